@@ -1,0 +1,73 @@
+//! Model errors: every problem found, each naming the thing at fault and where it is.
+
+use std::fmt;
+
+/// Which part of a frame a problem is about (lets TOML point at a line and the macro at a token).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameField {
+    Whole,
+    Name,
+    Parent,
+    Primitive,
+    Mass,
+    Inertia,
+}
+
+/// Where in a model a problem sits.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Site {
+    /// The model as a whole (no variables, bad gravity, a syntax error, a missing file).
+    Model,
+    /// The frame at this position of the specification's frame list.
+    Frame { index: usize, field: FrameField },
+    /// The settings of the variable of this name.
+    VariableSettings { name: String },
+}
+
+/// One problem with a model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Problem {
+    pub site: Site,
+    pub message: String,
+    /// 1-based line in the source file, when the model came from a file.
+    pub line: Option<usize>,
+}
+
+/// Everything wrong with a model, collected before failing.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelError {
+    /// The file the model came from, if any.
+    pub source_name: Option<String>,
+    pub problems: Vec<Problem>,
+}
+
+impl ModelError {
+    pub(crate) fn single(source_name: Option<String>, message: String, line: Option<usize>) -> Self {
+        ModelError {
+            source_name,
+            problems: vec![Problem {
+                site: Site::Model,
+                message,
+                line,
+            }],
+        }
+    }
+}
+
+impl fmt::Display for ModelError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (n, p) in self.problems.iter().enumerate() {
+            if n > 0 {
+                writeln!(f)?;
+            }
+            match (&self.source_name, p.line) {
+                (Some(file), Some(line)) => write!(f, "{file}:{line}: {}", p.message)?,
+                (Some(file), None) => write!(f, "{file}: {}", p.message)?,
+                (None, _) => write!(f, "{}", p.message)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ModelError {}

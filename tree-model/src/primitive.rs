@@ -1,0 +1,107 @@
+//! The six primitive transforms a frame can hang off its parent by (paper §III, assumption 1).
+
+use std::fmt;
+
+/// One of the six primitive rigid transforms: translation along, or rotation about, one of
+/// the parent frame's axes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PrimitiveKind {
+    Tx,
+    Ty,
+    Tz,
+    Rx,
+    Ry,
+    Rz,
+}
+
+impl PrimitiveKind {
+    /// All six, in the order `tx ty tz rx ry rz`.
+    pub const ALL: [PrimitiveKind; 6] = [
+        PrimitiveKind::Tx,
+        PrimitiveKind::Ty,
+        PrimitiveKind::Tz,
+        PrimitiveKind::Rx,
+        PrimitiveKind::Ry,
+        PrimitiveKind::Rz,
+    ];
+
+    /// The keyword used in TOML files and in `tree_model!`.
+    pub fn keyword(self) -> &'static str {
+        match self {
+            PrimitiveKind::Tx => "tx",
+            PrimitiveKind::Ty => "ty",
+            PrimitiveKind::Tz => "tz",
+            PrimitiveKind::Rx => "rx",
+            PrimitiveKind::Ry => "ry",
+            PrimitiveKind::Rz => "rz",
+        }
+    }
+
+    /// Parses a keyword (`"rx"` …); `None` for anything else.
+    pub fn from_keyword(word: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.keyword() == word)
+    }
+
+    /// True for `rx ry rz`.
+    pub fn is_rotation(self) -> bool {
+        matches!(self, PrimitiveKind::Rx | PrimitiveKind::Ry | PrimitiveKind::Rz)
+    }
+
+    /// The axis index 0, 1, 2 for X, Y, Z.
+    pub fn axis(self) -> usize {
+        match self {
+            PrimitiveKind::Tx | PrimitiveKind::Rx => 0,
+            PrimitiveKind::Ty | PrimitiveKind::Ry => 1,
+            PrimitiveKind::Tz | PrimitiveKind::Rz => 2,
+        }
+    }
+
+    /// The constant unit twist ξ with `g(x) = exp(ξ̂ x)`, ordered `(v, ω)`.
+    pub fn twist(self) -> [f64; 6] {
+        let mut xi = [0.0; 6];
+        let offset = if self.is_rotation() { 3 } else { 0 };
+        xi[offset + self.axis()] = 1.0;
+        xi
+    }
+}
+
+impl fmt::Display for PrimitiveKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.keyword())
+    }
+}
+
+/// What a primitive's parameter is: a constant, or a named configuration variable.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    Constant(f64),
+    Variable(String),
+}
+
+impl From<f64> for Value {
+    fn from(x: f64) -> Self {
+        Value::Constant(x)
+    }
+}
+
+impl From<&str> for Value {
+    fn from(name: &str) -> Self {
+        Value::Variable(name.to_string())
+    }
+}
+
+/// A primitive transform together with its parameter, as written in a model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Primitive {
+    pub kind: PrimitiveKind,
+    pub value: Value,
+}
+
+impl Primitive {
+    pub fn new(kind: PrimitiveKind, value: impl Into<Value>) -> Self {
+        Primitive {
+            kind,
+            value: value.into(),
+        }
+    }
+}

@@ -1,0 +1,50 @@
+//! Run-time errors: each says which step, at what time, and why.
+
+use std::fmt;
+
+/// A simulation or evaluation failure.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimError {
+    /// `M(q)` is not positive definite (Cholesky failed at this variable's pivot).
+    SingularMassMatrix { step: usize, t: f64, variable: String, pivot: f64 },
+    /// The VI's Newton iteration matrix (eq. (26)) is singular.
+    SingularJacobian { step: usize, t: f64, variable: String },
+    /// Newton did not reach the tolerance on the discrete Euler–Lagrange residual.
+    NewtonFailed { step: usize, t: f64, iterations: usize, residual: f64 },
+    /// A state or derivative stopped being finite.
+    NonFinite { step: usize, t: f64, what: String },
+    /// The adaptive step size fell below what floating point can resolve.
+    StepSizeTooSmall { step: usize, t: f64, dt: f64 },
+    /// Bad arguments (sizes, step, tolerances).
+    InvalidInput(String),
+    /// The model uses something this runtime does not do yet.
+    Unsupported(String),
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SimError::SingularMassMatrix { step, t, variable, pivot } => write!(
+                f,
+                "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`)"
+            ),
+            SimError::SingularJacobian { step, t, variable } => write!(
+                f,
+                "step {step} (t = {t}): variational integrator Newton matrix is singular (at variable `{variable}`)"
+            ),
+            SimError::NewtonFailed { step, t, iterations, residual } => write!(
+                f,
+                "step {step} (t = {t}): Newton did not converge in {iterations} iterations (residual {residual:e})"
+            ),
+            SimError::NonFinite { step, t, what } => {
+                write!(f, "step {step} (t = {t}): {what} is not finite")
+            }
+            SimError::StepSizeTooSmall { step, t, dt } => {
+                write!(f, "step {step} (t = {t}): adaptive step size {dt:e} is too small")
+            }
+            SimError::InvalidInput(m) | SimError::Unsupported(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}

@@ -1,0 +1,156 @@
+//! Adaptive Dormand–Prince 5(4) (the tableau of Dormand & Prince 1980), with per-step error
+//! control on `(q, q̇)`.
+
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
+
+use crate::dynamics::{Dynamics, GeneralizedForce};
+use crate::error::SimError;
+use crate::system::{System, Vector};
+
+const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
+const A: [[f64; 6]; 7] = [
+    [0.0; 6],
+    [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
+    [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
+    [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0],
+    [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0],
+    [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
+];
+/// Fifth-order weights (equal to the last row of `A`: first same as last).
+const B5: [f64; 7] = [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0, 0.0];
+/// Fourth-order embedded weights.
+const B4: [f64; 7] = [
+    5179.0 / 57600.0,
+    0.0,
+    7571.0 / 16695.0,
+    393.0 / 640.0,
+    -92097.0 / 339200.0,
+    187.0 / 2100.0,
+    1.0 / 40.0,
+];
+
+/// Tolerances of the adaptive method: a component's error must stay below
+/// `atol + rtol·|y|`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tolerance {
+    pub rtol: f64,
+    pub atol: f64,
+}
+
+impl Default for Tolerance {
+    fn default() -> Self {
+        Tolerance { rtol: 1e-8, atol: 1e-10 }
+    }
+}
+
+/// Dormand–Prince workspace.
+#[derive(Clone, Debug)]
+pub struct Rk45<N: Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    pub tolerance: Tolerance,
+    pub dynamics: Dynamics<N>,
+    kq: [Vector<N>; 7],
+    kv: [Vector<N>; 7],
+    q_stage: Vector<N>,
+    v_stage: Vector<N>,
+    /// Steps tried and rejected so far.
+    pub rejected: usize,
+}
+
+impl<N: Dim> Rk45<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    pub fn new(n: N, tolerance: Tolerance) -> Self {
+        let z = || Vector::<N>::zeros_generic(n, nalgebra::U1);
+        Rk45 {
+            tolerance,
+            dynamics: Dynamics::new(n),
+            kq: std::array::from_fn(|_| z()),
+            kv: std::array::from_fn(|_| z()),
+            q_stage: z(),
+            v_stage: z(),
+            rejected: 0,
+        }
+    }
+
+    /// Takes one accepted step from `t`, trying `*dt` first and shrinking it as needed but
+    /// never past `t_end`. Returns the step taken; `*dt` becomes the proposal for the next.
+    #[allow(clippy::too_many_arguments)]
+    pub fn step<S, F>(
+        &mut self,
+        sys: &mut S,
+        force: &mut F,
+        step: usize,
+        t: f64,
+        t_end: f64,
+        dt: &mut f64,
+        q: &mut Vector<N>,
+        dq: &mut Vector<N>,
+    ) -> Result<f64, SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        loop {
+            let h = dt.min(t_end - t);
+            if !(h > 1e-14 * t.abs().max(1.0)) {
+                return Err(SimError::StepSizeTooSmall { step, t, dt: h });
+            }
+            for s in 0..7 {
+                self.q_stage.copy_from(q);
+                self.v_stage.copy_from(dq);
+                for (r, &a) in A[s].iter().enumerate().take(s) {
+                    self.q_stage.axpy(h * a, &self.kq[r], 1.0);
+                    self.v_stage.axpy(h * a, &self.kv[r], 1.0);
+                }
+                self.kq[s].copy_from(&self.v_stage);
+                self.dynamics.acceleration(
+                    sys,
+                    force,
+                    step,
+                    t + C[s] * h,
+                    &self.q_stage,
+                    &self.v_stage,
+                    &mut self.kv[s],
+                )?;
+            }
+            // Stage 7 was evaluated at the fifth-order solution: q_stage, v_stage hold it.
+            let mut err: f64 = 0.0;
+            for i in 0..q.len() {
+                let (mut eq, mut ev) = (0.0, 0.0);
+                for s in 0..7 {
+                    eq += (B5[s] - B4[s]) * self.kq[s][i];
+                    ev += (B5[s] - B4[s]) * self.kv[s][i];
+                }
+                let tol = &self.tolerance;
+                let sq = tol.atol + tol.rtol * q[i].abs().max(self.q_stage[i].abs());
+                let sv = tol.atol + tol.rtol * dq[i].abs().max(self.v_stage[i].abs());
+                err = err.max((h * eq).abs() / sq).max((h * ev).abs() / sv);
+            }
+            if !err.is_finite() {
+                return Err(SimError::NonFinite {
+                    step,
+                    t,
+                    what: "rk45 error estimate".into(),
+                });
+            }
+            let factor = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            if err <= 1.0 {
+                q.copy_from(&self.q_stage);
+                dq.copy_from(&self.v_stage);
+                if h >= *dt {
+                    *dt *= factor;
+                } else if t + h < t_end {
+                    *dt = h * factor;
+                }
+                return Ok(h);
+            }
+            self.rejected += 1;
+            *dt = h * factor;
+        }
+    }
+}

@@ -1,0 +1,261 @@
+//! SE(3) for the tree: poses as `(R, p)`, twists as `(v, ω)` (Murray–Li–Sastry ordering),
+//! and the handful of operations the recursions need, each written out per primitive so a
+//! product with `rx` touches two columns, not sixteen entries.
+//!
+//! Facts used throughout (DESIGN.md §3): a primitive is `g(x) = exp(ξ̂ x)` with a constant unit
+//! twist ξ, so `g(x)⁻¹ = g(−x)` and `∂/∂x Ad_{g(x)⁻¹} X = [Ad_{g(x)⁻¹} X, ξ]`.
+
+use tree_model::PrimitiveKind;
+
+/// A twist `(v, ω)`: a body velocity, or a column of its derivatives.
+pub type Twist = [f64; 6];
+
+/// The zero twist.
+pub const ZERO: Twist = [0.0; 6];
+
+/// A rigid transform: rotation `r` (row-major 3×3) and translation `p`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    pub r: [[f64; 3]; 3],
+    pub p: [f64; 3],
+}
+
+impl Default for Pose {
+    fn default() -> Self {
+        Pose::IDENTITY
+    }
+}
+
+impl Pose {
+    pub const IDENTITY: Pose = Pose {
+        r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        p: [0.0; 3],
+    };
+
+    /// The homogeneous 4×4 matrix, row-major.
+    pub fn matrix(&self) -> [[f64; 4]; 4] {
+        let mut m = [[0.0; 4]; 4];
+        for i in 0..3 {
+            m[i][..3].copy_from_slice(&self.r[i]);
+            m[i][3] = self.p[i];
+        }
+        m[3][3] = 1.0;
+        m
+    }
+
+    /// `self · other` (paper eq. (1): `g_sk = g_s,par(k) g_k`).
+    pub fn compose(&self, other: &Pose) -> Pose {
+        let mut out = Pose::IDENTITY;
+        for i in 0..3 {
+            for j in 0..3 {
+                out.r[i][j] = (0..3).map(|k| self.r[i][k] * other.r[k][j]).sum();
+            }
+            out.p[i] = self.p[i] + (0..3).map(|k| self.r[i][k] * other.p[k]).sum::<f64>();
+        }
+        out
+    }
+
+    /// `self⁻¹ = (Rᵀ, −Rᵀp)`.
+    pub fn inverse(&self) -> Pose {
+        let mut out = Pose::IDENTITY;
+        for i in 0..3 {
+            for j in 0..3 {
+                out.r[i][j] = self.r[j][i];
+            }
+        }
+        for i in 0..3 {
+            out.p[i] = -(0..3).map(|k| out.r[i][k] * self.p[k]).sum::<f64>();
+        }
+        out
+    }
+
+    /// `Rᵀ a`: a spatial vector expressed in this frame.
+    #[inline(always)]
+    pub fn rotate_inverse(&self, a: &[f64; 3]) -> [f64; 3] {
+        let r = &self.r;
+        [
+            r[0][0] * a[0] + r[1][0] * a[1] + r[2][0] * a[2],
+            r[0][1] * a[0] + r[1][1] * a[1] + r[2][1] * a[2],
+            r[0][2] * a[0] + r[1][2] * a[1] + r[2][2] * a[2],
+        ]
+    }
+
+    /// `Ad_{g⁻¹} X = (Rᵀ(v + ω × p), Rᵀω)` for a general transform `g = self`.
+    #[inline(always)]
+    pub fn ad_inverse(&self, x: &Twist) -> Twist {
+        let (p, w) = (&self.p, [x[3], x[4], x[5]]);
+        let v = [
+            x[0] + w[1] * p[2] - w[2] * p[1],
+            x[1] + w[2] * p[0] - w[0] * p[2],
+            x[2] + w[0] * p[1] - w[1] * p[0],
+        ];
+        let v = self.rotate_inverse(&v);
+        let w = self.rotate_inverse(&w);
+        [v[0], v[1], v[2], w[0], w[1], w[2]]
+    }
+}
+
+/// A primitive transform evaluated at its parameter: for rotations the cosine and sine,
+/// for translations the distance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalTransform {
+    pub kind: PrimitiveKind,
+    /// cos x (rotations) or x (translations).
+    pub a: f64,
+    /// sin x (rotations); unused for translations.
+    pub b: f64,
+}
+
+impl LocalTransform {
+    /// `g(x)` for a primitive of this kind.
+    #[inline(always)]
+    pub fn new(kind: PrimitiveKind, x: f64) -> Self {
+        if kind.is_rotation() {
+            let (s, c) = x.sin_cos();
+            LocalTransform { kind, a: c, b: s }
+        } else {
+            LocalTransform { kind, a: x, b: 0.0 }
+        }
+    }
+
+    /// As a general pose.
+    pub fn pose(&self) -> Pose {
+        let mut g = Pose::IDENTITY;
+        let (c, s) = (self.a, self.b);
+        match self.kind {
+            PrimitiveKind::Tx => g.p[0] = self.a,
+            PrimitiveKind::Ty => g.p[1] = self.a,
+            PrimitiveKind::Tz => g.p[2] = self.a,
+            PrimitiveKind::Rx => g.r = [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]],
+            PrimitiveKind::Ry => g.r = [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
+            PrimitiveKind::Rz => g.r = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+        }
+        g
+    }
+
+    /// `parent · g(x)`, touching only what the primitive changes.
+    #[inline(always)]
+    pub fn compose_onto(&self, parent: &Pose) -> Pose {
+        let mut out = *parent;
+        let (c, s) = (self.a, self.b);
+        let r = &parent.r;
+        match self.kind {
+            PrimitiveKind::Tx | PrimitiveKind::Ty | PrimitiveKind::Tz => {
+                let k = self.kind.axis();
+                for i in 0..3 {
+                    out.p[i] += r[i][k] * self.a;
+                }
+            }
+            PrimitiveKind::Rx => {
+                for i in 0..3 {
+                    out.r[i][1] = c * r[i][1] + s * r[i][2];
+                    out.r[i][2] = -s * r[i][1] + c * r[i][2];
+                }
+            }
+            PrimitiveKind::Ry => {
+                for i in 0..3 {
+                    out.r[i][0] = c * r[i][0] - s * r[i][2];
+                    out.r[i][2] = s * r[i][0] + c * r[i][2];
+                }
+            }
+            PrimitiveKind::Rz => {
+                for i in 0..3 {
+                    out.r[i][0] = c * r[i][0] + s * r[i][1];
+                    out.r[i][1] = -s * r[i][0] + c * r[i][1];
+                }
+            }
+        }
+        out
+    }
+
+    /// `Ad_{g(x)⁻¹} X`: a parent-frame twist seen from the child (DESIGN.md §3,
+    /// `v_k = Ad_{g_k⁻¹} v_par + ξ q̇`).
+    #[inline(always)]
+    pub fn ad_inverse(&self, x: &Twist) -> Twist {
+        let (c, s, d) = (self.a, self.b, self.a);
+        match self.kind {
+            PrimitiveKind::Tx => [x[0], x[1] + d * x[5], x[2] - d * x[4], x[3], x[4], x[5]],
+            PrimitiveKind::Ty => [x[0] - d * x[5], x[1], x[2] + d * x[3], x[3], x[4], x[5]],
+            PrimitiveKind::Tz => [x[0] + d * x[4], x[1] - d * x[3], x[2], x[3], x[4], x[5]],
+            PrimitiveKind::Rx => [
+                x[0],
+                c * x[1] + s * x[2],
+                -s * x[1] + c * x[2],
+                x[3],
+                c * x[4] + s * x[5],
+                -s * x[4] + c * x[5],
+            ],
+            PrimitiveKind::Ry => [
+                c * x[0] - s * x[2],
+                x[1],
+                s * x[0] + c * x[2],
+                c * x[3] - s * x[5],
+                x[4],
+                s * x[3] + c * x[5],
+            ],
+            PrimitiveKind::Rz => [
+                c * x[0] + s * x[1],
+                -s * x[0] + c * x[1],
+                x[2],
+                c * x[3] + s * x[4],
+                -s * x[3] + c * x[4],
+                x[5],
+            ],
+        }
+    }
+}
+
+/// `a × e_axis` for a unit axis vector.
+#[inline(always)]
+fn cross_axis(a: [f64; 3], axis: usize) -> [f64; 3] {
+    match axis {
+        0 => [0.0, a[2], -a[1]],
+        1 => [-a[2], 0.0, a[0]],
+        _ => [a[1], -a[0], 0.0],
+    }
+}
+
+/// The Lie bracket `[X, ξ] = (ω_X × v_ξ − ω_ξ × v_X, ω_X × ω_ξ)` with a primitive's unit
+/// twist ξ: the derivative of a transported twist with respect to the primitive's parameter.
+#[inline(always)]
+pub fn bracket_with_axis(x: &Twist, kind: PrimitiveKind) -> Twist {
+    let axis = kind.axis();
+    let w = [x[3], x[4], x[5]];
+    if kind.is_rotation() {
+        let v = cross_axis([x[0], x[1], x[2]], axis);
+        let w = cross_axis(w, axis);
+        [v[0], v[1], v[2], w[0], w[1], w[2]]
+    } else {
+        let v = cross_axis(w, axis);
+        [v[0], v[1], v[2], 0.0, 0.0, 0.0]
+    }
+}
+
+/// The general Lie bracket `[X, Y]` of two twists.
+pub fn bracket(x: &Twist, y: &Twist) -> Twist {
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let (vx, wx) = ([x[0], x[1], x[2]], [x[3], x[4], x[5]]);
+    let (vy, wy) = ([y[0], y[1], y[2]], [y[3], y[4], y[5]]);
+    let a = cross(wx, vy);
+    let b = cross(wy, vx);
+    let w = cross(wx, wy);
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2], w[0], w[1], w[2]]
+}
+
+/// `x · y` for twists (or a wrench and a twist).
+#[inline(always)]
+pub fn dot(x: &Twist, y: &Twist) -> f64 {
+    x[0] * y[0] + x[1] * y[1] + x[2] * y[2] + x[3] * y[3] + x[4] * y[4] + x[5] * y[5]
+}
+
+/// `M_k X` with the body's generalized inertia `M_k = diag(m, m, m, Ixx, Iyy, Izz)`.
+#[inline(always)]
+pub fn inertia_times(m: f64, i: &[f64; 3], x: &Twist) -> Twist {
+    [m * x[0], m * x[1], m * x[2], i[0] * x[3], i[1] * x[4], i[2] * x[5]]
+}
