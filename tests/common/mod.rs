@@ -1,0 +1,61 @@
+//! Helpers shared by the integration tests: the model files, a seeded generator, finite
+//! differences.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use tree_mech::runtime::{Caching, TreeSystem, Vector};
+use tree_mech::tree_model::{self, Model};
+use nalgebra::Dyn;
+
+/// Every model file in `models/`.
+pub fn model_files() -> Vec<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 5, "models/ holds the five required models");
+    files
+}
+
+pub fn load(name: &str) -> Model {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models").join(name);
+    tree_model::from_toml_file(path).unwrap()
+}
+
+pub fn interpreted(model: &Model) -> TreeSystem {
+    TreeSystem::new(model, Caching::On).unwrap()
+}
+
+/// A small deterministic generator (xorshift64*), so tests need no extra crate.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    /// Uniform in `[-1, 1)`.
+    pub fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        let x = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11;
+        2.0 * (x as f64 / (1u64 << 53) as f64) - 1.0
+    }
+    pub fn vector(&mut self, n: usize, scale: f64) -> Vector<Dyn> {
+        Vector::<Dyn>::from_fn(n, |_, _| scale * self.uniform())
+    }
+}
+
+/// `|a − b| ≤ tol · max(1, |b|)`, with a message naming what is compared.
+#[track_caller]
+pub fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
+    assert!(
+        (a - b).abs() <= tol * b.abs().max(1.0),
+        "{what}: {a} vs {b} (difference {:e})",
+        (a - b).abs()
+    );
+}
