@@ -1,0 +1,80 @@
+//! The trajectory picture: every variable over time above, total energy below.
+
+use plotters::prelude::*;
+use plotters::style::{register_font, FontStyle};
+use tree_mech::Trajectory;
+
+/// DejaVu Sans, bundled so plots need no system fonts (licence in `assets/`).
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
+fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+    if !lo.is_finite() || !hi.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-9 * hi.abs().max(1.0));
+    (lo - pad, hi + pad)
+}
+
+/// Writes a PNG of `traj` to `path`.
+pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("cannot draw `{}`: {e}", path.display());
+    let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+    let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let (top, bottom) = root.split_vertically(560);
+    let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
+    let n = traj.dof();
+
+    let (lo, hi) = range((0..traj.len()).flat_map(|k| traj.q(k).iter().copied()));
+    let mut chart = ChartBuilder::on(&top)
+        .caption(format!("{title}: configuration"), ("sans-serif", 26))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0.0..t_end, lo..hi)
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .x_desc("t [s]")
+        .y_desc("q")
+        .draw()
+        .map_err(|e| err(&e))?;
+    for i in 0..n {
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new((0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])), color.stroke_width(2)))
+            .map_err(|e| err(&e))?
+            .label(traj.variables[i].clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+    }
+    if n <= 24 {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+
+    let (lo, hi) = range(traj.energy.iter().copied());
+    let mut chart = ChartBuilder::on(&bottom)
+        .caption("total energy", ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(90)
+        .build_cartesian_2d(0.0..t_end, lo..hi)
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .x_desc("t [s]")
+        .y_desc("E [J]")
+        .draw()
+        .map_err(|e| err(&e))?;
+    chart
+        .draw_series(LineSeries::new(traj.t.iter().copied().zip(traj.energy.iter().copied()), BLUE.stroke_width(2)))
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
