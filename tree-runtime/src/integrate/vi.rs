@@ -18,7 +18,8 @@ use crate::system::{Matrix, Order, System, Terms, Vector};
 pub struct ViSettings {
     /// Quadrature point `α ∈ [0, 1]`; `½` is the second-order midpoint rule.
     pub alpha: f64,
-    /// Newton stops when `‖residual‖∞ ≤ tolerance · max(1, ‖p_k‖∞)`.
+    /// Newton stops when `‖residual‖∞ ≤ tolerance · max(1, ‖p_k‖∞)`, or when an update is
+    /// below the rounding of q (the residual then sits at its floor).
     pub tolerance: f64,
     pub max_iterations: usize,
 }
@@ -187,6 +188,12 @@ where
                 variable: sys.variable_name(i).to_string(),
             })?;
             *q_next += &self.residual;
+            // An update lost in the last bits of q: the residual is at its rounding floor
+            // (≈ ε‖M‖‖q‖/Δt), which a large, stiff model can hold above the tolerance.
+            if self.residual.amax() <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
+                self.residual(sys, force, t, dt, q, p, q_next, false);
+                break;
+            }
         }
         // p_{k+1} = αΔt ∂L/∂q + ∂L/∂q̇ + αΔt u   (eq. (24) plus f⁺), terms at the solution.
         let a = self.settings.alpha;
