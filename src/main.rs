@@ -35,6 +35,7 @@ enum Integrator {
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a model and write its trajectory (CSV) and a picture (PNG).
+    #[command(allow_negative_numbers = true)]
     Simulate {
         /// Model file (TOML).
         model: PathBuf,

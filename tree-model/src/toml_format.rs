@@ -81,7 +81,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
     let raw: RawModel = toml::from_str(text).map_err(|e| {
         let line = e.span().map(|s| line_of(text, s.start));
         let msg = e.message().trim().to_string();
-        ModelError::single(src.clone(), format!("TOML syntax error: {msg}"), line)
+        ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
     })?;
 
     let mut lines = Vec::new();
