@@ -16,7 +16,11 @@ use tree_mech::runtime::{Dynamics, Vector};
 use tree_mech::{tree_model, Caching, NoForce, Order, System, TreeSystem};
 
 #[derive(Parser)]
-#[command(name = "tree-mech", version, about = "Simulate mechanical systems described as trees of frames")]
+#[command(
+    name = "tree-mech",
+    version,
+    about = "Simulate mechanical systems described as trees of frames"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -109,7 +113,17 @@ fn main() -> ExitCode {
                 Integrator::Rk45 => Method::Rk45(Tolerance { rtol, atol }),
             };
             let caching = if no_cache { Caching::Off } else { Caching::On };
-            run_simulate(&model, SimOptions { method, dt, duration }, caching, out.as_deref(), plot.as_deref())
+            run_simulate(
+                &model,
+                SimOptions {
+                    method,
+                    dt,
+                    duration,
+                },
+                caching,
+                out.as_deref(),
+                plot.as_deref(),
+            )
         }
         Command::Eval { model, q, dq } => run_eval(&model, q.as_deref(), dq.as_deref()),
         Command::Check { model } => run_check(&model),
@@ -139,7 +153,8 @@ fn run_simulate(
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
     bar.set_style(
-        ProgressStyle::with_template("{bar:40} {percent:>3}% t = {msg} s  ({elapsed})").map_err(|e| e.to_string())?,
+        ProgressStyle::with_template("{bar:40} {percent:>3}% t = {msg} s  ({elapsed})")
+            .map_err(|e| e.to_string())?,
     );
     let duration = options.duration.max(f64::MIN_POSITIVE);
     let start = Instant::now();
@@ -155,11 +170,13 @@ fn run_simulate(
             }
         }
     };
-    let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut progress).map_err(|e| e.to_string())?;
+    let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut progress)
+        .map_err(|e| e.to_string())?;
     bar.finish_and_clear();
     let wall = start.elapsed();
     if let Some(out) = out {
-        let file = std::fs::File::create(out).map_err(|e| format!("cannot write `{}`: {e}", out.display()))?;
+        let file = std::fs::File::create(out)
+            .map_err(|e| format!("cannot write `{}`: {e}", out.display()))?;
         traj.write_csv(std::io::BufWriter::new(file))
             .map_err(|e| format!("cannot write `{}`: {e}", out.display()))?;
     }
@@ -228,12 +245,16 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String
     let dq = dq.map_or(Ok(dq0), |s| parse_vector(s, n, "dq", &names))?;
     let t = sys.evaluate(&q, &dq, Order::Full);
     let mut qdd = Vector::<Dyn>::zeros(n);
-    let qdd_json = match Dynamics::new(Dyn(n)).acceleration(&mut sys, &mut NoForce, 0, 0.0, &q, &dq, &mut qdd) {
-        Ok(()) => json!(qdd.as_slice()),
-        Err(e) => json!({ "error": e.to_string() }),
-    };
+    let qdd_json =
+        match Dynamics::new(Dyn(n)).acceleration(&mut sys, &mut NoForce, 0, 0.0, &q, &dq, &mut qdd)
+        {
+            Ok(()) => json!(qdd.as_slice()),
+            Err(e) => json!({ "error": e.to_string() }),
+        };
     let matrix = |m: &tree_mech::runtime::Matrix<Dyn>| -> Vec<Vec<f64>> {
-        (0..n).map(|i| (0..n).map(|j| m[(i, j)]).collect()).collect()
+        (0..n)
+            .map(|i| (0..n).map(|j| m[(i, j)]).collect())
+            .collect()
     };
     let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
     sys.poses(&q, &mut poses);
@@ -256,7 +277,10 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String
         "qdd": qdd_json,
         "poses": poses,
     });
-    println!("{}", serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?
+    );
     Ok(())
 }
 
@@ -272,11 +296,20 @@ fn run_check(path: &Path) -> Result<(), String> {
     for v in &model.variables {
         println!(
             "  {:<20} drives `{}` by {}; q0 = {}, dq0 = {}, damping = {}",
-            v.name, model.frames[v.frame].name, model.frames[v.frame].primitive, v.q0, v.dq0, v.damping
+            v.name,
+            model.frames[v.frame].name,
+            model.frames[v.frame].primitive,
+            v.q0,
+            v.dq0,
+            v.damping
         );
     }
     let masses: Vec<_> = model.frames.iter().filter(|f| f.mass.is_some()).collect();
-    println!("{} masses, total mass {} kg:", masses.len(), model.total_mass());
+    println!(
+        "{} masses, total mass {} kg:",
+        masses.len(),
+        model.total_mass()
+    );
     for f in masses {
         let m = f.mass.unwrap();
         println!(

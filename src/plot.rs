@@ -8,7 +8,9 @@ use tree_mech::Trajectory;
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
     if !lo.is_finite() || !hi.is_finite() {
         return (-1.0, 1.0);
     }
@@ -43,10 +45,15 @@ pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<()
     for i in 0..n {
         let color = Palette99::pick(i).to_rgba();
         chart
-            .draw_series(LineSeries::new((0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])), color.stroke_width(2)))
+            .draw_series(LineSeries::new(
+                (0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])),
+                color.stroke_width(2),
+            ))
             .map_err(|e| err(&e))?
             .label(traj.variables[i].clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
     }
     if n <= 24 {
         chart
@@ -73,7 +80,10 @@ pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<()
         .draw()
         .map_err(|e| err(&e))?;
     chart
-        .draw_series(LineSeries::new(traj.t.iter().copied().zip(traj.energy.iter().copied()), BLUE.stroke_width(2)))
+        .draw_series(LineSeries::new(
+            traj.t.iter().copied().zip(traj.energy.iter().copied()),
+            BLUE.stroke_width(2),
+        ))
         .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())

@@ -23,14 +23,30 @@ fn simulate_writes_a_trajectory_and_a_picture() {
     let png = dir.join("t.png");
     for integrator in ["vi", "rk4", "rk45"] {
         let (ok, stdout, stderr) = tree_mech(&[
-            "simulate", "models/double-pendulum.toml", "--integrator", integrator, "--dt", "0.01", "--duration", "1",
-            "--out", csv.to_str().unwrap(), "--plot", png.to_str().unwrap(),
+            "simulate",
+            "models/double-pendulum.toml",
+            "--integrator",
+            integrator,
+            "--dt",
+            "0.01",
+            "--duration",
+            "1",
+            "--out",
+            csv.to_str().unwrap(),
+            "--plot",
+            png.to_str().unwrap(),
         ]);
         assert!(ok, "{stderr}");
-        assert!(stdout.contains("Simulated `double-pendulum`") && stdout.contains("drift"), "{stdout}");
+        assert!(
+            stdout.contains("Simulated `double-pendulum`") && stdout.contains("drift"),
+            "{stdout}"
+        );
         let text = std::fs::read_to_string(&csv).unwrap();
         let mut lines = text.lines();
-        assert_eq!(lines.next().unwrap(), "t,theta1,theta2,dtheta1,dtheta2,energy");
+        assert_eq!(
+            lines.next().unwrap(),
+            "t,theta1,theta2,dtheta1,dtheta2,energy"
+        );
         let rows: Vec<&str> = lines.collect();
         if integrator != "rk45" {
             assert_eq!(rows.len(), 101);
@@ -43,10 +59,21 @@ fn simulate_writes_a_trajectory_and_a_picture() {
 
 #[test]
 fn eval_prints_every_term_as_json() {
-    let (ok, stdout, stderr) = tree_mech(&["eval", "models/pendulum.toml", "--q", "0.3", "--dq", "-1"]);
+    let (ok, stdout, stderr) =
+        tree_mech(&["eval", "models/pendulum.toml", "--q", "0.3", "--dq", "-1"]);
     assert!(ok, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-    for key in ["variables", "L", "dL_dq", "dL_ddq", "M", "d2L_ddqdq", "d2L_dqdq", "qdd", "poses"] {
+    for key in [
+        "variables",
+        "L",
+        "dL_dq",
+        "dL_ddq",
+        "M",
+        "d2L_ddqdq",
+        "d2L_dqdq",
+        "qdd",
+        "poses",
+    ] {
         assert!(v.get(key).is_some(), "missing {key}");
     }
     // Pendulum: L = ½ θ̇² + 9.81 cos θ, q̈ = −9.81 sin θ, bob at (0, sin θ, −cos θ).
@@ -69,15 +96,30 @@ fn check_draws_the_tree() {
 fn bad_input_is_a_short_error_and_a_failing_exit() {
     let cases: [(&[&str], &str); 5] = [
         (&["check", "models/missing.toml"], "cannot read model file"),
-        (&["eval", "models/pendulum.toml", "--q", "1,2"], "--q has 2 values; the model has 1 variables (theta)"),
-        (&["eval", "models/pendulum.toml", "--dq", "x"], "--dq: `x` is not a finite number"),
-        (&["simulate", "models/pendulum.toml", "--dt", "-1"], "time step must be positive"),
-        (&["check", "Cargo.toml"], "Cargo.toml:17: TOML error: unknown field `dependencies`"),
+        (
+            &["eval", "models/pendulum.toml", "--q", "1,2"],
+            "--q has 2 values; the model has 1 variables (theta)",
+        ),
+        (
+            &["eval", "models/pendulum.toml", "--dq", "x"],
+            "--dq: `x` is not a finite number",
+        ),
+        (
+            &["simulate", "models/pendulum.toml", "--dt", "-1"],
+            "time step must be positive",
+        ),
+        (
+            &["check", "Cargo.toml"],
+            "Cargo.toml:17: TOML error: unknown field `dependencies`",
+        ),
     ];
     for (args, expected) in cases {
         let (ok, _, stderr) = tree_mech(args);
         assert!(!ok, "{args:?} should fail");
-        assert!(stderr.starts_with("error: ") && stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(
+            stderr.starts_with("error: ") && stderr.contains(expected),
+            "{args:?}: {stderr}"
+        );
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }

@@ -17,7 +17,12 @@ fn eval(sys: &mut TreeSystem, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Terms<Dyn> {
 }
 
 /// Central difference of `f` along coordinate `j` of `x`.
-fn fd<T>(x: &Vector<Dyn>, j: usize, mut f: impl FnMut(&Vector<Dyn>) -> T, sub: impl Fn(&T, &T) -> f64) -> f64 {
+fn fd<T>(
+    x: &Vector<Dyn>,
+    j: usize,
+    mut f: impl FnMut(&Vector<Dyn>) -> T,
+    sub: impl Fn(&T, &T) -> f64,
+) -> f64 {
     let mut xp = x.clone();
     let mut xm = x.clone();
     xp[j] += H;
@@ -33,18 +38,34 @@ fn check_model(model: &Model, seed: u64) {
         let q = rng.vector(n, 1.5);
         let dq = rng.vector(n, 2.0);
         let t = eval(&mut sys, &q, &dq);
-        let what = |s: &str, i: usize, j: usize| format!("{} trial {trial}: {s}[{i}][{j}]", model.name);
+        let what =
+            |s: &str, i: usize, j: usize| format!("{} trial {trial}: {s}[{i}][{j}]", model.name);
         for j in 0..n {
             let dl_dq = fd(&q, j, |x| eval(&mut sys, x, &dq), |a, b| a.l - b.l);
             assert_close(t.dl_dq[j], dl_dq, TOL, &what("dL/dq", j, 0));
             let dl_ddq = fd(&dq, j, |x| eval(&mut sys, &q, x), |a, b| a.l - b.l);
             assert_close(t.dl_ddq[j], dl_ddq, TOL, &what("dL/ddq", j, 0));
             for i in 0..n {
-                let m = fd(&dq, j, |x| eval(&mut sys, &q, x), |a, b| a.dl_ddq[i] - b.dl_ddq[i]);
+                let m = fd(
+                    &dq,
+                    j,
+                    |x| eval(&mut sys, &q, x),
+                    |a, b| a.dl_ddq[i] - b.dl_ddq[i],
+                );
                 assert_close(t.mass[(i, j)], m, TOL, &what("M", i, j));
-                let x = fd(&q, j, |x| eval(&mut sys, x, &dq), |a, b| a.dl_ddq[i] - b.dl_ddq[i]);
+                let x = fd(
+                    &q,
+                    j,
+                    |x| eval(&mut sys, x, &dq),
+                    |a, b| a.dl_ddq[i] - b.dl_ddq[i],
+                );
                 assert_close(t.d2l_ddq_dq[(i, j)], x, TOL, &what("d2L/ddq_i dq_j", i, j));
-                let x = fd(&q, j, |x| eval(&mut sys, x, &dq), |a, b| a.dl_dq[i] - b.dl_dq[i]);
+                let x = fd(
+                    &q,
+                    j,
+                    |x| eval(&mut sys, x, &dq),
+                    |a, b| a.dl_dq[i] - b.dl_dq[i],
+                );
                 assert_close(t.d2l_dq_dq[(i, j)], x, TOL, &what("d2L/dq dq", i, j));
             }
         }
@@ -104,9 +125,18 @@ fn poses_match_an_independent_composition() {
         let q = rng.vector(sys.dof(), 2.0);
         let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
         sys.poses(&q, &mut poses);
-        for (f, (a, b)) in poses.iter().zip(reference_poses(&model, q.as_slice())).enumerate() {
+        for (f, (a, b)) in poses
+            .iter()
+            .zip(reference_poses(&model, q.as_slice()))
+            .enumerate()
+        {
             let d = (pose_matrix(a) - b).amax();
-            assert!(d < 1e-13, "{}: pose of frame `{}` off by {d:e}", model.name, model.frames[f].name);
+            assert!(
+                d < 1e-13,
+                "{}: pose of frame `{}` off by {d:e}",
+                model.name,
+                model.frames[f].name
+            );
         }
     }
 }
@@ -131,13 +161,29 @@ fn body_velocities_and_their_derivatives_match_finite_differences() {
         qp.axpy(H, &dq, 1.0);
         let mut qm = q.clone();
         qm.axpy(-H, &dq, 1.0);
-        let (gp, gm, g) = (poses_at(&mut sys, &qp), poses_at(&mut sys, &qm), poses_at(&mut sys, &q));
+        let (gp, gm, g) = (
+            poses_at(&mut sys, &qp),
+            poses_at(&mut sys, &qm),
+            poses_at(&mut sys, &q),
+        );
         for f in 0..sys.frame_count() {
             let gdot = (pose_matrix(&gp[f]) - pose_matrix(&gm[f])) / (2.0 * H);
             let vhat = pose_matrix(&g[f].inverse()) * gdot;
-            let v = [vhat[(0, 3)], vhat[(1, 3)], vhat[(2, 3)], vhat[(2, 1)], vhat[(0, 2)], vhat[(1, 0)]];
+            let v = [
+                vhat[(0, 3)],
+                vhat[(1, 3)],
+                vhat[(2, 3)],
+                vhat[(2, 1)],
+                vhat[(0, 2)],
+                vhat[(1, 0)],
+            ];
             for c in 0..6 {
-                assert_close(frames[f].0[c], v[c], TOL, &format!("{}: v of `{}`", model.name, model.frames[f].name));
+                assert_close(
+                    frames[f].0[c],
+                    v[c],
+                    TOL,
+                    &format!("{}: v of `{}`", model.name, model.frames[f].name),
+                );
             }
             // ∂v/∂q̇_i is v at q̇ = e_i; ∂v/∂q_i by differences of v in q.
             for &(i, jac, dv_dq) in &frames[f].1 {
@@ -152,7 +198,12 @@ fn body_velocities_and_their_derivatives_match_finite_differences() {
                 let vm = sys.frame_velocities(&qm, &dq)[f].0;
                 for c in 0..6 {
                     assert_close(jac[c], at_e[f].0[c], 1e-14, "dv/ddq");
-                    assert_close(dv_dq[c], (vp[c] - vm[c]) / (2.0 * H), TOL, &format!("{}: dv/dq of `{}`", model.name, model.frames[f].name));
+                    assert_close(
+                        dv_dq[c],
+                        (vp[c] - vm[c]) / (2.0 * H),
+                        TOL,
+                        &format!("{}: dv/dq of `{}`", model.name, model.frames[f].name),
+                    );
                 }
             }
         }
@@ -161,7 +212,10 @@ fn body_velocities_and_their_derivatives_match_finite_differences() {
 
 #[test]
 fn caching_on_and_off_agree_to_rounding() {
-    let mut models: Vec<Model> = model_files().iter().map(|f| tree_model::from_toml_file(f).unwrap()).collect();
+    let mut models: Vec<Model> = model_files()
+        .iter()
+        .map(|f| tree_model::from_toml_file(f).unwrap())
+        .collect();
     models.push(tree_model::n_link_pendulum(6));
     for model in &models {
         let mut on = TreeSystem::new(model, Caching::On).unwrap();
@@ -182,7 +236,11 @@ fn caching_on_and_off_agree_to_rounding() {
                 (&a.d2l_dq_dq - &b.d2l_dq_dq).amax(),
             ];
             for d in diff {
-                assert!(d <= 1e-12 * scale, "{}: cached vs uncached differ by {d:e}", model.name);
+                assert!(
+                    d <= 1e-12 * scale,
+                    "{}: cached vs uncached differ by {d:e}",
+                    model.name
+                );
             }
         }
     }

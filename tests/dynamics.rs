@@ -10,13 +10,27 @@ use tree_mech::runtime::{Dynamics, Vector};
 use tree_mech::tree_model::{ModelBuilder, PrimitiveKind};
 use tree_mech::{NoForce, System, Trajectory, TreeSystem};
 
-fn run(sys: &mut TreeSystem, q0: &Vector<Dyn>, dq0: &Vector<Dyn>, method: Method, dt: f64, duration: f64) -> Trajectory {
-    let options = SimOptions { method, dt, duration };
+fn run(
+    sys: &mut TreeSystem,
+    q0: &Vector<Dyn>,
+    dq0: &Vector<Dyn>,
+    method: Method,
+    dt: f64,
+    duration: f64,
+) -> Trajectory {
+    let options = SimOptions {
+        method,
+        dt,
+        duration,
+    };
     simulate(sys, q0, dq0, &options, &mut NoForce, &mut |_| {}).unwrap()
 }
 
 fn vi(alpha: f64) -> Method {
-    Method::Vi(ViSettings { alpha, ..ViSettings::default() })
+    Method::Vi(ViSettings {
+        alpha,
+        ..ViSettings::default()
+    })
 }
 
 /// Times at which `x` crosses zero upwards, by linear interpolation.
@@ -24,7 +38,8 @@ fn upward_crossings(traj: &Trajectory, i: usize) -> Vec<f64> {
     (1..traj.len())
         .filter_map(|k| {
             let (a, b) = (traj.q(k - 1)[i], traj.q(k)[i]);
-            (a < 0.0 && b >= 0.0).then(|| traj.t[k - 1] + (traj.t[k] - traj.t[k - 1]) * (-a) / (b - a))
+            (a < 0.0 && b >= 0.0)
+                .then(|| traj.t[k - 1] + (traj.t[k] - traj.t[k - 1]) * (-a) / (b - a))
         })
         .collect()
 }
@@ -41,7 +56,10 @@ fn simple_pendulum_small_angle_period_is_two_pi_sqrt_l_over_g() {
         assert!(c.len() >= 4);
         let period = (c[c.len() - 1] - c[0]) / (c.len() - 1) as f64;
         // Finite amplitude lengthens the period by θ0²/16 ≈ 6e-6 relative.
-        assert!((period / expected - 1.0).abs() < 2e-5, "{method:?}: period {period} vs {expected}");
+        assert!(
+            (period / expected - 1.0).abs() < 2e-5,
+            "{method:?}: period {period} vs {expected}"
+        );
     }
 }
 
@@ -61,8 +79,15 @@ fn point_mass_falls_by_half_g_t_squared() {
         let z = 10.0 + 1.5 * t - 0.5 * 9.81 * t * t;
         let dz = 1.5 - 9.81 * t;
         assert!((t - 1.3).abs() < 1e-12);
-        assert!((traj.last_q()[0] - z).abs() < 1e-10, "{method:?}: z = {} vs {z}", traj.last_q()[0]);
-        assert!((traj.dq(traj.len() - 1)[0] - dz).abs() < 1e-9, "{method:?}: velocity");
+        assert!(
+            (traj.last_q()[0] - z).abs() < 1e-10,
+            "{method:?}: z = {} vs {z}",
+            traj.last_q()[0]
+        );
+        assert!(
+            (traj.dq(traj.len() - 1)[0] - dz).abs() < 1e-9,
+            "{method:?}: velocity"
+        );
     }
 }
 
@@ -92,10 +117,17 @@ fn double_pendulum_dynamics_match_the_textbook_equations() {
         let q = rng.vector(2, 3.0);
         let dq = rng.vector(2, 4.0);
         let mut qdd = Vector::<Dyn>::zeros(2);
-        dynamics.acceleration(&mut sys, &mut NoForce, 0, 0.0, &q, &dq, &mut qdd).unwrap();
+        dynamics
+            .acceleration(&mut sys, &mut NoForce, 0, 0.0, &q, &dq, &mut qdd)
+            .unwrap();
         let expected = textbook_double_pendulum(q.as_slice(), dq.as_slice(), 9.81);
         for i in 0..2 {
-            assert!((qdd[i] - expected[i]).abs() < 1e-11 * expected[i].abs().max(1.0), "q̈{i}: {} vs {}", qdd[i], expected[i]);
+            assert!(
+                (qdd[i] - expected[i]).abs() < 1e-11 * expected[i].abs().max(1.0),
+                "q̈{i}: {} vs {}",
+                qdd[i],
+                expected[i]
+            );
         }
     }
 }
@@ -112,16 +144,25 @@ fn vi_energy_error_stays_bounded_without_drift_over_1e5_steps() {
     // Bounded: the oscillation seen over the first 10 s is all there is after 1000 s.
     let first = err[..1001].iter().fold(0.0f64, |m, e| m.max(e.abs()));
     assert!(max < 2e-3, "energy error {max:e}");
-    assert!(max < 3.0 * first, "energy error grew from {first:e} to {max:e}");
+    assert!(
+        max < 3.0 * first,
+        "energy error grew from {first:e} to {max:e}"
+    );
     // No drift: the mean error of the first and last tenth agree.
     let tenth = err.len() / 10;
     let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
     let (a, b) = (mean(&err[..tenth]), mean(&err[err.len() - tenth..]));
-    assert!((a - b).abs() < 2e-4, "mean energy error drifted from {a:e} to {b:e}");
+    assert!(
+        (a - b).abs() < 2e-4,
+        "mean energy error drifted from {a:e} to {b:e}"
+    );
     // RK4 at the same step drifts instead.
     let rk = run(&mut sys, &q0, &dq0, Method::Rk4, 0.01, 1000.0);
     let rk_drift = (rk.energy.last().unwrap() - e0).abs();
-    assert!(rk_drift > 10.0 * (a - b).abs(), "RK4 drift {rk_drift:e} should exceed the VI's");
+    assert!(
+        rk_drift > 10.0 * (a - b).abs(),
+        "RK4 drift {rk_drift:e} should exceed the VI's"
+    );
 }
 
 /// Spatial linear and angular momentum (about the world origin) of the free body, from its
@@ -135,7 +176,11 @@ fn free_body_momenta(sys: &mut TreeSystem, q: &Vector<Dyn>, dq: &Vector<Dyn>) ->
     let g = nalgebra::Matrix3::from_fn(|i, j| poses[body].r[i][j]);
     let p = nalgebra::Vector3::from_column_slice(&poses[body].p);
     let lin = g * nalgebra::Vector3::new(v[0], v[1], v[2]) * m.mass;
-    let ang_body = nalgebra::Vector3::new(m.inertia[0] * v[3], m.inertia[1] * v[4], m.inertia[2] * v[5]);
+    let ang_body = nalgebra::Vector3::new(
+        m.inertia[0] * v[3],
+        m.inertia[1] * v[4],
+        m.inertia[2] * v[5],
+    );
     let ang = g * ang_body + p.cross(&lin);
     [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z]
 }
@@ -155,7 +200,13 @@ fn free_body_run(dt: f64) -> f64 {
         let p = traj.p(k).unwrap();
         // x, y, z and the yaw ψ are cyclic: their discrete momenta are exact invariants.
         for i in [0, 1, 2, 3] {
-            assert!((p[i] - p0[i]).abs() < 1e-10, "momentum of `{}` drifted at step {k}: {} vs {}", traj.variables[i], p[i], p0[i]);
+            assert!(
+                (p[i] - p0[i]).abs() < 1e-10,
+                "momentum of `{}` drifted at step {k}: {} vs {}",
+                traj.variables[i],
+                p[i],
+                p0[i]
+            );
         }
         let q = Vector::<Dyn>::from_column_slice(traj.q(k));
         let dq = Vector::<Dyn>::from_column_slice(traj.dq(k));
@@ -175,18 +226,26 @@ fn vi_conserves_the_free_bodys_momenta() {
     let fine = free_body_run(0.005);
     assert!(coarse < 3e-2, "spatial momentum varied by {coarse:e}");
     let order = (coarse / fine).log2();
-    assert!((order - 2.0).abs() < 0.3, "momentum error shrinks with order {order} ({coarse:e}, {fine:e})");
+    assert!(
+        (order - 2.0).abs() < 0.3,
+        "momentum error shrinks with order {order} ({coarse:e}, {fine:e})"
+    );
 }
 
 fn final_error(traj: &Trajectory, reference: &[f64]) -> f64 {
-    traj.last_q().iter().zip(reference).fold(0.0, |m, (a, b)| m.max((a - b).abs()))
+    traj.last_q()
+        .iter()
+        .zip(reference)
+        .fold(0.0, |m, (a, b)| m.max((a - b).abs()))
 }
 
 #[test]
 fn vi_converges_with_order_two_at_midpoint_and_one_elsewhere() {
     let mut sys = interpreted(&load("double-pendulum.toml"));
     let (q0, dq0) = sys.initial_state();
-    let reference = run(&mut sys, &q0, &dq0, Method::Rk4, 1e-4, 1.0).last_q().to_vec();
+    let reference = run(&mut sys, &q0, &dq0, Method::Rk4, 1e-4, 1.0)
+        .last_q()
+        .to_vec();
     for (alpha, order) in [(0.5, 2.0), (0.3, 1.0)] {
         let errors: Vec<f64> = [0.02, 0.01, 0.005]
             .iter()
@@ -194,7 +253,10 @@ fn vi_converges_with_order_two_at_midpoint_and_one_elsewhere() {
             .collect();
         for w in errors.windows(2) {
             let observed = (w[0] / w[1]).log2();
-            assert!((observed - order).abs() < 0.25, "α = {alpha}: observed order {observed} (errors {errors:?})");
+            assert!(
+                (observed - order).abs() < 0.25,
+                "α = {alpha}: observed order {observed} (errors {errors:?})"
+            );
         }
     }
 }
@@ -217,12 +279,18 @@ fn rk45_meets_its_tolerance_against_a_fine_rk4_reference() {
     let (q0, dq0) = sys.initial_state();
     let reference = run(&mut sys, &q0, &dq0, Method::Rk4, 1e-4, 2.0);
     for (rtol, bound) in [(1e-6, 1e-4), (1e-9, 1e-7)] {
-        let tol = Tolerance { rtol, atol: rtol * 1e-2 };
+        let tol = Tolerance {
+            rtol,
+            atol: rtol * 1e-2,
+        };
         let traj = run(&mut sys, &q0, &dq0, Method::Rk45(tol), 0.01, 2.0);
         assert!((traj.t.last().unwrap() - 2.0).abs() < 1e-12);
         let e = final_error(&traj, reference.last_q());
         assert!(e < bound, "rtol {rtol}: error {e:e}");
-        assert!(e > 1e-13, "a zero error would mean the test compares nothing");
+        assert!(
+            e > 1e-13,
+            "a zero error would mean the test compares nothing"
+        );
     }
 }
 

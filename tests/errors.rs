@@ -9,7 +9,11 @@ use tree_mech::runtime::Vector;
 use tree_mech::{NoForce, SimError, System};
 
 fn methods() -> [Method; 3] {
-    [Method::Rk4, Method::Rk45(Tolerance::default()), Method::Vi(ViSettings::default())]
+    [
+        Method::Rk4,
+        Method::Rk45(Tolerance::default()),
+        Method::Vi(ViSettings::default()),
+    ]
 }
 
 #[test]
@@ -19,11 +23,22 @@ fn a_singular_mass_matrix_is_an_error_naming_the_step() {
     let (mut q0, dq0) = sys.initial_state();
     q0[4] = std::f64::consts::FRAC_PI_2;
     for method in [Method::Rk4, Method::Rk45(Tolerance::default())] {
-        let options = SimOptions { method, dt: 0.01, duration: 1.0 };
+        let options = SimOptions {
+            method,
+            dt: 0.01,
+            duration: 1.0,
+        };
         let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
-        assert!(matches!(err, SimError::SingularMassMatrix { step: 0, .. }), "{err:?}");
+        assert!(
+            matches!(err, SimError::SingularMassMatrix { step: 0, .. }),
+            "{err:?}"
+        );
         let msg = err.to_string();
-        assert!(msg.starts_with("step 0 (t = 0)") && msg.contains("mass matrix is not positive definite"), "{msg}");
+        assert!(
+            msg.starts_with("step 0 (t = 0)")
+                && msg.contains("mass matrix is not positive definite"),
+            "{msg}"
+        );
     }
 }
 
@@ -31,18 +46,33 @@ fn a_singular_mass_matrix_is_an_error_naming_the_step() {
 fn newton_failure_reports_step_and_residual() {
     let mut sys = interpreted(&load("double-pendulum.toml"));
     let (q0, dq0) = sys.initial_state();
-    let settings = ViSettings { max_iterations: 1, tolerance: 1e-15, ..ViSettings::default() };
-    let options = SimOptions { method: Method::Vi(settings), dt: 0.05, duration: 1.0 };
+    let settings = ViSettings {
+        max_iterations: 1,
+        tolerance: 1e-15,
+        ..ViSettings::default()
+    };
+    let options = SimOptions {
+        method: Method::Vi(settings),
+        dt: 0.05,
+        duration: 1.0,
+    };
     let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
     match &err {
-        SimError::NewtonFailed { step, iterations, residual, .. } => {
+        SimError::NewtonFailed {
+            step,
+            iterations,
+            residual,
+            ..
+        } => {
             assert_eq!(*step, 0);
             assert_eq!(*iterations, 1);
             assert!(*residual > 0.0 && residual.is_finite());
         }
         other => panic!("expected a Newton failure, got {other:?}"),
     }
-    assert!(err.to_string().contains("Newton did not converge in 1 iterations"));
+    assert!(err
+        .to_string()
+        .contains("Newton did not converge in 1 iterations"));
 }
 
 #[test]
@@ -55,10 +85,17 @@ fn a_non_finite_force_stops_the_run_with_an_error() {
                 u[0] += f64::NAN;
             }
         };
-        let options = SimOptions { method, dt: 0.01, duration: 1.0 };
+        let options = SimOptions {
+            method,
+            dt: 0.01,
+            duration: 1.0,
+        };
         let err = simulate(&mut sys, &q0, &dq0, &options, &mut force, &mut |_| {}).unwrap_err();
         match err {
-            SimError::NonFinite { step, t, .. } => assert!(step > 0 && t > 0.24 && t < 0.3, "{method:?}: step {step}, t {t}"),
+            SimError::NonFinite { step, t, .. } => assert!(
+                step > 0 && t > 0.24 && t < 0.3,
+                "{method:?}: step {step}, t {t}"
+            ),
             other => panic!("{method:?}: expected NonFinite, got {other:?}"),
         }
     }
@@ -69,17 +106,36 @@ fn bad_arguments_are_errors() {
     let mut sys = interpreted(&load("pendulum.toml"));
     let (q0, dq0) = sys.initial_state();
     let short = Vector::<Dyn>::zeros(3);
-    let ok = SimOptions { method: Method::Rk4, dt: 0.01, duration: 1.0 };
+    let ok = SimOptions {
+        method: Method::Rk4,
+        dt: 0.01,
+        duration: 1.0,
+    };
     let e = simulate(&mut sys, &short, &dq0, &ok, &mut NoForce, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("the system has 1 variables"), "{e}");
     for (dt, duration) in [(0.0, 1.0), (-0.1, 1.0), (f64::NAN, 1.0), (0.1, -1.0)] {
         let o = SimOptions { dt, duration, ..ok };
-        assert!(matches!(simulate(&mut sys, &q0, &dq0, &o, &mut NoForce, &mut |_| {}), Err(SimError::InvalidInput(_))));
+        assert!(matches!(
+            simulate(&mut sys, &q0, &dq0, &o, &mut NoForce, &mut |_| {}),
+            Err(SimError::InvalidInput(_))
+        ));
     }
-    let bad_alpha = SimOptions { method: Method::Vi(ViSettings { alpha: 1.5, ..ViSettings::default() }), ..ok };
-    assert!(matches!(simulate(&mut sys, &q0, &dq0, &bad_alpha, &mut NoForce, &mut |_| {}), Err(SimError::InvalidInput(_))));
+    let bad_alpha = SimOptions {
+        method: Method::Vi(ViSettings {
+            alpha: 1.5,
+            ..ViSettings::default()
+        }),
+        ..ok
+    };
+    assert!(matches!(
+        simulate(&mut sys, &q0, &dq0, &bad_alpha, &mut NoForce, &mut |_| {}),
+        Err(SimError::InvalidInput(_))
+    ));
     let mut nan_q = q0.clone();
     nan_q[0] = f64::NAN;
-    assert!(matches!(simulate(&mut sys, &nan_q, &dq0, &ok, &mut NoForce, &mut |_| {}), Err(SimError::NonFinite { step: 0, .. })));
+    assert!(matches!(
+        simulate(&mut sys, &nan_q, &dq0, &ok, &mut NoForce, &mut |_| {}),
+        Err(SimError::NonFinite { step: 0, .. })
+    ));
     let _ = sys.dof();
 }

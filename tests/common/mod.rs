@@ -4,9 +4,9 @@
 
 use std::path::PathBuf;
 
+use nalgebra::Dyn;
 use tree_mech::runtime::{Caching, TreeSystem, Vector};
 use tree_mech::tree_model::{self, Model};
-use nalgebra::Dyn;
 
 /// Every model file in `models/`.
 pub fn model_files() -> Vec<PathBuf> {
@@ -22,7 +22,9 @@ pub fn model_files() -> Vec<PathBuf> {
 }
 
 pub fn load(name: &str) -> Model {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models").join(name);
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("models")
+        .join(name);
     tree_model::from_toml_file(path).unwrap()
 }
 

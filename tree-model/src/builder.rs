@@ -148,4 +148,3 @@ pub fn n_link_pendulum(n: usize) -> Model {
     b = b.initial("q1", 0.5, 0.0);
     b.build().expect("the N-link pendulum is a valid model")
 }
-

@@ -42,7 +42,11 @@ pub struct ModelError {
 }
 
 impl ModelError {
-    pub(crate) fn single(source_name: Option<String>, message: String, line: Option<usize>) -> Self {
+    pub(crate) fn single(
+        source_name: Option<String>,
+        message: String,
+        line: Option<usize>,
+    ) -> Self {
         ModelError {
             source_name,
             problems: vec![Problem {

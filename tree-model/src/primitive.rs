@@ -44,7 +44,10 @@ impl PrimitiveKind {
 
     /// True for `rx ry rz`.
     pub fn is_rotation(self) -> bool {
-        matches!(self, PrimitiveKind::Rx | PrimitiveKind::Ry | PrimitiveKind::Rz)
+        matches!(
+            self,
+            PrimitiveKind::Rx | PrimitiveKind::Ry | PrimitiveKind::Rz
+        )
     }
 
     /// The axis index 0, 1, 2 for X, Y, Z.

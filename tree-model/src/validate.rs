@@ -67,7 +67,11 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             Some(p) => match index_of.get(p) {
                 Some(&pi) if pi < k => Some(pi),
                 Some(&pi) if pi == k => {
-                    errs.frame(k, FrameField::Parent, format!("frame `{}` is its own parent", f.name));
+                    errs.frame(
+                        k,
+                        FrameField::Parent,
+                        format!("frame `{}` is its own parent", f.name),
+                    );
                     None
                 }
                 Some(_) => {
@@ -172,17 +176,25 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
 
     // Per-variable settings.
     for v in &spec.variables {
-        let site = || Site::VariableSettings { name: v.name.clone() };
+        let site = || Site::VariableSettings {
+            name: v.name.clone(),
+        };
         let Some(&i) = var_index.get(v.name.as_str()) else {
             errs.push(
                 site(),
-                format!("settings for variable `{}`, which drives no transform", v.name),
+                format!(
+                    "settings for variable `{}`, which drives no transform",
+                    v.name
+                ),
             );
             continue;
         };
         for (what, value) in [("q0", v.q0), ("dq0", v.dq0), ("damping", v.damping)] {
             if value.is_some_and(|x| !x.is_finite()) {
-                errs.push(site(), format!("variable `{}`: {what} is not finite", v.name));
+                errs.push(
+                    site(),
+                    format!("variable `{}`: {what} is not finite", v.name),
+                );
             }
         }
         if v.damping.is_some_and(|c| c < 0.0) {

@@ -32,7 +32,13 @@ fn a_valid_model_parses_with_variables_in_order_of_appearance() {
         None,
     )
     .unwrap();
-    assert_eq!(m.variables.iter().map(|v| v.name.as_str()).collect::<Vec<_>>(), ["q", "p"]);
+    assert_eq!(
+        m.variables
+            .iter()
+            .map(|v| v.name.as_str())
+            .collect::<Vec<_>>(),
+        ["q", "p"]
+    );
     assert_eq!(m.variables[1].q0, 0.25);
     assert_eq!(m.variables[1].damping, 0.5);
     assert_eq!(m.frames[1].mass.unwrap().mass, 2.0);
@@ -43,7 +49,9 @@ fn a_valid_model_parses_with_variables_in_order_of_appearance() {
 #[test]
 fn unknown_parent() {
     assert_reports(
-        &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"nowhere\"\ntz = 1.0\nmass = 1.0\n"),
+        &format!(
+            "{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"nowhere\"\ntz = 1.0\nmass = 1.0\n"
+        ),
         &["m.toml:7:", "frame `b` has unknown parent `nowhere`"],
     );
 }
@@ -75,7 +83,9 @@ fn frame_without_a_transform() {
 #[test]
 fn frame_with_several_transforms() {
     assert_reports(
-        &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1.0\nrx = 0.5\nmass = 1.0\n"),
+        &format!(
+            "{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1.0\nrx = 0.5\nmass = 1.0\n"
+        ),
         &["m.toml:8:", "frame `b` has several transforms (tz, rx)"],
     );
 }
@@ -92,7 +102,10 @@ fn variable_driving_two_transforms() {
 fn negative_or_non_finite_mass_and_inertia() {
     assert_reports(
         &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = -1.0\n"),
-        &["m.toml:9:", "frame `b`: mass -1 must be finite and not negative"],
+        &[
+            "m.toml:9:",
+            "frame `b`: mass -1 must be finite and not negative",
+        ],
     );
     assert_reports(
         &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = nan\n"),
@@ -108,7 +121,10 @@ fn negative_or_non_finite_mass_and_inertia() {
 fn settings_for_a_variable_that_drives_nothing() {
     assert_reports(
         &format!("{GOOD_HEAD}inertia = [1, 1, 1]\n[variables.ghost]\nq0 = 1.0\n"),
-        &["m.toml:6:", "settings for variable `ghost`, which drives no transform"],
+        &[
+            "m.toml:6:",
+            "settings for variable `ghost`, which drives no transform",
+        ],
     );
 }
 
@@ -141,7 +157,10 @@ fn every_problem_is_reported_at_once() {
 
 #[test]
 fn toml_syntax_errors_and_unknown_fields_name_their_line() {
-    assert_reports("name = \"t\"\n[[frame]]\nname = \"a\"\nrx = = 1\n", &["m.toml:4:", "TOML error"]);
+    assert_reports(
+        "name = \"t\"\n[[frame]]\nname = \"a\"\nrx = = 1\n",
+        &["m.toml:4:", "TOML error"],
+    );
     assert_reports(
         &format!("{GOOD_HEAD}masss = 1.0\n"),
         &["m.toml:5:", "TOML error", "unknown field `masss`"],
@@ -162,8 +181,13 @@ fn kinematic_variables_are_rejected_for_now() {
 
 #[test]
 fn missing_file() {
-    let e = from_toml_file("/no/such/model.toml").unwrap_err().to_string();
-    assert!(e.contains("cannot read model file `/no/such/model.toml`"), "{e}");
+    let e = from_toml_file("/no/such/model.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cannot read model file `/no/such/model.toml`"),
+        "{e}"
+    );
 }
 
 #[test]

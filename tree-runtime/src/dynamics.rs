@@ -98,11 +98,13 @@ where
         *qdd += &self.terms.dl_dq;
         qdd.gemv(-1.0, &self.terms.d2l_ddq_dq, dq, 1.0);
         self.factor.copy_from(&self.terms.mass);
-        cholesky_solve(&mut self.factor, qdd).map_err(|(i, pivot)| SimError::SingularMassMatrix {
-            step,
-            t,
-            variable: sys.variable_name(i).to_string(),
-            pivot,
+        cholesky_solve(&mut self.factor, qdd).map_err(|(i, pivot)| {
+            SimError::SingularMassMatrix {
+                step,
+                t,
+                variable: sys.variable_name(i).to_string(),
+                pivot,
+            }
         })?;
         if qdd.iter().any(|x| !x.is_finite()) {
             return Err(SimError::NonFinite {

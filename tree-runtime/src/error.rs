@@ -6,11 +6,25 @@ use std::fmt;
 #[derive(Clone, Debug, PartialEq)]
 pub enum SimError {
     /// `M(q)` is not positive definite (Cholesky failed at this variable's pivot).
-    SingularMassMatrix { step: usize, t: f64, variable: String, pivot: f64 },
+    SingularMassMatrix {
+        step: usize,
+        t: f64,
+        variable: String,
+        pivot: f64,
+    },
     /// The VI's Newton iteration matrix (eq. (26)) is singular.
-    SingularJacobian { step: usize, t: f64, variable: String },
+    SingularJacobian {
+        step: usize,
+        t: f64,
+        variable: String,
+    },
     /// Newton did not reach the tolerance on the discrete Euler–Lagrange residual.
-    NewtonFailed { step: usize, t: f64, iterations: usize, residual: f64 },
+    NewtonFailed {
+        step: usize,
+        t: f64,
+        iterations: usize,
+        residual: f64,
+    },
     /// A state or derivative stopped being finite.
     NonFinite { step: usize, t: f64, what: String },
     /// The adaptive step size fell below what floating point can resolve.

@@ -16,6 +16,10 @@
 //! assert!(traj.max_energy_error() < 1e-2);
 //! ```
 
+// Integrator steps take the system, the force, the step's labels and the state as separate
+// arguments on purpose.
+#![allow(clippy::too_many_arguments)]
+
 pub mod dynamics;
 pub mod error;
 pub mod integrate;

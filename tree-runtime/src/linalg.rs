@@ -19,7 +19,7 @@ where
         }
         // Relative threshold: a pivot lost to rounding is as singular as a zero one.
         let scale = a[(j, j)].abs().max(f64::MIN_POSITIVE);
-        if !(d > 1e-13 * scale) || !d.is_finite() {
+        if !d.is_finite() || d <= 1e-13 * scale {
             return Err((j, d));
         }
         let d = d.sqrt();
@@ -56,7 +56,10 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     let n = b.len();
-    let scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(f64::MIN_POSITIVE);
+    let scale = a
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()))
+        .max(f64::MIN_POSITIVE);
     for j in 0..n {
         let mut p = j;
         for i in j + 1..n {
@@ -65,7 +68,7 @@ where
             }
         }
         let pivot = a[(p, j)];
-        if !(pivot.abs() > 1e-14 * scale) || !pivot.is_finite() {
+        if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
             return Err(j);
         }
         if p != j {

@@ -257,5 +257,12 @@ pub fn dot(x: &Twist, y: &Twist) -> f64 {
 /// `M_k X` with the body's generalized inertia `M_k = diag(m, m, m, Ixx, Iyy, Izz)`.
 #[inline(always)]
 pub fn inertia_times(m: f64, i: &[f64; 3], x: &Twist) -> Twist {
-    [m * x[0], m * x[1], m * x[2], i[0] * x[3], i[1] * x[4], i[2] * x[5]]
+    [
+        m * x[0],
+        m * x[1],
+        m * x[2],
+        i[0] * x[3],
+        i[1] * x[4],
+        i[2] * x[5],
+    ]
 }

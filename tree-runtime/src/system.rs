@@ -112,7 +112,13 @@ where
     fn damping(&self, i: usize) -> f64;
 
     /// Evaluates the Lagrangian terms up to `order` at `(q, q̇)` into `out`.
-    fn lagrangian(&mut self, q: &Vector<Self::N>, dq: &Vector<Self::N>, order: Order, out: &mut Terms<Self::N>);
+    fn lagrangian(
+        &mut self,
+        q: &Vector<Self::N>,
+        dq: &Vector<Self::N>,
+        order: Order,
+        out: &mut Terms<Self::N>,
+    );
 
     /// Every frame's pose in the world, `g_sk(q)` (eq. (1)); `out.len()` must be
     /// `frame_count()`.
@@ -134,7 +140,12 @@ where
     }
 
     /// Convenience: a freshly allocated evaluation up to `order`.
-    fn evaluate(&mut self, q: &Vector<Self::N>, dq: &Vector<Self::N>, order: Order) -> Terms<Self::N> {
+    fn evaluate(
+        &mut self,
+        q: &Vector<Self::N>,
+        dq: &Vector<Self::N>,
+        order: Order,
+    ) -> Terms<Self::N> {
         let mut t = Terms::zeros(self.dim());
         self.lagrangian(q, dq, order, &mut t);
         t

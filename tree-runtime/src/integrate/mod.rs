@@ -36,7 +36,10 @@ pub struct SimOptions {
 
 fn check_options(o: &SimOptions) -> Result<(), SimError> {
     if !(o.dt > 0.0 && o.dt.is_finite()) {
-        return Err(SimError::InvalidInput(format!("time step must be positive, got {}", o.dt)));
+        return Err(SimError::InvalidInput(format!(
+            "time step must be positive, got {}",
+            o.dt
+        )));
     }
     if !(o.duration >= 0.0 && o.duration.is_finite()) {
         return Err(SimError::InvalidInput(format!(
@@ -46,12 +49,17 @@ fn check_options(o: &SimOptions) -> Result<(), SimError> {
     }
     if let Method::Vi(s) = o.method {
         if !(0.0..=1.0).contains(&s.alpha) {
-            return Err(SimError::InvalidInput(format!("VI alpha must lie in [0, 1], got {}", s.alpha)));
+            return Err(SimError::InvalidInput(format!(
+                "VI alpha must lie in [0, 1], got {}",
+                s.alpha
+            )));
         }
     }
     if let Method::Rk45(t) = o.method {
         if !(t.rtol > 0.0 || t.atol > 0.0) {
-            return Err(SimError::InvalidInput("rk45 needs a positive tolerance".into()));
+            return Err(SimError::InvalidInput(
+                "rk45 needs a positive tolerance".into(),
+            ));
         }
     }
     Ok(())
@@ -83,10 +91,16 @@ where
         )));
     }
     if q0.iter().chain(dq0.iter()).any(|x| !x.is_finite()) {
-        return Err(SimError::NonFinite { step: 0, t: 0.0, what: "initial state".into() });
+        return Err(SimError::NonFinite {
+            step: 0,
+            t: 0.0,
+            what: "initial state".into(),
+        });
     }
     let steps = (options.duration / options.dt).round() as usize;
-    let names = (0..n.value()).map(|i| sys.variable_name(i).to_string()).collect();
+    let names = (0..n.value())
+        .map(|i| sys.variable_name(i).to_string())
+        .collect();
     let mut traj = Trajectory::new(names, steps + 1);
     let mut q = q0.clone();
     let mut dq = dq0.clone();
@@ -115,7 +129,11 @@ where
             let t_end = options.duration;
             while t < t_end {
                 let h = rk.step(sys, force, k, t, t_end, &mut dt, &mut q, &mut dq)?;
-                t = if t + h >= t_end * (1.0 - 1e-15) { t_end } else { t + h };
+                t = if t + h >= t_end * (1.0 - 1e-15) {
+                    t_end
+                } else {
+                    t + h
+                };
                 k += 1;
                 check_finite(k, t, &q, &dq)?;
                 traj.push(t, q.as_slice(), dq.as_slice(), None, energy(sys, &q, &dq));
@@ -126,7 +144,13 @@ where
             let mut vi = MidpointVi::new(n, settings);
             let mut p = vi.initial_momentum(sys, &q, &dq);
             let mut q_next = q.clone();
-            traj.push(0.0, q.as_slice(), dq.as_slice(), Some(p.as_slice()), energy(sys, &q, &dq));
+            traj.push(
+                0.0,
+                q.as_slice(),
+                dq.as_slice(),
+                Some(p.as_slice()),
+                energy(sys, &q, &dq),
+            );
             for k in 0..steps {
                 let t = k as f64 * options.dt;
                 vi.step(sys, force, k, t, options.dt, &mut q, &mut p, &mut q_next)?;
@@ -146,7 +170,11 @@ where
     DefaultAllocator: Allocator<N>,
 {
     if q.iter().chain(dq.iter()).any(|x| !x.is_finite()) {
-        return Err(SimError::NonFinite { step, t, what: "state (q, q̇)".into() });
+        return Err(SimError::NonFinite {
+            step,
+            t,
+            what: "state (q, q̇)".into(),
+        });
     }
     Ok(())
 }

@@ -35,7 +35,6 @@ where
     }
 
     /// Advances `(q, q̇)` from `t` by `dt`.
-    #[allow(clippy::too_many_arguments)]
     pub fn step<S, F>(
         &mut self,
         sys: &mut S,

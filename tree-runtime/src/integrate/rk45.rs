@@ -13,12 +13,41 @@ const A: [[f64; 6]; 7] = [
     [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
     [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
-    [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0],
-    [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0],
-    [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
+    [
+        19372.0 / 6561.0,
+        -25360.0 / 2187.0,
+        64448.0 / 6561.0,
+        -212.0 / 729.0,
+        0.0,
+        0.0,
+    ],
+    [
+        9017.0 / 3168.0,
+        -355.0 / 33.0,
+        46732.0 / 5247.0,
+        49.0 / 176.0,
+        -5103.0 / 18656.0,
+        0.0,
+    ],
+    [
+        35.0 / 384.0,
+        0.0,
+        500.0 / 1113.0,
+        125.0 / 192.0,
+        -2187.0 / 6784.0,
+        11.0 / 84.0,
+    ],
 ];
 /// Fifth-order weights (equal to the last row of `A`: first same as last).
-const B5: [f64; 7] = [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0, 0.0];
+const B5: [f64; 7] = [
+    35.0 / 384.0,
+    0.0,
+    500.0 / 1113.0,
+    125.0 / 192.0,
+    -2187.0 / 6784.0,
+    11.0 / 84.0,
+    0.0,
+];
 /// Fourth-order embedded weights.
 const B4: [f64; 7] = [
     5179.0 / 57600.0,
@@ -40,7 +69,10 @@ pub struct Tolerance {
 
 impl Default for Tolerance {
     fn default() -> Self {
-        Tolerance { rtol: 1e-8, atol: 1e-10 }
+        Tolerance {
+            rtol: 1e-8,
+            atol: 1e-10,
+        }
     }
 }
 
@@ -79,7 +111,6 @@ where
 
     /// Takes one accepted step from `t`, trying `*dt` first and shrinking it as needed but
     /// never past `t_end`. Returns the step taken; `*dt` becomes the proposal for the next.
-    #[allow(clippy::too_many_arguments)]
     pub fn step<S, F>(
         &mut self,
         sys: &mut S,
@@ -97,7 +128,7 @@ where
     {
         loop {
             let h = dt.min(t_end - t);
-            if !(h > 1e-14 * t.abs().max(1.0)) {
+            if h.is_nan() || h <= 1e-14 * t.abs().max(1.0) {
                 return Err(SimError::StepSizeTooSmall { step, t, dt: h });
             }
             for s in 0..7 {
@@ -138,7 +169,11 @@ where
                     what: "rk45 error estimate".into(),
                 });
             }
-            let factor = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            let factor = if err == 0.0 {
+                5.0
+            } else {
+                (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
+            };
             if err <= 1.0 {
                 q.copy_from(&self.q_stage);
                 dq.copy_from(&self.v_stage);

@@ -73,7 +73,12 @@ where
     }
 
     /// Starts from `(q0, q̇0)`: returns `p_0 = ∂L/∂q̇(q0, q̇0)` and primes the predictor.
-    pub fn initial_momentum<S: System<N = N>>(&mut self, sys: &mut S, q0: &Vector<N>, dq0: &Vector<N>) -> Vector<N> {
+    pub fn initial_momentum<S: System<N = N>>(
+        &mut self,
+        sys: &mut S,
+        q0: &Vector<N>,
+        dq0: &Vector<N>,
+    ) -> Vector<N> {
         sys.lagrangian(q0, dq0, Order::First, &mut self.terms);
         self.last_velocity.copy_from(dq0);
         self.terms.dl_ddq.clone()
@@ -82,7 +87,6 @@ where
     /// The residual `p_k + D1 L_d + f⁻` (eqs. (23), (25)) at the guess `q2`, and, with
     /// `jacobian`, its exact derivative with respect to `q2` (eq. (26) plus the damping
     /// term). Leaves `terms` evaluated at `(q_α, v)`.
-    #[allow(clippy::too_many_arguments)]
     pub fn residual<S, F>(
         &mut self,
         sys: &mut S,
@@ -107,7 +111,14 @@ where
         self.q_alpha.axpy(a * dt, &self.velocity, 1.0);
         let order = if jacobian { Order::Full } else { Order::First };
         sys.lagrangian(&self.q_alpha, &self.velocity, order, &mut self.terms);
-        total_force(sys, force, t + a * dt, &self.q_alpha, &self.velocity, &mut self.force);
+        total_force(
+            sys,
+            force,
+            t + a * dt,
+            &self.q_alpha,
+            &self.velocity,
+            &mut self.force,
+        );
         // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + (1−α)Δt u
         self.residual.copy_from(p1);
         self.residual.axpy((1.0 - a) * dt, &self.terms.dl_dq, 1.0);
@@ -137,7 +148,6 @@ where
     }
 
     /// Advances `(q_k, p_k)` to `(q_{k+1}, p_{k+1})` in place. `step` labels errors.
-    #[allow(clippy::too_many_arguments)]
     pub fn step<S, F>(
         &mut self,
         sys: &mut S,
@@ -182,10 +192,12 @@ where
             self.iterations += 1;
             // Newton: J Δ = −f
             self.residual.neg_mut();
-            lu_solve(&mut self.jacobian, &mut self.residual).map_err(|i| SimError::SingularJacobian {
-                step,
-                t,
-                variable: sys.variable_name(i).to_string(),
+            lu_solve(&mut self.jacobian, &mut self.residual).map_err(|i| {
+                SimError::SingularJacobian {
+                    step,
+                    t,
+                    variable: sys.variable_name(i).to_string(),
+                }
             })?;
             *q_next += &self.residual;
             // An update lost in the last bits of q: the residual is at its rounding floor
@@ -227,11 +239,13 @@ where
         sys.lagrangian(q, &self.velocity, Order::Dynamics, &mut self.terms);
         self.jacobian.copy_from(&self.terms.mass);
         dq.copy_from(p);
-        cholesky_solve(&mut self.jacobian, dq).map_err(|(i, pivot)| SimError::SingularMassMatrix {
-            step,
-            t,
-            variable: sys.variable_name(i).to_string(),
-            pivot,
+        cholesky_solve(&mut self.jacobian, dq).map_err(|(i, pivot)| {
+            SimError::SingularMassMatrix {
+                step,
+                t,
+                variable: sys.variable_name(i).to_string(),
+                pivot,
+            }
         })?;
         // L(q, 0) = −V(q)
         Ok(0.5 * dq.dot(p) - self.terms.l)

@@ -81,11 +81,7 @@ pub(crate) fn add_mass_terms(
             // ∂²L/∂q_i∂q_j = Σ (∂v/∂q_j)ᵀ M_k ∂v/∂q_i + v_kᵀ M_k ∂²v/∂q_i∂q_j + m γ·∂²p/∂q_i∂q_j,
             // with ∂²p/∂q_i∂q_j = R_k (ω_j × J_i,lin + (∂²v/∂q̇_i∂q_j)_lin).
             let jb = fq.jac(b);
-            let h = if b < a {
-                fq.d2v_ddq_dq(b, a)
-            } else {
-                [0.0; 6]
-            };
+            let h = if b < a { fq.d2v_ddq_dq(b, a) } else { [0.0; 6] };
             // Symmetric: with b ≤ a use the (b, a) form, ∂(J_b)/∂q_a = ∂²v/∂q̇_b∂q_a.
             let d2p = [
                 ja[4] * jb[2] - ja[5] * jb[1] + h[0],

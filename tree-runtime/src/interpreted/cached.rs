@@ -21,7 +21,13 @@ impl TreeSystem {
             let (parent_pose, parent_vel, np, pc, pt) = match f.parent {
                 Some(p) => {
                     let pf = &self.frames[p];
-                    (self.pose[p], self.velocity[p], pf.n, pf.col_offset, pf.tri_offset)
+                    (
+                        self.pose[p],
+                        self.velocity[p],
+                        pf.n,
+                        pf.col_offset,
+                        pf.tri_offset,
+                    )
                 }
                 None => (Pose::IDENTITY, ZERO, 0, 0, 0),
             };

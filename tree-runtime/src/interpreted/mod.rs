@@ -52,6 +52,9 @@ pub(crate) fn tri(a: usize, b: usize) -> usize {
     a * (a + 1) / 2 + b
 }
 
+/// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
+pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
+
 /// The interpreted system.
 #[derive(Clone, Debug)]
 pub struct TreeSystem {
@@ -137,7 +140,11 @@ impl TreeSystem {
 
     /// Body velocity `v_k` and body Jacobian column `∂v_k/∂q̇_i` of every frame, for
     /// checking against finite differences: `(v_k, [(i, ∂v_k/∂q̇_i, ∂v_k/∂q_i)])`.
-    pub fn frame_velocities(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<(Twist, Vec<(usize, Twist, Twist)>)> {
+    pub fn frame_velocities(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+    ) -> Vec<FrameVelocity> {
         self.forward(q.as_slice(), dq.as_slice(), Order::First, true);
         (0..self.frames.len())
             .map(|k| {
@@ -192,7 +199,13 @@ impl System for TreeSystem {
         self.model.variables[i].damping
     }
 
-    fn lagrangian(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>, order: Order, out: &mut Terms<Dyn>) {
+    fn lagrangian(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        order: Order,
+        out: &mut Terms<Dyn>,
+    ) {
         out.clear(order);
         match self.caching {
             Caching::On => {
@@ -205,7 +218,8 @@ impl System for TreeSystem {
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
         for (k, f) in self.frames.iter().enumerate() {
-            let local = crate::se3::LocalTransform::new(f.kind, self.joint_value(f.joint, q.as_slice()));
+            let local =
+                crate::se3::LocalTransform::new(f.kind, self.joint_value(f.joint, q.as_slice()));
             let parent = f.parent.map_or(Pose::IDENTITY, |p| out[p]);
             out[k] = local.compose_onto(&parent);
         }

@@ -10,7 +10,13 @@ use crate::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
 use crate::system::{Order, Terms};
 
 impl TreeSystem {
-    pub(crate) fn accumulate_uncached(&self, q: &[f64], dq: &[f64], order: Order, out: &mut Terms<Dyn>) {
+    pub(crate) fn accumulate_uncached(
+        &self,
+        q: &[f64],
+        dq: &[f64],
+        order: Order,
+        out: &mut Terms<Dyn>,
+    ) {
         for (k, f) in self.frames.iter().enumerate() {
             let Some(m) = f.mass else { continue };
             let mut view = Recompute {
@@ -44,7 +50,9 @@ impl Recompute<'_> {
     }
 
     fn pose_of(&self, k: usize) -> Pose {
-        let parent = self.frames[k].parent.map_or(Pose::IDENTITY, |p| self.pose_of(p));
+        let parent = self.frames[k]
+            .parent
+            .map_or(Pose::IDENTITY, |p| self.pose_of(p));
         self.local(k).compose_onto(&parent)
     }
 
@@ -68,7 +76,9 @@ impl Recompute<'_> {
     }
 
     fn parent_transport(&self, k: usize, column: impl Fn(usize) -> Twist) -> Twist {
-        let p = self.frames[k].parent.expect("an ancestor variable implies a parent");
+        let p = self.frames[k]
+            .parent
+            .expect("an ancestor variable implies a parent");
         self.local(k).ad_inverse(&column(p))
     }
 
