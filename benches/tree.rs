@@ -1,5 +1,5 @@
 //! One evaluation (all Lagrangian terms, `Order::Full`) and one VI step of the N-link
-//! pendulum, interpreted with and without caching. Run: `cargo bench --bench tree`.
+//! pendulum, interpreted in each evaluation mode. Run: `cargo bench --bench tree`.
 
 use std::hint::black_box;
 
@@ -7,9 +7,14 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use tree_mech::integrate::{MidpointVi, ViSettings};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::Vector;
-use tree_mech::{tree_model, Caching, NoForce, Order, System, Terms, TreeSystem};
+use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Terms, TreeSystem};
 
 const SIZES: [usize; 7] = [1, 2, 4, 8, 12, 19, 40];
+const MODES: [(&str, Evaluation); 3] = [
+    ("sweeps", Evaluation::Sweeps),
+    ("cached", Evaluation::Cached),
+    ("uncached", Evaluation::Uncached),
+];
 
 fn state(n: usize) -> (Vector<Dyn>, Vector<Dyn>) {
     let q = Vector::<Dyn>::from_fn(n, |i, _| 0.3 * ((i as f64) * 0.7).sin());
@@ -21,11 +26,11 @@ fn evaluation(c: &mut Criterion) {
     let mut group = c.benchmark_group("evaluate");
     for n in SIZES {
         let model = tree_model::n_link_pendulum(n);
-        for (label, caching) in [("cached", Caching::On), ("uncached", Caching::Off)] {
-            if caching == Caching::Off && n > 19 {
+        for (label, mode) in MODES {
+            if mode == Evaluation::Uncached && n > 19 {
                 continue;
             }
-            let mut sys = TreeSystem::new(&model, caching).unwrap();
+            let mut sys = TreeSystem::new(&model, mode).unwrap();
             let (q, dq) = state(n);
             let mut terms = Terms::zeros(Dyn(n));
             group.bench_with_input(BenchmarkId::new(label, n), &n, |b, _| {
@@ -43,11 +48,11 @@ fn vi_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("vi_step");
     for n in SIZES {
         let model = tree_model::n_link_pendulum(n);
-        for (label, caching) in [("cached", Caching::On), ("uncached", Caching::Off)] {
-            if caching == Caching::Off && n > 19 {
+        for (label, mode) in MODES {
+            if mode == Evaluation::Uncached && n > 19 {
                 continue;
             }
-            let mut sys = TreeSystem::new(&model, caching).unwrap();
+            let mut sys = TreeSystem::new(&model, mode).unwrap();
             let (q0, dq0) = state(n);
             let mut vi = MidpointVi::new(Dyn(n), ViSettings::default());
             let p0 = vi.initial_momentum(&mut sys, &q0, &dq0);

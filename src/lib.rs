@@ -8,6 +8,6 @@ pub use tree_model;
 pub use tree_runtime as runtime;
 pub use tree_runtime::nalgebra;
 pub use tree_runtime::{
-    integrate, Caching, GeneralizedForce, NoForce, Order, SimError, System, Terms, Trajectory,
+    integrate, Evaluation, GeneralizedForce, NoForce, Order, SimError, System, Terms, Trajectory,
     TreeSystem,
 };

@@ -13,7 +13,7 @@ use tree_mech::integrate::{simulate, Method, SimOptions, Tolerance, ViSettings};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::se3::Pose;
 use tree_mech::runtime::{Dynamics, Vector};
-use tree_mech::{tree_model, Caching, NoForce, Order, System, TreeSystem};
+use tree_mech::{tree_model, Evaluation, NoForce, Order, System, TreeSystem};
 
 #[derive(Parser)]
 #[command(
@@ -34,6 +34,13 @@ enum Integrator {
     Rk4,
     /// Adaptive Dormand–Prince 5(4).
     Rk45,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum EvaluationArg {
+    Sweeps,
+    Cached,
+    Uncached,
 }
 
 #[derive(Subcommand)]
@@ -69,9 +76,10 @@ enum Command {
         /// rk45 absolute tolerance.
         #[arg(long, default_value_t = 1e-10)]
         atol: f64,
-        /// Evaluate without caching (the paper's Fig. 3 comparison).
-        #[arg(long)]
-        no_cache: bool,
+        /// How the interpreted system evaluates: composite sweeps (fastest), the paper's
+        /// per-mass sums with caching, or without caching (the paper's Fig. 3 comparison).
+        #[arg(long, value_enum, default_value = "sweeps")]
+        evaluation: EvaluationArg,
     },
     /// Evaluate L, its derivatives, q̈ and every pose at a state; prints JSON.
     Eval {
@@ -101,7 +109,7 @@ fn main() -> ExitCode {
             newton_tol,
             rtol,
             atol,
-            no_cache,
+            evaluation,
         } => {
             let method = match integrator {
                 Integrator::Vi => Method::Vi(ViSettings {
@@ -112,7 +120,11 @@ fn main() -> ExitCode {
                 Integrator::Rk4 => Method::Rk4,
                 Integrator::Rk45 => Method::Rk45(Tolerance { rtol, atol }),
             };
-            let caching = if no_cache { Caching::Off } else { Caching::On };
+            let caching = match evaluation {
+                EvaluationArg::Sweeps => Evaluation::Sweeps,
+                EvaluationArg::Cached => Evaluation::Cached,
+                EvaluationArg::Uncached => Evaluation::Uncached,
+            };
             run_simulate(
                 &model,
                 SimOptions {
@@ -137,7 +149,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path, caching: Caching) -> Result<TreeSystem, String> {
+fn load(path: &Path, caching: Evaluation) -> Result<TreeSystem, String> {
     let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
     TreeSystem::new(&model, caching).map_err(|e| e.to_string())
 }
@@ -145,7 +157,7 @@ fn load(path: &Path, caching: Caching) -> Result<TreeSystem, String> {
 fn run_simulate(
     path: &Path,
     options: SimOptions,
-    caching: Caching,
+    caching: Evaluation,
     out: Option<&Path>,
     plot_path: Option<&Path>,
 ) -> Result<(), String> {
@@ -237,7 +249,7 @@ fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Ve
 }
 
 fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String> {
-    let mut sys = load(path, Caching::On)?;
+    let mut sys = load(path, Evaluation::Sweeps)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
     let (q0, dq0) = sys.initial_state();
@@ -286,7 +298,7 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String
 
 fn run_check(path: &Path) -> Result<(), String> {
     let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
-    let sys = TreeSystem::new(&model, Caching::On).map_err(|e| e.to_string())?;
+    let sys = TreeSystem::new(&model, Evaluation::Sweeps).map_err(|e| e.to_string())?;
     println!("model `{}`: valid", model.name);
     println!(
         "gravity: [{}, {}, {}]",

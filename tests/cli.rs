@@ -94,8 +94,12 @@ fn check_draws_the_tree() {
 
 #[test]
 fn bad_input_is_a_short_error_and_a_failing_exit() {
-    let cases: [(&[&str], &str); 5] = [
+    let bad = std::env::temp_dir().join(format!("tree-mech-bad-{}.toml", std::process::id()));
+    std::fs::write(&bad, "name = \"bad\"\n[[frame]]\nname = \"a\"\nbogus = 2\n").unwrap();
+    let bad_shown = format!("{}:4: TOML error: unknown field `bogus`", bad.display());
+    let cases: [(&[&str], &str); 6] = [
         (&["check", "models/missing.toml"], "cannot read model file"),
+        (&["simulate"], "required"),
         (
             &["eval", "models/pendulum.toml", "--q", "1,2"],
             "--q has 2 values; the model has 1 variables (theta)",
@@ -108,10 +112,7 @@ fn bad_input_is_a_short_error_and_a_failing_exit() {
             &["simulate", "models/pendulum.toml", "--dt", "-1"],
             "time step must be positive",
         ),
-        (
-            &["check", "Cargo.toml"],
-            "Cargo.toml:17: TOML error: unknown field `dependencies`",
-        ),
+        (&["check", bad.to_str().unwrap()], &bad_shown),
     ];
     for (args, expected) in cases {
         let (ok, _, stderr) = tree_mech(args);

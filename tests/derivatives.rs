@@ -6,7 +6,7 @@ mod common;
 use common::{assert_close, model_files, Rng};
 use nalgebra::Dyn;
 use tree_mech::runtime::se3::{LocalTransform, Pose};
-use tree_mech::runtime::{Caching, Order, System, Terms, TreeSystem, Vector};
+use tree_mech::runtime::{Evaluation, Order, System, Terms, TreeSystem, Vector};
 use tree_mech::tree_model::{self, Joint, Model};
 
 const H: f64 = 1e-6;
@@ -30,8 +30,19 @@ fn fd<T>(
     sub(&f(&xp), &f(&xm)) / (2.0 * H)
 }
 
+const MODES: [Evaluation; 3] = [Evaluation::Sweeps, Evaluation::Cached, Evaluation::Uncached];
+
 fn check_model(model: &Model, seed: u64) {
-    let mut sys = TreeSystem::new(model, Caching::On).unwrap();
+    for mode in MODES {
+        // Uncached is slow on deep trees; the agreement test covers it there.
+        if mode != Evaluation::Uncached || model.dof() <= 8 {
+            check_model_in(model, seed, mode);
+        }
+    }
+}
+
+fn check_model_in(model: &Model, seed: u64, mode: Evaluation) {
+    let mut sys = TreeSystem::new(model, mode).unwrap();
     let n = sys.dof();
     let mut rng = Rng::new(seed);
     for trial in 0..4 {
@@ -120,7 +131,7 @@ fn pose_matrix(p: &Pose) -> nalgebra::Matrix4<f64> {
 fn poses_match_an_independent_composition() {
     for (k, file) in model_files().iter().enumerate() {
         let model = tree_model::from_toml_file(file).unwrap();
-        let mut sys = TreeSystem::new(&model, Caching::On).unwrap();
+        let mut sys = TreeSystem::new(&model, Evaluation::Sweeps).unwrap();
         let mut rng = Rng::new(k as u64);
         let q = rng.vector(sys.dof(), 2.0);
         let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
@@ -145,7 +156,7 @@ fn poses_match_an_independent_composition() {
 fn body_velocities_and_their_derivatives_match_finite_differences() {
     for (k, file) in model_files().iter().enumerate() {
         let model = tree_model::from_toml_file(file).unwrap();
-        let mut sys = TreeSystem::new(&model, Caching::On).unwrap();
+        let mut sys = TreeSystem::new(&model, Evaluation::Sweeps).unwrap();
         let n = sys.dof();
         let mut rng = Rng::new(50 + k as u64);
         let q = rng.vector(n, 1.5);
@@ -211,36 +222,38 @@ fn body_velocities_and_their_derivatives_match_finite_differences() {
 }
 
 #[test]
-fn caching_on_and_off_agree_to_rounding() {
+fn all_evaluation_modes_agree_to_rounding() {
     let mut models: Vec<Model> = model_files()
         .iter()
         .map(|f| tree_model::from_toml_file(f).unwrap())
         .collect();
     models.push(tree_model::n_link_pendulum(6));
     for model in &models {
-        let mut on = TreeSystem::new(model, Caching::On).unwrap();
-        let mut off = TreeSystem::new(model, Caching::Off).unwrap();
-        let mut rng = Rng::new(9);
-        for _ in 0..3 {
-            let q = rng.vector(on.dof(), 2.0);
-            let dq = rng.vector(on.dof(), 2.0);
-            let a = eval(&mut on, &q, &dq);
-            let b = eval(&mut off, &q, &dq);
-            let scale = a.d2l_dq_dq.amax().max(a.mass.amax()).max(1.0);
-            let diff = [
-                (a.l - b.l).abs(),
-                (&a.dl_dq - &b.dl_dq).amax(),
-                (&a.dl_ddq - &b.dl_ddq).amax(),
-                (&a.mass - &b.mass).amax(),
-                (&a.d2l_ddq_dq - &b.d2l_ddq_dq).amax(),
-                (&a.d2l_dq_dq - &b.d2l_dq_dq).amax(),
-            ];
-            for d in diff {
-                assert!(
-                    d <= 1e-12 * scale,
-                    "{}: cached vs uncached differ by {d:e}",
-                    model.name
-                );
+        let mut on = TreeSystem::new(model, Evaluation::Sweeps).unwrap();
+        for other in [Evaluation::Cached, Evaluation::Uncached] {
+            let mut off = TreeSystem::new(model, other).unwrap();
+            let mut rng = Rng::new(9);
+            for _ in 0..3 {
+                let q = rng.vector(on.dof(), 2.0);
+                let dq = rng.vector(on.dof(), 2.0);
+                let a = eval(&mut on, &q, &dq);
+                let b = eval(&mut off, &q, &dq);
+                let scale = a.d2l_dq_dq.amax().max(a.mass.amax()).max(1.0);
+                let diff = [
+                    (a.l - b.l).abs(),
+                    (&a.dl_dq - &b.dl_dq).amax(),
+                    (&a.dl_ddq - &b.dl_ddq).amax(),
+                    (&a.mass - &b.mass).amax(),
+                    (&a.d2l_ddq_dq - &b.d2l_ddq_dq).amax(),
+                    (&a.d2l_dq_dq - &b.d2l_dq_dq).amax(),
+                ];
+                for d in diff {
+                    assert!(
+                        d <= 1e-12 * scale,
+                        "{}: sweeps vs {other:?} differ by {d:e}",
+                        model.name
+                    );
+                }
             }
         }
     }

@@ -6,9 +6,9 @@
 //! [`integrate`] and the recorded [`Trajectory`].
 //!
 //! ```
-//! use tree_runtime::{integrate::{simulate, Method, SimOptions, ViSettings}, Caching, NoForce, System, TreeSystem};
+//! use tree_runtime::{integrate::{simulate, Method, SimOptions, ViSettings}, Evaluation, NoForce, System, TreeSystem};
 //! let model = tree_model::n_link_pendulum(2);
-//! let mut sys = TreeSystem::new(&model, Caching::On).unwrap();
+//! let mut sys = TreeSystem::new(&model, Evaluation::Sweeps).unwrap();
 //! let (q0, dq0) = sys.initial_state();
 //! let options = SimOptions { method: Method::Vi(ViSettings::default()), dt: 0.01, duration: 1.0 };
 //! let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
@@ -31,7 +31,7 @@ pub mod trajectory;
 
 pub use dynamics::{Dynamics, GeneralizedForce, NoForce};
 pub use error::SimError;
-pub use interpreted::{Caching, TreeSystem};
+pub use interpreted::{Evaluation, TreeSystem};
 pub use se3::{Pose, Twist};
 pub use system::{Matrix, Order, System, Terms, Vector};
 pub use trajectory::Trajectory;

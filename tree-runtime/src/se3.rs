@@ -266,3 +266,260 @@ pub fn inertia_times(m: f64, i: &[f64; 3], x: &Twist) -> Twist {
         i[2] * x[5],
     ]
 }
+
+/// A wrench `(f, τ)` (force and torque), dual to a twist.
+pub type Wrench = [f64; 6];
+
+impl LocalTransform {
+    /// `Ad_{g(x)⁻¹}ᵀ w`: a child-frame wrench seen from the parent, `(R f, R τ + p × R f)`.
+    /// Dual to [`LocalTransform::ad_inverse`]: `(Ad_{g⁻¹}ᵀ w)·X = w·(Ad_{g⁻¹} X)`.
+    #[inline(always)]
+    pub fn wrench_to_parent(&self, w: &Wrench) -> Wrench {
+        let (c, s, d) = (self.a, self.b, self.a);
+        match self.kind {
+            // p × f with p = d e_axis
+            PrimitiveKind::Tx => [w[0], w[1], w[2], w[3], w[4] - d * w[2], w[5] + d * w[1]],
+            PrimitiveKind::Ty => [w[0], w[1], w[2], w[3] + d * w[2], w[4], w[5] - d * w[0]],
+            PrimitiveKind::Tz => [w[0], w[1], w[2], w[3] - d * w[1], w[4] + d * w[0], w[5]],
+            PrimitiveKind::Rx => [
+                w[0],
+                c * w[1] - s * w[2],
+                s * w[1] + c * w[2],
+                w[3],
+                c * w[4] - s * w[5],
+                s * w[4] + c * w[5],
+            ],
+            PrimitiveKind::Ry => [
+                c * w[0] + s * w[2],
+                w[1],
+                -s * w[0] + c * w[2],
+                c * w[3] + s * w[5],
+                w[4],
+                -s * w[3] + c * w[5],
+            ],
+            PrimitiveKind::Rz => [
+                c * w[0] - s * w[1],
+                s * w[0] + c * w[1],
+                w[2],
+                c * w[3] - s * w[4],
+                s * w[3] + c * w[4],
+                w[5],
+            ],
+        }
+    }
+
+    /// `R h + m p`: the first mass moment `h` (about the child origin) of a body of mass `m`,
+    /// taken about the parent origin in parent coordinates.
+    #[inline(always)]
+    pub fn moment_to_parent(&self, h: &[f64; 3], m: f64) -> [f64; 3] {
+        let mut r = self.point_to_parent(h);
+        if !self.kind.is_rotation() {
+            r[self.kind.axis()] += (m - 1.0) * self.a;
+        }
+        r
+    }
+
+    /// `R a + p`: a point of the child frame in parent coordinates.
+    #[inline(always)]
+    pub fn point_to_parent(&self, a: &[f64; 3]) -> [f64; 3] {
+        let (c, s, d) = (self.a, self.b, self.a);
+        match self.kind {
+            PrimitiveKind::Tx => [a[0] + d, a[1], a[2]],
+            PrimitiveKind::Ty => [a[0], a[1] + d, a[2]],
+            PrimitiveKind::Tz => [a[0], a[1], a[2] + d],
+            PrimitiveKind::Rx => [a[0], c * a[1] - s * a[2], s * a[1] + c * a[2]],
+            PrimitiveKind::Ry => [c * a[0] + s * a[2], a[1], -s * a[0] + c * a[2]],
+            PrimitiveKind::Rz => [c * a[0] - s * a[1], s * a[0] + c * a[1], a[2]],
+        }
+    }
+
+    /// `Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`: a child-frame spatial inertia seen from the parent (the
+    /// composite-body step).
+    #[inline(always)]
+    pub fn inertia_to_parent(&self, i: &SpatialInertia) -> SpatialInertia {
+        let k = self.kind.axis();
+        if self.kind.is_rotation() {
+            // Blocks become R B Rᵀ; R mixes the two axes other than k.
+            let (u, w) = ((k + 1) % 3, (k + 2) % 3);
+            let (c, s) = (self.a, self.b);
+            let rot = |b: &[[f64; 3]; 3]| {
+                let mut r = *b;
+                for col in 0..3 {
+                    r[u][col] = c * b[u][col] - s * b[w][col];
+                    r[w][col] = s * b[u][col] + c * b[w][col];
+                }
+                let t = r;
+                for row in 0..3 {
+                    r[row][u] = c * t[row][u] - s * t[row][w];
+                    r[row][w] = s * t[row][u] + c * t[row][w];
+                }
+                r
+            };
+            SpatialInertia {
+                vv: rot(&i.vv),
+                vw: rot(&i.vw),
+                ww: rot(&i.ww),
+            }
+        } else {
+            // With A = [[I, −p̂], [0, I]]: vv' = vv, vw' = vw − vv p̂,
+            // ww' = ww + p̂ vw − (p̂ vv) p̂ − vwᵀ p̂.
+            let d = self.a;
+            let vw = sub3(&i.vw, &mul_skew(&i.vv, k, d));
+            let vw_t = transpose3(&i.vw);
+            let pvv = skew_mul(k, d, &i.vv);
+            let mut ww = i.ww;
+            let a = skew_mul(k, d, &i.vw);
+            let b = mul_skew(&pvv, k, d);
+            let e = mul_skew(&vw_t, k, d);
+            for r in 0..3 {
+                for c in 0..3 {
+                    ww[r][c] += a[r][c] - b[r][c] - e[r][c];
+                }
+            }
+            SpatialInertia { vv: i.vv, vw, ww }
+        }
+    }
+}
+
+/// `d ê_k M`: the cross-product matrix of `d e_k` times `M`.
+#[inline(always)]
+fn skew_mul(k: usize, d: f64, m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let z = [0.0; 3];
+    let neg = |r: [f64; 3]| [-d * r[0], -d * r[1], -d * r[2]];
+    let pos = |r: [f64; 3]| [d * r[0], d * r[1], d * r[2]];
+    match k {
+        0 => [z, neg(m[2]), pos(m[1])],
+        1 => [pos(m[2]), z, neg(m[0])],
+        _ => [neg(m[1]), pos(m[0]), z],
+    }
+}
+
+/// `M d ê_k`.
+#[inline(always)]
+fn mul_skew(m: &[[f64; 3]; 3], k: usize, d: f64) -> [[f64; 3]; 3] {
+    let mut r = [[0.0; 3]; 3];
+    for row in 0..3 {
+        let x = m[row];
+        r[row] = match k {
+            0 => [0.0, d * x[2], -d * x[1]],
+            1 => [-d * x[2], 0.0, d * x[0]],
+            _ => [d * x[1], -d * x[0], 0.0],
+        };
+    }
+    r
+}
+
+#[inline(always)]
+fn sub3(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let mut r = *a;
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] -= b[i][j];
+        }
+    }
+    r
+}
+
+#[inline(always)]
+fn transpose3(a: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    [
+        [a[0][0], a[1][0], a[2][0]],
+        [a[0][1], a[1][1], a[2][1]],
+        [a[0][2], a[1][2], a[2][2]],
+    ]
+}
+
+/// A 6×6 symmetric spatial inertia in `(v, ω)` ordering, stored as blocks
+/// `[[vv, vw], [vwᵀ, ww]]`; its product with a twist is a wrench (momentum).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SpatialInertia {
+    pub vv: [[f64; 3]; 3],
+    pub vw: [[f64; 3]; 3],
+    pub ww: [[f64; 3]; 3],
+}
+
+impl SpatialInertia {
+    /// The body inertia `diag(m, m, m, Ixx, Iyy, Izz)` of a mass at the frame origin.
+    pub fn diagonal(m: f64, inertia: &[f64; 3]) -> Self {
+        let mut s = SpatialInertia::default();
+        for k in 0..3 {
+            s.vv[k][k] = m;
+            s.ww[k][k] = inertia[k];
+        }
+        s
+    }
+
+    /// `self += other`.
+    #[inline(always)]
+    pub fn add(&mut self, other: &SpatialInertia) {
+        for i in 0..3 {
+            for j in 0..3 {
+                self.vv[i][j] += other.vv[i][j];
+                self.vw[i][j] += other.vw[i][j];
+                self.ww[i][j] += other.ww[i][j];
+            }
+        }
+    }
+
+    /// `I X`.
+    #[inline(always)]
+    pub fn times(&self, x: &Twist) -> Wrench {
+        let mut out = [0.0; 6];
+        for i in 0..3 {
+            out[i] = self.vv[i][0] * x[0]
+                + self.vv[i][1] * x[1]
+                + self.vv[i][2] * x[2]
+                + self.vw[i][0] * x[3]
+                + self.vw[i][1] * x[4]
+                + self.vw[i][2] * x[5];
+            out[i + 3] = self.vw[0][i] * x[0]
+                + self.vw[1][i] * x[1]
+                + self.vw[2][i] * x[2]
+                + self.ww[i][0] * x[3]
+                + self.ww[i][1] * x[4]
+                + self.ww[i][2] * x[5];
+        }
+        out
+    }
+
+    /// `I ξ` for a primitive's unit twist: one column.
+    #[inline(always)]
+    pub fn column(&self, kind: PrimitiveKind) -> Wrench {
+        let k = kind.axis();
+        if kind.is_rotation() {
+            [
+                self.vw[0][k],
+                self.vw[1][k],
+                self.vw[2][k],
+                self.ww[0][k],
+                self.ww[1][k],
+                self.ww[2][k],
+            ]
+        } else {
+            [
+                self.vv[0][k],
+                self.vv[1][k],
+                self.vv[2][k],
+                self.vw[k][0],
+                self.vw[k][1],
+                self.vw[k][2],
+            ]
+        }
+    }
+}
+
+/// `x · ξ` for a primitive's unit twist: one component.
+#[inline(always)]
+pub fn component(x: &Twist, kind: PrimitiveKind) -> f64 {
+    x[kind.axis() + if kind.is_rotation() { 3 } else { 0 }]
+}
+
+/// `a × b`.
+#[inline(always)]
+pub fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}

@@ -1,4 +1,4 @@
-//! Caching on: one outward pass computes every frame's quantities from its parent's
+//! `Evaluation::Cached`: one outward pass computes every frame's quantities from its parent's
 //! (DESIGN.md §3), then each mass reads them.
 
 use nalgebra::Dyn;
@@ -32,6 +32,7 @@ impl TreeSystem {
                 None => (Pose::IDENTITY, ZERO, 0, 0, 0),
             };
             let (kc, kt, own) = (f.col_offset, f.tri_offset, f.own());
+            self.local[k] = local;
             self.pose[k] = local.compose_onto(&parent_pose);
             // v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k (eq. (6)).
             let transported = local.ad_inverse(&parent_vel);

@@ -1,24 +1,32 @@
 //! The interpreted tree system: walks the validated model at run time, with the
-//! recursions of DESIGN.md §3. [`Caching::On`] computes every per-frame quantity once per
-//! evaluation and reuses it; [`Caching::Off`] recomputes each from the root on demand, as a
-//! symbolic expansion would (the paper's Fig. 3 comparison).
+//! recursions of DESIGN.md §3, in one of three [`Evaluation`] modes.
 
 mod accumulate;
 mod cached;
+mod sweeps;
 mod uncached;
 
 use nalgebra::Dyn;
 use tree_model::{Joint, Mass, Model, PrimitiveKind};
 
 use crate::error::SimError;
-use crate::se3::{Pose, Twist};
+use crate::se3::{LocalTransform, Pose, SpatialInertia, Twist, Wrench};
 use crate::system::{Order, System, Terms, Vector};
 
-/// Whether per-frame quantities are cached within one evaluation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Caching {
-    On,
-    Off,
+/// How the interpreted system evaluates the Lagrangian terms. All three give the same
+/// numbers (to rounding); they differ in cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Evaluation {
+    /// Outward and inward sweeps with composite bodies: every per-frame quantity once, every
+    /// derivative entry O(1). The default, and what `tree_model!` unrolls.
+    #[default]
+    Sweeps,
+    /// The paper's per-mass sums (eqs. (15)–(18)) over per-frame quantities computed once per
+    /// evaluation and cached, second derivatives of the body velocities included.
+    Cached,
+    /// The same sums with every quantity recomputed from the root on demand, as a symbolic
+    /// expansion would (caching off; the paper's Fig. 3 comparison).
+    Uncached,
 }
 
 /// One frame as the runtime needs it.
@@ -59,7 +67,7 @@ pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
 #[derive(Clone, Debug)]
 pub struct TreeSystem {
     model: Model,
-    caching: Caching,
+    evaluation: Evaluation,
     frames: Vec<FrameInfo>,
     vars: Vec<usize>,
     // Per-evaluation caches (DESIGN.md §3): poses, body velocities, ∂v/∂q̇, ∂v/∂q,
@@ -70,11 +78,18 @@ pub struct TreeSystem {
     dv_dq: Vec<Twist>,
     d2v_ddq_dq: Vec<Twist>,
     d2v_dq_dq: Vec<Twist>,
+    // Sweeps: local transforms, and per subtree its composite inertia, momentum wrench,
+    // first mass moment and (constant) mass, all in the subtree root's frame.
+    local: Vec<LocalTransform>,
+    inertia: Vec<SpatialInertia>,
+    wrench: Vec<Wrench>,
+    moment: Vec<[f64; 3]>,
+    subtree_mass: Vec<f64>,
 }
 
 impl TreeSystem {
     /// Builds the interpreted system for a validated model.
-    pub fn new(model: &Model, caching: Caching) -> Result<Self, SimError> {
+    pub fn new(model: &Model, evaluation: Evaluation) -> Result<Self, SimError> {
         if let Some(v) = model.variables.iter().find(|v| v.kinematic) {
             return Err(SimError::Unsupported(format!(
                 "variable `{}` is kinematic; prescribed variables are not supported yet",
@@ -109,9 +124,17 @@ impl TreeSystem {
             cols += n;
             tris += n * (n + 1) / 2;
         }
+        let nf = model.frames.len();
+        let mut subtree_mass = vec![0.0; nf];
+        for k in (0..nf).rev() {
+            subtree_mass[k] += model.frames[k].mass.map_or(0.0, |m| m.mass);
+            if let Some(p) = model.frames[k].parent {
+                subtree_mass[p] += subtree_mass[k];
+            }
+        }
         Ok(TreeSystem {
             model: model.clone(),
-            caching,
+            evaluation,
             frames,
             vars,
             pose: vec![Pose::IDENTITY; model.frames.len()],
@@ -120,6 +143,15 @@ impl TreeSystem {
             dv_dq: vec![[0.0; 6]; cols],
             d2v_ddq_dq: vec![[0.0; 6]; tris],
             d2v_dq_dq: vec![[0.0; 6]; tris],
+            local: model
+                .frames
+                .iter()
+                .map(|f| LocalTransform::new(f.primitive, 0.0))
+                .collect(),
+            inertia: vec![SpatialInertia::default(); nf],
+            wrench: vec![[0.0; 6]; nf],
+            moment: vec![[0.0; 3]; nf],
+            subtree_mass,
         })
     }
 
@@ -128,23 +160,19 @@ impl TreeSystem {
         &self.model
     }
 
-    /// The caching mode.
-    pub fn caching(&self) -> Caching {
-        self.caching
+    /// The evaluation mode.
+    pub fn evaluation(&self) -> Evaluation {
+        self.evaluation
     }
 
-    /// Switches caching on or off.
-    pub fn set_caching(&mut self, caching: Caching) {
-        self.caching = caching;
+    /// Switches the evaluation mode.
+    pub fn set_evaluation(&mut self, evaluation: Evaluation) {
+        self.evaluation = evaluation;
     }
 
     /// Body velocity `v_k` and body Jacobian column `∂v_k/∂q̇_i` of every frame, for
     /// checking against finite differences: `(v_k, [(i, ∂v_k/∂q̇_i, ∂v_k/∂q_i)])`.
-    pub fn frame_velocities(
-        &mut self,
-        q: &Vector<Dyn>,
-        dq: &Vector<Dyn>,
-    ) -> Vec<FrameVelocity> {
+    pub fn frame_velocities(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<FrameVelocity> {
         self.forward(q.as_slice(), dq.as_slice(), Order::First, true);
         (0..self.frames.len())
             .map(|k| {
@@ -207,12 +235,15 @@ impl System for TreeSystem {
         out: &mut Terms<Dyn>,
     ) {
         out.clear(order);
-        match self.caching {
-            Caching::On => {
+        match self.evaluation {
+            Evaluation::Sweeps => self.evaluate_sweeps(q.as_slice(), dq.as_slice(), order, out),
+            Evaluation::Cached => {
                 self.forward(q.as_slice(), dq.as_slice(), order, false);
                 self.accumulate_cached(order, out);
             }
-            Caching::Off => self.accumulate_uncached(q.as_slice(), dq.as_slice(), order, out),
+            Evaluation::Uncached => {
+                self.accumulate_uncached(q.as_slice(), dq.as_slice(), order, out)
+            }
         }
     }
 

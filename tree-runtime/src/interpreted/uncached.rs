@@ -1,4 +1,4 @@
-//! Caching off: every quantity a mass needs is recomputed from the root by recursion, with
+//! `Evaluation::Uncached`: every quantity a mass needs is recomputed from the root by recursion, with
 //! nothing stored between uses — the cost a symbolic expansion of the same formulas pays.
 
 use nalgebra::Dyn;
