@@ -25,7 +25,11 @@ pub mod error;
 pub mod integrate;
 pub mod interpreted;
 pub mod linalg;
+pub mod order;
+pub mod plan;
+pub mod scalar;
 pub mod se3;
+pub mod sweeps;
 pub mod system;
 pub mod trajectory;
 

@@ -1,23 +1,40 @@
 //! SE(3) for the tree: poses as `(R, p)`, twists as `(v, ω)` (Murray–Li–Sastry ordering),
 //! and the handful of operations the recursions need, each written out per primitive so a
-//! product with `rx` touches two columns, not sixteen entries.
+//! product with `rx` touches two columns, not sixteen entries. Generic over [`Scalar`], so
+//! the same code evaluates (`f64`) and is compiled by `tree_model!` (a tracing scalar).
 //!
 //! Facts used throughout (DESIGN.md §3): a primitive is `g(x) = exp(ξ̂ x)` with a constant unit
 //! twist ξ, so `g(x)⁻¹ = g(−x)` and `∂/∂x Ad_{g(x)⁻¹} X = [Ad_{g(x)⁻¹} X, ξ]`.
 
 use tree_model::PrimitiveKind;
 
+use crate::scalar::Scalar;
+
 /// A twist `(v, ω)`: a body velocity, or a column of its derivatives.
-pub type Twist = [f64; 6];
+pub type Twist<S = f64> = [S; 6];
+
+/// A wrench `(f, τ)` (force and torque), dual to a twist.
+pub type Wrench<S = f64> = [S; 6];
 
 /// The zero twist.
 pub const ZERO: Twist = [0.0; 6];
 
+#[inline(always)]
+fn c<S: Scalar>(x: f64) -> S {
+    S::constant(x)
+}
+
+/// The zero twist or wrench of any scalar.
+#[inline(always)]
+pub fn zero6<S: Scalar>() -> [S; 6] {
+    [S::zero(); 6]
+}
+
 /// A rigid transform: rotation `r` (row-major 3×3) and translation `p`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pose {
-    pub r: [[f64; 3]; 3],
-    pub p: [f64; 3],
+pub struct Pose<S = f64> {
+    pub r: [[S; 3]; 3],
+    pub p: [S; 3],
 }
 
 impl Default for Pose {
@@ -68,10 +85,21 @@ impl Pose {
         }
         out
     }
+}
+
+impl<S: Scalar> Pose<S> {
+    /// The identity of any scalar.
+    pub fn identity() -> Self {
+        let (o, l) = (S::zero(), c(1.0));
+        Pose {
+            r: [[l, o, o], [o, l, o], [o, o, l]],
+            p: [o; 3],
+        }
+    }
 
     /// `Rᵀ a`: a spatial vector expressed in this frame.
     #[inline(always)]
-    pub fn rotate_inverse(&self, a: &[f64; 3]) -> [f64; 3] {
+    pub fn rotate_inverse(&self, a: &[S; 3]) -> [S; 3] {
         let r = &self.r;
         [
             r[0][0] * a[0] + r[1][0] * a[1] + r[2][0] * a[2],
@@ -79,45 +107,20 @@ impl Pose {
             r[0][2] * a[0] + r[1][2] * a[1] + r[2][2] * a[2],
         ]
     }
-
-    /// `Ad_{g⁻¹} X = (Rᵀ(v + ω × p), Rᵀω)` for a general transform `g = self`.
-    #[inline(always)]
-    pub fn ad_inverse(&self, x: &Twist) -> Twist {
-        let (p, w) = (&self.p, [x[3], x[4], x[5]]);
-        let v = [
-            x[0] + w[1] * p[2] - w[2] * p[1],
-            x[1] + w[2] * p[0] - w[0] * p[2],
-            x[2] + w[0] * p[1] - w[1] * p[0],
-        ];
-        let v = self.rotate_inverse(&v);
-        let w = self.rotate_inverse(&w);
-        [v[0], v[1], v[2], w[0], w[1], w[2]]
-    }
 }
 
 /// A primitive transform evaluated at its parameter: for rotations the cosine and sine,
 /// for translations the distance.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LocalTransform {
+pub struct LocalTransform<S = f64> {
     pub kind: PrimitiveKind,
     /// cos x (rotations) or x (translations).
-    pub a: f64,
+    pub a: S,
     /// sin x (rotations); unused for translations.
-    pub b: f64,
+    pub b: S,
 }
 
 impl LocalTransform {
-    /// `g(x)` for a primitive of this kind.
-    #[inline(always)]
-    pub fn new(kind: PrimitiveKind, x: f64) -> Self {
-        if kind.is_rotation() {
-            let (s, c) = x.sin_cos();
-            LocalTransform { kind, a: c, b: s }
-        } else {
-            LocalTransform { kind, a: x, b: 0.0 }
-        }
-    }
-
     /// As a general pose.
     pub fn pose(&self) -> Pose {
         let mut g = Pose::IDENTITY;
@@ -132,10 +135,27 @@ impl LocalTransform {
         }
         g
     }
+}
+
+impl<S: Scalar> LocalTransform<S> {
+    /// `g(x)` for a primitive of this kind.
+    #[inline(always)]
+    pub fn new(kind: PrimitiveKind, x: S) -> Self {
+        if kind.is_rotation() {
+            let (s, c) = x.sin_cos();
+            LocalTransform { kind, a: c, b: s }
+        } else {
+            LocalTransform {
+                kind,
+                a: x,
+                b: S::zero(),
+            }
+        }
+    }
 
     /// `parent · g(x)`, touching only what the primitive changes.
     #[inline(always)]
-    pub fn compose_onto(&self, parent: &Pose) -> Pose {
+    pub fn compose_onto(&self, parent: &Pose<S>) -> Pose<S> {
         let mut out = *parent;
         let (c, s) = (self.a, self.b);
         let r = &parent.r;
@@ -171,7 +191,7 @@ impl LocalTransform {
     /// `Ad_{g(x)⁻¹} X`: a parent-frame twist seen from the child (DESIGN.md §3,
     /// `v_k = Ad_{g_k⁻¹} v_par + ξ q̇`).
     #[inline(always)]
-    pub fn ad_inverse(&self, x: &Twist) -> Twist {
+    pub fn ad_inverse(&self, x: &Twist<S>) -> Twist<S> {
         let (c, s, d) = (self.a, self.b, self.a);
         match self.kind {
             PrimitiveKind::Tx => [x[0], x[1] + d * x[5], x[2] - d * x[4], x[3], x[4], x[5]],
@@ -207,18 +227,18 @@ impl LocalTransform {
 
 /// `a × e_axis` for a unit axis vector.
 #[inline(always)]
-fn cross_axis(a: [f64; 3], axis: usize) -> [f64; 3] {
+fn cross_axis<S: Scalar>(a: [S; 3], axis: usize) -> [S; 3] {
     match axis {
-        0 => [0.0, a[2], -a[1]],
-        1 => [-a[2], 0.0, a[0]],
-        _ => [a[1], -a[0], 0.0],
+        0 => [S::zero(), a[2], -a[1]],
+        1 => [-a[2], S::zero(), a[0]],
+        _ => [a[1], -a[0], S::zero()],
     }
 }
 
 /// The Lie bracket `[X, ξ] = (ω_X × v_ξ − ω_ξ × v_X, ω_X × ω_ξ)` with a primitive's unit
 /// twist ξ: the derivative of a transported twist with respect to the primitive's parameter.
 #[inline(always)]
-pub fn bracket_with_axis(x: &Twist, kind: PrimitiveKind) -> Twist {
+pub fn bracket_with_axis<S: Scalar>(x: &Twist<S>, kind: PrimitiveKind) -> Twist<S> {
     let axis = kind.axis();
     let w = [x[3], x[4], x[5]];
     if kind.is_rotation() {
@@ -227,7 +247,7 @@ pub fn bracket_with_axis(x: &Twist, kind: PrimitiveKind) -> Twist {
         [v[0], v[1], v[2], w[0], w[1], w[2]]
     } else {
         let v = cross_axis(w, axis);
-        [v[0], v[1], v[2], 0.0, 0.0, 0.0]
+        [v[0], v[1], v[2], S::zero(), S::zero(), S::zero()]
     }
 }
 
@@ -250,13 +270,14 @@ pub fn bracket(x: &Twist, y: &Twist) -> Twist {
 
 /// `x · y` for twists (or a wrench and a twist).
 #[inline(always)]
-pub fn dot(x: &Twist, y: &Twist) -> f64 {
+pub fn dot<S: Scalar>(x: &[S; 6], y: &[S; 6]) -> S {
     x[0] * y[0] + x[1] * y[1] + x[2] * y[2] + x[3] * y[3] + x[4] * y[4] + x[5] * y[5]
 }
 
 /// `M_k X` with the body's generalized inertia `M_k = diag(m, m, m, Ixx, Iyy, Izz)`.
 #[inline(always)]
-pub fn inertia_times(m: f64, i: &[f64; 3], x: &Twist) -> Twist {
+pub fn inertia_times<S: Scalar>(m: f64, i: &[f64; 3], x: &Twist<S>) -> Wrench<S> {
+    let (m, i) = (c::<S>(m), [c::<S>(i[0]), c(i[1]), c(i[2])]);
     [
         m * x[0],
         m * x[1],
@@ -267,14 +288,11 @@ pub fn inertia_times(m: f64, i: &[f64; 3], x: &Twist) -> Twist {
     ]
 }
 
-/// A wrench `(f, τ)` (force and torque), dual to a twist.
-pub type Wrench = [f64; 6];
-
-impl LocalTransform {
+impl<S: Scalar> LocalTransform<S> {
     /// `Ad_{g(x)⁻¹}ᵀ w`: a child-frame wrench seen from the parent, `(R f, R τ + p × R f)`.
     /// Dual to [`LocalTransform::ad_inverse`]: `(Ad_{g⁻¹}ᵀ w)·X = w·(Ad_{g⁻¹} X)`.
     #[inline(always)]
-    pub fn wrench_to_parent(&self, w: &Wrench) -> Wrench {
+    pub fn wrench_to_parent(&self, w: &Wrench<S>) -> Wrench<S> {
         let (c, s, d) = (self.a, self.b, self.a);
         match self.kind {
             // p × f with p = d e_axis
@@ -311,17 +329,17 @@ impl LocalTransform {
     /// `R h + m p`: the first mass moment `h` (about the child origin) of a body of mass `m`,
     /// taken about the parent origin in parent coordinates.
     #[inline(always)]
-    pub fn moment_to_parent(&self, h: &[f64; 3], m: f64) -> [f64; 3] {
+    pub fn moment_to_parent(&self, h: &[S; 3], m: f64) -> [S; 3] {
         let mut r = self.point_to_parent(h);
         if !self.kind.is_rotation() {
-            r[self.kind.axis()] += (m - 1.0) * self.a;
+            r[self.kind.axis()] += c::<S>(m - 1.0) * self.a;
         }
         r
     }
 
     /// `R a + p`: a point of the child frame in parent coordinates.
     #[inline(always)]
-    pub fn point_to_parent(&self, a: &[f64; 3]) -> [f64; 3] {
+    pub fn point_to_parent(&self, a: &[S; 3]) -> [S; 3] {
         let (c, s, d) = (self.a, self.b, self.a);
         match self.kind {
             PrimitiveKind::Tx => [a[0] + d, a[1], a[2]],
@@ -336,13 +354,13 @@ impl LocalTransform {
     /// `Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`: a child-frame spatial inertia seen from the parent (the
     /// composite-body step).
     #[inline(always)]
-    pub fn inertia_to_parent(&self, i: &SpatialInertia) -> SpatialInertia {
+    pub fn inertia_to_parent(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         let k = self.kind.axis();
         if self.kind.is_rotation() {
             // Blocks become R B Rᵀ; R mixes the two axes other than k.
             let (u, w) = ((k + 1) % 3, (k + 2) % 3);
             let (c, s) = (self.a, self.b);
-            let rot = |b: &[[f64; 3]; 3]| {
+            let rot = |b: &[[S; 3]; 3]| {
                 let mut r = *b;
                 for col in 0..3 {
                     r[u][col] = c * b[u][col] - s * b[w][col];
@@ -383,10 +401,10 @@ impl LocalTransform {
 
 /// `d ê_k M`: the cross-product matrix of `d e_k` times `M`.
 #[inline(always)]
-fn skew_mul(k: usize, d: f64, m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    let z = [0.0; 3];
-    let neg = |r: [f64; 3]| [-d * r[0], -d * r[1], -d * r[2]];
-    let pos = |r: [f64; 3]| [d * r[0], d * r[1], d * r[2]];
+fn skew_mul<S: Scalar>(k: usize, d: S, m: &[[S; 3]; 3]) -> [[S; 3]; 3] {
+    let z = [S::zero(); 3];
+    let neg = |r: [S; 3]| [-d * r[0], -d * r[1], -d * r[2]];
+    let pos = |r: [S; 3]| [d * r[0], d * r[1], d * r[2]];
     match k {
         0 => [z, neg(m[2]), pos(m[1])],
         1 => [pos(m[2]), z, neg(m[0])],
@@ -396,21 +414,21 @@ fn skew_mul(k: usize, d: f64, m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 /// `M d ê_k`.
 #[inline(always)]
-fn mul_skew(m: &[[f64; 3]; 3], k: usize, d: f64) -> [[f64; 3]; 3] {
-    let mut r = [[0.0; 3]; 3];
+fn mul_skew<S: Scalar>(m: &[[S; 3]; 3], k: usize, d: S) -> [[S; 3]; 3] {
+    let mut r = [[S::zero(); 3]; 3];
     for row in 0..3 {
         let x = m[row];
         r[row] = match k {
-            0 => [0.0, d * x[2], -d * x[1]],
-            1 => [-d * x[2], 0.0, d * x[0]],
-            _ => [d * x[1], -d * x[0], 0.0],
+            0 => [S::zero(), d * x[2], -d * x[1]],
+            1 => [-d * x[2], S::zero(), d * x[0]],
+            _ => [d * x[1], -d * x[0], S::zero()],
         };
     }
     r
 }
 
 #[inline(always)]
-fn sub3(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+fn sub3<S: Scalar>(a: &[[S; 3]; 3], b: &[[S; 3]; 3]) -> [[S; 3]; 3] {
     let mut r = *a;
     for i in 0..3 {
         for j in 0..3 {
@@ -421,7 +439,7 @@ fn sub3(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 }
 
 #[inline(always)]
-fn transpose3(a: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+fn transpose3<S: Scalar>(a: &[[S; 3]; 3]) -> [[S; 3]; 3] {
     [
         [a[0][0], a[1][0], a[2][0]],
         [a[0][1], a[1][1], a[2][1]],
@@ -431,27 +449,38 @@ fn transpose3(a: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 /// A 6×6 symmetric spatial inertia in `(v, ω)` ordering, stored as blocks
 /// `[[vv, vw], [vwᵀ, ww]]`; its product with a twist is a wrench (momentum).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct SpatialInertia {
-    pub vv: [[f64; 3]; 3],
-    pub vw: [[f64; 3]; 3],
-    pub ww: [[f64; 3]; 3],
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpatialInertia<S = f64> {
+    pub vv: [[S; 3]; 3],
+    pub vw: [[S; 3]; 3],
+    pub ww: [[S; 3]; 3],
 }
 
-impl SpatialInertia {
+impl<S: Scalar> Default for SpatialInertia<S> {
+    fn default() -> Self {
+        let z = [[S::zero(); 3]; 3];
+        SpatialInertia {
+            vv: z,
+            vw: z,
+            ww: z,
+        }
+    }
+}
+
+impl<S: Scalar> SpatialInertia<S> {
     /// The body inertia `diag(m, m, m, Ixx, Iyy, Izz)` of a mass at the frame origin.
     pub fn diagonal(m: f64, inertia: &[f64; 3]) -> Self {
         let mut s = SpatialInertia::default();
         for k in 0..3 {
-            s.vv[k][k] = m;
-            s.ww[k][k] = inertia[k];
+            s.vv[k][k] = c(m);
+            s.ww[k][k] = c(inertia[k]);
         }
         s
     }
 
     /// `self += other`.
     #[inline(always)]
-    pub fn add(&mut self, other: &SpatialInertia) {
+    pub fn add(&mut self, other: &SpatialInertia<S>) {
         for i in 0..3 {
             for j in 0..3 {
                 self.vv[i][j] += other.vv[i][j];
@@ -463,8 +492,8 @@ impl SpatialInertia {
 
     /// `I X`.
     #[inline(always)]
-    pub fn times(&self, x: &Twist) -> Wrench {
-        let mut out = [0.0; 6];
+    pub fn times(&self, x: &Twist<S>) -> Wrench<S> {
+        let mut out = [S::zero(); 6];
         for i in 0..3 {
             out[i] = self.vv[i][0] * x[0]
                 + self.vv[i][1] * x[1]
@@ -484,7 +513,7 @@ impl SpatialInertia {
 
     /// `I ξ` for a primitive's unit twist: one column.
     #[inline(always)]
-    pub fn column(&self, kind: PrimitiveKind) -> Wrench {
+    pub fn column(&self, kind: PrimitiveKind) -> Wrench<S> {
         let k = kind.axis();
         if kind.is_rotation() {
             [
@@ -510,13 +539,13 @@ impl SpatialInertia {
 
 /// `x · ξ` for a primitive's unit twist: one component.
 #[inline(always)]
-pub fn component(x: &Twist, kind: PrimitiveKind) -> f64 {
+pub fn component<S: Scalar>(x: &[S; 6], kind: PrimitiveKind) -> S {
     x[kind.axis() + if kind.is_rotation() { 3 } else { 0 }]
 }
 
 /// `a × b`.
 #[inline(always)]
-pub fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+pub fn cross<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> [S; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],

@@ -3,23 +3,14 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector, U1};
 
+pub use crate::order::Order;
 use crate::se3::Pose;
+use crate::sweeps::TermsSink;
 
 /// A vector over the system's configuration variables.
 pub type Vector<N> = OVector<f64, N>;
 /// A square matrix over the system's configuration variables.
 pub type Matrix<N> = OMatrix<f64, N, N>;
-
-/// How much of the Lagrangian's derivative tower to compute.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Order {
-    /// `L`, `∂L/∂q`, `∂L/∂q̇` (enough for the VI residual, eqs. (23)–(24)).
-    First,
-    /// Also `M = ∂²L/∂q̇²` and `∂²L/∂q̇∂q` (enough for continuous dynamics, eq. (14)).
-    Dynamics,
-    /// Also `∂²L/∂q²` (the VI's exact Newton Jacobian, eq. (26)).
-    Full,
-}
 
 /// The Lagrangian and its derivatives at one state `(q, q̇)`; entries above the requested
 /// [`Order`] are left as they were.
@@ -75,6 +66,30 @@ where
     /// Total energy `E = q̇·∂L/∂q̇ − L` (the Legendre transform; `T + V` here).
     pub fn energy(&self, dq: &Vector<N>) -> f64 {
         self.dl_ddq.dot(dq) - self.l
+    }
+}
+
+impl<N: Dim> TermsSink<f64> for Terms<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    fn set_l(&mut self, l: f64) {
+        self.l = l;
+    }
+    fn set_dl_dq(&mut self, i: usize, x: f64) {
+        self.dl_dq[i] = x;
+    }
+    fn set_dl_ddq(&mut self, i: usize, x: f64) {
+        self.dl_ddq[i] = x;
+    }
+    fn set_mass(&mut self, i: usize, j: usize, x: f64) {
+        self.mass[(i, j)] = x;
+    }
+    fn set_d2l_ddq_dq(&mut self, i: usize, j: usize, x: f64) {
+        self.d2l_ddq_dq[(i, j)] = x;
+    }
+    fn set_d2l_dq_dq(&mut self, i: usize, j: usize, x: f64) {
+        self.d2l_dq_dq[(i, j)] = x;
     }
 }
 

@@ -5,7 +5,8 @@ use nalgebra::Dyn;
 use tree_model::Joint;
 
 use super::accumulate::{add_mass_terms, FrameQuantities};
-use super::{FrameInfo, TreeSystem};
+use super::TreeSystem;
+use crate::plan::FramePlan;
 use crate::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
 use crate::system::{Order, Terms};
 
@@ -17,23 +18,29 @@ impl TreeSystem {
         order: Order,
         out: &mut Terms<Dyn>,
     ) {
-        for (k, f) in self.frames.iter().enumerate() {
+        for (k, f) in self.plan.frames.iter().enumerate() {
             let Some(m) = f.mass else { continue };
             let mut view = Recompute {
-                frames: &self.frames,
+                frames: &self.plan.frames,
                 q,
                 dq,
                 k,
             };
-            let vars = &self.vars[f.var_start..f.var_start + f.n];
-            add_mass_terms(&m, &self.model.gravity, vars, order, &mut view, out);
+            add_mass_terms(
+                &m,
+                &self.plan.gravity,
+                self.plan.ancestors(k),
+                order,
+                &mut view,
+                out,
+            );
         }
     }
 }
 
 /// Frame k's quantities, each recomputed recursively on every request.
 struct Recompute<'a> {
-    frames: &'a [FrameInfo],
+    frames: &'a [FramePlan],
     q: &'a [f64],
     dq: &'a [f64],
     k: usize,

@@ -1,0 +1,250 @@
+//! The tree recursions, written once over any [`Scalar`]: evaluated with `f64` by the
+//! interpreted system, traced into straight-line Rust by `tree_model!`.
+//!
+//! One outward sweep gives every frame's pose, body velocity and its columns `∂v/∂q̇_i`,
+//! `∂v/∂q_i` (DESIGN.md §3, paper eqs. (1), (6), (7), (10)). One inward sweep accumulates each
+//! subtree at its root: composite inertia `I^c`, momentum wrench `W`, first mass moment `h`
+//! (DESIGN.md §5). Then every derivative entry is O(1). For variable j driving frame f (ξ_j
+//! its axis, `γ_f = R_fᵀγ` gravity in f) and any variable i at or above it (column a of f),
+//! with `Y = I^c ξ_j` and `Z = I^c ∂v_f/∂q_j`:
+//! * `∂L/∂q̇_j = W·ξ_j`, `∂L/∂q_j = W·∂v_f/∂q_j + ξ_j·(m^c γ_f, h × γ_f)`
+//! * `M_ij = J_aᵀ Y` (eq. (18))
+//! * `∂²L/∂q̇_i∂q_j = Zᵀ J_a + W·[J_a, ξ_j]` (i ≠ j), `∂²L/∂q̇_j∂q_i = (∂v_f/∂q_i)ᵀ Y` (eq. (17))
+//! * `∂²L/∂q_i∂q_j = Zᵀ ∂v_f/∂q_i + W·[∂v_f/∂q_i, ξ_j] + ξ_j·(m^c δ, h × δ)`, `δ = γ_f × ω(J_a)`
+//!
+//! Each is the paper's per-mass sum (eqs. (15)–(18)) with the sum over the subtree taken once,
+//! inward, instead of once per mass.
+
+use tree_model::Joint;
+
+use crate::order::Order;
+use crate::plan::TreePlan;
+use crate::scalar::Scalar;
+use crate::se3::{
+    bracket_with_axis, component, cross, dot, inertia_times, zero6, LocalTransform, Pose,
+    SpatialInertia, Twist, Wrench,
+};
+
+/// Where the Lagrangian terms go: the interpreted system's nalgebra matrices, or the
+/// compiler's record of which traced value lands in which output.
+pub trait TermsSink<S> {
+    fn set_l(&mut self, l: S);
+    fn set_dl_dq(&mut self, i: usize, x: S);
+    fn set_dl_ddq(&mut self, i: usize, x: S);
+    fn set_mass(&mut self, i: usize, j: usize, x: S);
+    fn set_d2l_ddq_dq(&mut self, i: usize, j: usize, x: S);
+    fn set_d2l_dq_dq(&mut self, i: usize, j: usize, x: S);
+}
+
+/// Per-frame storage for one evaluation (allocated once, reused).
+#[derive(Clone, Debug)]
+pub struct Workspace<S: Scalar> {
+    pub local: Vec<LocalTransform<S>>,
+    pub pose: Vec<Pose<S>>,
+    pub velocity: Vec<Twist<S>>,
+    /// `∂v_k/∂q̇_a` for each frame's ancestor variables (the body Jacobian columns).
+    pub jac: Vec<Twist<S>>,
+    /// `∂v_k/∂q_a`.
+    pub dv_dq: Vec<Twist<S>>,
+    pub inertia: Vec<SpatialInertia<S>>,
+    pub wrench: Vec<Wrench<S>>,
+    pub moment: Vec<[S; 3]>,
+}
+
+impl<S: Scalar> Workspace<S> {
+    pub fn new(plan: &TreePlan) -> Self {
+        let nf = plan.frames.len();
+        Workspace {
+            local: plan
+                .frames
+                .iter()
+                .map(|f| LocalTransform::new(f.kind, S::zero()))
+                .collect(),
+            pose: vec![Pose::identity(); nf],
+            velocity: vec![zero6(); nf],
+            jac: vec![zero6(); plan.columns],
+            dv_dq: vec![zero6(); plan.columns],
+            inertia: vec![SpatialInertia::default(); nf],
+            wrench: vec![zero6(); nf],
+            moment: vec![[S::zero(); 3]; nf],
+        }
+    }
+}
+
+#[inline(always)]
+fn joint_value<S: Scalar>(joint: Joint, q: &[S]) -> S {
+    match joint {
+        Joint::Constant(x) => S::constant(x),
+        Joint::Variable(i) => q[i],
+    }
+}
+
+/// Every frame's pose in the world, `g_sk = g_s,par(k) g_k` (eq. (1)).
+pub fn poses<S: Scalar>(plan: &TreePlan, q: &[S], out: &mut [Pose<S>]) {
+    for (k, f) in plan.frames.iter().enumerate() {
+        let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
+        let parent = f.parent.map_or_else(Pose::identity, |p| out[p]);
+        out[k] = local.compose_onto(&parent);
+    }
+}
+
+/// The outward sweep: poses, body velocities and their columns for every frame that carries
+/// or leads to mass (every frame when `all`).
+pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S], all: bool) {
+    for (k, f) in plan.frames.iter().enumerate() {
+        if !f.needed && !all {
+            continue;
+        }
+        let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
+        let (parent_pose, parent_vel, np, pc) = match f.parent {
+            Some(p) => (
+                ws.pose[p],
+                ws.velocity[p],
+                plan.frames[p].n,
+                plan.frames[p].col_offset,
+            ),
+            None => (Pose::identity(), zero6(), 0, 0),
+        };
+        ws.local[k] = local;
+        ws.pose[k] = local.compose_onto(&parent_pose);
+        // v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k (eq. (6)).
+        let transported = local.ad_inverse(&parent_vel);
+        let mut v = transported;
+        if let Joint::Variable(i) = f.joint {
+            let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
+            v[axis] += dq[i];
+        }
+        ws.velocity[k] = v;
+        // Columns of variables above k transport (eqs. (7), (10)); the own column is ξ_k and
+        // [Ad v_par, ξ_k].
+        let kc = f.col_offset;
+        for a in 0..np {
+            ws.jac[kc + a] = local.ad_inverse(&ws.jac[pc + a]);
+            ws.dv_dq[kc + a] = local.ad_inverse(&ws.dv_dq[pc + a]);
+        }
+        if let Some(d) = f.own() {
+            ws.jac[kc + d] = f.kind.twist().map(S::constant);
+            ws.dv_dq[kc + d] = bracket_with_axis(&transported, f.kind);
+        }
+    }
+}
+
+/// The inward sweep: each subtree's momentum wrench and first mass moment (and, from
+/// `Order::Dynamics` on, composite inertia) at its root. Returns the Lagrangian `L` (eq. (15)).
+pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -> S {
+    let gravity = plan.gravity.map(S::constant);
+    let dynamics = order >= Order::Dynamics;
+    let mut l = S::zero();
+    for (k, f) in plan.frames.iter().enumerate() {
+        if !f.needed {
+            continue;
+        }
+        ws.moment[k] = [S::zero(); 3];
+        match f.mass {
+            Some(m) => {
+                let v = &ws.velocity[k];
+                let p = &ws.pose[k].p;
+                ws.wrench[k] = inertia_times(m.mass, &m.inertia, v);
+                l += S::constant(0.5) * dot(v, &ws.wrench[k])
+                    + S::constant(m.mass)
+                        * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
+                if dynamics {
+                    ws.inertia[k] = SpatialInertia::diagonal(m.mass, &m.inertia);
+                }
+            }
+            None => {
+                ws.wrench[k] = zero6();
+                if dynamics {
+                    ws.inertia[k] = SpatialInertia::default();
+                }
+            }
+        }
+    }
+    // Children come after their parents: walking backwards, each is complete when added.
+    for k in (0..plan.frames.len()).rev() {
+        let f = &plan.frames[k];
+        let Some(p) = f.parent.filter(|_| f.needed) else {
+            continue;
+        };
+        let local = ws.local[k];
+        let w = local.wrench_to_parent(&ws.wrench[k]);
+        let h = local.moment_to_parent(&ws.moment[k], f.subtree_mass);
+        for c in 0..3 {
+            ws.moment[p][c] += h[c];
+        }
+        for c in 0..6 {
+            ws.wrench[p][c] += w[c];
+        }
+        if dynamics {
+            let i = local.inertia_to_parent(&ws.inertia[k]);
+            ws.inertia[p].add(&i);
+        }
+    }
+    l
+}
+
+/// All Lagrangian terms up to `order` at `(q, q̇)`, by the two sweeps.
+pub fn evaluate<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    q: &[S],
+    dq: &[S],
+    order: Order,
+    out: &mut impl TermsSink<S>,
+) {
+    forward(plan, ws, q, dq, false);
+    let l = inward(plan, ws, order);
+    out.set_l(l);
+    let gravity = plan.gravity.map(S::constant);
+    for (j, &fk) in plan.variable_frames.iter().enumerate() {
+        let f = &plan.frames[fk];
+        let kind = f.kind;
+        let own = f.n - 1;
+        let kc = f.col_offset;
+        let w = ws.wrench[fk];
+        let h = ws.moment[fk];
+        let mc = S::constant(f.subtree_mass);
+        let g = ws.pose[fk].rotate_inverse(&gravity);
+        let hg = cross(&h, &g);
+        let gravity_wrench = [mc * g[0], mc * g[1], mc * g[2], hg[0], hg[1], hg[2]];
+        let dv_own = ws.dv_dq[kc + own];
+        out.set_dl_ddq(j, component(&w, kind));
+        out.set_dl_dq(j, dot(&w, &dv_own) + component(&gravity_wrench, kind));
+        if order < Order::Dynamics {
+            continue;
+        }
+        let ic = &ws.inertia[fk];
+        let y = ic.column(kind);
+        let z = ic.times(&dv_own);
+        for a in 0..=own {
+            let i = plan.vars[f.var_start + a];
+            let ja = ws.jac[kc + a];
+            let dva = ws.dv_dq[kc + a];
+            let mij = dot(&ja, &y);
+            out.set_mass(i, j, mij);
+            out.set_mass(j, i, mij);
+            let mut x = dot(&z, &ja);
+            if a < own {
+                x += dot(&w, &bracket_with_axis(&ja, kind));
+                out.set_d2l_ddq_dq(j, i, dot(&dva, &y));
+            }
+            out.set_d2l_ddq_dq(i, j, x);
+            if order >= Order::Full {
+                let delta = cross(&g, &[ja[3], ja[4], ja[5]]);
+                let hd = cross(&h, &delta);
+                let gw = [
+                    mc * delta[0],
+                    mc * delta[1],
+                    mc * delta[2],
+                    hd[0],
+                    hd[1],
+                    hd[2],
+                ];
+                let x =
+                    dot(&z, &dva) + dot(&w, &bracket_with_axis(&dva, kind)) + component(&gw, kind);
+                out.set_d2l_dq_dq(i, j, x);
+                out.set_d2l_dq_dq(j, i, x);
+            }
+        }
+    }
+}
