@@ -20,26 +20,42 @@
 // arguments on purpose.
 #![allow(clippy::too_many_arguments)]
 
-pub mod dynamics;
-pub mod error;
-pub mod integrate;
-pub mod interpreted;
-pub mod linalg;
+// The recursions, over any scalar (what `tree_model!` needs).
 pub mod order;
 pub mod plan;
 pub mod scalar;
 pub mod se3;
 pub mod sweeps;
+
+// Simulation (needs nalgebra).
+#[cfg(feature = "simulate")]
+pub mod dynamics;
+#[cfg(feature = "simulate")]
+pub mod error;
+#[cfg(feature = "simulate")]
+pub mod integrate;
+#[cfg(feature = "simulate")]
+pub mod interpreted;
+#[cfg(feature = "simulate")]
+pub mod linalg;
+#[cfg(feature = "simulate")]
 pub mod system;
+#[cfg(feature = "simulate")]
 pub mod trajectory;
 
-pub use dynamics::{Dynamics, GeneralizedForce, NoForce};
-pub use error::SimError;
-pub use interpreted::{Evaluation, TreeSystem};
+pub use order::Order;
 pub use se3::{Pose, Twist};
-pub use system::{Matrix, Order, System, Terms, Vector};
-pub use trajectory::Trajectory;
 pub use tree_model;
 
+#[cfg(feature = "simulate")]
+pub use {
+    dynamics::{Dynamics, GeneralizedForce, NoForce},
+    error::SimError,
+    interpreted::{Evaluation, TreeSystem},
+    system::{Matrix, System, Terms, Vector},
+    trajectory::Trajectory,
+};
+
 /// Re-exported for generated code and users: the linear-algebra crate of every vector.
+#[cfg(feature = "simulate")]
 pub use nalgebra;

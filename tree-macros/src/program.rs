@@ -1,0 +1,197 @@
+//! A recorded tape turned into Rust: dead statements dropped, the rest split into functions
+//! of bounded size (rustc and LLVM stay linear in the model's size), values that cross a
+//! function boundary passed through one scratch array.
+
+use proc_macro2::{Ident, TokenStream};
+use quote::{format_ident, quote};
+
+use crate::trace::{Node, Term};
+
+/// Statements per generated function.
+const CHUNK: usize = 300;
+
+/// A recorded computation and the outputs it must assign: `(target expression, value)`.
+pub struct Program {
+    pub nodes: Vec<Node>,
+    pub outputs: Vec<(TokenStream, Term)>,
+}
+
+/// A constant as a token: `1.5f64`, `(-1.5f64)`.
+pub fn constant(c: f64) -> TokenStream {
+    assert!(c.is_finite(), "validated models have finite constants");
+    let lit = proc_macro2::Literal::f64_suffixed(c.abs());
+    if c.is_sign_negative() {
+        quote!((-#lit))
+    } else {
+        quote!(#lit)
+    }
+}
+
+fn var(v: u32) -> Ident {
+    format_ident!("t{}", v)
+}
+
+fn term(t: Term) -> TokenStream {
+    match t {
+        Term::Const(c) => constant(c),
+        Term::Var(v) => {
+            let id = var(v);
+            quote!(#id)
+        }
+    }
+}
+
+fn operands(node: &Node) -> Vec<Term> {
+    match *node {
+        Node::Q(_) | Node::Dq(_) => vec![],
+        Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => vec![a, b],
+        Node::Neg(a) | Node::Sin(a) | Node::Cos(a) => vec![a],
+    }
+}
+
+fn expression(node: &Node) -> TokenStream {
+    match *node {
+        Node::Q(i) => quote!(q[#i]),
+        Node::Dq(i) => quote!(dq[#i]),
+        Node::Add(a, b) => {
+            let (a, b) = (term(a), term(b));
+            quote!(#a + #b)
+        }
+        Node::Sub(a, b) => {
+            let (a, b) = (term(a), term(b));
+            quote!(#a - #b)
+        }
+        Node::Mul(a, b) => {
+            let (a, b) = (term(a), term(b));
+            quote!(#a * #b)
+        }
+        Node::Neg(a) => {
+            let a = term(a);
+            quote!(-#a)
+        }
+        Node::Sin(a) => {
+            let a = term(a);
+            quote!(#a.sin())
+        }
+        Node::Cos(a) => {
+            let a = term(a);
+            quote!(#a.cos())
+        }
+    }
+}
+
+/// The emitted functions of one program.
+pub struct Emitted {
+    /// Helper functions (associated functions of the generated type).
+    pub functions: TokenStream,
+    /// The body that calls them in order.
+    pub body: TokenStream,
+    /// Number of statements kept.
+    pub statements: usize,
+}
+
+impl Program {
+    /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)` with
+    /// `out: &mut #out_ty`.
+    pub fn emit(&self, prefix: &str, dof: usize, out_ty: &TokenStream) -> Emitted {
+        let n = self.nodes.len();
+        // Liveness, backwards from the outputs.
+        let mut live = vec![false; n];
+        for (_, t) in &self.outputs {
+            if let Term::Var(v) = t {
+                live[*v as usize] = true;
+            }
+        }
+        for i in (0..n).rev() {
+            if live[i] {
+                for t in operands(&self.nodes[i]) {
+                    if let Term::Var(v) = t {
+                        live[v as usize] = true;
+                    }
+                }
+            }
+        }
+        let kept: Vec<usize> = (0..n).filter(|&i| live[i]).collect();
+        let chunk_of = {
+            let mut c = vec![usize::MAX; n];
+            for (pos, &i) in kept.iter().enumerate() {
+                c[i] = pos / CHUNK;
+            }
+            c
+        };
+        let chunks = kept.len().div_ceil(CHUNK).max(1);
+        // Values used in a later chunk than their own get a scratch slot.
+        let mut slot = vec![usize::MAX; n];
+        let mut slots = 0;
+        let mut imports: Vec<Vec<u32>> = vec![Vec::new(); chunks];
+        for &i in &kept {
+            for t in operands(&self.nodes[i]) {
+                if let Term::Var(v) = t {
+                    let (from, to) = (chunk_of[v as usize], chunk_of[i]);
+                    if from != to {
+                        if slot[v as usize] == usize::MAX {
+                            slot[v as usize] = slots;
+                            slots += 1;
+                        }
+                        if !imports[to].contains(&v) {
+                            imports[to].push(v);
+                        }
+                    }
+                }
+            }
+        }
+        let mut outputs_by_chunk: Vec<Vec<TokenStream>> = vec![Vec::new(); chunks];
+        for (target, t) in &self.outputs {
+            let (c, value) = match t {
+                Term::Var(v) => (chunk_of[*v as usize], term(*t)),
+                Term::Const(_) => (0, term(*t)),
+            };
+            outputs_by_chunk[c].push(quote!(#target = #value;));
+        }
+        let inline = if chunks == 1 {
+            quote!(#[inline(always)])
+        } else {
+            quote!(#[inline(never)])
+        };
+        let mut functions = TokenStream::new();
+        let mut body = TokenStream::new();
+        for c in 0..chunks {
+            let name = format_ident!("{}_{}", prefix, c);
+            let mut stmts = TokenStream::new();
+            for &v in &imports[c] {
+                let (id, s) = (var(v), slot[v as usize]);
+                stmts.extend(quote!(let #id: f64 = s[#s];));
+            }
+            for &i in kept.iter().filter(|&&i| chunk_of[i] == c) {
+                let id = var(i as u32);
+                let e = expression(&self.nodes[i]);
+                stmts.extend(quote!(let #id: f64 = #e;));
+                if slot[i] != usize::MAX {
+                    let s = slot[i];
+                    stmts.extend(quote!(s[#s] = #id;));
+                }
+            }
+            for o in &outputs_by_chunk[c] {
+                stmts.extend(o.clone());
+            }
+            functions.extend(quote! {
+                #[doc(hidden)]
+                #inline
+                #[allow(unused_variables, clippy::all)]
+                fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty) {
+                    #stmts
+                }
+            });
+            body.extend(quote!(Self::#name(q, dq, &mut s, out);));
+        }
+        let body = quote! {
+            let mut s = [0.0f64; #slots];
+            #body
+        };
+        Emitted {
+            functions,
+            body,
+            statements: kept.len(),
+        }
+    }
+}

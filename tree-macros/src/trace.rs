@@ -1,0 +1,141 @@
+//! A scalar that records instead of computing. Running the runtime's recursions over it
+//! yields the straight-line program for one fixed tree: constants fold as they meet
+//! (`Const ⊕ Const` is computed now), structural zeros vanish (`0·x`, `0 + x`), and only
+//! what depends on `q`, `q̇` becomes a statement. The folds are exact in IEEE arithmetic for
+//! finite values, so the program computes the same numbers as the interpreted runtime.
+
+use std::cell::RefCell;
+use std::fmt;
+use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
+
+use tree_runtime::scalar::Scalar;
+
+/// A traced value: a constant known now, or the result of statement `n` of the tape.
+#[derive(Clone, Copy, PartialEq)]
+pub enum Term {
+    Const(f64),
+    Var(u32),
+}
+
+impl fmt::Debug for Term {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Term::Const(c) => write!(f, "{c:?}"),
+            Term::Var(v) => write!(f, "t{v}"),
+        }
+    }
+}
+
+/// One recorded statement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Node {
+    Q(usize),
+    Dq(usize),
+    Add(Term, Term),
+    Sub(Term, Term),
+    Mul(Term, Term),
+    Neg(Term),
+    Sin(Term),
+    Cos(Term),
+}
+
+thread_local! {
+    static TAPE: RefCell<Vec<Node>> = const { RefCell::new(Vec::new()) };
+}
+
+fn push(node: Node) -> Term {
+    TAPE.with(|t| {
+        let mut t = t.borrow_mut();
+        t.push(node);
+        Term::Var((t.len() - 1) as u32)
+    })
+}
+
+/// Runs `f` on a fresh tape and returns what it recorded with its result.
+pub fn record<R>(f: impl FnOnce() -> R) -> (Vec<Node>, R) {
+    TAPE.with(|t| t.borrow_mut().clear());
+    let r = f();
+    let nodes = TAPE.with(|t| std::mem::take(&mut *t.borrow_mut()));
+    (nodes, r)
+}
+
+/// The input `q[i]`.
+pub fn q(i: usize) -> Term {
+    push(Node::Q(i))
+}
+
+/// The input `q̇[i]`.
+pub fn dq(i: usize) -> Term {
+    push(Node::Dq(i))
+}
+
+impl Add for Term {
+    type Output = Term;
+    fn add(self, rhs: Term) -> Term {
+        match (self, rhs) {
+            (Term::Const(a), Term::Const(b)) => Term::Const(a + b),
+            (Term::Const(z), x) | (x, Term::Const(z)) if z == 0.0 => x,
+            (a, b) => push(Node::Add(a, b)),
+        }
+    }
+}
+
+impl Sub for Term {
+    type Output = Term;
+    fn sub(self, rhs: Term) -> Term {
+        match (self, rhs) {
+            (Term::Const(a), Term::Const(b)) => Term::Const(a - b),
+            (x, Term::Const(z)) if z == 0.0 => x,
+            (Term::Const(z), x) if z == 0.0 => -x,
+            (a, b) => push(Node::Sub(a, b)),
+        }
+    }
+}
+
+impl Mul for Term {
+    type Output = Term;
+    fn mul(self, rhs: Term) -> Term {
+        match (self, rhs) {
+            (Term::Const(a), Term::Const(b)) => Term::Const(a * b),
+            (Term::Const(z), _) | (_, Term::Const(z)) if z == 0.0 => Term::Const(0.0),
+            (Term::Const(o), x) | (x, Term::Const(o)) if o == 1.0 => x,
+            (Term::Const(m), x) | (x, Term::Const(m)) if m == -1.0 => -x,
+            (a, b) => push(Node::Mul(a, b)),
+        }
+    }
+}
+
+impl Neg for Term {
+    type Output = Term;
+    fn neg(self) -> Term {
+        match self {
+            Term::Const(a) => Term::Const(-a),
+            x => push(Node::Neg(x)),
+        }
+    }
+}
+
+impl AddAssign for Term {
+    fn add_assign(&mut self, rhs: Term) {
+        *self = *self + rhs;
+    }
+}
+
+impl SubAssign for Term {
+    fn sub_assign(&mut self, rhs: Term) {
+        *self = *self - rhs;
+    }
+}
+
+impl Scalar for Term {
+    fn constant(x: f64) -> Self {
+        Term::Const(x)
+    }
+
+    fn sin_cos(self) -> (Self, Self) {
+        match self {
+            Term::Const(a) => (Term::Const(a.sin()), Term::Const(a.cos())),
+            x => (push(Node::Sin(x)), push(Node::Cos(x))),
+        }
+    }
+}
