@@ -10,6 +10,51 @@ use tree_mech::integrate::{MidpointVi, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{tree_model, Evaluation, NoForce, System, TreeSystem};
 
+tree_model!(struct P1 from "benches/models/pendulum-1.toml");
+tree_model!(struct P2 from "benches/models/pendulum-2.toml");
+tree_model!(struct P3 from "benches/models/pendulum-3.toml");
+tree_model!(struct P4 from "benches/models/pendulum-4.toml");
+tree_model!(struct P5 from "benches/models/pendulum-5.toml");
+tree_model!(struct P6 from "benches/models/pendulum-6.toml");
+tree_model!(struct P7 from "benches/models/pendulum-7.toml");
+tree_model!(struct P8 from "benches/models/pendulum-8.toml");
+tree_model!(struct P9 from "benches/models/pendulum-9.toml");
+tree_model!(struct P10 from "benches/models/pendulum-10.toml");
+tree_model!(struct P11 from "benches/models/pendulum-11.toml");
+tree_model!(struct P12 from "benches/models/pendulum-12.toml");
+tree_model!(struct P13 from "benches/models/pendulum-13.toml");
+tree_model!(struct P14 from "benches/models/pendulum-14.toml");
+tree_model!(struct P15 from "benches/models/pendulum-15.toml");
+tree_model!(struct P16 from "benches/models/pendulum-16.toml");
+tree_model!(struct P17 from "benches/models/pendulum-17.toml");
+tree_model!(struct P18 from "benches/models/pendulum-18.toml");
+tree_model!(struct P19 from "benches/models/pendulum-19.toml");
+
+/// The generated system for N links, timed.
+fn time_generated(n: usize) -> f64 {
+    match n {
+        1 => time_vi(&mut P1),
+        2 => time_vi(&mut P2),
+        3 => time_vi(&mut P3),
+        4 => time_vi(&mut P4),
+        5 => time_vi(&mut P5),
+        6 => time_vi(&mut P6),
+        7 => time_vi(&mut P7),
+        8 => time_vi(&mut P8),
+        9 => time_vi(&mut P9),
+        10 => time_vi(&mut P10),
+        11 => time_vi(&mut P11),
+        12 => time_vi(&mut P12),
+        13 => time_vi(&mut P13),
+        14 => time_vi(&mut P14),
+        15 => time_vi(&mut P15),
+        16 => time_vi(&mut P16),
+        17 => time_vi(&mut P17),
+        18 => time_vi(&mut P18),
+        _ => time_vi(&mut P19),
+    }
+}
+
 /// Best wall time of a few 1000-step VI runs from the model's initial state, in ms.
 fn time_vi<S: System>(sys: &mut S) -> f64
 where
@@ -43,25 +88,32 @@ where
 
 fn main() {
     let modes = [
-        ("interpreted, sweeps", Evaluation::Sweeps),
-        ("interpreted, cached (paper)", Evaluation::Cached),
-        ("interpreted, uncached (paper)", Evaluation::Uncached),
+        ("generated (tree_model!)", None),
+        ("interpreted, sweeps", Some(Evaluation::Sweeps)),
+        ("interpreted, cached (paper)", Some(Evaluation::Cached)),
+        ("interpreted, uncached (paper)", Some(Evaluation::Uncached)),
     ];
     let mut rows: Vec<(usize, Vec<f64>)> = Vec::new();
-    println!("| N | sweeps [ms] | cached [ms] | uncached [ms] | uncached / cached |");
-    println!("|---:|---:|---:|---:|---:|");
+    println!("| N | generated [ms] | interpreted sweeps [ms] | interpreted cached [ms] | interpreted uncached [ms] | sweeps / generated | cached / generated | uncached / cached |");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for n in 1..=19 {
         let model = tree_model::n_link_pendulum(n);
         let times: Vec<f64> = modes
             .iter()
-            .map(|&(_, mode)| time_vi(&mut TreeSystem::new(&model, mode).unwrap()))
+            .map(|&(_, mode)| match mode {
+                None => time_generated(n),
+                Some(mode) => time_vi(&mut TreeSystem::new(&model, mode).unwrap()),
+            })
             .collect();
         println!(
-            "| {n} | {:.2} | {:.2} | {:.1} | {:.1} |",
+            "| {n} | {:.3} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {:.0} |",
             times[0],
             times[1],
             times[2],
-            times[2] / times[1]
+            times[3],
+            times[1] / times[0],
+            times[2] / times[0],
+            times[3] / times[2]
         );
         rows.push((n, times));
     }
