@@ -5,7 +5,7 @@
 
 use std::hint::black_box;
 
-use criterion::{criterion_group, criterion_main, BenchmarkGroup, BenchmarkId, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion};
 use tree_mech::integrate::{MidpointVi, Rk4, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Terms, TreeSystem};
@@ -19,10 +19,13 @@ tree_model!(struct P19 from "benches/models/pendulum-19.toml");
 tree_model!(struct P40 from "benches/models/pendulum-40.toml");
 tree_model!(struct Humanoid from "models/humanoid.toml");
 
-type Measurement = criterion::measurement::WallTime;
-
 /// A fixed, non-trivial state.
-fn state<S: System>(sys: &S) -> (tree_mech::runtime::Vector<S::N>, tree_mech::runtime::Vector<S::N>)
+fn state<S: System>(
+    sys: &S,
+) -> (
+    tree_mech::runtime::Vector<S::N>,
+    tree_mech::runtime::Vector<S::N>,
+)
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -34,17 +37,14 @@ where
     (q, dq)
 }
 
-fn bench_system<S: System>(
-    groups: &mut [BenchmarkGroup<'_, Measurement>; 3],
-    label: &str,
-    size: &str,
-    mut sys: S,
-) where
+/// Benchmarks `evaluate/{label}/{size}`, `vi_step/…` and `rk4_step/…`.
+fn bench_system<S: System>(c: &mut Criterion, label: &str, size: &str, mut sys: S)
+where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let (q, dq) = state(&sys);
     let mut terms = Terms::zeros(sys.dim());
-    groups[0].bench_function(BenchmarkId::new(label, size), |b| {
+    c.bench_function(&format!("evaluate/{label}/{size}"), |b| {
         b.iter(|| {
             sys.lagrangian(black_box(&q), black_box(&dq), Order::Full, &mut terms);
             black_box(terms.l)
@@ -53,7 +53,7 @@ fn bench_system<S: System>(
     let mut vi = MidpointVi::new(sys.dim(), ViSettings::default());
     let p0 = vi.initial_momentum(&mut sys, &q, &dq);
     let mut next = q.clone();
-    groups[1].bench_function(BenchmarkId::new(label, size), |b| {
+    c.bench_function(&format!("vi_step/{label}/{size}"), |b| {
         b.iter_batched_ref(
             || (q.clone(), p0.clone()),
             |(qk, pk)| {
@@ -65,16 +65,19 @@ fn bench_system<S: System>(
         )
     });
     let mut rk = Rk4::new(sys.dim());
-    groups[2].bench_function(BenchmarkId::new(label, size), |b| {
+    c.bench_function(&format!("rk4_step/{label}/{size}"), |b| {
         b.iter_batched_ref(
             || (q.clone(), dq.clone()),
-            |(qk, vk)| rk.step(&mut sys, &mut NoForce, 0, 0.0, 0.01, qk, vk).unwrap(),
+            |(qk, vk)| {
+                rk.step(&mut sys, &mut NoForce, 0, 0.0, 0.01, qk, vk)
+                    .unwrap()
+            },
             criterion::BatchSize::SmallInput,
         )
     });
 }
 
-fn bench_interpreted(groups: &mut [BenchmarkGroup<'_, Measurement>; 3], size: &str, model: &tree_model::Model) {
+fn bench_interpreted(c: &mut Criterion, size: &str, model: &tree_model::Model) {
     for (label, mode) in [
         ("sweeps", Evaluation::Sweeps),
         ("cached", Evaluation::Cached),
@@ -83,20 +86,15 @@ fn bench_interpreted(groups: &mut [BenchmarkGroup<'_, Measurement>; 3], size: &s
         if mode == Evaluation::Uncached && model.dof() > 19 {
             continue;
         }
-        bench_system(groups, label, size, TreeSystem::new(model, mode).unwrap());
+        bench_system(c, label, size, TreeSystem::new(model, mode).unwrap());
     }
 }
 
 fn benches(c: &mut Criterion) {
-    let mut groups = [
-        c.benchmark_group("evaluate"),
-        c.benchmark_group("vi_step"),
-        c.benchmark_group("rk4_step"),
-    ];
     macro_rules! pendulum {
         ($ty:ident, $n:expr) => {
-            bench_system(&mut groups, "generated", stringify!($n), $ty);
-            bench_interpreted(&mut groups, stringify!($n), &tree_model::n_link_pendulum($n));
+            bench_system(c, "generated", stringify!($n), $ty);
+            bench_interpreted(c, stringify!($n), &tree_model::n_link_pendulum($n));
         };
     }
     pendulum!(P1, 1);
@@ -106,11 +104,8 @@ fn benches(c: &mut Criterion) {
     pendulum!(P12, 12);
     pendulum!(P19, 19);
     pendulum!(P40, 40);
-    bench_system(&mut groups, "generated", "humanoid", Humanoid);
-    bench_interpreted(&mut groups, "humanoid", &Humanoid::model());
-    for g in groups {
-        g.finish();
-    }
+    bench_system(c, "generated", "humanoid", Humanoid);
+    bench_interpreted(c, "humanoid", &Humanoid::model());
 }
 
 criterion_group!(tree, benches);
