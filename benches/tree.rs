@@ -6,7 +6,7 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use tree_mech::integrate::{MidpointVi, Rk4, ViSettings};
+use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Terms, TreeSystem};
 
@@ -37,7 +37,7 @@ where
     (q, dq)
 }
 
-/// Benchmarks `evaluate/{label}/{size}`, `vi_step/…` and `rk4_step/…`.
+/// Benchmarks `evaluate/{label}/{size}`, `vi_step/…`, `vi_step_reuse/…` and `rk4_step/…`.
 fn bench_system<S: System>(c: &mut Criterion, label: &str, size: &str, mut sys: S)
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -50,20 +50,29 @@ where
             black_box(terms.l)
         })
     });
-    let mut vi = MidpointVi::new(sys.dim(), ViSettings::default());
-    let p0 = vi.initial_momentum(&mut sys, &q, &dq);
-    let mut next = q.clone();
-    c.bench_function(&format!("vi_step/{label}/{size}"), |b| {
-        b.iter_batched_ref(
-            || (q.clone(), p0.clone()),
-            |(qk, pk)| {
-                vi.last_velocity.copy_from(&dq);
-                vi.step(&mut sys, &mut NoForce, 0, 0.0, 0.01, qk, pk, &mut next)
-                    .unwrap();
-            },
-            criterion::BatchSize::SmallInput,
-        )
-    });
+    for (name, jacobian) in [
+        ("vi_step", JacobianUpdate::EveryIteration),
+        ("vi_step_reuse", JacobianUpdate::OncePerStep),
+    ] {
+        let settings = ViSettings {
+            jacobian,
+            ..ViSettings::default()
+        };
+        let mut vi = MidpointVi::new(sys.dim(), settings);
+        let p0 = vi.initial_momentum(&mut sys, &q, &dq);
+        let mut next = q.clone();
+        c.bench_function(&format!("{name}/{label}/{size}"), |b| {
+            b.iter_batched_ref(
+                || (q.clone(), p0.clone()),
+                |(qk, pk)| {
+                    vi.last_velocity.copy_from(&dq);
+                    vi.step(&mut sys, &mut NoForce, 0, 0.0, 0.01, qk, pk, &mut next)
+                        .unwrap();
+                },
+                criterion::BatchSize::SmallInput,
+            )
+        });
+    }
     let mut rk = Rk4::new(sys.dim());
     c.bench_function(&format!("rk4_step/{label}/{size}"), |b| {
         b.iter_batched_ref(

@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use plotters::prelude::*;
-use tree_mech::integrate::{MidpointVi, ViSettings};
+use tree_mech::integrate::{JacobianUpdate, MidpointVi, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{tree_model, Evaluation, NoForce, System, TreeSystem};
 
@@ -31,27 +31,27 @@ tree_model!(struct P18 from "benches/models/pendulum-18.toml");
 tree_model!(struct P19 from "benches/models/pendulum-19.toml");
 
 /// The generated system for N links, timed.
-fn time_generated(n: usize) -> f64 {
+fn time_generated(n: usize, jacobian: JacobianUpdate) -> f64 {
     match n {
-        1 => time_vi(&mut P1),
-        2 => time_vi(&mut P2),
-        3 => time_vi(&mut P3),
-        4 => time_vi(&mut P4),
-        5 => time_vi(&mut P5),
-        6 => time_vi(&mut P6),
-        7 => time_vi(&mut P7),
-        8 => time_vi(&mut P8),
-        9 => time_vi(&mut P9),
-        10 => time_vi(&mut P10),
-        11 => time_vi(&mut P11),
-        12 => time_vi(&mut P12),
-        13 => time_vi(&mut P13),
-        14 => time_vi(&mut P14),
-        15 => time_vi(&mut P15),
-        16 => time_vi(&mut P16),
-        17 => time_vi(&mut P17),
-        18 => time_vi(&mut P18),
-        _ => time_vi(&mut P19),
+        1 => time_vi_with(&mut P1, jacobian),
+        2 => time_vi_with(&mut P2, jacobian),
+        3 => time_vi_with(&mut P3, jacobian),
+        4 => time_vi_with(&mut P4, jacobian),
+        5 => time_vi_with(&mut P5, jacobian),
+        6 => time_vi_with(&mut P6, jacobian),
+        7 => time_vi_with(&mut P7, jacobian),
+        8 => time_vi_with(&mut P8, jacobian),
+        9 => time_vi_with(&mut P9, jacobian),
+        10 => time_vi_with(&mut P10, jacobian),
+        11 => time_vi_with(&mut P11, jacobian),
+        12 => time_vi_with(&mut P12, jacobian),
+        13 => time_vi_with(&mut P13, jacobian),
+        14 => time_vi_with(&mut P14, jacobian),
+        15 => time_vi_with(&mut P15, jacobian),
+        16 => time_vi_with(&mut P16, jacobian),
+        17 => time_vi_with(&mut P17, jacobian),
+        18 => time_vi_with(&mut P18, jacobian),
+        _ => time_vi_with(&mut P19, jacobian),
     }
 }
 
@@ -60,11 +60,23 @@ fn time_vi<S: System>(sys: &mut S) -> f64
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    time_vi_with(sys, JacobianUpdate::EveryIteration)
+}
+
+/// As [`time_vi`], choosing when Newton re-evaluates its Jacobian.
+fn time_vi_with<S: System>(sys: &mut S, jacobian: JacobianUpdate) -> f64
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let (q0, dq0) = sys.initial_state();
     let mut best = f64::INFINITY;
     for _ in 0..3 {
         let start = Instant::now();
-        let mut vi = MidpointVi::new(sys.dim(), ViSettings::default());
+        let settings = ViSettings {
+            jacobian,
+            ..ViSettings::default()
+        };
+        let mut vi = MidpointVi::new(sys.dim(), settings);
         let mut q = q0.clone();
         let mut p = vi.initial_momentum(sys, &q0, &dq0);
         let mut next = q0.clone();
@@ -88,32 +100,36 @@ where
 
 fn main() {
     let modes = [
+        ("generated, Jacobian reused", None),
         ("generated (tree_model!)", None),
         ("interpreted, sweeps", Some(Evaluation::Sweeps)),
         ("interpreted, cached (paper)", Some(Evaluation::Cached)),
         ("interpreted, uncached (paper)", Some(Evaluation::Uncached)),
     ];
     let mut rows: Vec<(usize, Vec<f64>)> = Vec::new();
-    println!("| N | generated [ms] | interpreted sweeps [ms] | interpreted cached [ms] | interpreted uncached [ms] | sweeps / generated | cached / generated | uncached / cached |");
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("| N | generated, reuse [ms] | generated [ms] | interpreted sweeps [ms] | interpreted cached [ms] | interpreted uncached [ms] | sweeps / generated | cached / generated | uncached / cached |");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for n in 1..=19 {
         let model = tree_model::n_link_pendulum(n);
         let times: Vec<f64> = modes
             .iter()
-            .map(|&(_, mode)| match mode {
-                None => time_generated(n),
+            .enumerate()
+            .map(|(k, &(_, mode))| match mode {
+                None if k == 0 => time_generated(n, JacobianUpdate::OncePerStep),
+                None => time_generated(n, JacobianUpdate::EveryIteration),
                 Some(mode) => time_vi(&mut TreeSystem::new(&model, mode).unwrap()),
             })
             .collect();
         println!(
-            "| {n} | {:.3} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {:.0} |",
+            "| {n} | {:.3} | {:.3} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {:.0} |",
             times[0],
             times[1],
             times[2],
             times[3],
-            times[1] / times[0],
-            times[2] / times[0],
-            times[3] / times[2]
+            times[4],
+            times[2] / times[1],
+            times[3] / times[1],
+            times[4] / times[3]
         );
         rows.push((n, times));
     }

@@ -9,7 +9,7 @@ use std::time::Instant;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use tree_mech::integrate::{simulate, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::integrate::{simulate, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::se3::Pose;
 use tree_mech::runtime::{Dynamics, Vector};
@@ -34,6 +34,12 @@ enum Integrator {
     Rk4,
     /// Adaptive Dormand–Prince 5(4).
     Rk45,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum JacobianArg {
+    EveryIteration,
+    OncePerStep,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -70,6 +76,9 @@ enum Command {
         /// VI Newton tolerance.
         #[arg(long, default_value_t = 1e-12)]
         newton_tol: f64,
+        /// VI Newton Jacobian: re-evaluated every iteration (exact Newton) or once per step.
+        #[arg(long, value_enum, default_value = "every-iteration")]
+        jacobian: JacobianArg,
         /// rk45 relative tolerance.
         #[arg(long, default_value_t = 1e-8)]
         rtol: f64,
@@ -107,6 +116,7 @@ fn main() -> ExitCode {
             plot,
             alpha,
             newton_tol,
+            jacobian,
             rtol,
             atol,
             evaluation,
@@ -115,6 +125,10 @@ fn main() -> ExitCode {
                 Integrator::Vi => Method::Vi(ViSettings {
                     alpha,
                     tolerance: newton_tol,
+                    jacobian: match jacobian {
+                        JacobianArg::EveryIteration => JacobianUpdate::EveryIteration,
+                        JacobianArg::OncePerStep => JacobianUpdate::OncePerStep,
+                    },
                     ..ViSettings::default()
                 }),
                 Integrator::Rk4 => Method::Rk4,

@@ -1,50 +1,61 @@
 //! In-place dense factorisations for any nalgebra dimension: nothing allocated, so a
-//! fixed-size system stays on the stack and an interpreted one reuses its buffers.
+//! fixed-size system stays on the stack and an interpreted one reuses its buffers. They work
+//! on the column-major storage directly (`a[j * n + i]` is row i, column j).
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
 use crate::system::{Matrix, Vector};
 
-/// Solves `A x = b` for symmetric positive definite `A` by Cholesky, overwriting `a` with
-/// its factor and `b` with `x`. On failure returns the pivot index and value.
+/// Solves `A x = b` for symmetric positive definite `A` by Cholesky, overwriting the lower
+/// triangle of `a` with the factor and `b` with `x`. On failure returns the pivot index and
+/// value.
 pub fn cholesky_solve<N: Dim>(a: &mut Matrix<N>, b: &mut Vector<N>) -> Result<(), (usize, f64)>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     let n = b.len();
+    let a = a.as_mut_slice();
+    let b = b.as_mut_slice();
     for j in 0..n {
-        let mut d = a[(j, j)];
+        let (done, rest) = a.split_at_mut(j * n);
+        let col_j = &mut rest[..n];
+        let original = col_j[j];
+        // Column j of the factor: a[i][j] −= Σ_k L[i][k] L[j][k] for i ≥ j.
         for k in 0..j {
-            d -= a[(j, k)] * a[(j, k)];
+            let col_k = &done[k * n..(k + 1) * n];
+            let ljk = col_k[j];
+            for i in j..n {
+                col_j[i] -= col_k[i] * ljk;
+            }
         }
+        let d = col_j[j];
         // Relative threshold: a pivot lost to rounding is as singular as a zero one.
-        let scale = a[(j, j)].abs().max(f64::MIN_POSITIVE);
+        let scale = original.abs().max(f64::MIN_POSITIVE);
         if !d.is_finite() || d <= 1e-13 * scale {
             return Err((j, d));
         }
         let d = d.sqrt();
-        a[(j, j)] = d;
+        col_j[j] = d;
+        for x in &mut col_j[j + 1..n] {
+            *x /= d;
+        }
+    }
+    // L y = b, then Lᵀ x = y.
+    for j in 0..n {
+        let col = &a[j * n..(j + 1) * n];
+        b[j] /= col[j];
+        let bj = b[j];
         for i in j + 1..n {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= a[(i, k)] * a[(j, k)];
-            }
-            a[(i, j)] = s / d;
+            b[i] -= col[i] * bj;
         }
     }
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[(i, k)] * b[k];
+    for j in (0..n).rev() {
+        let col = &a[j * n..(j + 1) * n];
+        let mut s = b[j];
+        for i in j + 1..n {
+            s -= col[i] * b[i];
         }
-        b[i] = s / a[(i, i)];
-    }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= a[(k, i)] * b[k];
-        }
-        b[i] = s / a[(i, i)];
+        b[j] = s / col[j];
     }
     Ok(())
 }
@@ -56,40 +67,103 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     let n = b.len();
+    let b = b.as_mut_slice();
+    lu_core_factor(a.as_mut_slice(), n, |j, p| b.swap(j, p))?;
+    forward_backward(a.as_slice(), n, b);
+    Ok(())
+}
+
+/// Row interchanges of an LU factorisation.
+pub type Pivots<N> = nalgebra::OVector<usize, N>;
+
+/// Factors `a` in place into `P A = L U` (unit lower `L`), recording the row interchanges in
+/// `pivots`, for [`lu_solve_factored`]. On a zero pivot returns its column.
+pub fn lu_factor<N: Dim>(a: &mut Matrix<N>, pivots: &mut Pivots<N>) -> Result<(), usize>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    let n = pivots.len();
+    let pivots = pivots.as_mut_slice();
+    lu_core_factor(a.as_mut_slice(), n, |j, p| pivots[j] = p)
+}
+
+/// Solves `A x = b` with the factors from [`lu_factor`]; `b` becomes `x`.
+pub fn lu_solve_factored<N: Dim>(a: &Matrix<N>, pivots: &Pivots<N>, b: &mut Vector<N>)
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    let n = b.len();
+    let (a, b) = (a.as_slice(), b.as_mut_slice());
+    for (j, &p) in pivots.iter().enumerate() {
+        b.swap(p, j);
+    }
+    forward_backward(a, n, b);
+}
+
+/// `L y = b` (unit lower), then `U x = y`, on column-major factors.
+fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
+    for j in 0..n {
+        let col = &a[j * n..(j + 1) * n];
+        let bj = b[j];
+        for i in j + 1..n {
+            b[i] -= col[i] * bj;
+        }
+    }
+    for j in (0..n).rev() {
+        let col = &a[j * n..(j + 1) * n];
+        b[j] /= col[j];
+        let bj = b[j];
+        for i in 0..j {
+            b[i] -= col[i] * bj;
+        }
+    }
+}
+
+/// LU with partial pivoting on column-major storage; `swapped(j, p)` is told that row p was
+/// swapped into row j.
+fn lu_core_factor(
+    a: &mut [f64],
+    n: usize,
+    mut swapped: impl FnMut(usize, usize),
+) -> Result<(), usize> {
     let scale = a
         .iter()
         .fold(0.0f64, |m, x| m.max(x.abs()))
         .max(f64::MIN_POSITIVE);
     for j in 0..n {
+        // Pivot: the largest entry of column j at or below the diagonal.
+        let col = &a[j * n..(j + 1) * n];
         let mut p = j;
         for i in j + 1..n {
-            if a[(i, j)].abs() > a[(p, j)].abs() {
+            if col[i].abs() > col[p].abs() {
                 p = i;
             }
         }
-        let pivot = a[(p, j)];
+        let pivot = col[p];
         if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
             return Err(j);
         }
+        swapped(j, p);
         if p != j {
-            a.swap_rows(p, j);
-            b.swap_rows(p, j);
-        }
-        for i in j + 1..n {
-            let f = a[(i, j)] / pivot;
-            a[(i, j)] = f;
-            for k in j + 1..n {
-                a[(i, k)] -= f * a[(j, k)];
+            for c in 0..n {
+                a.swap(c * n + p, c * n + j);
             }
-            b[i] -= f * b[j];
         }
-    }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= a[(i, k)] * b[k];
+        // Multipliers below the pivot, then update the trailing columns.
+        for i in j + 1..n {
+            a[j * n + i] /= pivot;
         }
-        b[i] = s / a[(i, i)];
+        let (left, right) = a.split_at_mut((j + 1) * n);
+        let mult = &left[j * n..(j + 1) * n];
+        for c in 0..n - j - 1 {
+            let col = &mut right[c * n..(c + 1) * n];
+            let ajc = col[j];
+            if ajc != 0.0 {
+                for i in j + 1..n {
+                    col[i] -= mult[i] * ajc;
+                }
+            }
+        }
     }
     Ok(())
 }

@@ -8,7 +8,7 @@ mod vi;
 
 pub use rk4::Rk4;
 pub use rk45::{Rk45, Tolerance};
-pub use vi::{MidpointVi, ViSettings};
+pub use vi::{JacobianUpdate, MidpointVi, ViSettings};
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
