@@ -96,6 +96,19 @@ fn lagrangian_derivatives_match_finite_differences_on_every_model() {
     }
 }
 
+/// The compiler's test model: every primitive kind, constant chains, massless branches.
+fn specialised() -> Model {
+    tree_model::from_toml_file(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/models/specialised.toml"),
+    )
+    .unwrap()
+}
+
+#[test]
+fn lagrangian_derivatives_match_finite_differences_with_folded_constant_chains() {
+    check_model(&specialised(), 77);
+}
+
 #[test]
 fn lagrangian_derivatives_match_finite_differences_on_a_long_chain() {
     check_model(&tree_model::n_link_pendulum(7), 7);
@@ -228,6 +241,7 @@ fn all_evaluation_modes_agree_to_rounding() {
         .map(|f| tree_model::from_toml_file(f).unwrap())
         .collect();
     models.push(tree_model::n_link_pendulum(6));
+    models.push(specialised());
     for model in &models {
         let mut on = TreeSystem::new(model, Evaluation::Sweeps).unwrap();
         for other in [Evaluation::Cached, Evaluation::Uncached] {

@@ -37,6 +37,27 @@ tree_model! {
     variable bend { q0 = 0.7; damping = 0.05; }
 }
 
+tree_model! {
+    /// Three constant translations in a row.
+    struct ChainOfThree;
+    frame a = rx(q) { frame b = tz(0.1) { frame c = tz(0.2) { frame d = tz(0.3) { mass = 1.0; } } } }
+}
+
+tree_model! {
+    /// The same chain written as one translation.
+    struct ChainOfOne;
+    frame a = rx(q) { frame d = tz(0.6) { mass = 1.0; } }
+}
+
+tree_model! {
+    /// The same, with massless branches hanging off it.
+    struct ChainWithMasslessBranches;
+    frame a = rx(q) {
+        frame sensor = ty(0.2) { frame lens = rz(0.1) { frame tip = tx(0.05); } }
+        frame d = tz(0.6) { mass = 1.0; frame marker = ry(0.3); }
+    }
+}
+
 /// `|a − b| ≤ tol · max(1, |a|, |b|)` entry by entry.
 fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol * a.abs().max(b.abs()).max(1.0)
@@ -231,4 +252,25 @@ fn named_constants_and_initial_state() {
     assert_eq!((q0[0], q0[1], dq0[1]), (1.0, -0.5, 0.5));
     assert_eq!(Humanoid::DOF, 22);
     assert!(Humanoid::STATEMENTS > 0);
+}
+
+#[test]
+fn constant_chains_fold_and_massless_branches_cost_nothing() {
+    // A chain of constant transforms compiles to one constant transform ...
+    assert_eq!(ChainOfThree::STATEMENTS, ChainOfOne::STATEMENTS);
+    // ... and massless branches add no statement to the Lagrangian terms.
+    assert_eq!(
+        ChainWithMasslessBranches::STATEMENTS,
+        ChainOfOne::STATEMENTS
+    );
+    // The folded chain computes the same numbers as the chain.
+    let q = tree_mech::runtime::nalgebra::SVector::<f64, 1>::new(0.4);
+    let dq = tree_mech::runtime::nalgebra::SVector::<f64, 1>::new(-1.3);
+    let a = ChainOfThree.evaluate(&q, &dq, Order::Full);
+    let b = ChainOfOne.evaluate(&q, &dq, Order::Full);
+    assert!(close(a.l, b.l, 1e-14) && close(a.d2l_dq_dq[(0, 0)], b.d2l_dq_dq[(0, 0)], 1e-14));
+    // Poses still cover every frame, folded or not.
+    let mut poses = vec![Pose::IDENTITY; 4];
+    ChainOfThree.poses(&q, &mut poses);
+    assert!(close(poses[3].p[1], -0.6 * 0.4f64.sin(), 1e-15));
 }

@@ -60,7 +60,7 @@ fn poses_program(plan: &TreePlan) -> Program {
     let n = plan.dof();
     let (nodes, outputs) = trace::record(|| {
         let q: Vec<Term> = (0..n).map(trace::q).collect();
-        let mut poses = vec![Pose::<Term>::identity(); plan.frames.len()];
+        let mut poses = vec![Pose::<Term>::identity(); plan.pose_frames.len()];
         sweeps::poses(plan, &q, &mut poses);
         let mut outputs = Vec::new();
         for (k, g) in poses.iter().enumerate() {
@@ -170,7 +170,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         Source::Inline(inline) => (lower::from_inline(&input.name, inline)?, None),
     };
     let (attrs, vis, name) = (&input.attrs, &input.vis, &input.name);
-    let plan = TreePlan::new(&model);
+    let plan = TreePlan::folded(&model);
     let n = model.dof();
     let nf = model.frames.len();
 

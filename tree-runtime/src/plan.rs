@@ -1,13 +1,21 @@
 //! The structure of a validated model as the recursions walk it: for each frame its parent,
 //! primitive, parameter, the variables that move it, where its columns live, and whether any
 //! mass hangs at or below it. Built once; shared by every evaluation mode and by the compiler.
+//!
+//! [`TreePlan::folded`] also folds constant transforms: a massless frame with a constant
+//! primitive disappears into its children's `pre` transform, so a chain of constant
+//! primitives costs one constant transform (DESIGN.md §5).
 
 use tree_model::{Joint, Mass, Model, PrimitiveKind};
+
+use crate::se3::{LocalTransform, Pose};
 
 /// One frame of the plan.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FramePlan {
     pub parent: Option<usize>,
+    /// A constant transform applied before the primitive (folded constant frames).
+    pub pre: Option<Pose>,
     pub kind: PrimitiveKind,
     pub joint: Joint,
     /// The variables that move this frame, root first (own last when driven):
@@ -31,10 +39,22 @@ impl FramePlan {
     }
 }
 
+/// A model frame as the pose recursion (eq. (1)) needs it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseFrame {
+    pub parent: Option<usize>,
+    pub kind: PrimitiveKind,
+    pub joint: Joint,
+}
+
 /// The plan of a whole tree.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TreePlan {
+    /// The frames the sweeps walk: every model frame, or after folding only those that are
+    /// driven or carry mass.
     pub frames: Vec<FramePlan>,
+    /// Every model frame, for [`crate::sweeps::poses`].
+    pub pose_frames: Vec<PoseFrame>,
     /// Concatenated ancestor-variable lists.
     pub vars: Vec<usize>,
     /// The frame each variable drives.
@@ -44,31 +64,112 @@ pub struct TreePlan {
     pub columns: usize,
 }
 
+/// A frame before ancestor lists and offsets are filled in.
+struct Draft {
+    parent: Option<usize>,
+    pre: Option<Pose>,
+    kind: PrimitiveKind,
+    joint: Joint,
+    needed: bool,
+    mass: Option<Mass>,
+}
+
 impl TreePlan {
+    /// The plan of every model frame as it is.
     pub fn new(model: &Model) -> Self {
         let has_mass = model.subtree_has_mass();
-        let mut frames: Vec<FramePlan> = Vec::with_capacity(model.frames.len());
+        let drafts = model
+            .frames
+            .iter()
+            .enumerate()
+            .map(|(k, f)| Draft {
+                parent: f.parent,
+                pre: None,
+                kind: f.primitive,
+                joint: f.joint,
+                needed: has_mass[k],
+                mass: f.mass.filter(|m| m.is_nonzero()),
+            })
+            .collect();
+        Self::from_drafts(model, drafts, (0..model.frames.len()).map(Some).collect())
+    }
+
+    /// The plan with constant transforms folded: only driven or massive frames remain, each
+    /// with the constant transform from its nearest remaining ancestor to its parent in `pre`.
+    pub fn folded(model: &Model) -> Self {
+        let has_mass = model.subtree_has_mass();
+        let mut drafts: Vec<Draft> = Vec::new();
+        // For each model frame: its index in `drafts` if kept, and the constant transform from
+        // the nearest kept ancestor (or the world) to it if not.
+        let mut kept: Vec<Option<usize>> = Vec::with_capacity(model.frames.len());
+        let mut carried: Vec<Option<Pose>> = Vec::with_capacity(model.frames.len());
+        for (k, f) in model.frames.iter().enumerate() {
+            let mass = f.mass.filter(|m| m.is_nonzero());
+            // The kept ancestor and the constant transform from it to this frame's parent.
+            let (parent, pre) = match f.parent {
+                None => (None, None),
+                Some(p) => match kept[p] {
+                    Some(d) => (Some(d), None),
+                    None => (nearest_kept(model, &kept, p), carried[p]),
+                },
+            };
+            if matches!(f.joint, Joint::Variable(_)) || mass.is_some() {
+                let (pre, kind, joint) = match (f.joint, pre) {
+                    // A constant frame after a folded chain joins the chain; its own primitive
+                    // becomes the identity.
+                    (Joint::Constant(x), Some(c)) => (
+                        Some(c.compose(&LocalTransform::new(f.primitive, x).pose())),
+                        PrimitiveKind::Tx,
+                        Joint::Constant(0.0),
+                    ),
+                    (joint, pre) => (pre, f.primitive, joint),
+                };
+                kept.push(Some(drafts.len()));
+                carried.push(None);
+                drafts.push(Draft {
+                    parent,
+                    pre,
+                    kind,
+                    joint,
+                    needed: has_mass[k],
+                    mass,
+                });
+            } else {
+                let Joint::Constant(x) = f.joint else {
+                    unreachable!("driven frames are kept")
+                };
+                let own = LocalTransform::new(f.primitive, x).pose();
+                kept.push(None);
+                carried.push(Some(pre.map_or(own, |c| c.compose(&own))));
+            }
+        }
+        Self::from_drafts(model, drafts, kept)
+    }
+
+    fn from_drafts(model: &Model, drafts: Vec<Draft>, kept: Vec<Option<usize>>) -> Self {
+        let mut frames: Vec<FramePlan> = Vec::with_capacity(drafts.len());
         let mut vars = Vec::new();
         let mut columns = 0;
-        for (k, f) in model.frames.iter().enumerate() {
+        for d in drafts {
             let var_start = vars.len();
-            if let Some(p) = f.parent {
+            if let Some(p) = d.parent {
                 let (s, n) = (frames[p].var_start, frames[p].n);
                 vars.extend_from_within(s..s + n);
             }
-            if let Joint::Variable(i) = f.joint {
+            if let Joint::Variable(i) = d.joint {
                 vars.push(i);
             }
             let n = vars.len() - var_start;
             frames.push(FramePlan {
-                parent: f.parent,
-                kind: f.primitive,
-                joint: f.joint,
+                parent: d.parent,
+                pre: d.pre,
+                kind: d.kind,
+                joint: d.joint,
                 var_start,
                 n,
                 col_offset: columns,
-                needed: has_mass[k],
-                mass: f.mass.filter(|m| m.is_nonzero()),
+                needed: d.needed,
+                mass: d.mass,
                 subtree_mass: 0.0,
             });
             columns += n;
@@ -81,8 +182,21 @@ impl TreePlan {
         }
         TreePlan {
             frames,
+            pose_frames: model
+                .frames
+                .iter()
+                .map(|f| PoseFrame {
+                    parent: f.parent,
+                    kind: f.primitive,
+                    joint: f.joint,
+                })
+                .collect(),
             vars,
-            variable_frames: model.variables.iter().map(|v| v.frame).collect(),
+            variable_frames: model
+                .variables
+                .iter()
+                .map(|v| kept[v.frame].expect("driven frames are always kept"))
+                .collect(),
             gravity: model.gravity,
             columns,
         }
@@ -98,4 +212,16 @@ impl TreePlan {
     pub fn dof(&self) -> usize {
         self.variable_frames.len()
     }
+}
+
+/// The kept frame nearest above model frame `k` (itself not kept).
+fn nearest_kept(model: &Model, kept: &[Option<usize>], k: usize) -> Option<usize> {
+    let mut at = model.frames[k].parent;
+    while let Some(p) = at {
+        if let Some(d) = kept[p] {
+            return Some(d);
+        }
+        at = model.frames[p].parent;
+    }
+    None
 }

@@ -552,3 +552,172 @@ pub fn cross<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> [S; 3] {
         a[0] * b[1] - a[1] * b[0],
     ]
 }
+
+/// `a M` for a constant 3×3 `a` (row-major).
+#[inline(always)]
+fn const_mul<S: Scalar>(a: &[[f64; 3]; 3], m: &[[S; 3]; 3]) -> [[S; 3]; 3] {
+    let mut r = [[S::zero(); 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] =
+                c::<S>(a[i][0]) * m[0][j] + c::<S>(a[i][1]) * m[1][j] + c::<S>(a[i][2]) * m[2][j];
+        }
+    }
+    r
+}
+
+/// `M aᵀ` for a constant 3×3 `a`.
+#[inline(always)]
+fn mul_const_transpose<S: Scalar>(m: &[[S; 3]; 3], a: &[[f64; 3]; 3]) -> [[S; 3]; 3] {
+    let mut r = [[S::zero(); 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] =
+                m[i][0] * c::<S>(a[j][0]) + m[i][1] * c::<S>(a[j][1]) + m[i][2] * c::<S>(a[j][2]);
+        }
+    }
+    r
+}
+
+/// The cross-product matrix `p̂`.
+fn skew(p: &[f64; 3]) -> [[f64; 3]; 3] {
+    [[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]]
+}
+
+/// `M p̂` for a constant `p`.
+#[inline(always)]
+fn mul_const<S: Scalar>(m: &[[S; 3]; 3], a: &[[f64; 3]; 3]) -> [[S; 3]; 3] {
+    let mut r = [[S::zero(); 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] =
+                m[i][0] * c::<S>(a[0][j]) + m[i][1] * c::<S>(a[1][j]) + m[i][2] * c::<S>(a[2][j]);
+        }
+    }
+    r
+}
+
+/// A constant pose — a chain of constant primitives folded into one when the plan is built —
+/// acting on values of any scalar. The same operations as [`LocalTransform`], for a general
+/// `(R, p)`; identity parts are skipped, and a tracing scalar folds the zeros and ones of `R`.
+impl Pose {
+    fn is_rotation_free(&self) -> bool {
+        self.r == Pose::IDENTITY.r
+    }
+
+    fn is_translation_free(&self) -> bool {
+        self.p == [0.0; 3]
+    }
+
+    /// `parent · self`.
+    #[inline(always)]
+    pub fn compose_onto<S: Scalar>(&self, parent: &Pose<S>) -> Pose<S> {
+        let mut out = *parent;
+        for i in 0..3 {
+            for j in 0..3 {
+                out.r[i][j] = parent.r[i][0] * c::<S>(self.r[0][j])
+                    + parent.r[i][1] * c::<S>(self.r[1][j])
+                    + parent.r[i][2] * c::<S>(self.r[2][j]);
+            }
+            out.p[i] = parent.p[i]
+                + (parent.r[i][0] * c::<S>(self.p[0])
+                    + parent.r[i][1] * c::<S>(self.p[1])
+                    + parent.r[i][2] * c::<S>(self.p[2]));
+        }
+        out
+    }
+
+    /// `Ad_{g⁻¹} X = (Rᵀ(v + ω × p), Rᵀω)`.
+    #[inline(always)]
+    pub fn ad_inverse<S: Scalar>(&self, x: &Twist<S>) -> Twist<S> {
+        let w = [x[3], x[4], x[5]];
+        let mut v = [x[0], x[1], x[2]];
+        if !self.is_translation_free() {
+            let wp = cross(&w, &self.p.map(c::<S>));
+            v = [v[0] + wp[0], v[1] + wp[1], v[2] + wp[2]];
+        }
+        if self.is_rotation_free() {
+            return [v[0], v[1], v[2], w[0], w[1], w[2]];
+        }
+        let rt = |a: &[S; 3]| {
+            let r = &self.r;
+            [
+                c::<S>(r[0][0]) * a[0] + c::<S>(r[1][0]) * a[1] + c::<S>(r[2][0]) * a[2],
+                c::<S>(r[0][1]) * a[0] + c::<S>(r[1][1]) * a[1] + c::<S>(r[2][1]) * a[2],
+                c::<S>(r[0][2]) * a[0] + c::<S>(r[1][2]) * a[1] + c::<S>(r[2][2]) * a[2],
+            ]
+        };
+        let (v, w) = (rt(&v), rt(&w));
+        [v[0], v[1], v[2], w[0], w[1], w[2]]
+    }
+
+    /// `R a` for a constant `R`.
+    #[inline(always)]
+    fn rotate<S: Scalar>(&self, a: &[S; 3]) -> [S; 3] {
+        if self.is_rotation_free() {
+            return *a;
+        }
+        let r = &self.r;
+        [
+            c::<S>(r[0][0]) * a[0] + c::<S>(r[0][1]) * a[1] + c::<S>(r[0][2]) * a[2],
+            c::<S>(r[1][0]) * a[0] + c::<S>(r[1][1]) * a[1] + c::<S>(r[1][2]) * a[2],
+            c::<S>(r[2][0]) * a[0] + c::<S>(r[2][1]) * a[1] + c::<S>(r[2][2]) * a[2],
+        ]
+    }
+
+    /// `Ad_{g⁻¹}ᵀ w = (R f, R τ + p × R f)`.
+    #[inline(always)]
+    pub fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
+        let f = self.rotate(&[w[0], w[1], w[2]]);
+        let mut t = self.rotate(&[w[3], w[4], w[5]]);
+        if !self.is_translation_free() {
+            let pf = cross(&self.p.map(c::<S>), &f);
+            t = [t[0] + pf[0], t[1] + pf[1], t[2] + pf[2]];
+        }
+        [f[0], f[1], f[2], t[0], t[1], t[2]]
+    }
+
+    /// `R h + m p`: a first mass moment about the child origin, taken about the parent's.
+    #[inline(always)]
+    pub fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
+        let r = self.rotate(h);
+        if self.is_translation_free() {
+            return r;
+        }
+        [
+            r[0] + c::<S>(m * self.p[0]),
+            r[1] + c::<S>(m * self.p[1]),
+            r[2] + c::<S>(m * self.p[2]),
+        ]
+    }
+
+    /// `Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`: rotate the blocks (`R B Rᵀ`), then shift by `p` as
+    /// [`LocalTransform::inertia_to_parent`] does for one axis.
+    #[inline(always)]
+    pub fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
+        let mut out = *i;
+        if !self.is_rotation_free() {
+            let rot = |b: &[[S; 3]; 3]| mul_const_transpose(&const_mul(&self.r, b), &self.r);
+            out = SpatialInertia {
+                vv: rot(&i.vv),
+                vw: rot(&i.vw),
+                ww: rot(&i.ww),
+            };
+        }
+        if self.is_translation_free() {
+            return out;
+        }
+        let p = skew(&self.p);
+        let vw = sub3(&out.vw, &mul_const(&out.vv, &p));
+        let a = const_mul(&p, &out.vw);
+        let b = mul_const(&const_mul(&p, &out.vv), &p);
+        let e = mul_const(&transpose3(&out.vw), &p);
+        let mut ww = out.ww;
+        for r in 0..3 {
+            for s in 0..3 {
+                ww[r][s] += a[r][s] - b[r][s] - e[r][s];
+            }
+        }
+        SpatialInertia { vv: out.vv, vw, ww }
+    }
+}

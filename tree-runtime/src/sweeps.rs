@@ -81,7 +81,7 @@ fn joint_value<S: Scalar>(joint: Joint, q: &[S]) -> S {
 
 /// Every frame's pose in the world, `g_sk = g_s,par(k) g_k` (eq. (1)).
 pub fn poses<S: Scalar>(plan: &TreePlan, q: &[S], out: &mut [Pose<S>]) {
-    for (k, f) in plan.frames.iter().enumerate() {
+    for (k, f) in plan.pose_frames.iter().enumerate() {
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let parent = f.parent.map_or_else(Pose::identity, |p| out[p]);
         out[k] = local.compose_onto(&parent);
@@ -96,7 +96,7 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             continue;
         }
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
-        let (parent_pose, parent_vel, np, pc) = match f.parent {
+        let (mut parent_pose, mut parent_vel, np, pc) = match f.parent {
             Some(p) => (
                 ws.pose[p],
                 ws.velocity[p],
@@ -105,6 +105,12 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             ),
             None => (Pose::identity(), zero6(), 0, 0),
         };
+        // A folded constant transform comes first: g = C g_k(x).
+        let pre = |x: &Twist<S>| f.pre.as_ref().map_or(*x, |c| c.ad_inverse(x));
+        if let Some(c) = &f.pre {
+            parent_pose = c.compose_onto(&parent_pose);
+            parent_vel = c.ad_inverse(&parent_vel);
+        }
         ws.local[k] = local;
         ws.pose[k] = local.compose_onto(&parent_pose);
         // v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k (eq. (6)).
@@ -119,8 +125,8 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
         // [Ad v_par, ξ_k].
         let kc = f.col_offset;
         for a in 0..np {
-            ws.jac[kc + a] = local.ad_inverse(&ws.jac[pc + a]);
-            ws.dv_dq[kc + a] = local.ad_inverse(&ws.dv_dq[pc + a]);
+            ws.jac[kc + a] = local.ad_inverse(&pre(&ws.jac[pc + a]));
+            ws.dv_dq[kc + a] = local.ad_inverse(&pre(&ws.dv_dq[pc + a]));
         }
         if let Some(d) = f.own() {
             ws.jac[kc + d] = f.kind.twist().map(S::constant);
@@ -167,8 +173,12 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
             continue;
         };
         let local = ws.local[k];
-        let w = local.wrench_to_parent(&ws.wrench[k]);
-        let h = local.moment_to_parent(&ws.moment[k], f.subtree_mass);
+        let mut w = local.wrench_to_parent(&ws.wrench[k]);
+        let mut h = local.moment_to_parent(&ws.moment[k], f.subtree_mass);
+        if let Some(c) = &f.pre {
+            w = c.wrench_to_parent(&w);
+            h = c.moment_to_parent(&h, f.subtree_mass);
+        }
         for c in 0..3 {
             ws.moment[p][c] += h[c];
         }
@@ -176,7 +186,10 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
             ws.wrench[p][c] += w[c];
         }
         if dynamics {
-            let i = local.inertia_to_parent(&ws.inertia[k]);
+            let mut i = local.inertia_to_parent(&ws.inertia[k]);
+            if let Some(c) = &f.pre {
+                i = c.inertia_to_parent(&i);
+            }
             ws.inertia[p].add(&i);
         }
     }

@@ -44,8 +44,12 @@ pub(crate) fn tri(a: usize, b: usize) -> usize {
 pub struct TreeSystem {
     model: Model,
     evaluation: Evaluation,
+    /// Every frame as modelled (the paper's modes, body velocities for tests).
     plan: TreePlan,
     ws: Workspace<f64>,
+    /// Constant chains folded (the sweeps, as `tree_model!` compiles them).
+    folded: TreePlan,
+    folded_ws: Workspace<f64>,
     // `Evaluation::Cached` only: per frame, ∂²v/∂q̇_b∂q_a (b < a, at tri(a, b)) and
     // ∂²v/∂q_a∂q_b (a ≥ b), in packed triangles starting at `tri_offset[k]`.
     tri_offset: Vec<usize>,
@@ -69,10 +73,13 @@ impl TreeSystem {
             tri_offset.push(tris);
             tris += f.n * (f.n + 1) / 2;
         }
+        let folded = TreePlan::folded(model);
         Ok(TreeSystem {
             model: model.clone(),
             evaluation,
             ws: Workspace::new(&plan),
+            folded_ws: Workspace::new(&folded),
+            folded,
             plan,
             tri_offset,
             d2v_ddq_dq: vec![[0.0; 6]; tris],
@@ -155,7 +162,9 @@ impl System for TreeSystem {
         out.clear(order);
         let (q, dq) = (q.as_slice(), dq.as_slice());
         match self.evaluation {
-            Evaluation::Sweeps => sweeps::evaluate(&self.plan, &mut self.ws, q, dq, order, out),
+            Evaluation::Sweeps => {
+                sweeps::evaluate(&self.folded, &mut self.folded_ws, q, dq, order, out)
+            }
             Evaluation::Cached => {
                 sweeps::forward(&self.plan, &mut self.ws, q, dq, false);
                 self.second_order_caches(order);
