@@ -85,8 +85,8 @@ impl Sub for Term {
     fn sub(self, rhs: Term) -> Term {
         match (self, rhs) {
             (Term::Const(a), Term::Const(b)) => Term::Const(a - b),
-            (x, Term::Const(z)) if z == 0.0 => x,
-            (Term::Const(z), x) if z == 0.0 => -x,
+            (x, Term::Const(0.0)) => x,
+            (Term::Const(0.0), x) => -x,
             (a, b) => push(Node::Sub(a, b)),
         }
     }
