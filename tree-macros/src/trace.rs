@@ -2,9 +2,11 @@
 //! yields the straight-line program for one fixed tree: constants fold as they meet
 //! (`Const ⊕ Const` is computed now), structural zeros vanish (`0·x`, `0 + x`), and only
 //! what depends on `q`, `q̇` becomes a statement. The folds are exact in IEEE arithmetic for
-//! finite values, so the program computes the same numbers as the interpreted runtime.
+//! finite values, so the program computes the same numbers as the interpreted runtime. A
+//! statement recorded twice (the same operation on the same operands) is kept once.
 
 use std::cell::RefCell;
+use std::collections::HashMap;
 use std::fmt;
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
@@ -39,23 +41,71 @@ pub enum Node {
     Cos(Term),
 }
 
+/// The statements recorded so far, and each one's index for reuse: a statement that was
+/// already recorded (commutative operands in either order) is not recorded again.
+#[derive(Default)]
+struct Tape {
+    nodes: Vec<Node>,
+    seen: HashMap<NodeKey, u32>,
+}
+
+/// An operand by kind and bit pattern: hashable, and equal exactly when the operands are.
+type OperandKey = (bool, u64);
+
+/// A node with commutative operands ordered.
+type NodeKey = (u8, OperandKey, OperandKey);
+
+fn key(node: &Node) -> NodeKey {
+    let bits = |t: Term| match t {
+        Term::Const(c) => (false, c.to_bits()),
+        Term::Var(v) => (true, v as u64),
+    };
+    let none = (false, 0);
+    let ordered = |a: Term, b: Term| {
+        let (x, y) = (bits(a), bits(b));
+        (x.min(y), x.max(y))
+    };
+    match *node {
+        Node::Q(i) => (0, (false, i as u64), none),
+        Node::Dq(i) => (1, (false, i as u64), none),
+        Node::Add(a, b) => {
+            let (x, y) = ordered(a, b);
+            (2, x, y)
+        }
+        Node::Sub(a, b) => (3, bits(a), bits(b)),
+        Node::Mul(a, b) => {
+            let (x, y) = ordered(a, b);
+            (4, x, y)
+        }
+        Node::Neg(a) => (5, bits(a), none),
+        Node::Sin(a) => (6, bits(a), none),
+        Node::Cos(a) => (7, bits(a), none),
+    }
+}
+
 thread_local! {
-    static TAPE: RefCell<Vec<Node>> = const { RefCell::new(Vec::new()) };
+    static TAPE: RefCell<Tape> = RefCell::new(Tape::default());
 }
 
 fn push(node: Node) -> Term {
     TAPE.with(|t| {
         let mut t = t.borrow_mut();
-        t.push(node);
-        Term::Var((t.len() - 1) as u32)
+        let k = key(&node);
+        if let Some(&v) = t.seen.get(&k) {
+            return Term::Var(v);
+        }
+        let v = t.nodes.len() as u32;
+        t.nodes.push(node);
+        t.seen.insert(k, v);
+        Term::Var(v)
     })
 }
 
 /// Runs `f` on a fresh tape and returns what it recorded with its result.
 pub fn record<R>(f: impl FnOnce() -> R) -> (Vec<Node>, R) {
-    TAPE.with(|t| t.borrow_mut().clear());
+    TAPE.with(|t| *t.borrow_mut() = Tape::default());
     let r = f();
-    let nodes = TAPE.with(|t| std::mem::take(&mut *t.borrow_mut()));
+    let nodes = TAPE.with(|t| std::mem::take(&mut t.borrow_mut().nodes));
     (nodes, r)
 }
 
