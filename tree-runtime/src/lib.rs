@@ -1,8 +1,10 @@
 //! # tree-runtime
 //!
 //! Simulation of mechanical systems described as trees of frames (Johnson & Murphey): SE(3)
-//! primitives ([`se3`]), the [`System`] trait that interpreted and generated systems share,
-//! the interpreted [`TreeSystem`], continuous [`dynamics`], the integrators in
+//! primitives ([`se3`]), the tree as the recursions walk it ([`plan`]), the recursions
+//! themselves over any [`scalar`] ([`sweeps`]: evaluated here with `f64`, compiled by
+//! `tree_model!` with a tracing scalar), the [`System`] trait that interpreted and generated
+//! systems share, the interpreted [`TreeSystem`], continuous [`dynamics`], the integrators in
 //! [`integrate`] and the recorded [`Trajectory`].
 //!
 //! ```
