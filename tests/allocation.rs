@@ -1,0 +1,109 @@
+//! Hot paths allocate nothing: evaluations and integrator steps, interpreted and generated,
+//! counted by a global allocator that tallies every allocation of this test binary.
+
+use std::alloc::{GlobalAlloc, Layout, System as SystemAlloc};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, Rk45, Tolerance, ViSettings};
+use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
+use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Terms, TreeSystem};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { SystemAlloc.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { SystemAlloc.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+tree_model!(struct Humanoid from "models/humanoid.toml");
+
+/// Allocations made by `f`.
+fn allocations(f: impl FnOnce()) -> usize {
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    f();
+    ALLOCATIONS.load(Ordering::SeqCst) - before
+}
+
+fn check<S: System>(mut sys: S, what: &str)
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (mut q, mut dq) = sys.initial_state();
+    let mut terms = Terms::zeros(sys.dim());
+    let mut rk4 = Rk4::new(sys.dim());
+    let mut rk45 = Rk45::new(sys.dim(), Tolerance::default());
+    let mut vi = MidpointVi::new(sys.dim(), ViSettings::default());
+    let mut vi_reuse = MidpointVi::new(
+        sys.dim(),
+        ViSettings {
+            jacobian: JacobianUpdate::OncePerStep,
+            ..ViSettings::default()
+        },
+    );
+    let mut p = vi.initial_momentum(&mut sys, &q, &dq);
+    let mut p2 = vi_reuse.initial_momentum(&mut sys, &q, &dq);
+    let (mut q2, mut q3, mut next) = (q.clone(), q.clone(), q.clone());
+    let (q0, dq0) = (q.clone(), dq.clone());
+    let n = allocations(|| {
+        for order in [Order::First, Order::Dynamics, Order::Full] {
+            sys.lagrangian(&q0, &dq0, order, &mut terms);
+        }
+        for k in 0..20 {
+            let t = k as f64 * 0.01;
+            rk4.step(&mut sys, &mut NoForce, k, t, 0.01, &mut q, &mut dq)
+                .unwrap();
+            let mut h = 0.01;
+            rk45.step(&mut sys, &mut NoForce, k, t, 1.0, &mut h, &mut q, &mut dq)
+                .unwrap();
+            vi.step(
+                &mut sys,
+                &mut NoForce,
+                k,
+                t,
+                0.01,
+                &mut q2,
+                &mut p,
+                &mut next,
+            )
+            .unwrap();
+            vi_reuse
+                .step(
+                    &mut sys,
+                    &mut NoForce,
+                    k,
+                    t,
+                    0.01,
+                    &mut q3,
+                    &mut p2,
+                    &mut next,
+                )
+                .unwrap();
+            vi.velocity_and_energy(&mut sys, k, t, &q2, &p, &mut dq)
+                .unwrap();
+        }
+    });
+    assert_eq!(n, 0, "{what}: {n} allocations in the hot path");
+}
+
+#[test]
+fn evaluations_and_steps_allocate_nothing() {
+    check(Humanoid, "generated humanoid");
+    for mode in [Evaluation::Sweeps, Evaluation::Cached, Evaluation::Uncached] {
+        check(
+            TreeSystem::new(&Humanoid::model(), mode).unwrap(),
+            &format!("interpreted {mode:?}"),
+        );
+    }
+    // The counter does count: a Vec allocates.
+    assert!(allocations(|| drop(std::hint::black_box(vec![1u8; 16]))) > 0);
+}
