@@ -94,7 +94,20 @@ fn constant_name(prefix: &str, name: &str) -> String {
     format!("{prefix}{s}")
 }
 
-/// Named index constants, failing on two names that map to one constant.
+/// Associated items the expansion defines itself.
+const RESERVED: [&str; 9] = [
+    "DOF",
+    "VARIABLES",
+    "FRAMES",
+    "Q0",
+    "DQ0",
+    "DAMPING",
+    "STATEMENTS",
+    "NEW",
+    "MODEL",
+];
+
+/// Named index constants, failing on two names that map to one constant or on a reserved one.
 fn index_constants(
     prefix: &str,
     names: &[&str],
@@ -105,6 +118,12 @@ fn index_constants(
     let mut out = TokenStream::new();
     for (i, name) in names.iter().enumerate() {
         let c = constant_name(prefix, name);
+        if RESERVED.contains(&c.as_str()) {
+            return Err(syn::Error::new(
+                span,
+                format!("{what} `{name}` would become the constant `{c}`, which tree_model! already defines; rename it"),
+            ));
+        }
         if let Some(other) = seen.insert(c.clone(), name) {
             return Err(syn::Error::new(
                 span,
