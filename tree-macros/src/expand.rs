@@ -95,7 +95,7 @@ fn constant_name(prefix: &str, name: &str) -> String {
 }
 
 /// Associated items the expansion defines itself.
-const RESERVED: [&str; 9] = [
+const RESERVED: [&str; 7] = [
     "DOF",
     "VARIABLES",
     "FRAMES",
@@ -103,8 +103,6 @@ const RESERVED: [&str; 9] = [
     "DQ0",
     "DAMPING",
     "STATEMENTS",
-    "NEW",
-    "MODEL",
 ];
 
 /// Named index constants, failing on two names that map to one constant or on a reserved one.
