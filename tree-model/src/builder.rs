@@ -133,6 +133,7 @@ impl ModelBuilder {
 
 /// The paper's N-link pendulum (Fig. 3): link i is `rx(q_i)` then `tz(−1)` carrying a 1 kg
 /// point mass. Variables `q1 … qN`, all starting at rest; `q1 = 0.5` so it swings.
+/// `n` must be at least 1 (a model needs a variable); `n = 0` panics.
 pub fn n_link_pendulum(n: usize) -> Model {
     let mut b = ModelBuilder::new(&format!("pendulum-{n}"));
     let mut parent = "world".to_string();
