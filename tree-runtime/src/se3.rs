@@ -566,25 +566,12 @@ fn const_mul<S: Scalar>(a: &[[f64; 3]; 3], m: &[[S; 3]; 3]) -> [[S; 3]; 3] {
     r
 }
 
-/// `M aᵀ` for a constant 3×3 `a`.
-#[inline(always)]
-fn mul_const_transpose<S: Scalar>(m: &[[S; 3]; 3], a: &[[f64; 3]; 3]) -> [[S; 3]; 3] {
-    let mut r = [[S::zero(); 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] =
-                m[i][0] * c::<S>(a[j][0]) + m[i][1] * c::<S>(a[j][1]) + m[i][2] * c::<S>(a[j][2]);
-        }
-    }
-    r
-}
-
 /// The cross-product matrix `p̂`.
 fn skew(p: &[f64; 3]) -> [[f64; 3]; 3] {
     [[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]]
 }
 
-/// `M p̂` for a constant `p`.
+/// `M a` for a constant 3×3 `a`.
 #[inline(always)]
 fn mul_const<S: Scalar>(m: &[[S; 3]; 3], a: &[[f64; 3]; 3]) -> [[S; 3]; 3] {
     let mut r = [[S::zero(); 3]; 3];
@@ -697,7 +684,8 @@ impl Pose {
     pub fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         let mut out = *i;
         if !self.is_rotation_free() {
-            let rot = |b: &[[S; 3]; 3]| mul_const_transpose(&const_mul(&self.r, b), &self.r);
+            let rt = transpose3(&self.r);
+            let rot = |b: &[[S; 3]; 3]| mul_const(&const_mul(&self.r, b), &rt);
             out = SpatialInertia {
                 vv: rot(&i.vv),
                 vw: rot(&i.vw),
