@@ -284,3 +284,31 @@ fn local_transform_pose_is_the_primitive() {
         assert!((pose_matrix(&g.inverse()) - pose_matrix(&gi)).amax() < 1e-15);
     }
 }
+
+#[test]
+fn primitive_derivatives_and_inverses() {
+    // g' = g ξ̂ and g'' = g ξ̂² against central differences; g⁻¹ = g(−x).
+    let h = 1e-5;
+    for kind in tree_model::PrimitiveKind::ALL {
+        for x in [-1.3, 0.0, 0.4, 2.5] {
+            let g = |x: f64| LocalTransform::new(kind, x).pose().matrix();
+            let (gp, gm, g0) = (g(x + h), g(x - h), g(x));
+            let local = LocalTransform::new(kind, x);
+            let (d1, d2) = (local.derivative(), local.second_derivative());
+            for i in 0..4 {
+                for j in 0..4 {
+                    let fd1 = (gp[i][j] - gm[i][j]) / (2.0 * h);
+                    let fd2 = (gp[i][j] - 2.0 * g0[i][j] + gm[i][j]) / (h * h);
+                    assert!((d1[i][j] - fd1).abs() < 1e-9, "{kind} g'[{i}][{j}] at {x}");
+                    assert!((d2[i][j] - fd2).abs() < 1e-5, "{kind} g''[{i}][{j}] at {x}");
+                }
+            }
+            let inv = local.inverse().pose();
+            assert!(
+                (pose_matrix(&local.pose().compose(&inv)) - nalgebra::Matrix4::identity()).amax()
+                    < 1e-15
+            );
+            assert_eq!(inv, LocalTransform::new(kind, -x).pose());
+        }
+    }
+}

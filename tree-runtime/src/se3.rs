@@ -120,7 +120,63 @@ pub struct LocalTransform<S = f64> {
     pub b: S,
 }
 
+/// `ξ̂`, the 4×4 matrix of a primitive's unit twist.
+fn twist_hat(kind: PrimitiveKind) -> [[f64; 4]; 4] {
+    let mut h = [[0.0; 4]; 4];
+    let k = kind.axis();
+    if kind.is_rotation() {
+        let (u, w) = ((k + 1) % 3, (k + 2) % 3);
+        h[w][u] = 1.0;
+        h[u][w] = -1.0;
+    } else {
+        h[k][3] = 1.0;
+    }
+    h
+}
+
+fn mat4_mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
+    let mut r = [[0.0; 4]; 4];
+    for i in 0..4 {
+        for j in 0..4 {
+            r[i][j] = (0..4).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    r
+}
+
 impl LocalTransform {
+    /// `g'(x) = g(x) ξ̂` (DESIGN.md §3), as a 4×4 matrix.
+    pub fn derivative(&self) -> [[f64; 4]; 4] {
+        mat4_mul(&self.pose().matrix(), &twist_hat(self.kind))
+    }
+
+    /// `g''(x) = g(x) ξ̂²`.
+    pub fn second_derivative(&self) -> [[f64; 4]; 4] {
+        let h = twist_hat(self.kind);
+        mat4_mul(&self.pose().matrix(), &mat4_mul(&h, &h))
+    }
+
+    /// `g(x)⁻¹ = g(−x)`.
+    pub fn inverse(&self) -> Self {
+        LocalTransform {
+            kind: self.kind,
+            a: self.a,
+            b: if self.kind.is_rotation() {
+                -self.b
+            } else {
+                0.0
+            },
+        }
+        .with_translation_negated()
+    }
+
+    fn with_translation_negated(mut self) -> Self {
+        if !self.kind.is_rotation() {
+            self.a = -self.a;
+        }
+        self
+    }
+
     /// As a general pose.
     pub fn pose(&self) -> Pose {
         let mut g = Pose::IDENTITY;
