@@ -134,7 +134,7 @@ fn main() -> ExitCode {
                 Integrator::Rk4 => Method::Rk4,
                 Integrator::Rk45 => Method::Rk45(Tolerance { rtol, atol }),
             };
-            let caching = match evaluation {
+            let evaluation = match evaluation {
                 EvaluationArg::Sweeps => Evaluation::Sweeps,
                 EvaluationArg::Cached => Evaluation::Cached,
                 EvaluationArg::Uncached => Evaluation::Uncached,
@@ -146,7 +146,7 @@ fn main() -> ExitCode {
                     dt,
                     duration,
                 },
-                caching,
+                evaluation,
                 out.as_deref(),
                 plot.as_deref(),
             )
@@ -163,19 +163,19 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path, caching: Evaluation) -> Result<TreeSystem, String> {
+fn load(path: &Path, evaluation: Evaluation) -> Result<TreeSystem, String> {
     let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
-    TreeSystem::new(&model, caching).map_err(|e| e.to_string())
+    TreeSystem::new(&model, evaluation).map_err(|e| e.to_string())
 }
 
 fn run_simulate(
     path: &Path,
     options: SimOptions,
-    caching: Evaluation,
+    evaluation: Evaluation,
     out: Option<&Path>,
     plot_path: Option<&Path>,
 ) -> Result<(), String> {
-    let mut sys = load(path, caching)?;
+    let mut sys = load(path, evaluation)?;
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
     bar.set_style(

@@ -18,56 +18,22 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-/// Writes a PNG of `traj` to `path`.
-pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<(), String> {
-    let err = |e: &dyn std::fmt::Display| format!("cannot draw `{}`: {e}", path.display());
-    let _ = register_font("sans-serif", FontStyle::Normal, FONT);
-    let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let (top, bottom) = root.split_vertically(560);
-    let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
-    let n = traj.dof();
+/// One named curve.
+type Series = (String, Vec<(f64, f64)>);
 
-    let (lo, hi) = range((0..traj.len()).flat_map(|k| traj.q(k).iter().copied()));
-    let mut chart = ChartBuilder::on(&top)
-        .caption(format!("{title}: configuration"), ("sans-serif", 26))
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0.0..t_end, lo..hi)
-        .map_err(|e| err(&e))?;
-    chart
-        .configure_mesh()
-        .x_desc("t [s]")
-        .y_desc("q")
-        .draw()
-        .map_err(|e| err(&e))?;
-    for i in 0..n {
-        let color = Palette99::pick(i).to_rgba();
-        chart
-            .draw_series(LineSeries::new(
-                (0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])),
-                color.stroke_width(2),
-            ))
-            .map_err(|e| err(&e))?
-            .label(traj.variables[i].clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
-            });
-    }
-    if n <= 24 {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| err(&e))?;
-    }
-
-    let (lo, hi) = range(traj.energy.iter().copied());
-    let mut chart = ChartBuilder::on(&bottom)
-        .caption("total energy", ("sans-serif", 22))
+/// Draws one panel: `series` over `0..t_end` with a caption and a legend (when there is more
+/// than one curve and not too many to read).
+fn panel(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    caption: &str,
+    y_desc: &str,
+    t_end: f64,
+    series: &[Series],
+) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let (lo, hi) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 24))
         .margin(12)
         .x_label_area_size(36)
         .y_label_area_size(90)
@@ -76,15 +42,65 @@ pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<()
     chart
         .configure_mesh()
         .x_desc("t [s]")
-        .y_desc("E [J]")
+        .y_desc(y_desc)
         .draw()
         .map_err(|e| err(&e))?;
-    chart
-        .draw_series(LineSeries::new(
-            traj.t.iter().copied().zip(traj.energy.iter().copied()),
-            BLUE.stroke_width(2),
-        ))
-        .map_err(|e| err(&e))?;
+    for (i, (name, points)) in series.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(
+                points.iter().copied(),
+                color.stroke_width(2),
+            ))
+            .map_err(|e| err(&e))?
+            .label(name.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
+    }
+    if (2..=24).contains(&series.len()) {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+    Ok(())
+}
+
+/// Writes a PNG of `traj` to `path`: every variable over time above, total energy below.
+pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("cannot draw `{}`: {e}", path.display());
+    let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+    let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let (top, bottom) = root.split_vertically(560);
+    let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
+    let variables: Vec<Series> = (0..traj.dof())
+        .map(|i| {
+            let points = (0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])).collect();
+            (traj.variables[i].clone(), points)
+        })
+        .collect();
+    let energy = vec![(
+        "energy".to_string(),
+        traj.t
+            .iter()
+            .copied()
+            .zip(traj.energy.iter().copied())
+            .collect(),
+    )];
+    panel(
+        &top,
+        &format!("{title}: configuration"),
+        "q",
+        t_end,
+        &variables,
+    )
+    .map_err(|e| err(&e))?;
+    panel(&bottom, "total energy", "E [J]", t_end, &energy).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())
 }

@@ -106,11 +106,6 @@ impl ModelBuilder {
         self
     }
 
-    /// The specification built so far.
-    pub fn spec(&self) -> &ModelSpec {
-        &self.spec
-    }
-
     pub fn build(self) -> Result<Model, ModelError> {
         let result = validate(&self.spec);
         let mut problems = self.pending;

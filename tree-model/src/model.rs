@@ -90,20 +90,6 @@ impl Model {
         self.variables.iter().position(|v| v.name == name)
     }
 
-    /// The variables that move frame `k`, root first: those driving `k` or any ancestor.
-    pub fn ancestor_variables(&self, k: usize) -> Vec<usize> {
-        let mut vars = Vec::new();
-        let mut at = Some(k);
-        while let Some(f) = at {
-            if let Joint::Variable(i) = self.frames[f].joint {
-                vars.push(i);
-            }
-            at = self.frames[f].parent;
-        }
-        vars.reverse();
-        vars
-    }
-
     /// For each frame, whether it or any descendant carries a non-zero mass.
     pub fn subtree_has_mass(&self) -> Vec<bool> {
         let mut has = vec![false; self.frames.len()];

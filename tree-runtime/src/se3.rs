@@ -307,23 +307,6 @@ pub fn bracket_with_axis<S: Scalar>(x: &Twist<S>, kind: PrimitiveKind) -> Twist<
     }
 }
 
-/// The general Lie bracket `[X, Y]` of two twists.
-pub fn bracket(x: &Twist, y: &Twist) -> Twist {
-    let cross = |a: [f64; 3], b: [f64; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
-    let (vx, wx) = ([x[0], x[1], x[2]], [x[3], x[4], x[5]]);
-    let (vy, wy) = ([y[0], y[1], y[2]], [y[3], y[4], y[5]]);
-    let a = cross(wx, vy);
-    let b = cross(wy, vx);
-    let w = cross(wx, wy);
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2], w[0], w[1], w[2]]
-}
-
 /// `x · y` for twists (or a wrench and a twist).
 #[inline(always)]
 pub fn dot<S: Scalar>(x: &[S; 6], y: &[S; 6]) -> S {

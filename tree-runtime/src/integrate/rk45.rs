@@ -177,10 +177,9 @@ where
             if err <= 1.0 {
                 q.copy_from(&self.q_stage);
                 dq.copy_from(&self.v_stage);
+                // A step shortened to land on t_end leaves the proposal as it was.
                 if h >= *dt {
                     *dt *= factor;
-                } else if t + h < t_end {
-                    *dt = h * factor;
                 }
                 return Ok(h);
             }
