@@ -1,7 +1,7 @@
 //! # tree-mech
 //!
-//! Simulators for mechanical systems described as trees of frames (Johnson & Murphey, *Scalable
-//! Variational Integrators for Constrained Mechanical Systems in Generalized Coordinates*).
+//! Simulators for mechanical systems described as trees of frames (Johnson & Murphey, *Discrete and
+//! Continuous Mechanics for Tree Representations of Mechanical Systems*, ICRA 2008).
 //! This facade re-exports the model crate and the runtime; depend on `tree-mech` alone.
 
 // The expansion of `tree_model!` names `::tree_mech`; this lets it work inside this crate too.
@@ -12,6 +12,6 @@ pub extern crate tree_model;
 pub use tree_runtime as runtime;
 pub use tree_runtime::nalgebra;
 pub use tree_runtime::{
-    integrate, Evaluation, GeneralizedForce, NoForce, Order, SimError, System, Terms, Trajectory,
-    TreeSystem,
+    integrate, ConstraintTerms, GeneralizedForce, NoForce, Order, PaperEvaluation, PaperSystem,
+    SimError, System, Terms, Trajectory, TreeSystem,
 };

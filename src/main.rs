@@ -9,11 +9,14 @@ use std::time::Instant;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use tree_mech::integrate::{simulate, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::integrate::{run, Forcing, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::se3::Pose;
-use tree_mech::runtime::{Dynamics, Vector};
-use tree_mech::{tree_model, Evaluation, NoForce, Order, System, TreeSystem};
+use tree_mech::runtime::{Baumgarte, CsvStream, Dynamics, ModelMotions, Prescription, Vector};
+use tree_mech::{
+    tree_model, ConstraintTerms, NoForce, Order, PaperEvaluation, PaperSystem, SimError, System,
+    Trajectory, TreeSystem,
+};
 
 #[derive(Parser)]
 #[command(
@@ -43,6 +46,14 @@ enum JacobianArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+enum ForcingArg {
+    /// f⁻ = f⁺ = ½Δt F at the midpoint (second order).
+    Split,
+    /// f⁻ = Δt F, f⁺ = 0 (trep's; first order in the force).
+    Left,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 enum EvaluationArg {
     Sweeps,
     Cached,
@@ -64,9 +75,22 @@ enum Command {
         /// Simulated time in seconds.
         #[arg(long, default_value_t = 10.0)]
         duration: f64,
-        /// CSV output: `t,<var…>,d<var…>,energy`.
+        /// CSV output, written while the run goes: `t,<var…>,d<var…>,energy`, then with
+        /// constraints `lambda_<constraint…>,violation`.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Record every K-th step (the first and last are always recorded).
+        #[arg(long, default_value_t = 1)]
+        every: usize,
+        /// VI forcing: split (second order) or left (trep's, first order in the force).
+        #[arg(long, value_enum, default_value = "split")]
+        forcing: ForcingArg,
+        /// VI: fail at once when Newton fails instead of retrying the step in halves.
+        #[arg(long)]
+        no_subdivide: bool,
+        /// Baumgarte stabilisation of the constraints for rk4/rk45: `a,b` in ḧ + 2aḣ + b²h = 0.
+        #[arg(long, allow_hyphen_values = true)]
+        baumgarte: Option<String>,
         /// PNG plot of the variables and the energy.
         #[arg(long)]
         plot: Option<PathBuf>,
@@ -99,6 +123,9 @@ enum Command {
         /// Velocity, comma-separated (default: the model's dq0).
         #[arg(long, allow_hyphen_values = true)]
         dq: Option<String>,
+        /// Time at which the kinematic variables' accelerations are taken.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        t: f64,
     },
     /// Validate a model and print a summary with the tree drawn as text.
     Check { model: PathBuf },
@@ -113,6 +140,10 @@ fn main() -> ExitCode {
             dt,
             duration,
             out,
+            every,
+            forcing,
+            no_subdivide,
+            baumgarte,
             plot,
             alpha,
             newton_tol,
@@ -129,29 +160,48 @@ fn main() -> ExitCode {
                         JacobianArg::EveryIteration => JacobianUpdate::EveryIteration,
                         JacobianArg::OncePerStep => JacobianUpdate::OncePerStep,
                     },
+                    forcing: match forcing {
+                        ForcingArg::Split => Forcing::Split,
+                        ForcingArg::Left => Forcing::Left,
+                    },
+                    max_subdivisions: if no_subdivide {
+                        0
+                    } else {
+                        ViSettings::default().max_subdivisions
+                    },
                     ..ViSettings::default()
                 }),
                 Integrator::Rk4 => Method::Rk4,
                 Integrator::Rk45 => Method::Rk45(Tolerance { rtol, atol }),
             };
-            let evaluation = match evaluation {
-                EvaluationArg::Sweeps => Evaluation::Sweeps,
-                EvaluationArg::Cached => Evaluation::Cached,
-                EvaluationArg::Uncached => Evaluation::Uncached,
-            };
-            run_simulate(
-                &model,
-                SimOptions {
-                    method,
-                    dt,
-                    duration,
-                },
-                evaluation,
-                out.as_deref(),
-                plot.as_deref(),
-            )
+            parse_baumgarte(baumgarte.as_deref()).and_then(|baumgarte| {
+                let options = SimOptions {
+                    every,
+                    baumgarte,
+                    ..SimOptions::new(method, dt, duration)
+                };
+                let (out, plot) = (out.as_deref(), plot.as_deref());
+                let model = tree_model::from_toml_file(&model).map_err(|e| e.to_string())?;
+                let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
+                match evaluation {
+                    EvaluationArg::Sweeps => {
+                        let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
+                        run_simulate(sys, &model.name, options, out, plot)
+                    }
+                    EvaluationArg::Cached => {
+                        run_simulate(paper(PaperEvaluation::Cached)?, &model.name, options, out, plot)
+                    }
+                    EvaluationArg::Uncached => run_simulate(
+                        paper(PaperEvaluation::Uncached)?,
+                        &model.name,
+                        options,
+                        out,
+                        plot,
+                    ),
+                }
+            })
         }
-        Command::Eval { model, q, dq } => run_eval(&model, q.as_deref(), dq.as_deref()),
+        Command::Eval { model, q, dq, t } => run_eval(&model, q.as_deref(), dq.as_deref(), t),
         Command::Check { model } => run_check(&model),
     };
     match result {
@@ -163,19 +213,46 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path, evaluation: Evaluation) -> Result<TreeSystem, String> {
+fn load(path: &Path) -> Result<TreeSystem, String> {
     let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
-    TreeSystem::new(&model, evaluation).map_err(|e| e.to_string())
+    TreeSystem::new(&model).map_err(|e| e.to_string())
 }
 
-fn run_simulate(
-    path: &Path,
+/// `a,b` for Baumgarte stabilisation.
+fn parse_baumgarte(text: Option<&str>) -> Result<Baumgarte, String> {
+    let Some(text) = text else {
+        return Ok(Baumgarte::default());
+    };
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0))
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("--baumgarte: `{text}` is not two non-negative numbers a,b"))?;
+    match v[..] {
+        [a, b] => Ok(Baumgarte { a, b }),
+        _ => Err(format!("--baumgarte: `{text}` is not two numbers a,b")),
+    }
+}
+
+/// A number for the summary: plain when moderate, scientific when huge or tiny.
+fn num(x: f64) -> String {
+    if x == 0.0 || (1e-4..1e7).contains(&x.abs()) {
+        format!("{x:.9}")
+    } else {
+        format!("{x:.6e}")
+    }
+}
+
+/// Most samples kept in memory for the picture (the CSV gets every recorded step).
+const PLOT_SAMPLES: usize = 20_000;
+
+fn run_simulate<S: System<N = Dyn>>(
+    mut sys: S,
+    name: &str,
     options: SimOptions,
-    evaluation: Evaluation,
     out: Option<&Path>,
     plot_path: Option<&Path>,
 ) -> Result<(), String> {
-    let mut sys = load(path, evaluation)?;
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
     bar.set_style(
@@ -185,55 +262,124 @@ fn run_simulate(
     let duration = options.duration.max(f64::MIN_POSITIVE);
     let start = Instant::now();
     let mut last_tick = 0;
-    let mut progress = |t: f64| {
-        // Show the bar only for runs long enough to watch.
-        if start.elapsed().as_millis() > 300 {
-            let tick = (1000.0 * t / duration) as u64;
-            if tick != last_tick {
-                last_tick = tick;
-                bar.set_position(tick);
-                bar.set_message(format!("{t:.3}"));
-            }
+    let names: Vec<String> = (0..sys.dof())
+        .map(|i| sys.variable_name(i).to_string())
+        .collect();
+    let constraints: Vec<String> = (0..sys.constraint_count())
+        .map(|r| sys.constraint_name(r).to_string())
+        .collect();
+    let mut csv = match out {
+        Some(path) => {
+            let file = std::fs::File::create(path)
+                .map_err(|e| format!("cannot write `{}`: {e}", path.display()))?;
+            Some(
+                CsvStream::new(std::io::BufWriter::new(file), &names, &constraints)
+                    .map_err(|e| format!("cannot write `{}`: {e}", path.display()))?,
+            )
         }
+        None => None,
     };
-    let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut progress)
-        .map_err(|e| e.to_string())?;
+    // The picture keeps at most PLOT_SAMPLES samples: every `thin`-th recorded one.
+    let recorded = (options.duration / options.dt / options.every as f64).max(1.0);
+    let thin = (recorded / PLOT_SAMPLES as f64).ceil().max(1.0) as usize;
+    let mut picture = Trajectory::new(names.clone(), constraints.clone(), 0);
+    let (mut e0, mut e_end, mut t_end, mut k) = (f64::NAN, f64::NAN, 0.0, 0usize);
+    let mut motion = ModelMotions::of(&sys);
+    let summary = run(
+        &mut sys,
+        &q0,
+        &dq0,
+        &options,
+        &mut NoForce,
+        &mut motion,
+        &mut |sample| {
+            if let Some(csv) = csv.as_mut() {
+                csv.write(sample).map_err(|e| {
+                    SimError::InvalidInput(format!("cannot write the trajectory: {e}"))
+                })?;
+            }
+            if plot_path.is_some() && k % thin == 0 {
+                picture.push(sample);
+            }
+            k += 1;
+            if e0.is_nan() {
+                e0 = sample.energy;
+            }
+            (e_end, t_end) = (sample.energy, sample.t);
+            // Show the bar only for runs long enough to watch.
+            if start.elapsed().as_millis() > 300 {
+                let tick = (1000.0 * sample.t / duration) as u64;
+                if tick != last_tick {
+                    last_tick = tick;
+                    bar.set_position(tick);
+                    bar.set_message(format!("{:.3}", sample.t));
+                }
+            }
+            Ok(())
+        },
+    )
+    .map_err(|e| e.to_string())?;
     bar.finish_and_clear();
     let wall = start.elapsed();
-    if let Some(out) = out {
-        let file = std::fs::File::create(out)
-            .map_err(|e| format!("cannot write `{}`: {e}", out.display()))?;
-        traj.write_csv(std::io::BufWriter::new(file))
-            .map_err(|e| format!("cannot write `{}`: {e}", out.display()))?;
+    if let Some(csv) = csv {
+        csv.finish().map_err(|e| format!("cannot write the trajectory: {e}"))?;
     }
     if let Some(p) = plot_path {
-        plot::plot(&traj, &sys.model().name, p)?;
+        plot::plot(&picture, name, p)?;
     }
-    let e0 = traj.energy[0];
-    let e_end = *traj.energy.last().unwrap();
+    for m in &summary.moved {
+        println!(
+            "Initial {} of `{}` moved from {} to {} to satisfy the constraints.",
+            if m.velocity { "velocity" } else { "value" },
+            m.variable,
+            m.from,
+            m.to
+        );
+    }
     let method = match options.method {
         Method::Vi(s) => format!("the midpoint variational integrator (α = {})", s.alpha),
         Method::Rk4 => "RK4".into(),
         Method::Rk45(_) => "adaptive Dormand–Prince 5(4)".into(),
     };
-    let newton = if traj.newton_iterations > 0 {
+    let newton = if summary.newton_iterations > 0 {
         format!(
             ", {:.2} Newton iterations per step",
-            traj.newton_iterations as f64 / (traj.len() - 1).max(1) as f64
+            summary.newton_iterations as f64 / summary.steps.max(1) as f64
         )
     } else {
         String::new()
     };
+    let subdivided = if summary.subdivided_steps > 0 {
+        format!(
+            " {} steps needed subdividing (Newton failed at full length).",
+            summary.subdivided_steps
+        )
+    } else {
+        String::new()
+    };
+    let constrained = if constraints.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " Worst constraint violation {:.3e}.",
+            summary.worst_violation
+        )
+    };
+    let kinematic = (0..sys.dof()).any(|i| sys.is_kinematic(i));
+    let energy_note = if kinematic {
+        " (not conserved: kinematic inputs do work)"
+    } else {
+        ""
+    };
     println!(
-        "Simulated `{}` ({} variables) for {} s with {method}: {} steps in {:.3} s of wall time{newton}. \
-         Energy went from {e0:.9} to {e_end:.9} J (drift {:+.3e} J, largest deviation {:.3e} J).{}{}",
-        sys.model().name,
+        "Simulated `{name}` ({} variables) for {t_end} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
+         Energy went from {} to {} J{energy_note} (drift {:+.3e} J).{constrained}{}{}",
         sys.dof(),
-        traj.t.last().unwrap(),
-        traj.len() - 1,
+        summary.steps,
         wall.as_secs_f64(),
+        num(e0),
+        num(e_end),
         e_end - e0,
-        traj.max_energy_error(),
         out.map(|p| format!(" Trajectory: {}.", p.display())).unwrap_or_default(),
         plot_path.map(|p| format!(" Plot: {}.", p.display())).unwrap_or_default(),
     );
@@ -262,21 +408,45 @@ fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Ve
     Ok(Vector::<Dyn>::from_vec(values))
 }
 
-fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String> {
-    let mut sys = load(path, Evaluation::Sweeps)?;
+fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>, time: f64) -> Result<(), String> {
+    let mut sys = load(path)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
     let (q0, dq0) = sys.initial_state();
     let q = q.map_or(Ok(q0), |s| parse_vector(s, n, "q", &names))?;
     let dq = dq.map_or(Ok(dq0), |s| parse_vector(s, n, "dq", &names))?;
+    if !time.is_finite() {
+        return Err(format!("--t: `{time}` is not a finite time"));
+    }
     let t = sys.evaluate(&q, &dq, Order::Full);
     let mut qdd = Vector::<Dyn>::zeros(n);
-    let qdd_json =
-        match Dynamics::new(Dyn(n)).acceleration(&mut sys, &mut NoForce, 0, 0.0, &q, &dq, &mut qdd)
-        {
-            Ok(()) => json!(qdd.as_slice()),
-            Err(e) => json!({ "error": e.to_string() }),
+    let mut motion = ModelMotions::of(&sys);
+    let mut dynamics = Dynamics::new(&sys);
+    let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
+    let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+    let (qdd_json, lambda_json) =
+        match dynamics.acceleration(&mut sys, &mut NoForce, &mut motion, 0, time, &q, &dq, &mut qdd) {
+            Ok(()) => (
+                json!(dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>()),
+                json!(dynamics.lambda.as_slice()),
+            ),
+            Err(e) => (json!({ "error": e.to_string() }), json!(null)),
         };
+    let rows = sys.constraint_count();
+    let mut c = ConstraintTerms::zeros(rows, n);
+    sys.constraints(&q, &dq, Order::First, &mut c);
+    let name_list = |list: &[usize]| -> Vec<String> {
+        list.iter().map(|&i| names[i].clone()).collect()
+    };
+    let constraint_names: Vec<String> =
+        (0..rows).map(|r| sys.constraint_name(r).to_string()).collect();
+    let dh: Vec<Vec<f64>> = (0..rows)
+        .map(|r| (0..n).map(|i| c.dh[(r, i)]).collect())
+        .collect();
+    let kinematic_motion: serde_json::Map<String, serde_json::Value> = kinematic
+        .iter()
+        .map(|&i| (names[i].clone(), json!(motion.kinematic(i, time))))
+        .collect();
     let matrix = |m: &tree_mech::runtime::Matrix<Dyn>| -> Vec<Vec<f64>> {
         (0..n)
             .map(|i| (0..n).map(|j| m[(i, j)]).collect())
@@ -300,7 +470,14 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String
         "M": matrix(&t.mass),
         "d2L_ddqdq": matrix(&t.d2l_ddq_dq),
         "d2L_dqdq": matrix(&t.d2l_dq_dq),
+        "dynamic": name_list(&dynamic),
+        "kinematic": name_list(&kinematic),
+        "kinematic_motion": kinematic_motion,
         "qdd": qdd_json,
+        "constraints": constraint_names,
+        "h": c.h.as_slice(),
+        "dh_dq": dh,
+        "lambda": lambda_json,
         "poses": poses,
     });
     println!(
@@ -312,7 +489,7 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>) -> Result<(), String
 
 fn run_check(path: &Path) -> Result<(), String> {
     let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
-    let sys = TreeSystem::new(&model, Evaluation::Sweeps).map_err(|e| e.to_string())?;
+    let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
     println!("model `{}`: valid", model.name);
     println!(
         "gravity: [{}, {}, {}]",
@@ -320,14 +497,74 @@ fn run_check(path: &Path) -> Result<(), String> {
     );
     println!("{} frames, {} variables:", model.frames.len(), sys.dof());
     for v in &model.variables {
+        let drives = match v.frame {
+            Some(f) => format!(
+                "drives `{}` by {}",
+                model.frames[f].name, model.frames[f].primitive
+            ),
+            None => "sets a constraint length".to_string(),
+        };
+        let how = match &v.motion {
+            None => format!("dynamic, damping = {}", v.damping),
+            Some(tree_model::Motion::Steady { q0, dq0 }) => {
+                format!("kinematic, held at q0 = {q0} moving at {dq0}")
+            }
+            Some(tree_model::Motion::Sine {
+                offset,
+                amplitude,
+                frequency,
+                phase,
+            }) => format!(
+                "kinematic, {offset} + {amplitude}·sin(2π·{frequency}·t + {phase})"
+            ),
+            Some(tree_model::Motion::Spline(s)) => {
+                let (a, b) = s.span();
+                format!("kinematic, spline through samples on [{a}, {b}] s")
+            }
+        };
         println!(
-            "  {:<20} drives `{}` by {}; q0 = {}, dq0 = {}, damping = {}",
-            v.name,
-            model.frames[v.frame].name,
-            model.frames[v.frame].primitive,
-            v.q0,
-            v.dq0,
-            v.damping
+            "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}",
+            v.name, v.q0, v.dq0
+        );
+    }
+    if !model.constraints.is_empty() {
+        println!("{} constraints:", model.constraints.len());
+        for c in &model.constraints {
+            let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
+            let what = match &c.kind {
+                tree_model::ConstraintKind::Distance { length } => match length {
+                    tree_model::Parameter::Constant(l) => format!("distance {l}"),
+                    tree_model::Parameter::Variable(i) => {
+                        format!("distance `{}`", model.variables[*i].name)
+                    }
+                },
+                tree_model::ConstraintKind::Plane { normal } => {
+                    format!("plane, normal {normal:?} in `{a}`")
+                }
+                tree_model::ConstraintKind::Point { axes } => format!(
+                    "point, axes {}",
+                    axes.iter().map(|&k| ["x", "y", "z"][k]).collect::<String>()
+                ),
+            };
+            println!("  {:<20} {what} between `{a}` and `{b}`", c.name);
+        }
+    }
+    for s in &model.springs {
+        match s.kind {
+            tree_model::SpringKind::Frames([a, b]) => println!(
+                "spring between `{}` and `{}`: k = {}, rest = {}",
+                model.frames[a].name, model.frames[b].name, s.stiffness, s.rest
+            ),
+            tree_model::SpringKind::Variable(i) => println!(
+                "spring on `{}`: k = {}, rest = {}",
+                model.variables[i].name, s.stiffness, s.rest
+            ),
+        }
+    }
+    for d in &model.dampers {
+        println!(
+            "damper between `{}` and `{}`: c = {}",
+            model.frames[d.frames[0]].name, model.frames[d.frames[1]].name, d.damping
         );
     }
     let masses: Vec<_> = model.frames.iter().filter(|f| f.mass.is_some()).collect();

@@ -8,7 +8,7 @@ use quote::{format_ident, quote};
 use tree_model::{Joint, Model};
 use tree_runtime::plan::TreePlan;
 use tree_runtime::se3::Pose;
-use tree_runtime::sweeps::{self, TermsSink, Workspace};
+use tree_runtime::sweeps::{self, Output, Sink, Workspace};
 use tree_runtime::Order;
 
 use crate::ast::{Input, Source};
@@ -16,29 +16,65 @@ use crate::lower;
 use crate::program::{constant, Program};
 use crate::trace::{self, Term};
 
-/// Collects `(target, value)` pairs as the recursions hand out their results.
+/// Collects what the recursions hand out, summing the contributions to each output, in the
+/// order the outputs first appear.
 #[derive(Default)]
-struct Recorder(Vec<(TokenStream, Term)>);
+struct Recorder {
+    slots: HashMap<Output, usize>,
+    values: Vec<(Output, Term)>,
+}
 
-impl TermsSink<Term> for Recorder {
-    fn set_l(&mut self, l: Term) {
-        self.0.push((quote!(out.l), l));
+impl Sink<Term> for Recorder {
+    fn add(&mut self, at: Output, x: Term) {
+        match self.slots.get(&at) {
+            Some(&k) => self.values[k].1 += x,
+            None => {
+                self.slots.insert(at, self.values.len());
+                self.values.push((at, x));
+            }
+        }
     }
-    fn set_dl_dq(&mut self, i: usize, x: Term) {
-        self.0.push((quote!(out.dl_dq[#i]), x));
+}
+
+impl Recorder {
+    /// `(target expression, value)` for every output.
+    fn into_outputs(self) -> Vec<(TokenStream, Term)> {
+        self.values
+            .into_iter()
+            .map(|(at, x)| {
+                let target = match at {
+                    Output::L => quote!(out.l),
+                    Output::DlDq(i) => quote!(out.dl_dq[#i]),
+                    Output::DlDdq(i) => quote!(out.dl_ddq[#i]),
+                    Output::Mass(i, j) => quote!(out.mass[(#i, #j)]),
+                    Output::D2lDdqDq(i, j) => quote!(out.d2l_ddq_dq[(#i, #j)]),
+                    Output::D2lDqDq(i, j) => quote!(out.d2l_dq_dq[(#i, #j)]),
+                    Output::Force(i) => quote!(out.force[#i]),
+                    Output::DforceDq(i, j) => quote!(out.dforce_dq[(#i, #j)]),
+                    Output::DforceDdq(i, j) => quote!(out.dforce_ddq[(#i, #j)]),
+                    Output::H(r) => quote!(out.h[#r]),
+                    Output::Dh(r, i) => quote!(out.dh[(#r, #i)]),
+                    Output::DhDot(r) => quote!(out.dh_dot[#r]),
+                    Output::D2h(r, i, j) => quote!(out.d2h[#r][(#i, #j)]),
+                };
+                (target, x)
+            })
+            .collect()
     }
-    fn set_dl_ddq(&mut self, i: usize, x: Term) {
-        self.0.push((quote!(out.dl_ddq[#i]), x));
-    }
-    fn set_mass(&mut self, i: usize, j: usize, x: Term) {
-        self.0.push((quote!(out.mass[(#i, #j)]), x));
-    }
-    fn set_d2l_ddq_dq(&mut self, i: usize, j: usize, x: Term) {
-        self.0.push((quote!(out.d2l_ddq_dq[(#i, #j)]), x));
-    }
-    fn set_d2l_dq_dq(&mut self, i: usize, j: usize, x: Term) {
-        self.0.push((quote!(out.d2l_dq_dq[(#i, #j)]), x));
-    }
+}
+
+/// The constraints up to `order`, traced.
+fn constraints_program(plan: &TreePlan, order: Order) -> Program {
+    let n = plan.dof();
+    let (nodes, outputs) = trace::record(|| {
+        let q: Vec<Term> = (0..n).map(trace::q).collect();
+        let dq: Vec<Term> = (0..n).map(trace::dq).collect();
+        let mut ws = Workspace::<Term>::new(plan);
+        let mut out = Recorder::default();
+        sweeps::constraints(plan, &mut ws, &q, &dq, order, &mut out);
+        out.into_outputs()
+    });
+    Program { nodes, outputs }
 }
 
 /// The Lagrangian terms up to `order`, traced.
@@ -50,7 +86,7 @@ fn lagrangian_program(plan: &TreePlan, order: Order) -> Program {
         let mut ws = Workspace::<Term>::new(plan);
         let mut out = Recorder::default();
         sweeps::evaluate(plan, &mut ws, &q, &dq, order, &mut out);
-        out.0
+        out.into_outputs()
     });
     Program { nodes, outputs }
 }
@@ -95,7 +131,7 @@ fn constant_name(prefix: &str, name: &str) -> String {
 }
 
 /// Associated items the expansion defines itself.
-const RESERVED: [&str; 7] = [
+const RESERVED: [&str; 8] = [
     "DOF",
     "VARIABLES",
     "FRAMES",
@@ -103,6 +139,7 @@ const RESERVED: [&str; 7] = [
     "DQ0",
     "DAMPING",
     "STATEMENTS",
+    "CONSTRAINTS",
 ];
 
 /// Named index constants, failing on two names that map to one constant or on a reserved one.
@@ -137,8 +174,15 @@ fn index_constants(
     Ok(out)
 }
 
-/// `Model` rebuilt by the builder, so `Name::model()` gives the interpreted twin.
-fn model_constructor(model: &Model) -> TokenStream {
+/// `Model` rebuilt at run time, so `Name::model()` gives the interpreted twin: a file model
+/// is read again from the text compiled in, an inline one rebuilt by the builder.
+fn model_constructor(model: &Model, file: Option<(&str, &str)>) -> TokenStream {
+    if let Some((path, shown)) = file {
+        return quote! {
+            ::tree_mech::tree_model::from_toml_str(include_str!(#path), Some(#shown))
+                .expect("the model was validated when it was compiled")
+        };
+    }
     let name = &model.name;
     let g = model.gravity.map(constant);
     let mut calls = quote!(.gravity([#(#g),*]));
@@ -168,7 +212,12 @@ fn model_constructor(model: &Model) -> TokenStream {
             constant(v.dq0),
             constant(v.damping),
         );
-        calls.extend(quote!(.initial(#vname, #q0, #dq0).damping(#vname, #c)));
+        calls.extend(quote!(.initial(#vname, #q0, #dq0)));
+        if v.is_kinematic() {
+            calls.extend(quote!(.kinematic(#vname)));
+        } else {
+            calls.extend(quote!(.damping(#vname, #c)));
+        }
     }
     quote! {
         ::tree_mech::tree_model::ModelBuilder::new(#name)
@@ -182,7 +231,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let (model, file) = match &input.source {
         Source::File(path) => {
             let (model, full) = lower::from_file(path)?;
-            (model, Some(full))
+            (model, Some((full, path.value())))
         }
         Source::Inline(inline) => (lower::from_inline(&input.name, inline)?, None),
     };
@@ -208,18 +257,44 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let dynamics = lagrangian_program(&plan, Order::Dynamics).emit("__dynamics", n, &terms_ty);
     let full = lagrangian_program(&plan, Order::Full).emit("__full", n, &terms_ty);
     let poses = poses_program(&plan).emit("__poses", n, &quote!([::tree_mech::runtime::Pose]));
+    let constraint_ty = quote!(::tree_mech::runtime::ConstraintTerms);
+    let c_first = constraints_program(&plan, Order::First).emit("__c_first", n, &constraint_ty);
+    let c_dynamics =
+        constraints_program(&plan, Order::Dynamics).emit("__c_dynamics", n, &constraint_ty);
+    let c_full = constraints_program(&plan, Order::Full).emit("__c_full", n, &constraint_ty);
     let functions = [
         &first.functions,
         &dynamics.functions,
         &full.functions,
         &poses.functions,
+        &c_first.functions,
+        &c_dynamics.functions,
+        &c_full.functions,
     ];
+    let (c_first_body, c_dynamics_body, c_full_body) =
+        (&c_first.body, &c_dynamics.body, &c_full.body);
+    let rows = plan.rows;
+    let constraint_names = model.constraint_row_names();
+    let motions: Vec<TokenStream> = model
+        .variables
+        .iter()
+        .map(|v| match &v.motion {
+            None => quote!(None),
+            Some(_) => quote!(Self::model().variables[i].motion.clone()),
+        })
+        .collect();
     let (first_body, dynamics_body, full_body, poses_body) =
         (&first.body, &dynamics.body, &full.body, &poses.body);
     let statements = full.statements;
-    let constructor = model_constructor(&model);
-    let rebuild = file.map(|path| {
-        let path = path.to_string_lossy().into_owned();
+    let indices: Vec<usize> = (0..n).collect();
+    let full_path = file
+        .as_ref()
+        .map(|(full, shown)| (full.to_string_lossy().into_owned(), shown.clone()));
+    let constructor = model_constructor(
+        &model,
+        full_path.as_ref().map(|(p, s)| (p.as_str(), s.as_str())),
+    );
+    let rebuild = full_path.as_ref().map(|(path, _)| {
         quote!(
             const _: &[u8] = include_bytes!(#path);
         )
@@ -255,6 +330,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             pub const DQ0: [f64; #n] = [#(#dq0),*];
             /// Damping coefficients.
             pub const DAMPING: [f64; #n] = [#(#damping),*];
+            /// Constraint equation names, in order.
+            pub const CONSTRAINTS: [&'static str; #rows] = [#(#constraint_names),*];
             /// Statements in one full (second-order) evaluation.
             pub const STATEMENTS: usize = #statements;
             #var_consts
@@ -298,6 +375,38 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             fn damping(&self, i: usize) -> f64 {
                 Self::DAMPING[i]
+            }
+
+            fn motion(&self, i: usize) -> Option<::tree_mech::tree_model::Motion> {
+                match i {
+                    #(#indices => #motions,)*
+                    _ => None,
+                }
+            }
+
+            fn constraint_count(&self) -> usize {
+                #rows
+            }
+
+            fn constraint_name(&self, r: usize) -> &str {
+                Self::CONSTRAINTS[r]
+            }
+
+            fn constraints(
+                &mut self,
+                q: &::tree_mech::runtime::Vector<Self::N>,
+                dq: &::tree_mech::runtime::Vector<Self::N>,
+                order: ::tree_mech::runtime::Order,
+                out: &mut ::tree_mech::runtime::ConstraintTerms,
+            ) {
+                out.clear(order);
+                let q: &[f64; #n] = &q.data.0[0];
+                let dq: &[f64; #n] = &dq.data.0[0];
+                match order {
+                    ::tree_mech::runtime::Order::First => { #c_first_body }
+                    ::tree_mech::runtime::Order::Dynamics => { #c_dynamics_body }
+                    ::tree_mech::runtime::Order::Full => { #c_full_body }
+                }
             }
 
             fn lagrangian(

@@ -137,6 +137,9 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<Model
         gravity: inline.gravity.map(|g| g.0),
         frames,
         variables,
+        constraints: Vec::new(),
+        springs: Vec::new(),
+        dampers: Vec::new(),
     };
     let model = tree_model::validate(&spec);
     if let Err(problems) = &model {
@@ -147,6 +150,7 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<Model
                     .iter()
                     .find(|(n, _)| n == v)
                     .map_or(name.span(), |s| s.1),
+                Site::Element { .. } => name.span(),
                 Site::Frame { index, field } => {
                     let s = &spans[*index];
                     match field {

@@ -45,7 +45,7 @@ fn operands(node: &Node) -> Vec<Term> {
     match *node {
         Node::Q(_) | Node::Dq(_) => vec![],
         Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => vec![a, b],
-        Node::Neg(a) | Node::Sin(a) | Node::Cos(a) => vec![a],
+        Node::Neg(a) | Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Recip(a) => vec![a],
     }
 }
 
@@ -76,6 +76,14 @@ fn expression(node: &Node) -> TokenStream {
         Node::Cos(a) => {
             let a = term(a);
             quote!(#a.cos())
+        }
+        Node::Sqrt(a) => {
+            let a = term(a);
+            quote!(#a.sqrt())
+        }
+        Node::Recip(a) => {
+            let a = term(a);
+            quote!(1.0f64 / #a)
         }
     }
 }

@@ -39,6 +39,8 @@ pub enum Node {
     Neg(Term),
     Sin(Term),
     Cos(Term),
+    Sqrt(Term),
+    Recip(Term),
 }
 
 /// The statements recorded so far, and each one's index for reuse: a statement that was
@@ -80,6 +82,8 @@ fn key(node: &Node) -> NodeKey {
         Node::Neg(a) => (5, bits(a), none),
         Node::Sin(a) => (6, bits(a), none),
         Node::Cos(a) => (7, bits(a), none),
+        Node::Sqrt(a) => (8, bits(a), none),
+        Node::Recip(a) => (9, bits(a), none),
     }
 }
 
@@ -186,6 +190,20 @@ impl Scalar for Term {
         match self {
             Term::Const(a) => (Term::Const(a.sin()), Term::Const(a.cos())),
             x => (push(Node::Sin(x)), push(Node::Cos(x))),
+        }
+    }
+
+    fn sqrt(self) -> Self {
+        match self {
+            Term::Const(a) => Term::Const(a.sqrt()),
+            x => push(Node::Sqrt(x)),
+        }
+    }
+
+    fn recip(self) -> Self {
+        match self {
+            Term::Const(a) => Term::Const(1.0 / a),
+            x => push(Node::Recip(x)),
         }
     }
 }

@@ -4,7 +4,10 @@ use crate::error::ModelError;
 use crate::error::{Problem, Site};
 use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind};
-use crate::spec::{FrameSpec, ModelSpec, VariableSpec};
+use crate::spec::{
+    ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
+    VariableSpec,
+};
 use crate::validate::validate;
 
 /// Builds a [`Model`] frame by frame; `build` runs the same validation as the file formats.
@@ -35,6 +38,9 @@ impl ModelBuilder {
                 gravity: None,
                 frames: Vec::new(),
                 variables: Vec::new(),
+                constraints: Vec::new(),
+                springs: Vec::new(),
+                dampers: Vec::new(),
             },
             pending: Vec::new(),
         }
@@ -103,6 +109,107 @@ impl ModelBuilder {
     /// Viscous damping coefficient of a variable.
     pub fn damping(mut self, var: &str, c: f64) -> Self {
         self.settings(var).damping = Some(c);
+        self
+    }
+
+    /// Makes a variable kinematic, held at its `q0` moving at `dq0` (see [`Self::initial`]).
+    pub fn kinematic(mut self, var: &str) -> Self {
+        self.settings(var).kinematic = Some(true);
+        self
+    }
+
+    /// Makes a variable kinematic, moving as `offset + amplitude·sin(2πf t + phase)`.
+    pub fn sine(mut self, var: &str, offset: f64, amplitude: f64, frequency: f64, phase: f64) -> Self {
+        let s = self.settings(var);
+        s.kinematic = Some(true);
+        s.motion = Some(SineSpec {
+            offset: Some(offset),
+            amplitude: Some(amplitude),
+            frequency: Some(frequency),
+            phase: Some(phase),
+        });
+        self
+    }
+
+    /// Makes a variable kinematic, following a natural cubic spline through `(t, q)` samples.
+    pub fn samples(mut self, var: &str, samples: &[[f64; 2]]) -> Self {
+        let s = self.settings(var);
+        s.kinematic = Some(true);
+        s.samples = Some(samples.to_vec());
+        self
+    }
+
+    /// A distance constraint `‖p_a − p_b‖² − ℓ² = 0`; `length` is a number or a variable name.
+    pub fn distance(mut self, name: &str, a: &str, b: &str, length: impl Into<crate::Value>) -> Self {
+        let length = match length.into() {
+            crate::Value::Constant(x) => ParameterSpec::Constant(x),
+            crate::Value::Variable(v) => {
+                self.settings(&v);
+                ParameterSpec::Variable(v)
+            }
+        };
+        self.spec.constraints.push(ConstraintSpec {
+            name: Some(name.into()),
+            kind: "distance".into(),
+            frames: vec![a.into(), b.into()],
+            length: Some(length),
+            ..Default::default()
+        });
+        self
+    }
+
+    /// A plane constraint `n·(p_b − p_a) = 0`, `n` in frame a's axes.
+    pub fn plane(mut self, name: &str, a: &str, b: &str, normal: [f64; 3]) -> Self {
+        self.spec.constraints.push(ConstraintSpec {
+            name: Some(name.into()),
+            kind: "plane".into(),
+            frames: vec![a.into(), b.into()],
+            normal: Some(normal),
+            ..Default::default()
+        });
+        self
+    }
+
+    /// A point constraint `e_i·(p_a − p_b) = 0` for each world axis in `axes` (e.g. `"xz"`).
+    pub fn point(mut self, name: &str, a: &str, b: &str, axes: &str) -> Self {
+        self.spec.constraints.push(ConstraintSpec {
+            name: Some(name.into()),
+            kind: "point".into(),
+            frames: vec![a.into(), b.into()],
+            axes: Some(axes.into()),
+            ..Default::default()
+        });
+        self
+    }
+
+    /// A spring `½k(‖p_a − p_b‖ − rest)²` between two frames' origins.
+    pub fn spring(mut self, a: &str, b: &str, stiffness: f64, rest: f64) -> Self {
+        self.spec.springs.push(SpringSpec {
+            frames: Some(vec![a.into(), b.into()]),
+            variable: None,
+            stiffness: Some(stiffness),
+            rest: Some(rest),
+        });
+        self
+    }
+
+    /// A spring `½k(q − rest)²` on one variable.
+    pub fn variable_spring(mut self, var: &str, stiffness: f64, rest: f64) -> Self {
+        self.spec.springs.push(SpringSpec {
+            frames: None,
+            variable: Some(var.into()),
+            stiffness: Some(stiffness),
+            rest: Some(rest),
+        });
+        self
+    }
+
+    /// A damper with force `−c·ḋ` along the line between two frames' origins.
+    pub fn damper(mut self, a: &str, b: &str, damping: f64) -> Self {
+        self.spec.dampers.push(DamperSpec {
+            frames: vec![a.into(), b.into()],
+            damping: Some(damping),
+        });
         self
     }
 

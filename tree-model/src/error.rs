@@ -22,6 +22,32 @@ pub enum Site {
     Frame { index: usize, field: FrameField },
     /// The settings of the variable of this name.
     VariableSettings { name: String },
+    /// A constraint, spring or damper (by position in its list) and the field at fault
+    /// (`None`: the whole entry).
+    Element {
+        section: Section,
+        index: usize,
+        field: Option<&'static str>,
+    },
+}
+
+/// The lists of elements a model has besides its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Section {
+    Constraint,
+    Spring,
+    Damper,
+}
+
+impl Section {
+    /// The TOML table name (`constraint`, `spring`, `damper`).
+    pub fn keyword(self) -> &'static str {
+        match self {
+            Section::Constraint => "constraint",
+            Section::Spring => "spring",
+            Section::Damper => "damper",
+        }
+    }
 }
 
 /// One problem with a model.

@@ -1,8 +1,7 @@
 //! # tree-model
 //!
-//! The description of a mechanical system as a tree of frames (Johnson & Murphey, *Scalable
-//! Variational Integrators for Constrained Mechanical Systems in Generalized Coordinates*,
-//! §III): each frame hangs off its parent by one primitive transform (`tx ty tz rx ry rz`),
+//! The description of a mechanical system as a tree of frames (Johnson & Murphey, *Discrete and
+//! Continuous Mechanics for Tree Representations of Mechanical Systems*, ICRA 2008, §II): each frame hangs off its parent by one primitive transform (`tx ty tz rx ry rz`),
 //! constant or driven by one configuration variable; masses sit at frame origins.
 //!
 //! Models come from TOML ([`from_toml_str`], [`from_toml_file`]), from the
@@ -10,17 +9,26 @@
 //! that one validator turns into a [`Model`], so a model means the same on every path.
 
 mod builder;
+mod elements;
 mod error;
 mod model;
+mod motion;
 mod primitive;
 mod spec;
 mod toml_format;
 mod validate;
 
 pub use builder::{n_link_pendulum, ModelBuilder};
-pub use error::{FrameField, ModelError, Problem, Site};
-pub use model::{Frame, Joint, Mass, Model, Variable, DEFAULT_GRAVITY};
+pub use error::{FrameField, ModelError, Problem, Section, Site};
+pub use model::{
+    Constraint, ConstraintKind, Damper, Frame, Joint, Mass, Model, Parameter, Spring, SpringKind,
+    Variable, DEFAULT_GRAVITY,
+};
+pub use motion::{CubicSpline, Motion};
 pub use primitive::{Primitive, PrimitiveKind, Value};
-pub use spec::{FrameSpec, ModelSpec, VariableSpec};
+pub use spec::{
+    ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
+    VariableSpec,
+};
 pub use toml_format::{from_toml_file, from_toml_str};
 pub use validate::validate;

@@ -1,6 +1,7 @@
 //! The validated model: a tree of frames in topological order, variables numbered in the
 //! order they first appear in the frame list.
 
+use crate::motion::Motion;
 use crate::primitive::PrimitiveKind;
 
 /// Standard gravity along −Z, the default.
@@ -53,14 +54,95 @@ pub struct Frame {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variable {
     pub name: String,
-    /// The one frame this variable drives.
-    pub frame: usize,
+    /// The one frame this variable drives; `None` for a variable that only sets a constraint's
+    /// length (always kinematic).
+    pub frame: Option<usize>,
     pub q0: f64,
     pub dq0: f64,
     /// Viscous damping coefficient: generalized force `−c q̇`.
     pub damping: f64,
-    /// Reserved: prescribed (kinematic) variables come in a later release.
-    pub kinematic: bool,
+    /// A prescribed variable's motion (`None`: a dynamic variable, simulated).
+    pub motion: Option<Motion>,
+}
+
+impl Variable {
+    /// Whether the variable is prescribed rather than simulated.
+    pub fn is_kinematic(&self) -> bool {
+        self.motion.is_some()
+    }
+}
+
+/// A scalar that is a constant or a configuration variable (a constraint's length).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Parameter {
+    Constant(f64),
+    /// Index into [`Model::variables`].
+    Variable(usize),
+}
+
+/// What a holonomic constraint `h(q) = 0` holds between its two frames' origins `p_a`, `p_b`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ConstraintKind {
+    /// `h = ‖p_a − p_b‖² − ℓ²`.
+    Distance { length: Parameter },
+    /// `h = n·(p_b − p_a)` with `n` fixed in frame a's axes (unit length after validation).
+    Plane { normal: [f64; 3] },
+    /// `h_i = e_i·(p_a − p_b)` for each listed world axis (0, 1, 2 for x, y, z): one row each.
+    Point { axes: Vec<usize> },
+}
+
+/// A holonomic constraint between two frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Constraint {
+    pub name: String,
+    pub kind: ConstraintKind,
+    /// Frames `a` and `b` (indices into [`Model::frames`]).
+    pub frames: [usize; 2],
+}
+
+impl Constraint {
+    /// Number of scalar equations (rows of `h`).
+    pub fn rows(&self) -> usize {
+        match &self.kind {
+            ConstraintKind::Point { axes } => axes.len(),
+            _ => 1,
+        }
+    }
+
+    /// The name of each row: the constraint's name, with `.x` … for a point constraint.
+    pub fn row_names(&self) -> Vec<String> {
+        match &self.kind {
+            ConstraintKind::Point { axes } => axes
+                .iter()
+                .map(|&a| format!("{}.{}", self.name, ["x", "y", "z"][a]))
+                .collect(),
+            _ => vec![self.name.clone()],
+        }
+    }
+}
+
+/// What a spring stretches.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SpringKind {
+    /// The distance between two frames' origins.
+    Frames([usize; 2]),
+    /// One configuration variable.
+    Variable(usize),
+}
+
+/// A linear spring with potential `½k(x − rest)²`, part of the Lagrangian.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spring {
+    pub kind: SpringKind,
+    pub stiffness: f64,
+    pub rest: f64,
+}
+
+/// A linear damper between two frames' origins: force `−c·ḋ` along the line joining them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Damper {
+    pub frames: [usize; 2],
+    pub damping: f64,
 }
 
 /// A validated tree model.
@@ -70,14 +152,70 @@ pub struct Model {
     pub gravity: [f64; 3],
     /// Frames in topological order (every parent before its children).
     pub frames: Vec<Frame>,
-    /// Variables in the order they first appear in `frames`.
+    /// Variables in the order they first appear in `frames`, then in `constraints`.
     pub variables: Vec<Variable>,
+    pub constraints: Vec<Constraint>,
+    pub springs: Vec<Spring>,
+    pub dampers: Vec<Damper>,
 }
 
 impl Model {
     /// Number of configuration variables.
     pub fn dof(&self) -> usize {
         self.variables.len()
+    }
+
+    /// Indices of the dynamic (simulated) variables, in order.
+    pub fn dynamic(&self) -> Vec<usize> {
+        (0..self.dof())
+            .filter(|&i| !self.variables[i].is_kinematic())
+            .collect()
+    }
+
+    /// Indices of the kinematic (prescribed) variables, in order.
+    pub fn kinematic(&self) -> Vec<usize> {
+        (0..self.dof())
+            .filter(|&i| self.variables[i].is_kinematic())
+            .collect()
+    }
+
+    /// Number of constraint rows.
+    pub fn constraint_rows(&self) -> usize {
+        self.constraints.iter().map(Constraint::rows).sum()
+    }
+
+    /// The name of every constraint row, in order.
+    pub fn constraint_row_names(&self) -> Vec<String> {
+        self.constraints
+            .iter()
+            .flat_map(Constraint::row_names)
+            .collect()
+    }
+
+    /// Whether the model has anything beyond the tree's Lagrangian: kinematic variables,
+    /// constraints, springs, dampers.
+    pub fn has_elements(&self) -> bool {
+        !self.constraints.is_empty()
+            || !self.springs.is_empty()
+            || !self.dampers.is_empty()
+            || self.variables.iter().any(|v| v.is_kinematic() || v.frame.is_none())
+    }
+
+    /// The frames a constraint, spring or damper attaches to, each once, in frame order.
+    pub fn attached_frames(&self) -> Vec<usize> {
+        let mut used = vec![false; self.frames.len()];
+        for c in &self.constraints {
+            c.frames.iter().for_each(|&f| used[f] = true);
+        }
+        for s in &self.springs {
+            if let SpringKind::Frames(fr) = s.kind {
+                fr.iter().for_each(|&f| used[f] = true);
+            }
+        }
+        for d in &self.dampers {
+            d.frames.iter().for_each(|&f| used[f] = true);
+        }
+        (0..self.frames.len()).filter(|&k| used[k]).collect()
     }
 
     /// Index of the frame with this name.
@@ -90,9 +228,13 @@ impl Model {
         self.variables.iter().position(|v| v.name == name)
     }
 
-    /// For each frame, whether it or any descendant carries a non-zero mass.
-    pub fn subtree_has_mass(&self) -> Vec<bool> {
+    /// For each frame, whether it or any descendant carries a non-zero mass or has a
+    /// constraint, spring or damper attached (whether the recursions must visit it).
+    pub fn needed_frames(&self) -> Vec<bool> {
         let mut has = vec![false; self.frames.len()];
+        for k in self.attached_frames() {
+            has[k] = true;
+        }
         for k in (0..self.frames.len()).rev() {
             if self.frames[k].mass.is_some_and(|m| m.is_nonzero()) {
                 has[k] = true;

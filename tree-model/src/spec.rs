@@ -24,6 +24,10 @@ pub struct VariableSpec {
     pub dq0: Option<f64>,
     pub damping: Option<f64>,
     pub kinematic: Option<bool>,
+    /// A sinusoidal prescription (kinematic variables only).
+    pub motion: Option<SineSpec>,
+    /// Samples `(t, q)` of a spline prescription (kinematic variables only).
+    pub samples: Option<Vec<[f64; 2]>>,
 }
 
 /// A whole model as written.
@@ -33,4 +37,50 @@ pub struct ModelSpec {
     pub gravity: Option<[f64; 3]>,
     pub frames: Vec<FrameSpec>,
     pub variables: Vec<VariableSpec>,
+    pub constraints: Vec<ConstraintSpec>,
+    pub springs: Vec<SpringSpec>,
+    pub dampers: Vec<DamperSpec>,
+}
+
+/// A prescribed sinusoid as written: `q = offset + amplitude·sin(2πf t + phase)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SineSpec {
+    pub offset: Option<f64>,
+    pub amplitude: Option<f64>,
+    pub frequency: Option<f64>,
+    pub phase: Option<f64>,
+}
+
+/// A constraint's length as written: a number or a variable name.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ParameterSpec {
+    Constant(f64),
+    Variable(String),
+}
+
+/// A `[[constraint]]` as written; which fields belong depends on `kind` (validated).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ConstraintSpec {
+    pub name: Option<String>,
+    pub kind: String,
+    pub frames: Vec<String>,
+    pub length: Option<ParameterSpec>,
+    pub normal: Option<[f64; 3]>,
+    pub axes: Option<String>,
+}
+
+/// A `[[spring]]` as written: between two frames, or on one variable.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SpringSpec {
+    pub frames: Option<Vec<String>>,
+    pub variable: Option<String>,
+    pub stiffness: Option<f64>,
+    pub rest: Option<f64>,
+}
+
+/// A `[[damper]]` as written.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DamperSpec {
+    pub frames: Vec<String>,
+    pub damping: Option<f64>,
 }

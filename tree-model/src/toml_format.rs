@@ -7,10 +7,13 @@ use std::path::Path;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::error::{FrameField, ModelError, Site};
+use crate::error::{FrameField, ModelError, Section, Site};
 use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind, Value};
-use crate::spec::{FrameSpec, ModelSpec, VariableSpec};
+use crate::spec::{
+    ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
+    VariableSpec,
+};
 use crate::validate::validate;
 
 #[derive(Deserialize)]
@@ -22,6 +25,48 @@ struct RawModel {
     frame: Vec<Spanned<RawFrame>>,
     #[serde(default)]
     variables: BTreeMap<String, Spanned<RawVariable>>,
+    #[serde(default)]
+    constraint: Vec<Spanned<RawConstraint>>,
+    #[serde(default)]
+    spring: Vec<Spanned<RawSpring>>,
+    #[serde(default)]
+    damper: Vec<Spanned<RawDamper>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConstraint {
+    name: Option<Spanned<String>>,
+    kind: Spanned<String>,
+    frames: Spanned<Vec<String>>,
+    length: Option<Spanned<RawValue>>,
+    normal: Option<Spanned<[f64; 3]>>,
+    axes: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSpring {
+    frames: Option<Spanned<Vec<String>>>,
+    variable: Option<Spanned<String>>,
+    stiffness: Option<Spanned<f64>>,
+    rest: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDamper {
+    frames: Spanned<Vec<String>>,
+    damping: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMotion {
+    offset: Option<f64>,
+    amplitude: Option<f64>,
+    frequency: Option<f64>,
+    phase: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -53,6 +98,34 @@ struct RawVariable {
     dq0: Option<f64>,
     damping: Option<f64>,
     kinematic: Option<bool>,
+    motion: Option<RawMotion>,
+    samples: Option<Vec<[f64; 2]>>,
+}
+
+/// Lines of one constraint, spring or damper: the entry's first line and each field's.
+#[derive(Default)]
+struct ElementLines {
+    whole: usize,
+    fields: Vec<(&'static str, usize)>,
+}
+
+impl ElementLines {
+    fn new(text: &str, whole: std::ops::Range<usize>) -> Self {
+        ElementLines {
+            whole: line_of(text, whole.start),
+            fields: Vec::new(),
+        }
+    }
+    fn field<T>(&mut self, text: &str, name: &'static str, value: &Option<Spanned<T>>) {
+        if let Some(v) = value {
+            self.fields.push((name, line_of(text, v.span().start)));
+        }
+    }
+    fn line(&self, field: Option<&str>) -> usize {
+        field
+            .and_then(|f| self.fields.iter().find(|(n, _)| *n == f))
+            .map_or(self.whole, |(_, l)| *l)
+    }
 }
 
 /// 1-based line of a byte offset.
@@ -137,6 +210,77 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                 dq0: v.dq0,
                 damping: v.damping,
                 kinematic: v.kinematic,
+                motion: v.motion.as_ref().map(|m| SineSpec {
+                    offset: m.offset,
+                    amplitude: m.amplitude,
+                    frequency: m.frequency,
+                    phase: m.phase,
+                }),
+                samples: v.samples.clone(),
+            }
+        })
+        .collect();
+    let value = |v: &RawValue| match v {
+        RawValue::Number(x) => ParameterSpec::Constant(*x),
+        RawValue::Name(n) => ParameterSpec::Variable(n.clone()),
+    };
+    let mut constraint_lines = Vec::new();
+    let constraints = raw
+        .constraint
+        .iter()
+        .map(|c| {
+            let mut lines = ElementLines::new(text, c.span());
+            let c = c.get_ref();
+            lines.field(text, "name", &c.name);
+            lines.field(text, "kind", &Some(c.kind.clone()));
+            lines.field(text, "frames", &Some(c.frames.clone()));
+            lines.field(text, "length", &c.length);
+            lines.field(text, "normal", &c.normal);
+            lines.field(text, "axes", &c.axes);
+            constraint_lines.push(lines);
+            ConstraintSpec {
+                name: c.name.as_ref().map(|n| n.get_ref().clone()),
+                kind: c.kind.get_ref().clone(),
+                frames: c.frames.get_ref().clone(),
+                length: c.length.as_ref().map(|l| value(l.get_ref())),
+                normal: c.normal.as_ref().map(|n| *n.get_ref()),
+                axes: c.axes.as_ref().map(|a| a.get_ref().clone()),
+            }
+        })
+        .collect();
+    let mut spring_lines = Vec::new();
+    let springs = raw
+        .spring
+        .iter()
+        .map(|s| {
+            let mut lines = ElementLines::new(text, s.span());
+            let s = s.get_ref();
+            lines.field(text, "frames", &s.frames);
+            lines.field(text, "variable", &s.variable);
+            lines.field(text, "stiffness", &s.stiffness);
+            lines.field(text, "rest", &s.rest);
+            spring_lines.push(lines);
+            SpringSpec {
+                frames: s.frames.as_ref().map(|f| f.get_ref().clone()),
+                variable: s.variable.as_ref().map(|v| v.get_ref().clone()),
+                stiffness: s.stiffness.as_ref().map(|x| *x.get_ref()),
+                rest: s.rest.as_ref().map(|x| *x.get_ref()),
+            }
+        })
+        .collect();
+    let mut damper_lines = Vec::new();
+    let dampers = raw
+        .damper
+        .iter()
+        .map(|d| {
+            let mut lines = ElementLines::new(text, d.span());
+            let d = d.get_ref();
+            lines.field(text, "frames", &Some(d.frames.clone()));
+            lines.field(text, "damping", &d.damping);
+            damper_lines.push(lines);
+            DamperSpec {
+                frames: d.frames.get_ref().clone(),
+                damping: d.damping.as_ref().map(|x| *x.get_ref()),
             }
         })
         .collect();
@@ -150,12 +294,27 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         gravity: raw.gravity,
         frames,
         variables,
+        constraints,
+        springs,
+        dampers,
     };
     validate(&spec).map_err(|mut problems| {
         for p in &mut problems {
             p.line = match &p.site {
                 Site::Model => None,
                 Site::VariableSettings { name } => variable_lines.get(name).copied(),
+                Site::Element {
+                    section,
+                    index,
+                    field,
+                } => {
+                    let lines = match section {
+                        Section::Constraint => &constraint_lines,
+                        Section::Spring => &spring_lines,
+                        Section::Damper => &damper_lines,
+                    };
+                    Some(lines[*index].line(*field))
+                }
                 Site::Frame { index, field } => {
                     let l = &lines[*index];
                     let specific = match field {

@@ -5,8 +5,9 @@ use std::collections::HashMap;
 
 use crate::error::{FrameField, Problem, Site};
 use crate::model::{Frame, Joint, Mass, Model, Variable, DEFAULT_GRAVITY};
+use crate::motion::{CubicSpline, Motion};
 use crate::primitive::{PrimitiveKind, Value};
-use crate::spec::ModelSpec;
+use crate::spec::{ModelSpec, ParameterSpec, VariableSpec};
 
 /// Collects problems; `finish` fails if there are any.
 struct Problems(Vec<Problem>);
@@ -21,6 +22,16 @@ impl Problems {
     }
     fn frame(&mut self, index: usize, field: FrameField, message: String) {
         self.push(Site::Frame { index, field }, message);
+    }
+    fn element(&mut self, index: usize, field: &'static str, message: String) {
+        self.push(
+            Site::Element {
+                section: crate::error::Section::Constraint,
+                index,
+                field: Some(field),
+            },
+            message,
+        );
     }
 }
 
@@ -127,7 +138,8 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                                 FrameField::Primitive,
                                 format!(
                                     "variable `{name}` drives frames `{}` and `{}`: a variable drives exactly one transform",
-                                    spec.frames[variables[i].frame].name, f.name
+                                    variables[i].frame.map_or("?", |k| spec.frames[k].name.as_str()),
+                                    f.name
                                 ),
                             );
                             Joint::Variable(i)
@@ -137,11 +149,11 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                             var_index.insert(name, i);
                             variables.push(Variable {
                                 name: name.clone(),
-                                frame: k,
+                                frame: Some(k),
                                 q0: 0.0,
                                 dq0: 0.0,
                                 damping: 0.0,
-                                kinematic: false,
+                                motion: None,
                             });
                             Joint::Variable(i)
                         }
@@ -174,6 +186,34 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         });
     }
 
+    // Variables that only set a constraint's length come next, in constraint order.
+    let settings: HashMap<&str, &VariableSpec> =
+        spec.variables.iter().map(|v| (v.name.as_str(), v)).collect();
+    for (c, con) in spec.constraints.iter().enumerate() {
+        if let Some(ParameterSpec::Variable(name)) = &con.length {
+            if var_index.contains_key(name.as_str()) {
+                continue;
+            }
+            if settings.contains_key(name.as_str()) {
+                var_index.insert(name, variables.len());
+                variables.push(Variable {
+                    name: name.clone(),
+                    frame: None,
+                    q0: 0.0,
+                    dq0: 0.0,
+                    damping: 0.0,
+                    motion: None,
+                });
+            } else {
+                errs.element(
+                    c,
+                    "length",
+                    format!("constraint length `{name}` is not a variable: it drives no frame and has no [variables.{name}] table"),
+                );
+            }
+        }
+    }
+
     // Per-variable settings.
     for v in &spec.variables {
         let site = || Site::VariableSettings {
@@ -183,7 +223,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             errs.push(
                 site(),
                 format!(
-                    "settings for variable `{}`, which drives no transform",
+                    "settings for variable `{}`, which drives no transform and sets no constraint length",
                     v.name
                 ),
             );
@@ -203,20 +243,98 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                 format!("variable `{}`: damping must not be negative", v.name),
             );
         }
-        if v.kinematic == Some(true) {
-            errs.push(
-                site(),
-                format!(
-                    "variable `{}`: kinematic (prescribed) variables are not supported yet",
-                    v.name
-                ),
-            );
-        }
+        let kinematic = v.kinematic.unwrap_or(false);
         let var = &mut variables[i];
         var.q0 = v.q0.unwrap_or(0.0);
         var.dq0 = v.dq0.unwrap_or(0.0);
         var.damping = v.damping.unwrap_or(0.0);
-        var.kinematic = v.kinematic.unwrap_or(false);
+        if !kinematic {
+            if v.motion.is_some() || v.samples.is_some() {
+                errs.push(
+                    site(),
+                    format!(
+                        "variable `{}` has a prescribed motion but is dynamic: add `kinematic = true`, or remove the motion",
+                        v.name
+                    ),
+                );
+            }
+            continue;
+        }
+        if v.damping.is_some_and(|c| c != 0.0) {
+            errs.push(
+                site(),
+                format!(
+                    "variable `{}` is kinematic: damping has no effect on a prescribed variable",
+                    v.name
+                ),
+            );
+        }
+        var.motion = match (&v.motion, &v.samples) {
+            (Some(_), Some(_)) => {
+                errs.push(
+                    site(),
+                    format!(
+                        "variable `{}`: give `motion` or `samples`, not both",
+                        v.name
+                    ),
+                );
+                None
+            }
+            (Some(m), None) => {
+                let sine = [m.offset, m.amplitude, m.frequency, m.phase].map(|x| x.unwrap_or(0.0));
+                if sine.iter().any(|x| !x.is_finite()) {
+                    errs.push(
+                        site(),
+                        format!("variable `{}`: motion has a non-finite number", v.name),
+                    );
+                } else if sine[2] < 0.0 {
+                    errs.push(
+                        site(),
+                        format!("variable `{}`: motion frequency must not be negative", v.name),
+                    );
+                }
+                Some(Motion::Sine {
+                    offset: sine[0],
+                    amplitude: sine[1],
+                    frequency: sine[2],
+                    phase: sine[3],
+                })
+            }
+            (None, Some(samples)) => match CubicSpline::new(samples) {
+                Some(spline) => Some(Motion::Spline(spline)),
+                None => {
+                    errs.push(
+                        site(),
+                        format!(
+                            "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing",
+                            v.name
+                        ),
+                    );
+                    None
+                }
+            },
+            (None, None) => Some(Motion::Steady {
+                q0: var.q0,
+                dq0: var.dq0,
+            }),
+        };
+        if let Some(m) = &var.motion {
+            // A prescribed variable starts where its motion does.
+            [var.q0, var.dq0, _] = m.at(0.0);
+        }
+    }
+    for v in &variables {
+        if v.frame.is_none() && !v.is_kinematic() {
+            errs.push(
+                Site::VariableSettings {
+                    name: v.name.clone(),
+                },
+                format!(
+                    "variable `{}` sets a constraint length but drives no frame: it must be kinematic",
+                    v.name
+                ),
+            );
+        }
     }
 
     if variables.is_empty() && !spec.frames.is_empty() {
@@ -228,24 +346,42 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         errs.push(Site::Model, "model has no frames".into());
     }
 
+    let elements = crate::elements::validate_elements(spec, &index_of, &var_index, &variables, &mut errs.0);
+
     if errs.0.is_empty() {
+        let (constraints, springs, dampers) = elements;
         let model = Model {
             name: spec.name.clone(),
             gravity,
             frames,
             variables,
+            constraints,
+            springs,
+            dampers,
         };
         for (i, v) in model.variables.iter().enumerate() {
+            if v.is_kinematic() {
+                continue;
+            }
+            let Some(frame) = v.frame else { continue };
             if !variable_moves_mass(&model, i) {
                 errs.frame(
-                    v.frame,
+                    frame,
                     FrameField::Primitive,
                     format!(
                         "variable `{}` moves no mass: nothing at or below frame `{}` has mass or inertia that it moves (its mass-matrix column would be zero)",
-                        v.name, model.frames[v.frame].name
+                        v.name, model.frames[frame].name
                     ),
                 );
             }
+        }
+        let dynamic = model.dynamic().len();
+        let rows = model.constraint_rows();
+        if rows > dynamic {
+            errs.push(
+                Site::Model,
+                format!("the model has {rows} constraint equations but only {dynamic} dynamic variables: at most one equation per dynamic variable"),
+            );
         }
         if errs.0.is_empty() {
             return Ok(model);
@@ -290,7 +426,9 @@ fn mass_of(
 /// moves a body with inertia, or a mass reached through some translation. (A mass exactly on
 /// the rotation axis slips through; the runtime then reports a singular mass matrix.)
 fn variable_moves_mass(model: &Model, i: usize) -> bool {
-    let f = model.variables[i].frame;
+    let Some(f) = model.variables[i].frame else {
+        return false;
+    };
     let rotation = model.frames[f].primitive.is_rotation();
     // offset[k]: whether the path from f down to k contains a non-trivial translation.
     let mut offset = vec![false; model.frames.len()];

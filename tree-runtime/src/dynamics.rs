@@ -1,14 +1,17 @@
-//! Continuous Euler–Lagrange dynamics (paper eq. (14)):
-//! `M(q) q̈ = u(t, q, q̇) + ∂L/∂q − (∂²L/∂q̇∂q) q̇`, solved by Cholesky.
+//! Continuous Euler–Lagrange dynamics (paper eq. (14), docs/derivations.md §6) with the
+//! model's forces, kinematic inputs and holonomic constraints:
+//! `M q̈ = F + u + ∂L/∂q − (∂²L/∂q̇∂q) q̇ + Dhᵀλ` on the dynamic rows, `q̈_k` prescribed, and
+//! `Dh q̈ + q̇ᵀD²h q̇ = 0` (optionally stabilised, Baumgarte: `+ 2a ḣ + b² h`).
 
-use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
+use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dyn};
+use tree_model::Motion;
 
 use crate::error::SimError;
 use crate::linalg::cholesky_solve;
-use crate::system::{Matrix, Order, System, Terms, Vector};
+use crate::system::{ConstraintTerms, Matrix, Order, System, Terms, Vector};
 
 /// An external generalized force `u(t, q, q̇)` (joint torques, actuators, …), added to the
-/// model's damping.
+/// model's own forces (damping, dampers).
 pub trait GeneralizedForce<N: Dim>
 where
     DefaultAllocator: Allocator<N>,
@@ -39,21 +42,93 @@ where
     }
 }
 
-/// Fills `u` with the total generalized force: damping `−c_i q̇_i` plus the external force.
-pub fn total_force<S: System, F: GeneralizedForce<S::N>>(
-    sys: &S,
-    force: &mut F,
-    t: f64,
-    q: &Vector<S::N>,
-    dq: &Vector<S::N>,
-    u: &mut Vector<S::N>,
-) where
-    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
-{
-    for i in 0..u.len() {
-        u[i] = -sys.damping(i) * dq[i];
+/// How the kinematic (prescribed) variables move: `t ↦ (q, q̇, q̈)` of variable `i`.
+pub trait Prescription {
+    /// `[q, q̇, q̈]` of kinematic variable `i` at time `t`.
+    fn kinematic(&mut self, i: usize, t: f64) -> [f64; 3];
+}
+
+/// Any closure `|i, t| [q, q̇, q̈]`.
+impl<F: FnMut(usize, f64) -> [f64; 3]> Prescription for F {
+    fn kinematic(&mut self, i: usize, t: f64) -> [f64; 3] {
+        self(i, t)
     }
-    force.add_force(t, q, dq, u);
+}
+
+/// The motions the model prescribes (a file's `motion`, `samples`, or `q0`/`dq0`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelMotions(pub Vec<Option<Motion>>);
+
+impl ModelMotions {
+    /// The motions of `sys`'s kinematic variables.
+    pub fn of<S: System>(sys: &S) -> Self
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        ModelMotions((0..sys.dof()).map(|i| sys.motion(i)).collect())
+    }
+}
+
+impl Prescription for ModelMotions {
+    fn kinematic(&mut self, i: usize, t: f64) -> [f64; 3] {
+        self.0[i].as_ref().map_or([0.0; 3], |m| m.at(t))
+    }
+}
+
+/// Sets the kinematic entries of `q`, `q̇` (and `q̈`) to their prescription at `t`.
+pub fn prescribe<N: Dim>(
+    kinematic: &[usize],
+    motion: &mut impl Prescription,
+    t: f64,
+    q: &mut Vector<N>,
+    dq: &mut Vector<N>,
+    ddq: Option<&mut Vector<N>>,
+) where
+    DefaultAllocator: Allocator<N>,
+{
+    let mut ddq = ddq;
+    for &i in kinematic {
+        let [x, v, a] = motion.kinematic(i, t);
+        q[i] = x;
+        dq[i] = v;
+        if let Some(ddq) = ddq.as_deref_mut() {
+            ddq[i] = a;
+        }
+    }
+}
+
+/// Which variables are simulated and which prescribed, and how many constraint rows.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Split {
+    pub dynamic: Vec<usize>,
+    pub kinematic: Vec<usize>,
+    pub rows: usize,
+}
+
+impl Split {
+    pub fn of<S: System>(sys: &S) -> Self
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        let (kinematic, dynamic) = (0..sys.dof()).partition(|&i| sys.is_kinematic(i));
+        Split {
+            dynamic,
+            kinematic,
+            rows: sys.constraint_count(),
+        }
+    }
+
+    /// Nothing prescribed and nothing constrained: the plain `M q̈ = rhs` path.
+    pub fn is_plain(&self) -> bool {
+        self.kinematic.is_empty() && self.rows == 0
+    }
+}
+
+/// Baumgarte stabilisation of the acceleration-level constraint: `ḧ + 2a ḣ + b² h = 0`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Baumgarte {
+    pub a: f64,
+    pub b: f64,
 }
 
 /// Workspace for evaluating accelerations without allocating.
@@ -63,25 +138,117 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     pub terms: Terms<N>,
+    pub constraint_terms: ConstraintTerms,
+    /// The constraint forces `λ` of the last evaluation.
+    pub lambda: DVector<f64>,
+    pub baumgarte: Baumgarte,
+    pub split: Split,
     factor: Matrix<N>,
+    rhs: Vector<N>,
+    reduced: ReducedKkt,
+}
+
+/// The dynamic rows of `M q̈ = rhs + Dhᵀλ` with the constraint rows, solved by the
+/// Cholesky factor of `M_dd` and the Schur complement `Dh_d M_dd⁻¹ Dh_dᵀ`.
+#[derive(Clone, Debug)]
+pub(crate) struct ReducedKkt {
+    pub(crate) mdd: DMatrix<f64>,
+    pub(crate) rhs: DVector<f64>,
+    pub(crate) a: DMatrix<f64>,
+    /// `M_dd⁻¹ Dh_dᵀ`, column by column.
+    y: DMatrix<f64>,
+    column: DVector<f64>,
+    schur: DMatrix<f64>,
+    pub(crate) gamma: DVector<f64>,
+}
+
+impl ReducedKkt {
+    pub(crate) fn new(nd: usize, m: usize) -> Self {
+        ReducedKkt {
+            mdd: DMatrix::zeros(nd, nd),
+            rhs: DVector::zeros(nd),
+            a: DMatrix::zeros(m, nd),
+            y: DMatrix::zeros(nd, m),
+            column: DVector::zeros(nd),
+            schur: DMatrix::zeros(m, m),
+            gamma: DVector::zeros(m),
+        }
+    }
+}
+
+/// Solves the reduced system: on entry `k.mdd`, `k.rhs`, `k.a` (Dh_d) and `k.gamma` (the
+/// constraint's right side) are set; on exit `k.rhs` holds `q̈_d` and `lambda` the
+/// multipliers. Errors name the dynamic variable or the constraint.
+pub(crate) fn solve_reduced<S: System>(
+    k: &mut ReducedKkt,
+    lambda: &mut DVector<f64>,
+    sys: &S,
+    split: &Split,
+    step: usize,
+    t: f64,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let m = lambda.len();
+    cholesky_solve::<Dyn>(&mut k.mdd, &mut k.rhs).map_err(|(i, pivot)| SimError::SingularMassMatrix {
+        step,
+        t,
+        variable: sys.variable_name(split.dynamic[i]).to_string(),
+        pivot,
+    })?;
+    if m == 0 {
+        return Ok(());
+    }
+    // Y = M⁻¹Aᵀ with the factor already in mdd (cholesky_solve factors in place; solving
+    // again reuses it through a zero-pivot-free triangular pair).
+    for r in 0..m {
+        k.column.copy_from(&k.a.row(r).transpose());
+        crate::linalg::cholesky_substitute::<Dyn>(&k.mdd, &mut k.column);
+        k.y.set_column(r, &k.column);
+    }
+    // S = A Y, right side γ − A q̈_free.
+    k.schur.gemm(1.0, &k.a, &k.y, 0.0);
+    lambda.copy_from(&k.gamma);
+    lambda.gemv(-1.0, &k.a, &k.rhs, 1.0);
+    cholesky_solve::<Dyn>(&mut k.schur, lambda).map_err(|(r, _)| SimError::SingularConstraints {
+        step,
+        t,
+        constraint: sys.constraint_name(r).to_string(),
+    })?;
+    // q̈_d = q̈_free + Y λ
+    k.rhs.gemv(1.0, &k.y, lambda, 1.0);
+    Ok(())
 }
 
 impl<N: Dim> Dynamics<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    pub fn new(n: N) -> Self {
+    pub fn new<S: System<N = N>>(sys: &S) -> Self {
+        let n = sys.dim();
+        let split = Split::of(sys);
+        let (nd, m) = (split.dynamic.len(), split.rows);
         Dynamics {
             terms: Terms::zeros(n),
+            constraint_terms: ConstraintTerms::zeros(m, n.value()),
+            lambda: DVector::zeros(m),
+            baumgarte: Baumgarte::default(),
             factor: Matrix::zeros_generic(n, n),
+            rhs: Vector::zeros_generic(n, nalgebra::U1),
+            reduced: ReducedKkt::new(nd, m),
+            split,
         }
     }
 
-    /// `q̈` at `(t, q, q̇)` into `qdd` (eq. (14)). `step` labels errors.
-    pub fn acceleration<S, F>(
+    /// `q̈` at `(t, q, q̇)` into `qdd` (eq. (14)); the kinematic entries of `q`, `q̇` must hold
+    /// their prescription at `t`, and `qdd`'s kinematic entries are set from it. `step`
+    /// labels errors.
+    pub fn acceleration<S, F, P>(
         &mut self,
         sys: &mut S,
         force: &mut F,
+        motion: &mut P,
         step: usize,
         t: f64,
         q: &Vector<N>,
@@ -91,22 +258,68 @@ where
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
+        P: Prescription,
     {
         sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
-        total_force(sys, force, t, q, dq, qdd);
-        // rhs = u + ∂L/∂q − (∂²L/∂q̇∂q) q̇
-        *qdd += &self.terms.dl_dq;
-        qdd.gemv(-1.0, &self.terms.d2l_ddq_dq, dq, 1.0);
-        self.factor.copy_from(&self.terms.mass);
-        cholesky_solve(&mut self.factor, qdd).map_err(|(i, pivot)| {
-            SimError::SingularMassMatrix {
-                step,
-                t,
-                variable: sys.variable_name(i).to_string(),
-                pivot,
+        // rhs = F + u + ∂L/∂q − (∂²L/∂q̇∂q) q̇
+        self.rhs.copy_from(&self.terms.force);
+        force.add_force(t, q, dq, &mut self.rhs);
+        self.rhs += &self.terms.dl_dq;
+        self.rhs.gemv(-1.0, &self.terms.d2l_ddq_dq, dq, 1.0);
+        if self.split.is_plain() {
+            qdd.copy_from(&self.rhs);
+            self.factor.copy_from(&self.terms.mass);
+            cholesky_solve(&mut self.factor, qdd).map_err(|(i, pivot)| {
+                SimError::SingularMassMatrix {
+                    step,
+                    t,
+                    variable: sys.variable_name(i).to_string(),
+                    pivot,
+                }
+            })?;
+        } else {
+            let split = &self.split;
+            for &i in &split.kinematic {
+                qdd[i] = motion.kinematic(i, t)[2];
             }
-        })?;
-        if qdd.iter().any(|x| !x.is_finite()) {
+            let k = &mut self.reduced;
+            let mass = &self.terms.mass;
+            for (r, &i) in split.dynamic.iter().enumerate() {
+                let mut x = self.rhs[i];
+                for &j in &split.kinematic {
+                    x -= mass[(i, j)] * qdd[j];
+                }
+                k.rhs[r] = x;
+                for (c, &j) in split.dynamic.iter().enumerate() {
+                    k.mdd[(r, c)] = mass[(i, j)];
+                }
+            }
+            if split.rows > 0 {
+                let c = &mut self.constraint_terms;
+                sys.constraints(q, dq, Order::Dynamics, c);
+                let b = self.baumgarte;
+                for r in 0..split.rows {
+                    // γ = −Dh_k q̈_k − q̇ᵀD²h q̇ − 2a ḣ − b² h
+                    let mut gamma = -c.dh_dot[r] - b.b * b.b * c.h[r];
+                    if b.a != 0.0 {
+                        let rate: f64 = (0..dq.len()).map(|i| c.dh[(r, i)] * dq[i]).sum();
+                        gamma -= 2.0 * b.a * rate;
+                    }
+                    for &j in &split.kinematic {
+                        gamma -= c.dh[(r, j)] * qdd[j];
+                    }
+                    k.gamma[r] = gamma;
+                    for (col, &j) in split.dynamic.iter().enumerate() {
+                        k.a[(r, col)] = c.dh[(r, j)];
+                    }
+                }
+            }
+            solve_reduced(k, &mut self.lambda, sys, split, step, t)?;
+            for (r, &i) in split.dynamic.iter().enumerate() {
+                qdd[i] = k.rhs[r];
+            }
+        }
+        if qdd.iter().chain(self.lambda.iter()).any(|x| !x.is_finite()) {
             return Err(SimError::NonFinite {
                 step,
                 t,

@@ -12,6 +12,18 @@ pub enum SimError {
         variable: String,
         pivot: f64,
     },
+    /// The constraints' Jacobian has lost rank (redundant or degenerate constraints): the
+    /// Schur complement `Dh M⁻¹ Dhᵀ` is singular at this constraint's pivot.
+    SingularConstraints {
+        step: usize,
+        t: f64,
+        constraint: String,
+    },
+    /// The initial configuration cannot be brought onto `h(q) = 0` by moving the dynamic
+    /// variables.
+    Unsatisfiable { constraint: String, violation: f64 },
+    /// The run would take more steps than can be stored or finished.
+    TooManySteps { steps: f64 },
     /// The VI's Newton iteration matrix (eq. (26)) is singular.
     SingularJacobian {
         step: usize,
@@ -41,6 +53,18 @@ impl fmt::Display for SimError {
             SimError::SingularMassMatrix { step, t, variable, pivot } => write!(
                 f,
                 "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`)"
+            ),
+            SimError::SingularConstraints { step, t, constraint } => write!(
+                f,
+                "step {step} (t = {t}): the constraint Jacobian has lost rank at constraint `{constraint}` (redundant or degenerate constraints)"
+            ),
+            SimError::Unsatisfiable { constraint, violation } => write!(
+                f,
+                "cannot satisfy constraint `{constraint}` at the start by moving the dynamic variables (it stays violated by {violation:e})"
+            ),
+            SimError::TooManySteps { steps } => write!(
+                f,
+                "the run needs {steps:e} steps, more than the limit of 1e9: lengthen --dt or shorten --duration"
             ),
             SimError::SingularJacobian { step, t, variable } => write!(
                 f,

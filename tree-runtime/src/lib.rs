@@ -8,9 +8,9 @@
 //! [`integrate`] and the recorded [`Trajectory`].
 //!
 //! ```
-//! use tree_runtime::{integrate::{simulate, Method, SimOptions, ViSettings}, Evaluation, NoForce, System, TreeSystem};
+//! use tree_runtime::{integrate::{simulate, Method, SimOptions, ViSettings}, NoForce, System, TreeSystem};
 //! let model = tree_model::n_link_pendulum(2);
-//! let mut sys = TreeSystem::new(&model, Evaluation::Sweeps).unwrap();
+//! let mut sys = TreeSystem::new(&model).unwrap();
 //! let (q0, dq0) = sys.initial_state();
 //! let options = SimOptions { method: Method::Vi(ViSettings::default()), dt: 0.01, duration: 1.0 };
 //! let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
@@ -23,6 +23,7 @@
 #![allow(clippy::too_many_arguments)]
 
 // The recursions, over any scalar (what `tree_model!` needs).
+pub mod elements;
 pub mod order;
 pub mod plan;
 pub mod scalar;
@@ -41,6 +42,8 @@ pub mod interpreted;
 #[cfg(feature = "simulate")]
 pub mod linalg;
 #[cfg(feature = "simulate")]
+pub mod reference;
+#[cfg(feature = "simulate")]
 pub mod system;
 #[cfg(feature = "simulate")]
 pub mod trajectory;
@@ -51,11 +54,12 @@ pub use tree_model;
 
 #[cfg(feature = "simulate")]
 pub use {
-    dynamics::{Dynamics, GeneralizedForce, NoForce},
+    dynamics::{Baumgarte, Dynamics, GeneralizedForce, ModelMotions, NoForce, Prescription},
     error::SimError,
-    interpreted::{Evaluation, TreeSystem},
-    system::{Matrix, System, Terms, Vector},
-    trajectory::Trajectory,
+    interpreted::TreeSystem,
+    reference::{PaperEvaluation, PaperSystem},
+    system::{ConstraintTerms, Matrix, System, Terms, Vector},
+    trajectory::{CsvStream, Sample, Trajectory},
 };
 
 /// Re-exported for generated code and users: the linear-algebra crate of every vector.

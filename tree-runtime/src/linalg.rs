@@ -13,9 +13,19 @@ pub fn cholesky_solve<N: Dim>(a: &mut Matrix<N>, b: &mut Vector<N>) -> Result<()
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    let n = b.len();
+    cholesky_factor(a)?;
+    cholesky_substitute(a, b);
+    Ok(())
+}
+
+/// Factors symmetric positive definite `A = L Lᵀ` in place (the lower triangle of `a`
+/// becomes `L`). On failure returns the pivot index and value.
+pub fn cholesky_factor<N: Dim>(a: &mut Matrix<N>) -> Result<(), (usize, f64)>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    let n = a.nrows();
     let a = a.as_mut_slice();
-    let b = b.as_mut_slice();
     for j in 0..n {
         let (done, rest) = a.split_at_mut(j * n);
         let col_j = &mut rest[..n];
@@ -40,7 +50,17 @@ where
             *x /= d;
         }
     }
-    // L y = b, then Lᵀ x = y.
+    Ok(())
+}
+
+/// Solves `L Lᵀ x = b` with the factor from [`cholesky_factor`]; `b` becomes `x`.
+pub fn cholesky_substitute<N: Dim>(a: &Matrix<N>, b: &mut Vector<N>)
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    let n = b.len();
+    let a = a.as_slice();
+    let b = b.as_mut_slice();
     for j in 0..n {
         let col = &a[j * n..(j + 1) * n];
         b[j] /= col[j];
@@ -57,7 +77,6 @@ where
         }
         b[j] = s / col[j];
     }
-    Ok(())
 }
 
 /// Solves `A x = b` by LU with partial pivoting, overwriting `a` and `b` (`b` becomes `x`).

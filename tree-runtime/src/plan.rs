@@ -1,12 +1,13 @@
 //! The structure of a validated model as the recursions walk it: for each frame its parent,
-//! primitive, parameter, the variables that move it, where its columns live, and whether any
-//! mass hangs at or below it. Built once; shared by every evaluation mode and by the compiler.
+//! primitive, parameter, the variables that move it, where its columns live, and whether
+//! anything (a mass, a constraint, a spring, a damper) needs it. Built once; shared by the
+//! interpreted system and the compiler.
 //!
-//! [`TreePlan::folded`] also folds constant transforms: a massless frame with a constant
-//! primitive disappears into its children's `pre` transform, so a chain of constant
-//! primitives costs one constant transform (DESIGN.md §5).
+//! [`TreePlan::folded`] also folds constant transforms: a frame with a constant primitive that
+//! nothing attaches to disappears into its children's `pre` transform, so a chain of constant
+//! primitives costs one constant transform (docs/derivations.md §4).
 
-use tree_model::{Joint, Mass, Model, PrimitiveKind};
+use tree_model::{Constraint, Damper, Joint, Mass, Model, PrimitiveKind, Spring, SpringKind};
 
 use crate::se3::{LocalTransform, Pose};
 
@@ -24,8 +25,11 @@ pub struct FramePlan {
     pub n: usize,
     /// Offset of this frame's `n` columns (`∂v/∂q̇_i`, `∂v/∂q_i`) in the column buffers.
     pub col_offset: usize,
-    /// Whether this frame or a descendant carries mass; other frames are skipped.
+    /// Whether this frame or a descendant carries mass or has an element attached; other
+    /// frames are skipped.
     pub needed: bool,
+    /// A constraint, spring or damper attaches here: its world point Jacobian is computed.
+    pub attached: bool,
     /// A non-zero mass at this frame's origin.
     pub mass: Option<Mass>,
     /// Total mass of the subtree rooted here.
@@ -57,11 +61,19 @@ pub struct TreePlan {
     pub pose_frames: Vec<PoseFrame>,
     /// Concatenated ancestor-variable lists.
     pub vars: Vec<usize>,
-    /// The frame each variable drives.
-    pub variable_frames: Vec<usize>,
+    /// The frame each variable drives (`None`: a variable that moves no frame).
+    pub variable_frames: Vec<Option<usize>>,
     pub gravity: [f64; 3],
     /// Total number of columns over all frames.
     pub columns: usize,
+    /// Per-variable viscous damping `c_i`.
+    pub damping: Vec<f64>,
+    /// The model's constraints, springs and dampers, their frames as indices into `frames`.
+    pub constraints: Vec<Constraint>,
+    pub springs: Vec<Spring>,
+    pub dampers: Vec<Damper>,
+    /// Number of constraint rows.
+    pub rows: usize,
 }
 
 /// A frame before ancestor lists and offsets are filled in.
@@ -71,13 +83,15 @@ struct Draft {
     kind: PrimitiveKind,
     joint: Joint,
     needed: bool,
+    attached: bool,
     mass: Option<Mass>,
 }
 
 impl TreePlan {
     /// The plan of every model frame as it is.
     pub fn new(model: &Model) -> Self {
-        let has_mass = model.subtree_has_mass();
+        let has_mass = model.needed_frames();
+        let attached = attached(model);
         let drafts = model
             .frames
             .iter()
@@ -88,16 +102,19 @@ impl TreePlan {
                 kind: f.primitive,
                 joint: f.joint,
                 needed: has_mass[k],
+                attached: attached[k],
                 mass: f.mass.filter(|m| m.is_nonzero()),
             })
             .collect();
         Self::from_drafts(model, drafts, (0..model.frames.len()).map(Some).collect())
     }
 
-    /// The plan with constant transforms folded: only driven or massive frames remain, each
-    /// with the constant transform from its nearest remaining ancestor to its parent in `pre`.
+    /// The plan with constant transforms folded: only driven, massive or attached frames
+    /// remain, each with the constant transform from its nearest remaining ancestor to its
+    /// parent in `pre`.
     pub fn folded(model: &Model) -> Self {
-        let has_mass = model.subtree_has_mass();
+        let has_mass = model.needed_frames();
+        let attached = attached(model);
         let mut drafts: Vec<Draft> = Vec::new();
         // For each model frame: its index in `drafts` if kept, and the constant transform from
         // the nearest kept ancestor (or the world) to it if not.
@@ -113,7 +130,7 @@ impl TreePlan {
                     None => (nearest_kept(model, &kept, p), carried[p]),
                 },
             };
-            if matches!(f.joint, Joint::Variable(_)) || mass.is_some() {
+            if matches!(f.joint, Joint::Variable(_)) || mass.is_some() || attached[k] {
                 let (pre, kind, joint) = match (f.joint, pre) {
                     // A constant frame after a folded chain joins the chain; its own primitive
                     // becomes the identity.
@@ -132,6 +149,7 @@ impl TreePlan {
                     kind,
                     joint,
                     needed: has_mass[k],
+                    attached: attached[k],
                     mass,
                 });
             } else {
@@ -169,6 +187,7 @@ impl TreePlan {
                 n,
                 col_offset: columns,
                 needed: d.needed,
+                attached: d.attached,
                 mass: d.mass,
                 subtree_mass: 0.0,
             });
@@ -195,10 +214,39 @@ impl TreePlan {
             variable_frames: model
                 .variables
                 .iter()
-                .map(|v| kept[v.frame].expect("driven frames are always kept"))
+                .map(|v| v.frame.map(|f| kept[f].expect("driven frames are always kept")))
                 .collect(),
             gravity: model.gravity,
             columns,
+            damping: model.variables.iter().map(|v| v.damping).collect(),
+            constraints: model
+                .constraints
+                .iter()
+                .map(|c| Constraint {
+                    frames: c.frames.map(|f| at(&kept, f)),
+                    ..c.clone()
+                })
+                .collect(),
+            springs: model
+                .springs
+                .iter()
+                .map(|s| Spring {
+                    kind: match s.kind {
+                        SpringKind::Frames(fr) => SpringKind::Frames(fr.map(|f| at(&kept, f))),
+                        other => other,
+                    },
+                    ..*s
+                })
+                .collect(),
+            dampers: model
+                .dampers
+                .iter()
+                .map(|d| Damper {
+                    frames: d.frames.map(|f| at(&kept, f)),
+                    ..*d
+                })
+                .collect(),
+            rows: model.constraint_rows(),
         }
     }
 
@@ -212,6 +260,20 @@ impl TreePlan {
     pub fn dof(&self) -> usize {
         self.variable_frames.len()
     }
+}
+
+/// The plan index of model frame `f`, which an element attaches to (so it is kept).
+fn at(kept: &[Option<usize>], f: usize) -> usize {
+    kept[f].expect("attached frames are always kept")
+}
+
+/// For each model frame, whether a constraint, spring or damper attaches to it.
+fn attached(model: &Model) -> Vec<bool> {
+    let mut out = vec![false; model.frames.len()];
+    for k in model.attached_frames() {
+        out[k] = true;
+    }
+    out
 }
 
 /// The kept frame nearest above model frame `k` (itself not kept).

@@ -23,6 +23,12 @@ pub trait Scalar:
     /// `(sin x, cos x)`.
     fn sin_cos(self) -> (Self, Self);
 
+    /// `√x` (distances of springs and dampers).
+    fn sqrt(self) -> Self;
+
+    /// `1/x`.
+    fn recip(self) -> Self;
+
     /// `0`.
     #[inline(always)]
     fn zero() -> Self {
@@ -39,5 +45,15 @@ impl Scalar for f64 {
     #[inline(always)]
     fn sin_cos(self) -> (Self, Self) {
         f64::sin_cos(self)
+    }
+
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+
+    #[inline(always)]
+    fn recip(self) -> Self {
+        1.0 / self
     }
 }

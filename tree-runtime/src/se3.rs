@@ -3,7 +3,7 @@
 //! product with `rx` touches two columns, not sixteen entries. Generic over [`Scalar`], so
 //! the same code evaluates (`f64`) and is compiled by `tree_model!` (a tracing scalar).
 //!
-//! Facts used throughout (DESIGN.md §3): a primitive is `g(x) = exp(ξ̂ x)` with a constant unit
+//! Facts used throughout (docs/derivations.md §2): a primitive is `g(x) = exp(ξ̂ x)` with a constant unit
 //! twist ξ, so `g(x)⁻¹ = g(−x)` and `∂/∂x Ad_{g(x)⁻¹} X = [Ad_{g(x)⁻¹} X, ξ]`.
 
 use tree_model::PrimitiveKind;
@@ -97,6 +97,17 @@ impl<S: Scalar> Pose<S> {
         }
     }
 
+    /// `R a`: a vector in this frame's axes expressed in the world's.
+    #[inline(always)]
+    pub fn rotate(&self, a: &[S; 3]) -> [S; 3] {
+        let r = &self.r;
+        [
+            r[0][0] * a[0] + r[0][1] * a[1] + r[0][2] * a[2],
+            r[1][0] * a[0] + r[1][1] * a[1] + r[1][2] * a[2],
+            r[2][0] * a[0] + r[2][1] * a[1] + r[2][2] * a[2],
+        ]
+    }
+
     /// `Rᵀ a`: a spatial vector expressed in this frame.
     #[inline(always)]
     pub fn rotate_inverse(&self, a: &[S; 3]) -> [S; 3] {
@@ -145,7 +156,7 @@ fn mat4_mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
 }
 
 impl LocalTransform {
-    /// `g'(x) = g(x) ξ̂` (DESIGN.md §3), as a 4×4 matrix.
+    /// `g'(x) = g(x) ξ̂` (docs/derivations.md §2), as a 4×4 matrix.
     pub fn derivative(&self) -> [[f64; 4]; 4] {
         mat4_mul(&self.pose().matrix(), &twist_hat(self.kind))
     }
@@ -244,7 +255,7 @@ impl<S: Scalar> LocalTransform<S> {
         out
     }
 
-    /// `Ad_{g(x)⁻¹} X`: a parent-frame twist seen from the child (DESIGN.md §3,
+    /// `Ad_{g(x)⁻¹} X`: a parent-frame twist seen from the child (docs/derivations.md §2,
     /// `v_k = Ad_{g_k⁻¹} v_par + ξ q̇`).
     #[inline(always)]
     pub fn ad_inverse(&self, x: &Twist<S>) -> Twist<S> {
@@ -679,7 +690,7 @@ impl Pose {
 
     /// `R a` for a constant `R`.
     #[inline(always)]
-    fn rotate<S: Scalar>(&self, a: &[S; 3]) -> [S; 3] {
+    fn rotate_const<S: Scalar>(&self, a: &[S; 3]) -> [S; 3] {
         if self.is_rotation_free() {
             return *a;
         }
@@ -694,8 +705,8 @@ impl Pose {
     /// `Ad_{g⁻¹}ᵀ w = (R f, R τ + p × R f)`.
     #[inline(always)]
     pub fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
-        let f = self.rotate(&[w[0], w[1], w[2]]);
-        let mut t = self.rotate(&[w[3], w[4], w[5]]);
+        let f = self.rotate_const(&[w[0], w[1], w[2]]);
+        let mut t = self.rotate_const(&[w[3], w[4], w[5]]);
         if !self.is_translation_free() {
             let pf = cross(&self.p.map(c::<S>), &f);
             t = [t[0] + pf[0], t[1] + pf[1], t[2] + pf[2]];
@@ -706,7 +717,7 @@ impl Pose {
     /// `R h + m p`: a first mass moment about the child origin, taken about the parent's.
     #[inline(always)]
     pub fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
-        let r = self.rotate(h);
+        let r = self.rotate_const(h);
         if self.is_translation_free() {
             return r;
         }

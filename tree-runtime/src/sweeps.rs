@@ -2,9 +2,9 @@
 //! interpreted system, traced into straight-line Rust by `tree_model!`.
 //!
 //! One outward sweep gives every frame's pose, body velocity and its columns `∂v/∂q̇_i`,
-//! `∂v/∂q_i` (DESIGN.md §3, paper eqs. (1), (6), (7), (10)). One inward sweep accumulates each
-//! subtree at its root: composite inertia `I^c`, momentum wrench `W`, first mass moment `h`
-//! (DESIGN.md §5). Then every derivative entry is O(1). For variable j driving frame f (ξ_j
+//! `∂v/∂q_i` (docs/derivations.md §2, paper eqs. (1), (6), (7), (10)). One inward sweep
+//! accumulates each subtree at its root: composite inertia `I^c`, momentum wrench `W`, first
+//! mass moment `h` (docs/derivations.md §3). Then every derivative entry is O(1). For variable j driving frame f (ξ_j
 //! its axis, `γ_f = R_fᵀγ` gravity in f) and any variable i at or above it (column a of f),
 //! with `Y = I^c ξ_j` and `Z = I^c ∂v_f/∂q_j`:
 //! * `∂L/∂q̇_j = W·ξ_j`, `∂L/∂q_j = W·∂v_f/∂q_j + ξ_j·(m^c γ_f, h × γ_f)`
@@ -13,10 +13,12 @@
 //! * `∂²L/∂q_i∂q_j = Zᵀ ∂v_f/∂q_i + W·[∂v_f/∂q_i, ξ_j] + ξ_j·(m^c δ, h × δ)`, `δ = γ_f × ω(J_a)`
 //!
 //! Each is the paper's per-mass sum (eqs. (15)–(18)) with the sum over the subtree taken once,
-//! inward, instead of once per mass.
+//! inward, instead of once per mass. Springs, dampers and constraints ([`crate::elements`])
+//! then add their terms from the world point Jacobians of the frames they attach to.
 
 use tree_model::Joint;
 
+use crate::elements;
 use crate::order::Order;
 use crate::plan::TreePlan;
 use crate::scalar::Scalar;
@@ -25,15 +27,42 @@ use crate::se3::{
     SpatialInertia, Twist, Wrench,
 };
 
-/// Where the Lagrangian terms go: the interpreted system's nalgebra matrices, or the
-/// compiler's record of which traced value lands in which output.
-pub trait TermsSink<S> {
-    fn set_l(&mut self, l: S);
-    fn set_dl_dq(&mut self, i: usize, x: S);
-    fn set_dl_ddq(&mut self, i: usize, x: S);
-    fn set_mass(&mut self, i: usize, j: usize, x: S);
-    fn set_d2l_ddq_dq(&mut self, i: usize, j: usize, x: S);
-    fn set_d2l_dq_dq(&mut self, i: usize, j: usize, x: S);
+/// One scalar that an evaluation produces. Every evaluation adds its contributions into a
+/// [`Sink`] by these names, so a new term is one more contribution, not a new interface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Output {
+    /// `L` (eq. (15)), springs' potentials included.
+    L,
+    /// `∂L/∂q_i` (eq. (16)).
+    DlDq(usize),
+    /// `∂L/∂q̇_i`.
+    DlDdq(usize),
+    /// `M_ij = ∂²L/∂q̇_i∂q̇_j` (eq. (18)).
+    Mass(usize, usize),
+    /// `∂²L/∂q̇_i∂q_j` (eq. (17)).
+    D2lDdqDq(usize, usize),
+    /// `∂²L/∂q_i∂q_j`.
+    D2lDqDq(usize, usize),
+    /// The model's own generalized force `F_i(q, q̇)` (damping, dampers).
+    Force(usize),
+    /// `∂F_i/∂q_j`.
+    DforceDq(usize, usize),
+    /// `∂F_i/∂q̇_j`.
+    DforceDdq(usize, usize),
+    /// Constraint row `h_r(q)`.
+    H(usize),
+    /// `∂h_r/∂q_i`.
+    Dh(usize, usize),
+    /// `q̇ᵀ (∂²h_r/∂q²) q̇`, the acceleration-level constraint's velocity term.
+    DhDot(usize),
+    /// `∂²h_r/∂q_i∂q_j`.
+    D2h(usize, usize, usize),
+}
+
+/// Where evaluations put what they produce: the interpreted system's matrices, or the
+/// compiler's record of which traced value lands in which output. Contributions add up.
+pub trait Sink<S> {
+    fn add(&mut self, at: Output, x: S);
 }
 
 /// Per-frame storage for one evaluation (allocated once, reused).
@@ -49,6 +78,12 @@ pub struct Workspace<S: Scalar> {
     pub inertia: Vec<SpatialInertia<S>>,
     pub wrench: Vec<Wrench<S>>,
     pub moment: Vec<[S; 3]>,
+    /// World point Jacobian columns `∂p_k/∂q_a = R_k (∂v_k/∂q̇_a)_lin` (attached frames only).
+    pub point_jac: Vec<[S; 3]>,
+    /// World axes `R_k (∂v_k/∂q̇_a)_ang` of the ancestor variables (attached frames only).
+    pub axis: Vec<[S; 3]>,
+    /// Scratch for the elements, one entry per variable (or per pair of variables).
+    pub scratch: elements::Scratch<S>,
 }
 
 impl<S: Scalar> Workspace<S> {
@@ -67,6 +102,9 @@ impl<S: Scalar> Workspace<S> {
             inertia: vec![SpatialInertia::default(); nf],
             wrench: vec![zero6(); nf],
             moment: vec![[S::zero(); 3]; nf],
+            point_jac: vec![[S::zero(); 3]; plan.columns],
+            axis: vec![[S::zero(); 3]; plan.columns],
+            scratch: elements::Scratch::new(plan.dof()),
         }
     }
 }
@@ -132,6 +170,14 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             ws.jac[kc + d] = f.kind.twist().map(S::constant);
             ws.dv_dq[kc + d] = bracket_with_axis(&transported, f.kind);
         }
+        if f.attached {
+            let pose = ws.pose[k];
+            for a in 0..f.n {
+                let j = ws.jac[kc + a];
+                ws.point_jac[kc + a] = pose.rotate(&[j[0], j[1], j[2]]);
+                ws.axis[kc + a] = pose.rotate(&[j[3], j[4], j[5]]);
+            }
+        }
     }
 }
 
@@ -196,20 +242,22 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
     l
 }
 
-/// All Lagrangian terms up to `order` at `(q, q̇)`, by the two sweeps.
+/// All Lagrangian terms up to `order` at `(q, q̇)` by the two sweeps, springs' potentials
+/// included, and the model's own forces (damping, dampers) with their derivatives.
 pub fn evaluate<S: Scalar>(
     plan: &TreePlan,
     ws: &mut Workspace<S>,
     q: &[S],
     dq: &[S],
     order: Order,
-    out: &mut impl TermsSink<S>,
+    out: &mut impl Sink<S>,
 ) {
     forward(plan, ws, q, dq, false);
     let l = inward(plan, ws, order);
-    out.set_l(l);
+    out.add(Output::L, l);
     let gravity = plan.gravity.map(S::constant);
-    for (j, &fk) in plan.variable_frames.iter().enumerate() {
+    for (j, fk) in plan.variable_frames.iter().enumerate() {
+        let Some(fk) = *fk else { continue };
         let f = &plan.frames[fk];
         let kind = f.kind;
         let own = f.n - 1;
@@ -221,8 +269,11 @@ pub fn evaluate<S: Scalar>(
         let hg = cross(&h, &g);
         let gravity_wrench = [mc * g[0], mc * g[1], mc * g[2], hg[0], hg[1], hg[2]];
         let dv_own = ws.dv_dq[kc + own];
-        out.set_dl_ddq(j, component(&w, kind));
-        out.set_dl_dq(j, dot(&w, &dv_own) + component(&gravity_wrench, kind));
+        out.add(Output::DlDdq(j), component(&w, kind));
+        out.add(
+            Output::DlDq(j),
+            dot(&w, &dv_own) + component(&gravity_wrench, kind),
+        );
         if order < Order::Dynamics {
             continue;
         }
@@ -234,14 +285,14 @@ pub fn evaluate<S: Scalar>(
             let ja = ws.jac[kc + a];
             let dva = ws.dv_dq[kc + a];
             let mij = dot(&ja, &y);
-            out.set_mass(i, j, mij);
-            out.set_mass(j, i, mij);
+            out.add(Output::Mass(i, j), mij);
             let mut x = dot(&z, &ja);
             if a < own {
+                out.add(Output::Mass(j, i), mij);
                 x += dot(&w, &bracket_with_axis(&ja, kind));
-                out.set_d2l_ddq_dq(j, i, dot(&dva, &y));
+                out.add(Output::D2lDdqDq(j, i), dot(&dva, &y));
             }
-            out.set_d2l_ddq_dq(i, j, x);
+            out.add(Output::D2lDdqDq(i, j), x);
             if order >= Order::Full {
                 let delta = cross(&g, &[ja[3], ja[4], ja[5]]);
                 let hd = cross(&h, &delta);
@@ -255,9 +306,27 @@ pub fn evaluate<S: Scalar>(
                 ];
                 let x =
                     dot(&z, &dva) + dot(&w, &bracket_with_axis(&dva, kind)) + component(&gw, kind);
-                out.set_d2l_dq_dq(i, j, x);
-                out.set_d2l_dq_dq(j, i, x);
+                out.add(Output::D2lDqDq(i, j), x);
+                if a < own {
+                    out.add(Output::D2lDqDq(j, i), x);
+                }
             }
         }
     }
+    elements::springs(plan, ws, q, order, out);
+    elements::forces(plan, ws, dq, order, out);
+}
+
+/// The constraints `h`, `Dh` and, from `Order::Dynamics` on, `q̇ᵀD²h q̇` (and at `Order::Full`
+/// all of `D²h`) at `(q, q̇)`.
+pub fn constraints<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    q: &[S],
+    dq: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    forward(plan, ws, q, dq, false);
+    elements::constraints(plan, ws, q, dq, order, out);
 }

@@ -1,11 +1,12 @@
 //! The one trait every simulated system implements — the interpreted tree and the code
 //! `tree_model!` generates — and the Lagrangian terms it yields.
 
-use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector, U1};
+use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector, U1};
+use tree_model::Motion;
 
 pub use crate::order::Order;
 use crate::se3::Pose;
-use crate::sweeps::TermsSink;
+use crate::sweeps::{Output, Sink};
 
 /// A vector over the system's configuration variables.
 pub type Vector<N> = OVector<f64, N>;
@@ -31,6 +32,12 @@ where
     pub d2l_ddq_dq: Matrix<N>,
     /// `∂²L/∂q∂q`.
     pub d2l_dq_dq: Matrix<N>,
+    /// The model's own generalized force `F(q, q̇)`: damping and dampers.
+    pub force: Vector<N>,
+    /// `∂F/∂q` (at `Order::Full`).
+    pub dforce_dq: Matrix<N>,
+    /// `∂F/∂q̇` (at `Order::Full`).
+    pub dforce_ddq: Matrix<N>,
 }
 
 impl<N: Dim> Terms<N>
@@ -46,6 +53,9 @@ where
             mass: Matrix::zeros_generic(n, n),
             d2l_ddq_dq: Matrix::zeros_generic(n, n),
             d2l_dq_dq: Matrix::zeros_generic(n, n),
+            force: Vector::zeros_generic(n, U1),
+            dforce_dq: Matrix::zeros_generic(n, n),
+            dforce_ddq: Matrix::zeros_generic(n, n),
         }
     }
 
@@ -54,12 +64,15 @@ where
         self.l = 0.0;
         self.dl_dq.fill(0.0);
         self.dl_ddq.fill(0.0);
+        self.force.fill(0.0);
         if order >= Order::Dynamics {
             self.mass.fill(0.0);
             self.d2l_ddq_dq.fill(0.0);
         }
         if order >= Order::Full {
             self.d2l_dq_dq.fill(0.0);
+            self.dforce_dq.fill(0.0);
+            self.dforce_ddq.fill(0.0);
         }
     }
 
@@ -69,27 +82,85 @@ where
     }
 }
 
-impl<N: Dim> TermsSink<f64> for Terms<N>
+impl<N: Dim> Sink<f64> for Terms<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    fn set_l(&mut self, l: f64) {
-        self.l = l;
+    #[inline(always)]
+    fn add(&mut self, at: Output, x: f64) {
+        match at {
+            Output::L => self.l += x,
+            Output::DlDq(i) => self.dl_dq[i] += x,
+            Output::DlDdq(i) => self.dl_ddq[i] += x,
+            Output::Mass(i, j) => self.mass[(i, j)] += x,
+            Output::D2lDdqDq(i, j) => self.d2l_ddq_dq[(i, j)] += x,
+            Output::D2lDqDq(i, j) => self.d2l_dq_dq[(i, j)] += x,
+            Output::Force(i) => self.force[i] += x,
+            Output::DforceDq(i, j) => self.dforce_dq[(i, j)] += x,
+            Output::DforceDdq(i, j) => self.dforce_ddq[(i, j)] += x,
+            Output::H(_) | Output::Dh(..) | Output::DhDot(_) | Output::D2h(..) => {}
+        }
     }
-    fn set_dl_dq(&mut self, i: usize, x: f64) {
-        self.dl_dq[i] = x;
+}
+
+/// The holonomic constraints `h(q) = 0` and their derivatives at one state: one row per
+/// constraint equation, one column per variable (all variables, kinematic included).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConstraintTerms {
+    /// `h(q)`.
+    pub h: DVector<f64>,
+    /// `Dh = ∂h/∂q`, rows: constraint equations.
+    pub dh: DMatrix<f64>,
+    /// `q̇ᵀ D²h_r q̇` for each row (from `Order::Dynamics` on).
+    pub dh_dot: DVector<f64>,
+    /// `D²h_r = ∂²h_r/∂q²` for each row (at `Order::Full`).
+    pub d2h: Vec<DMatrix<f64>>,
+}
+
+impl ConstraintTerms {
+    /// Zeros for `rows` equations over `n` variables.
+    pub fn zeros(rows: usize, n: usize) -> Self {
+        ConstraintTerms {
+            h: DVector::zeros(rows),
+            dh: DMatrix::zeros(rows, n),
+            dh_dot: DVector::zeros(rows),
+            d2h: vec![DMatrix::zeros(n, n); rows],
+        }
     }
-    fn set_dl_ddq(&mut self, i: usize, x: f64) {
-        self.dl_ddq[i] = x;
+
+    /// Number of constraint equations.
+    pub fn rows(&self) -> usize {
+        self.h.len()
     }
-    fn set_mass(&mut self, i: usize, j: usize, x: f64) {
-        self.mass[(i, j)] = x;
+
+    /// Zeroes what `order` asks for, ready to accumulate.
+    pub fn clear(&mut self, order: Order) {
+        self.h.fill(0.0);
+        self.dh.fill(0.0);
+        if order >= Order::Dynamics {
+            self.dh_dot.fill(0.0);
+        }
+        if order >= Order::Full {
+            self.d2h.iter_mut().for_each(|m| m.fill(0.0));
+        }
     }
-    fn set_d2l_ddq_dq(&mut self, i: usize, j: usize, x: f64) {
-        self.d2l_ddq_dq[(i, j)] = x;
+
+    /// `max |h_r|`, 0 without constraints.
+    pub fn violation(&self) -> f64 {
+        self.h.amax()
     }
-    fn set_d2l_dq_dq(&mut self, i: usize, j: usize, x: f64) {
-        self.d2l_dq_dq[(i, j)] = x;
+}
+
+impl Sink<f64> for ConstraintTerms {
+    #[inline(always)]
+    fn add(&mut self, at: Output, x: f64) {
+        match at {
+            Output::H(r) => self.h[r] += x,
+            Output::Dh(r, i) => self.dh[(r, i)] += x,
+            Output::DhDot(r) => self.dh_dot[r] += x,
+            Output::D2h(r, i, j) => self.d2h[r][(i, j)] += x,
+            _ => {}
+        }
     }
 }
 
@@ -123,10 +194,36 @@ where
     /// The model's initial value `q0` and velocity `dq0` of variable `i`.
     fn initial(&self, i: usize) -> (f64, f64);
 
-    /// The viscous damping coefficient `c_i` (generalized force `−c_i q̇_i`).
+    /// The viscous damping coefficient `c_i` (generalized force `−c_i q̇_i`, part of
+    /// [`Terms::force`]).
     fn damping(&self, i: usize) -> f64;
 
-    /// Evaluates the Lagrangian terms up to `order` at `(q, q̇)` into `out`.
+    /// The prescribed motion of variable `i` when it is kinematic, `None` when it is dynamic.
+    fn motion(&self, i: usize) -> Option<Motion>;
+
+    /// Whether variable `i` is kinematic (prescribed).
+    fn is_kinematic(&self, i: usize) -> bool {
+        self.motion(i).is_some()
+    }
+
+    /// Number of constraint equations.
+    fn constraint_count(&self) -> usize;
+
+    /// Name of constraint equation `r`.
+    fn constraint_name(&self, r: usize) -> &str;
+
+    /// Evaluates the constraints up to `order` at `(q, q̇)` into `out` (sized
+    /// `constraint_count() × dof()`).
+    fn constraints(
+        &mut self,
+        q: &Vector<Self::N>,
+        dq: &Vector<Self::N>,
+        order: Order,
+        out: &mut ConstraintTerms,
+    );
+
+    /// Evaluates the Lagrangian terms up to `order` at `(q, q̇)` into `out`, springs and the
+    /// model's forces included.
     fn lagrangian(
         &mut self,
         q: &Vector<Self::N>,

@@ -1,33 +1,58 @@
-//! A simulated trajectory: times, configurations, velocities, momenta (VI) and energy.
+//! A simulated trajectory: times, configurations, velocities, momenta (VI), energy, and with
+//! constraints their forces and violation; and the CSV it writes, whole or streamed.
 
 use std::io::{self, Write};
+
+/// One recorded state, as an integrator hands it out.
+#[derive(Clone, Copy, Debug)]
+pub struct Sample<'a> {
+    pub step: usize,
+    pub t: f64,
+    pub q: &'a [f64],
+    pub dq: &'a [f64],
+    /// The VI's discrete momentum.
+    pub p: Option<&'a [f64]>,
+    /// `T + V` (springs included); not conserved while kinematic inputs move.
+    pub energy: f64,
+    /// Constraint forces `λ`, one per constraint equation.
+    pub lambda: &'a [f64],
+    /// `max |h_r(q)|`.
+    pub violation: f64,
+}
 
 /// One run's output, stored row by row in flat vectors (`dof` values a row).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Trajectory {
     /// Variable names, in order.
     pub variables: Vec<String>,
+    /// Constraint equation names, in order.
+    pub constraints: Vec<String>,
     pub t: Vec<f64>,
     q: Vec<f64>,
     dq: Vec<f64>,
     p: Vec<f64>,
+    lambda: Vec<f64>,
     /// Total energy `E = T + V` at each sample.
     pub energy: Vec<f64>,
+    /// `max |h|` at each sample.
+    pub violation: Vec<f64>,
     /// Total Newton iterations (VI only).
     pub newton_iterations: usize,
+    /// Steps the VI had to subdivide.
+    pub subdivided_steps: usize,
 }
 
 impl Trajectory {
-    pub fn new(variables: Vec<String>, capacity: usize) -> Self {
+    pub fn new(variables: Vec<String>, constraints: Vec<String>, capacity: usize) -> Self {
         let n = variables.len();
         Trajectory {
-            variables,
             t: Vec::with_capacity(capacity),
             q: Vec::with_capacity(capacity * n),
             dq: Vec::with_capacity(capacity * n),
-            p: Vec::new(),
             energy: Vec::with_capacity(capacity),
-            newton_iterations: 0,
+            variables,
+            constraints,
+            ..Default::default()
         }
     }
 
@@ -44,15 +69,17 @@ impl Trajectory {
         self.t.is_empty()
     }
 
-    /// Appends a sample; `p` is the discrete momentum for the VI.
-    pub fn push(&mut self, t: f64, q: &[f64], dq: &[f64], p: Option<&[f64]>, energy: f64) {
-        self.t.push(t);
-        self.q.extend_from_slice(q);
-        self.dq.extend_from_slice(dq);
-        if let Some(p) = p {
+    /// Appends a sample.
+    pub fn push(&mut self, s: &Sample) {
+        self.t.push(s.t);
+        self.q.extend_from_slice(s.q);
+        self.dq.extend_from_slice(s.dq);
+        if let Some(p) = s.p {
             self.p.extend_from_slice(p);
         }
-        self.energy.push(energy);
+        self.lambda.extend_from_slice(s.lambda);
+        self.energy.push(s.energy);
+        self.violation.push(s.violation);
     }
 
     pub fn q(&self, k: usize) -> &[f64] {
@@ -71,6 +98,12 @@ impl Trajectory {
         (self.p.len() >= (k + 1) * n).then(|| &self.p[k * n..(k + 1) * n])
     }
 
+    /// The constraint forces at sample k.
+    pub fn lambda(&self, k: usize) -> &[f64] {
+        let m = self.constraints.len();
+        &self.lambda[k * m..(k + 1) * m]
+    }
+
     /// The last sample's configuration.
     pub fn last_q(&self) -> &[f64] {
         self.q(self.len() - 1)
@@ -82,20 +115,70 @@ impl Trajectory {
         self.energy.iter().fold(0.0, |m, e| m.max((e - e0).abs()))
     }
 
-    /// CSV with header `t,<var…>,d<var…>,energy`.
-    pub fn write_csv(&self, mut w: impl Write) -> io::Result<()> {
-        let mut header = vec!["t".to_string()];
-        header.extend(self.variables.iter().cloned());
-        header.extend(self.variables.iter().map(|v| format!("d{v}")));
-        header.push("energy".into());
-        writeln!(w, "{}", header.join(","))?;
+    /// Largest constraint violation over the run.
+    pub fn worst_violation(&self) -> f64 {
+        self.violation.iter().fold(0.0, |m: f64, v| m.max(*v))
+    }
+
+    /// Writes the whole trajectory as CSV (see [`CsvStream`]).
+    pub fn write_csv(&self, w: impl Write) -> io::Result<()> {
+        let mut csv = CsvStream::new(w, &self.variables, &self.constraints)?;
         for k in 0..self.len() {
-            write!(w, "{}", self.t[k])?;
-            for x in self.q(k).iter().chain(self.dq(k)) {
-                write!(w, ",{x}")?;
-            }
-            writeln!(w, ",{}", self.energy[k])?;
+            csv.write(&Sample {
+                step: k,
+                t: self.t[k],
+                q: self.q(k),
+                dq: self.dq(k),
+                p: self.p(k),
+                energy: self.energy[k],
+                lambda: self.lambda(k),
+                violation: self.violation[k],
+            })?;
         }
-        Ok(())
+        csv.finish()
+    }
+}
+
+/// CSV rows written as samples arrive: header `t,<var…>,d<var…>,energy`, then with
+/// constraints `lambda_<constraint…>,violation`.
+pub struct CsvStream<W: Write> {
+    out: W,
+    constraints: bool,
+}
+
+impl<W: Write> CsvStream<W> {
+    pub fn new(mut out: W, variables: &[String], constraints: &[String]) -> io::Result<Self> {
+        let mut header = vec!["t".to_string()];
+        header.extend(variables.iter().cloned());
+        header.extend(variables.iter().map(|v| format!("d{v}")));
+        header.push("energy".into());
+        header.extend(constraints.iter().map(|c| format!("lambda_{c}")));
+        if !constraints.is_empty() {
+            header.push("violation".into());
+        }
+        writeln!(out, "{}", header.join(","))?;
+        Ok(CsvStream {
+            out,
+            constraints: !constraints.is_empty(),
+        })
+    }
+
+    pub fn write(&mut self, s: &Sample) -> io::Result<()> {
+        write!(self.out, "{}", s.t)?;
+        for x in s.q.iter().chain(s.dq) {
+            write!(self.out, ",{x}")?;
+        }
+        write!(self.out, ",{}", s.energy)?;
+        if self.constraints {
+            for x in s.lambda {
+                write!(self.out, ",{x}")?;
+            }
+            write!(self.out, ",{}", s.violation)?;
+        }
+        writeln!(self.out)
+    }
+
+    pub fn finish(mut self) -> io::Result<()> {
+        self.out.flush()
     }
 }

@@ -1,21 +1,27 @@
 //! Integrators — fixed-step RK4, adaptive Dormand–Prince 5(4), the midpoint variational
-//! integrator — and [`simulate`], which runs any of them on any [`System`] and records a
-//! [`Trajectory`].
+//! integrator — and [`run`], which drives any of them on any [`System`], projects the start
+//! onto the constraints and hands every recorded step to an observer ([`simulate`] collects
+//! them into a [`Trajectory`]).
 
+mod projection;
 mod rk4;
 mod rk45;
 mod vi;
 
+pub use projection::{project_initial_state, Moved};
 pub use rk4::Rk4;
 pub use rk45::{Rk45, Tolerance};
-pub use vi::{JacobianUpdate, MidpointVi, ViSettings};
+pub use vi::{Forcing, JacobianUpdate, MidpointVi, ViSettings};
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
-use crate::dynamics::GeneralizedForce;
+use crate::dynamics::{prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription};
 use crate::error::SimError;
 use crate::system::{Order, System, Terms, Vector};
-use crate::trajectory::Trajectory;
+use crate::trajectory::{Sample, Trajectory};
+
+/// The most steps a fixed-step run may take.
+pub const MAX_STEPS: f64 = 1e9;
 
 /// Which integrator to run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -26,15 +32,45 @@ pub enum Method {
     Vi(ViSettings),
 }
 
-/// What to simulate for how long.
+/// What to simulate for how long, and what to record.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
     pub method: Method,
     pub dt: f64,
     pub duration: f64,
+    /// Record every K-th step (the first and the last are always recorded).
+    pub every: usize,
+    /// Stabilisation of the continuous methods' constraints.
+    pub baumgarte: Baumgarte,
 }
 
-fn check_options(o: &SimOptions) -> Result<(), SimError> {
+impl SimOptions {
+    /// `method` for `duration` seconds at step `dt`, every step recorded, no stabilisation.
+    pub fn new(method: Method, dt: f64, duration: f64) -> Self {
+        SimOptions {
+            method,
+            dt,
+            duration,
+            every: 1,
+            baumgarte: Baumgarte::default(),
+        }
+    }
+}
+
+/// What a run did, besides the samples it handed out.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunSummary {
+    pub steps: usize,
+    pub recorded: usize,
+    pub newton_iterations: usize,
+    /// VI steps that Newton could only take in pieces.
+    pub subdivided_steps: usize,
+    pub worst_violation: f64,
+    /// What the projection of the initial state onto the constraints moved.
+    pub moved: Vec<Moved>,
+}
+
+fn check_options(o: &SimOptions) -> Result<usize, SimError> {
     if !(o.dt > 0.0 && o.dt.is_finite()) {
         return Err(SimError::InvalidInput(format!(
             "time step must be positive, got {}",
@@ -46,6 +82,11 @@ fn check_options(o: &SimOptions) -> Result<(), SimError> {
             "duration must be non-negative, got {}",
             o.duration
         )));
+    }
+    if o.every == 0 {
+        return Err(SimError::InvalidInput(
+            "record every K-th step needs K ≥ 1".into(),
+        ));
     }
     if let Method::Vi(s) = o.method {
         if !(0.0..=1.0).contains(&s.alpha) {
@@ -62,11 +103,16 @@ fn check_options(o: &SimOptions) -> Result<(), SimError> {
             ));
         }
     }
-    Ok(())
+    let steps = (o.duration / o.dt).round();
+    if steps > MAX_STEPS {
+        return Err(SimError::TooManySteps { steps });
+    }
+    Ok(steps as usize)
 }
 
-/// Simulates from `(q0, q̇0)` and records every step. `progress` is called with the time
-/// reached after each step.
+/// Simulates from `(q0, q̇0)` with the model's own prescriptions and no external force
+/// beyond `force`, and collects every recorded step. `progress` is called with the time
+/// reached at each recorded step.
 pub fn simulate<S, F>(
     sys: &mut S,
     q0: &Vector<S::N>,
@@ -80,7 +126,46 @@ where
     F: GeneralizedForce<S::N>,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    check_options(options)?;
+    let mut motion = ModelMotions::of(sys);
+    let names = (0..sys.dof())
+        .map(|i| sys.variable_name(i).to_string())
+        .collect();
+    let constraints = (0..sys.constraint_count())
+        .map(|r| sys.constraint_name(r).to_string())
+        .collect();
+    let capacity = (options.duration / options.dt / options.every.max(1) as f64)
+        .clamp(0.0, 1e6) as usize
+        + 2;
+    let mut traj = Trajectory::new(names, constraints, capacity);
+    let summary = run(sys, q0, dq0, options, force, &mut motion, &mut |s| {
+        traj.push(s);
+        progress(s.t);
+        Ok(())
+    })?;
+    traj.newton_iterations = summary.newton_iterations;
+    traj.subdivided_steps = summary.subdivided_steps;
+    Ok(traj)
+}
+
+/// Runs `options.method` from `(q0, q̇0)` — first projected onto the constraints, kinematic
+/// variables set from `motion` — and hands every `options.every`-th step to `observe`
+/// (which may stop the run by returning an error). Nothing is kept in memory.
+pub fn run<S, F, P>(
+    sys: &mut S,
+    q0: &Vector<S::N>,
+    dq0: &Vector<S::N>,
+    options: &SimOptions,
+    force: &mut F,
+    motion: &mut P,
+    observe: &mut dyn FnMut(&Sample) -> Result<(), SimError>,
+) -> Result<RunSummary, SimError>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let steps = check_options(options)?;
     let n = sys.dim();
     if q0.len() != n.value() || dq0.len() != n.value() {
         return Err(SimError::InvalidInput(format!(
@@ -90,79 +175,176 @@ where
             n.value()
         )));
     }
-    if q0.iter().chain(dq0.iter()).any(|x| !x.is_finite()) {
+    let mut q = q0.clone();
+    let mut dq = dq0.clone();
+    let mut dynamics = Dynamics::new(sys);
+    dynamics.baumgarte = options.baumgarte;
+    prescribe(&dynamics.split.kinematic, motion, 0.0, &mut q, &mut dq, None);
+    if q.iter().chain(dq.iter()).any(|x| !x.is_finite()) {
         return Err(SimError::NonFinite {
             step: 0,
             t: 0.0,
             what: "initial state".into(),
         });
     }
-    let steps = (options.duration / options.dt).round() as usize;
-    let names = (0..n.value())
-        .map(|i| sys.variable_name(i).to_string())
-        .collect();
-    let mut traj = Trajectory::new(names, steps + 1);
-    let mut q = q0.clone();
-    let mut dq = dq0.clone();
+    let mut summary = RunSummary {
+        moved: project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?,
+        ..RunSummary::default()
+    };
+    let rows = dynamics.split.rows;
     let mut terms = Terms::zeros(n);
-    let mut energy = |sys: &mut S, q: &Vector<S::N>, dq: &Vector<S::N>| {
-        sys.lagrangian(q, dq, Order::First, &mut terms);
-        terms.energy(dq)
+    let every = options.every;
+    let mut observed = |summary: &mut RunSummary, s: &Sample| {
+        summary.recorded += 1;
+        summary.worst_violation = summary.worst_violation.max(s.violation);
+        observe(s)
     };
     match options.method {
-        Method::Rk4 => {
-            let mut rk = Rk4::new(n);
-            traj.push(0.0, q.as_slice(), dq.as_slice(), None, energy(sys, &q, &dq));
-            for k in 0..steps {
-                let t = k as f64 * options.dt;
-                rk.step(sys, force, k, t, options.dt, &mut q, &mut dq)?;
-                check_finite(k + 1, t + options.dt, &q, &dq)?;
-                let t = (k + 1) as f64 * options.dt;
-                traj.push(t, q.as_slice(), dq.as_slice(), None, energy(sys, &q, &dq));
-                progress(t);
-            }
-        }
-        Method::Rk45(tol) => {
-            let mut rk = Rk45::new(n, tol);
-            traj.push(0.0, q.as_slice(), dq.as_slice(), None, energy(sys, &q, &dq));
-            let (mut t, mut dt, mut k) = (0.0, options.dt, 0);
-            let t_end = options.duration;
-            while t < t_end {
-                let h = rk.step(sys, force, k, t, t_end, &mut dt, &mut q, &mut dq)?;
-                t = if t + h >= t_end * (1.0 - 1e-15) {
-                    t_end
-                } else {
-                    t + h
-                };
-                k += 1;
-                check_finite(k, t, &q, &dq)?;
-                traj.push(t, q.as_slice(), dq.as_slice(), None, energy(sys, &q, &dq));
-                progress(t);
+        Method::Rk4 | Method::Rk45(_) => {
+            // Energy, constraint forces and violation at a recorded state.
+            let mut qdd = sys.zero_vector();
+            let mut report = |sys: &mut S,
+                              dynamics: &mut Dynamics<S::N>,
+                              force: &mut F,
+                              motion: &mut P,
+                              step: usize,
+                              t: f64,
+                              q: &Vector<S::N>,
+                              dq: &Vector<S::N>|
+             -> Result<(f64, f64), SimError> {
+                sys.lagrangian(q, dq, Order::First, &mut terms);
+                let energy = terms.energy(dq);
+                if rows == 0 {
+                    return Ok((energy, 0.0));
+                }
+                dynamics.acceleration(sys, force, motion, step, t, q, dq, &mut qdd)?;
+                Ok((energy, dynamics.constraint_terms.violation()))
+            };
+            let (e, v) = report(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
+            observed(
+                &mut summary,
+                &sample(0, 0.0, &q, &dq, dynamics.lambda.as_slice(), e, v),
+            )?;
+            if let Method::Rk4 = options.method {
+                let mut rk = Rk4::new(sys);
+                rk.dynamics.baumgarte = options.baumgarte;
+                for k in 0..steps {
+                    let t = k as f64 * options.dt;
+                    rk.step(sys, force, motion, k, t, options.dt, &mut q, &mut dq)?;
+                    check_finite(k + 1, t + options.dt, &q, &dq)?;
+                    if (k + 1) % every == 0 || k + 1 == steps {
+                        let t = (k + 1) as f64 * options.dt;
+                        let (e, v) = report(sys, &mut dynamics, force, motion, k + 1, t, &q, &dq)?;
+                        let lambda = dynamics.lambda.as_slice();
+                        observed(&mut summary, &sample(k + 1, t, &q, &dq, lambda, e, v))?;
+                    }
+                }
+                summary.steps = steps;
+            } else if let Method::Rk45(tol) = options.method {
+                let mut rk = Rk45::new(sys, tol);
+                rk.dynamics.baumgarte = options.baumgarte;
+                let (mut t, mut dt, mut k) = (0.0, options.dt, 0);
+                let t_end = options.duration;
+                while t < t_end {
+                    let h = rk.step(sys, force, motion, k, t, t_end, &mut dt, &mut q, &mut dq)?;
+                    t = if t + h >= t_end * (1.0 - 1e-15) {
+                        t_end
+                    } else {
+                        t + h
+                    };
+                    k += 1;
+                    check_finite(k, t, &q, &dq)?;
+                    if k % every == 0 || t >= t_end {
+                        let (e, v) = report(sys, &mut dynamics, force, motion, k, t, &q, &dq)?;
+                        let lambda = dynamics.lambda.as_slice();
+                        observed(&mut summary, &sample(k, t, &q, &dq, lambda, e, v))?;
+                    }
+                }
+                summary.steps = k;
             }
         }
         Method::Vi(settings) => {
-            let mut vi = MidpointVi::new(n, settings);
+            let mut vi = MidpointVi::new(sys, settings);
             let mut p = vi.initial_momentum(sys, &q, &dq);
             let mut q_next = q.clone();
-            traj.push(
-                0.0,
-                q.as_slice(),
-                dq.as_slice(),
-                Some(p.as_slice()),
-                energy(sys, &q, &dq),
-            );
+            // The start's constraint forces, from the continuous equations.
+            let mut e = {
+                sys.lagrangian(&q, &dq, Order::First, &mut terms);
+                terms.energy(&dq)
+            };
+            let mut violation = 0.0;
+            if rows > 0 {
+                let mut qdd = sys.zero_vector();
+                dynamics.acceleration(sys, force, motion, 0, 0.0, &q, &dq, &mut qdd)?;
+                vi.lambda.copy_from(&dynamics.lambda);
+                violation = dynamics.constraint_terms.violation();
+            }
+            observed(
+                &mut summary,
+                &Sample {
+                    step: 0,
+                    t: 0.0,
+                    q: q.as_slice(),
+                    dq: dq.as_slice(),
+                    p: Some(p.as_slice()),
+                    energy: e,
+                    lambda: vi.lambda.as_slice(),
+                    violation,
+                },
+            )?;
             for k in 0..steps {
                 let t = k as f64 * options.dt;
-                vi.step(sys, force, k, t, options.dt, &mut q, &mut p, &mut q_next)?;
-                traj.newton_iterations += vi.iterations;
-                let t = (k + 1) as f64 * options.dt;
-                let e = vi.velocity_and_energy(sys, k + 1, t, &q, &p, &mut dq)?;
-                traj.push(t, q.as_slice(), dq.as_slice(), Some(p.as_slice()), e);
-                progress(t);
+                vi.step(sys, force, motion, k, t, options.dt, &mut q, &mut p, &mut q_next)?;
+                summary.newton_iterations += vi.iterations;
+                summary.subdivided_steps += (vi.subdivisions > 0) as usize;
+                if (k + 1) % every == 0 || k + 1 == steps {
+                    let t = (k + 1) as f64 * options.dt;
+                    violation = vi.constraint_terms.violation();
+                    e = vi.velocity_and_energy(sys, motion, k + 1, t, &q, &p, &mut dq)?;
+                    observed(
+                        &mut summary,
+                        &Sample {
+                            step: k + 1,
+                            t,
+                            q: q.as_slice(),
+                            dq: dq.as_slice(),
+                            p: Some(p.as_slice()),
+                            energy: e,
+                            lambda: vi.lambda.as_slice(),
+                            violation,
+                        },
+                    )?;
+                }
             }
+            summary.steps = steps;
         }
     }
-    Ok(traj)
+    Ok(summary)
+}
+
+/// A continuous method's sample.
+fn sample<'a, N: Dim>(
+    step: usize,
+    t: f64,
+    q: &'a Vector<N>,
+    dq: &'a Vector<N>,
+    lambda: &'a [f64],
+    energy: f64,
+    violation: f64,
+) -> Sample<'a>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    Sample {
+        step,
+        t,
+        q: q.as_slice(),
+        dq: dq.as_slice(),
+        p: None,
+        energy,
+        lambda,
+        violation,
+    }
 }
 
 fn check_finite<N: Dim>(step: usize, t: f64, q: &Vector<N>, dq: &Vector<N>) -> Result<(), SimError>

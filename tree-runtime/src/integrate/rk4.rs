@@ -1,8 +1,9 @@
-//! The classical fixed-step fourth-order Runge–Kutta method on `(q, q̇)`.
+//! The classical fixed-step fourth-order Runge–Kutta method on the dynamic variables'
+//! `(q, q̇)`; kinematic variables take their prescription at every stage.
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
-use crate::dynamics::{Dynamics, GeneralizedForce};
+use crate::dynamics::{prescribe, Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::system::{System, Vector};
 
@@ -23,10 +24,11 @@ impl<N: Dim> Rk4<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    pub fn new(n: N) -> Self {
+    pub fn new<S: System<N = N>>(sys: &S) -> Self {
+        let n = sys.dim();
         let z = || Vector::<N>::zeros_generic(n, nalgebra::U1);
         Rk4 {
-            dynamics: Dynamics::new(n),
+            dynamics: Dynamics::new(sys),
             kq: [z(), z(), z(), z()],
             kv: [z(), z(), z(), z()],
             q_stage: z(),
@@ -35,10 +37,11 @@ where
     }
 
     /// Advances `(q, q̇)` from `t` by `dt`.
-    pub fn step<S, F>(
+    pub fn step<S, F, P>(
         &mut self,
         sys: &mut S,
         force: &mut F,
+        motion: &mut P,
         step: usize,
         t: f64,
         dt: f64,
@@ -48,6 +51,7 @@ where
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
+        P: Prescription,
     {
         const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
         for s in 0..4 {
@@ -57,12 +61,16 @@ where
                 self.q_stage.axpy(C[s] * dt, &self.kq[s - 1], 1.0);
                 self.v_stage.axpy(C[s] * dt, &self.kv[s - 1], 1.0);
             }
+            let ts = t + C[s] * dt;
+            let kinematic = &self.dynamics.split.kinematic;
+            prescribe(kinematic, motion, ts, &mut self.q_stage, &mut self.v_stage, None);
             self.kq[s].copy_from(&self.v_stage);
             self.dynamics.acceleration(
                 sys,
                 force,
+                motion,
                 step,
-                t + C[s] * dt,
+                ts,
                 &self.q_stage,
                 &self.v_stage,
                 &mut self.kv[s],
@@ -72,6 +80,7 @@ where
             q.axpy(w * dt / 6.0, &self.kq[k], 1.0);
             dq.axpy(w * dt / 6.0, &self.kv[k], 1.0);
         }
+        prescribe(&self.dynamics.split.kinematic, motion, t + dt, q, dq, None);
         Ok(())
     }
 }

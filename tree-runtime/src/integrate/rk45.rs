@@ -1,9 +1,11 @@
 //! Adaptive Dormand–Prince 5(4) (the tableau of Dormand & Prince 1980), with per-step error
-//! control on `(q, q̇)`.
+//! control on the dynamic variables' `(q, q̇)`. The last stage of an accepted step is the
+//! first of the next (first same as last: six evaluations a step); a trial step whose stages
+//! are not finite is rejected and shrunk, not fatal.
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
-use crate::dynamics::{Dynamics, GeneralizedForce};
+use crate::dynamics::{prescribe, Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::system::{System, Vector};
 
@@ -90,17 +92,24 @@ where
     v_stage: Vector<N>,
     /// Steps tried and rejected so far.
     pub rejected: usize,
+    /// Derivative evaluations so far.
+    pub evaluations: usize,
+    /// Whether stage 0 of the next step is already in `kq[0]`, `kv[0]` (at `fsal_t`).
+    fsal: Option<f64>,
 }
 
 impl<N: Dim> Rk45<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    pub fn new(n: N, tolerance: Tolerance) -> Self {
+    pub fn new<S: System<N = N>>(sys: &S, tolerance: Tolerance) -> Self {
+        let n = sys.dim();
         let z = || Vector::<N>::zeros_generic(n, nalgebra::U1);
         Rk45 {
             tolerance,
-            dynamics: Dynamics::new(n),
+            evaluations: 0,
+            fsal: None,
+            dynamics: Dynamics::new(sys),
             kq: std::array::from_fn(|_| z()),
             kv: std::array::from_fn(|_| z()),
             q_stage: z(),
@@ -111,10 +120,11 @@ where
 
     /// Takes one accepted step from `t`, trying `*dt` first and shrinking it as needed but
     /// never past `t_end`. Returns the step taken; `*dt` becomes the proposal for the next.
-    pub fn step<S, F>(
+    pub fn step<S, F, P>(
         &mut self,
         sys: &mut S,
         force: &mut F,
+        motion: &mut P,
         step: usize,
         t: f64,
         t_end: f64,
@@ -125,33 +135,58 @@ where
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
+        P: Prescription,
     {
         loop {
             let h = dt.min(t_end - t);
             if h.is_nan() || h <= 1e-14 * t.abs().max(1.0) {
                 return Err(SimError::StepSizeTooSmall { step, t, dt: h });
             }
+            let mut finite = true;
             for s in 0..7 {
+                if s == 0 && self.fsal == Some(t) {
+                    continue;
+                }
                 self.q_stage.copy_from(q);
                 self.v_stage.copy_from(dq);
                 for (r, &a) in A[s].iter().enumerate().take(s) {
                     self.q_stage.axpy(h * a, &self.kq[r], 1.0);
                     self.v_stage.axpy(h * a, &self.kv[r], 1.0);
                 }
+                let ts = t + C[s] * h;
+                let kinematic = &self.dynamics.split.kinematic;
+                prescribe(kinematic, motion, ts, &mut self.q_stage, &mut self.v_stage, None);
                 self.kq[s].copy_from(&self.v_stage);
-                self.dynamics.acceleration(
+                self.evaluations += 1;
+                match self.dynamics.acceleration(
                     sys,
                     force,
+                    motion,
                     step,
-                    t + C[s] * h,
+                    ts,
                     &self.q_stage,
                     &self.v_stage,
                     &mut self.kv[s],
-                )?;
+                ) {
+                    Ok(()) => {}
+                    // A trial stage gone non-finite: reject the step and shrink it.
+                    Err(SimError::NonFinite { .. }) if s > 0 => {
+                        finite = false;
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            // Stage 0 stays valid for a retry from the same state.
+            self.fsal = Some(t);
+            if !finite {
+                self.rejected += 1;
+                *dt = 0.2 * h;
+                continue;
             }
             // Stage 7 was evaluated at the fifth-order solution: q_stage, v_stage hold it.
             let mut err: f64 = 0.0;
-            for i in 0..q.len() {
+            for &i in &self.dynamics.split.dynamic {
                 let (mut eq, mut ev) = (0.0, 0.0);
                 for s in 0..7 {
                     eq += (B5[s] - B4[s]) * self.kq[s][i];
@@ -163,11 +198,9 @@ where
                 err = err.max((h * eq).abs() / sq).max((h * ev).abs() / sv);
             }
             if !err.is_finite() {
-                return Err(SimError::NonFinite {
-                    step,
-                    t,
-                    what: "rk45 error estimate".into(),
-                });
+                self.rejected += 1;
+                *dt = 0.2 * h;
+                continue;
             }
             let factor = if err == 0.0 {
                 5.0
@@ -177,6 +210,10 @@ where
             if err <= 1.0 {
                 q.copy_from(&self.q_stage);
                 dq.copy_from(&self.v_stage);
+                // The last stage, at (t + h, the new state), starts the next step.
+                self.kq.swap(0, 6);
+                self.kv.swap(0, 6);
+                self.fsal = Some(t + h);
                 // A step shortened to land on t_end leaves the proposal as it was.
                 if h >= *dt {
                     *dt *= factor;

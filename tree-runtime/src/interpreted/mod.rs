@@ -1,89 +1,41 @@
-//! The interpreted tree system: walks the validated model at run time, with the
-//! recursions of DESIGN.md §3, in one of three [`Evaluation`] modes.
-
-mod accumulate;
-mod cached;
-mod uncached;
+//! The interpreted tree system: walks the validated model at run time with the composite
+//! sweeps of [`crate::sweeps`] and the elements of [`crate::elements`] — the same code
+//! `tree_model!` compiles.
 
 use nalgebra::Dyn;
-use tree_model::Model;
+use tree_model::{Model, Motion};
 
 use crate::error::SimError;
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
 use crate::sweeps::{self, Workspace};
-use crate::system::{Order, System, Terms, Vector};
-
-/// How the interpreted system evaluates the Lagrangian terms. All three give the same
-/// numbers (to rounding); they differ in cost.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Evaluation {
-    /// Outward and inward sweeps with composite bodies ([`crate::sweeps`]): every per-frame
-    /// quantity once, every derivative entry O(1). The default, and what `tree_model!` unrolls.
-    #[default]
-    Sweeps,
-    /// The paper's per-mass sums (eqs. (15)–(18)) over per-frame quantities computed once per
-    /// evaluation and cached, second derivatives of the body velocities included.
-    Cached,
-    /// The same sums with every quantity recomputed from the root on demand, as a symbolic
-    /// expansion would (caching off; the paper's Fig. 3 comparison).
-    Uncached,
-}
+use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
 pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
-
-/// Index of `(a, b)`, `a ≥ b`, in a packed lower triangle.
-#[inline(always)]
-pub(crate) fn tri(a: usize, b: usize) -> usize {
-    a * (a + 1) / 2 + b
-}
 
 /// The interpreted system.
 #[derive(Clone, Debug)]
 pub struct TreeSystem {
     model: Model,
-    evaluation: Evaluation,
-    /// Every frame as modelled (the paper's modes, body velocities for tests).
+    /// Constant chains folded (as `tree_model!` compiles them).
     plan: TreePlan,
     ws: Workspace<f64>,
-    /// Constant chains folded (the sweeps, as `tree_model!` compiles them).
-    folded: TreePlan,
-    folded_ws: Workspace<f64>,
-    // `Evaluation::Cached` only: per frame, ∂²v/∂q̇_b∂q_a (b < a, at tri(a, b)) and
-    // ∂²v/∂q_a∂q_b (a ≥ b), in packed triangles starting at `tri_offset[k]`.
-    tri_offset: Vec<usize>,
-    d2v_ddq_dq: Vec<Twist>,
-    d2v_dq_dq: Vec<Twist>,
+    /// Every frame as modelled, for the poses.
+    full_plan: TreePlan,
+    constraint_names: Vec<String>,
 }
 
 impl TreeSystem {
     /// Builds the interpreted system for a validated model.
-    pub fn new(model: &Model, evaluation: Evaluation) -> Result<Self, SimError> {
-        if let Some(v) = model.variables.iter().find(|v| v.kinematic) {
-            return Err(SimError::Unsupported(format!(
-                "variable `{}` is kinematic; prescribed variables are not supported yet",
-                v.name
-            )));
-        }
-        let plan = TreePlan::new(model);
-        let mut tri_offset = Vec::with_capacity(plan.frames.len());
-        let mut tris = 0;
-        for f in &plan.frames {
-            tri_offset.push(tris);
-            tris += f.n * (f.n + 1) / 2;
-        }
-        let folded = TreePlan::folded(model);
+    pub fn new(model: &Model) -> Result<Self, SimError> {
+        let plan = TreePlan::folded(model);
         Ok(TreeSystem {
             model: model.clone(),
-            evaluation,
             ws: Workspace::new(&plan),
-            folded_ws: Workspace::new(&folded),
-            folded,
             plan,
-            tri_offset,
-            d2v_ddq_dq: vec![[0.0; 6]; tris],
-            d2v_dq_dq: vec![[0.0; 6]; tris],
+            full_plan: TreePlan::new(model),
+            constraint_names: model.constraint_row_names(),
         })
     }
 
@@ -92,33 +44,25 @@ impl TreeSystem {
         &self.model
     }
 
-    /// The evaluation mode.
-    pub fn evaluation(&self) -> Evaluation {
-        self.evaluation
-    }
-
-    /// Switches the evaluation mode.
-    pub fn set_evaluation(&mut self, evaluation: Evaluation) {
-        self.evaluation = evaluation;
-    }
-
     /// Every frame's body velocity `v_k` and its columns, for checking against finite
-    /// differences.
+    /// differences (allocates; not for hot paths).
     pub fn frame_velocities(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<FrameVelocity> {
-        sweeps::forward(&self.plan, &mut self.ws, q.as_slice(), dq.as_slice(), true);
-        (0..self.plan.frames.len())
+        let plan = &self.full_plan;
+        let mut ws = Workspace::new(plan);
+        sweeps::forward(plan, &mut ws, q.as_slice(), dq.as_slice(), true);
+        (0..plan.frames.len())
             .map(|k| {
-                let f = &self.plan.frames[k];
+                let f = &plan.frames[k];
                 let cols = (0..f.n)
                     .map(|a| {
                         (
-                            self.plan.vars[f.var_start + a],
-                            self.ws.jac[f.col_offset + a],
-                            self.ws.dv_dq[f.col_offset + a],
+                            plan.vars[f.var_start + a],
+                            ws.jac[f.col_offset + a],
+                            ws.dv_dq[f.col_offset + a],
                         )
                     })
                     .collect();
-                (self.ws.velocity[k], cols)
+                (ws.velocity[k], cols)
             })
             .collect()
     }
@@ -152,6 +96,40 @@ impl System for TreeSystem {
         self.model.variables[i].damping
     }
 
+    fn motion(&self, i: usize) -> Option<Motion> {
+        self.model.variables[i].motion.clone()
+    }
+
+    fn is_kinematic(&self, i: usize) -> bool {
+        self.model.variables[i].is_kinematic()
+    }
+
+    fn constraint_count(&self) -> usize {
+        self.constraint_names.len()
+    }
+
+    fn constraint_name(&self, r: usize) -> &str {
+        &self.constraint_names[r]
+    }
+
+    fn constraints(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        order: Order,
+        out: &mut ConstraintTerms,
+    ) {
+        out.clear(order);
+        sweeps::constraints(
+            &self.plan,
+            &mut self.ws,
+            q.as_slice(),
+            dq.as_slice(),
+            order,
+            out,
+        );
+    }
+
     fn lagrangian(
         &mut self,
         q: &Vector<Dyn>,
@@ -160,21 +138,17 @@ impl System for TreeSystem {
         out: &mut Terms<Dyn>,
     ) {
         out.clear(order);
-        let (q, dq) = (q.as_slice(), dq.as_slice());
-        match self.evaluation {
-            Evaluation::Sweeps => {
-                sweeps::evaluate(&self.folded, &mut self.folded_ws, q, dq, order, out)
-            }
-            Evaluation::Cached => {
-                sweeps::forward(&self.plan, &mut self.ws, q, dq, false);
-                self.second_order_caches(order);
-                self.accumulate_cached(order, out);
-            }
-            Evaluation::Uncached => self.accumulate_uncached(q, dq, order, out),
-        }
+        sweeps::evaluate(
+            &self.plan,
+            &mut self.ws,
+            q.as_slice(),
+            dq.as_slice(),
+            order,
+            out,
+        );
     }
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
-        sweeps::poses(&self.plan, q.as_slice(), out);
+        sweeps::poses(&self.full_plan, q.as_slice(), out);
     }
 }

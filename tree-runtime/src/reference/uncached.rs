@@ -1,16 +1,16 @@
-//! `Evaluation::Uncached`: every quantity a mass needs is recomputed from the root by recursion, with
+//! `PaperEvaluation::Uncached`: every quantity a mass needs is recomputed from the root by recursion, with
 //! nothing stored between uses — the cost a symbolic expansion of the same formulas pays.
 
 use nalgebra::Dyn;
 use tree_model::Joint;
 
 use super::accumulate::{add_mass_terms, FrameQuantities};
-use super::TreeSystem;
+use super::PaperSystem;
 use crate::plan::FramePlan;
 use crate::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
 use crate::system::{Order, Terms};
 
-impl TreeSystem {
+impl PaperSystem {
     pub(crate) fn accumulate_uncached(
         &self,
         q: &[f64],

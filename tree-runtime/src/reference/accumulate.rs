@@ -1,4 +1,4 @@
-//! One mass's contribution to the Lagrangian and its derivatives (DESIGN.md §3, paper
+//! One mass's contribution to the Lagrangian and its derivatives (docs/derivations.md §2, paper
 //! eqs. (15)–(18)), written once against [`FrameQuantities`] so the cached and uncached
 //! modes share it.
 

@@ -1,15 +1,15 @@
-//! `Evaluation::Cached`: after the outward sweep, the second derivatives of every frame's body
-//! velocity are computed from its parent's (DESIGN.md §3, paper eqs. (8), (9)) and cached;
+//! `PaperEvaluation::Cached`: after the outward sweep, the second derivatives of every frame's body
+//! velocity are computed from its parent's (docs/derivations.md §2, paper eqs. (8), (9)) and cached;
 //! then each mass reads what it needs.
 
 use nalgebra::Dyn;
 
 use super::accumulate::{add_mass_terms, FrameQuantities};
-use super::{tri, TreeSystem};
+use super::{tri, PaperSystem};
 use crate::se3::{bracket_with_axis, Pose, Twist};
 use crate::system::{Order, Terms};
 
-impl TreeSystem {
+impl PaperSystem {
     /// `∂²v/∂q̇∂q` and `∂²v/∂q∂q` of every needed frame, from the outward sweep's columns.
     pub(crate) fn second_order_caches(&mut self, order: Order) {
         if order < Order::Dynamics {
@@ -73,7 +73,7 @@ impl TreeSystem {
 
 /// Reads frame k's cached quantities.
 struct CachedFrame<'a> {
-    sys: &'a TreeSystem,
+    sys: &'a PaperSystem,
     k: usize,
 }
 

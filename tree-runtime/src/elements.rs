@@ -1,0 +1,428 @@
+//! Springs, dampers and holonomic constraints, written once over any [`Scalar`] so that the
+//! interpreted system evaluates them and `tree_model!` compiles them (docs/derivations.md §5).
+//!
+//! Everything here is built from the world kinematics of the frames an element attaches to,
+//! which the outward sweep leaves in the workspace: the origin `p_f`, the point Jacobian
+//! columns `J_a = ∂p_f/∂q_a` and the world axes `w_a` of the variables above f. For a
+//! variable ia at or above ib (both moving f), `∂²p_f/∂q_ia∂q_ib = w_ia × J_ib`, and a vector `n`
+//! fixed in f's axes has `∂n/∂q_ia = w_ia × n`, `∂²n/∂q_ia∂q_ib = w_ia × (w_ib × n)`. A pair of
+//! frames a, b gives `d = p_a − p_b` and its derivative columns `Dd_i`; every element is a
+//! scalar function of `d` (and of frame a's axes, for a plane), differentiated by the chain
+//! rule.
+//!
+//! Sign conventions: springs' potentials are subtracted from `L`; forces are generalized
+//! forces `F(q, q̇)` on the right of `d/dt ∂L/∂q̇ − ∂L/∂q = F + u + Dhᵀλ`.
+
+use tree_model::{ConstraintKind, Parameter, SpringKind};
+
+use crate::order::Order;
+use crate::plan::TreePlan;
+use crate::scalar::Scalar;
+use crate::se3::cross;
+use crate::sweeps::{Output, Sink, Workspace};
+
+/// Per-variable scratch for the elements (allocated once with the workspace).
+#[derive(Clone, Debug)]
+pub struct Scratch<S> {
+    n: usize,
+    /// `Dd_i = ∂(p_a − p_b)/∂q_i`.
+    dd: Vec<[S; 3]>,
+    /// Gradient of the element's scalar function.
+    grad: Vec<S>,
+    /// Its Hessian, row-major `n × n`; zero outside the pairs of `vars`.
+    hess: Vec<S>,
+    /// The variables the current element depends on.
+    vars: Vec<usize>,
+    involved: Vec<bool>,
+}
+
+impl<S: Scalar> Scratch<S> {
+    pub fn new(n: usize) -> Self {
+        Scratch {
+            n,
+            dd: vec![[S::zero(); 3]; n],
+            grad: vec![S::zero(); n],
+            hess: vec![S::zero(); n * n],
+            vars: Vec::with_capacity(n),
+            involved: vec![false; n],
+        }
+    }
+
+    /// Forgets the last element: zeroes what it touched.
+    fn reset(&mut self) {
+        for &i in &self.vars {
+            self.dd[i] = [S::zero(); 3];
+            self.grad[i] = S::zero();
+            self.involved[i] = false;
+            for &j in &self.vars {
+                self.hess[i * self.n + j] = S::zero();
+            }
+        }
+        self.vars.clear();
+    }
+
+    fn involve(&mut self, i: usize) {
+        if !self.involved[i] {
+            self.involved[i] = true;
+            self.vars.push(i);
+        }
+    }
+
+    fn add_hess(&mut self, i: usize, j: usize, x: S) {
+        self.hess[i * self.n + j] += x;
+    }
+
+    /// Adds `x` at `(i, j)` and, off the diagonal, at `(j, i)`.
+    fn add_hess_sym(&mut self, i: usize, j: usize, x: S) {
+        self.add_hess(i, j, x);
+        if i != j {
+            self.add_hess(j, i, x);
+        }
+    }
+
+    fn hess_at(&self, i: usize, j: usize) -> S {
+        self.hess[i * self.n + j]
+    }
+}
+
+#[inline(always)]
+fn dot3<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> S {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn sub3<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> [S; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// `(plan column offset, ancestor variables)` of plan frame `f`.
+fn columns(plan: &TreePlan, f: usize) -> (usize, &[usize]) {
+    (plan.frames[f].col_offset, plan.ancestors(f))
+}
+
+/// Starts an element on the pair `(a, b)`: returns `d = p_a − p_b` and fills `Dd`.
+fn pair<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, a: usize, b: usize) -> [S; 3] {
+    ws.scratch.reset();
+    for (f, sign) in [(a, 1.0), (b, -1.0)] {
+        let (col, vars) = columns(plan, f);
+        for (ia, &i) in vars.iter().enumerate() {
+            ws.scratch.involve(i);
+            let j = ws.point_jac[col + ia];
+            let s = S::constant(sign);
+            for c in 0..3 {
+                ws.scratch.dd[i][c] += s * j[c];
+            }
+        }
+    }
+    sub3(&ws.pose[a].p, &ws.pose[b].p)
+}
+
+/// Adds `scale · c·∂²p_f/∂q∂q` (c a world vector) into the Hessian scratch.
+fn add_point_hessian<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    f: usize,
+    c: &[S; 3],
+    scale: S,
+) {
+    let (col, vars) = columns(plan, f);
+    for ia in 0..vars.len() {
+        for ib in ia..vars.len() {
+            let x = dot3(c, &cross(&ws.axis[col + ia], &ws.point_jac[col + ib]));
+            ws.scratch.add_hess_sym(vars[ia], vars[ib], scale * x);
+        }
+    }
+}
+
+/// Hessian of `s = d·d` into the scratch: `2 Dd_i·Dd_j + 2 d·∂²d/∂q_i∂q_j`.
+fn squared_distance_hessian<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    a: usize,
+    b: usize,
+    d: &[S; 3],
+) {
+    let two = S::constant(2.0);
+    let sc = &mut ws.scratch;
+    for x in 0..sc.vars.len() {
+        for y in x..sc.vars.len() {
+            let (i, j) = (sc.vars[x], sc.vars[y]);
+            let v = two * dot3(&sc.dd[i], &sc.dd[j]);
+            sc.add_hess_sym(i, j, v);
+        }
+    }
+    add_point_hessian(plan, ws, a, d, two);
+    add_point_hessian(plan, ws, b, d, -two);
+}
+
+/// Emits the current element's value, gradient and Hessian as constraint row `r`.
+fn emit_row<S: Scalar>(
+    ws: &Workspace<S>,
+    r: usize,
+    h: S,
+    dq: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    let sc = &ws.scratch;
+    out.add(Output::H(r), h);
+    for &i in &sc.vars {
+        out.add(Output::Dh(r, i), sc.grad[i]);
+    }
+    if order < Order::Dynamics {
+        return;
+    }
+    let mut acc = S::zero();
+    for &i in &sc.vars {
+        let mut row = S::zero();
+        for &j in &sc.vars {
+            row += sc.hess_at(i, j) * dq[j];
+        }
+        acc += dq[i] * row;
+    }
+    out.add(Output::DhDot(r), acc);
+    if order >= Order::Full {
+        for &i in &sc.vars {
+            for &j in &sc.vars {
+                out.add(Output::D2h(r, i, j), sc.hess_at(i, j));
+            }
+        }
+    }
+}
+
+/// Every constraint row `h_r(q)` with its derivatives (docs/derivations.md §5.1):
+/// * distance: `h = d·d − ℓ²`;
+/// * plane: `h = n·(p_b − p_a)`, `n = R_a n_a` turning with frame a;
+/// * point: `h = e_k·d` for each listed world axis k.
+pub fn constraints<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    q: &[S],
+    dq: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    let second = order >= Order::Dynamics;
+    let mut r = 0;
+    for con in &plan.constraints {
+        let [a, b] = con.frames;
+        match &con.kind {
+            ConstraintKind::Distance { length } => {
+                let d = pair(plan, ws, a, b);
+                let two = S::constant(2.0);
+                let sc = &mut ws.scratch;
+                for x in 0..sc.vars.len() {
+                    let i = sc.vars[x];
+                    sc.grad[i] = two * dot3(&d, &sc.dd[i]);
+                }
+                let l = match *length {
+                    Parameter::Constant(l) => S::constant(l),
+                    Parameter::Variable(i) => {
+                        sc.involve(i);
+                        sc.grad[i] -= two * q[i];
+                        if second {
+                            sc.add_hess(i, i, -two);
+                        }
+                        q[i]
+                    }
+                };
+                if second {
+                    squared_distance_hessian(plan, ws, a, b, &d);
+                }
+                emit_row(ws, r, dot3(&d, &d) - l * l, dq, order, out);
+                r += 1;
+            }
+            ConstraintKind::Plane { normal } => {
+                let d = pair(plan, ws, a, b);
+                let e = [-d[0], -d[1], -d[2]];
+                let n = ws.pose[a].rotate(&normal.map(S::constant));
+                let n_cross_e = cross(&n, &e);
+                let (col, anc) = columns(plan, a);
+                let sc = &mut ws.scratch;
+                for x in 0..sc.vars.len() {
+                    let i = sc.vars[x];
+                    sc.grad[i] = -dot3(&n, &sc.dd[i]);
+                }
+                // ∂n/∂q_i · e = (w_i × n)·e = w_i·(n × e).
+                for (ia, &i) in anc.iter().enumerate() {
+                    sc.grad[i] += dot3(&ws.axis[col + ia], &n_cross_e);
+                }
+                if second {
+                    // n·∂²e = n·(∂²p_b − ∂²p_a).
+                    add_point_hessian(plan, ws, b, &n, S::constant(1.0));
+                    add_point_hessian(plan, ws, a, &n, S::constant(-1.0));
+                    let (col, anc) = columns(plan, a);
+                    for ia in 0..anc.len() {
+                        let w_a = ws.axis[col + ia];
+                        let dn = cross(&w_a, &n);
+                        // ∂²n·e over pairs of frame a's variables.
+                        for ib in ia..anc.len() {
+                            let x = dot3(&cross(&w_a, &cross(&ws.axis[col + ib], &n)), &e);
+                            ws.scratch.add_hess_sym(anc[ia], anc[ib], x);
+                        }
+                        // ∂n_i·∂e_j + ∂n_j·∂e_i, with ∂e = −Dd.
+                        let sc = &mut ws.scratch;
+                        for y in 0..sc.vars.len() {
+                            let j = sc.vars[y];
+                            let x = -dot3(&dn, &sc.dd[j]);
+                            sc.add_hess(anc[ia], j, x);
+                            sc.add_hess(j, anc[ia], x);
+                        }
+                    }
+                }
+                emit_row(ws, r, dot3(&n, &e), dq, order, out);
+                r += 1;
+            }
+            ConstraintKind::Point { axes } => {
+                for &k in axes {
+                    let d = pair(plan, ws, a, b);
+                    let sc = &mut ws.scratch;
+                    for x in 0..sc.vars.len() {
+                        let i = sc.vars[x];
+                        sc.grad[i] = sc.dd[i][k];
+                    }
+                    if second {
+                        let mut e = [S::zero(); 3];
+                        e[k] = S::constant(1.0);
+                        add_point_hessian(plan, ws, a, &e, S::constant(1.0));
+                        add_point_hessian(plan, ws, b, &e, S::constant(-1.0));
+                    }
+                    emit_row(ws, r, d[k], dq, order, out);
+                    r += 1;
+                }
+            }
+        }
+    }
+}
+
+/// Springs' potentials `V` subtracted from `L`, `∂L/∂q` and (at `Order::Full`) `∂²L/∂q²`.
+/// Between frames `V = ½k(r − r₀)²` with `r = ‖d‖`: `∂V/∂q_i = kib d·Dd_i` and
+/// `∂²V/∂q_i∂q_j = k[(r₀/r³)(d·Dd_i)(d·Dd_j) + ib(Dd_i·Dd_j + d·∂²d/∂q_i∂q_j)]`, `ib = 1 − r₀/r`.
+pub fn springs<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    q: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    let full = order >= Order::Full;
+    for spring in &plan.springs {
+        let k = S::constant(spring.stiffness);
+        let rest = S::constant(spring.rest);
+        match spring.kind {
+            SpringKind::Variable(i) => {
+                let x = q[i] - rest;
+                out.add(Output::L, -(S::constant(0.5) * k * x * x));
+                out.add(Output::DlDq(i), -(k * x));
+                if full {
+                    out.add(Output::D2lDqDq(i, i), -k);
+                }
+            }
+            SpringKind::Frames([a, b]) => {
+                let d = pair(plan, ws, a, b);
+                let s = dot3(&d, &d);
+                // With zero rest length V = ½k d·d, smooth through d = 0.
+                let (potential, beta, rest_over_r3) = if spring.rest == 0.0 {
+                    (S::constant(0.5) * k * s, S::constant(1.0), S::zero())
+                } else {
+                    let r = s.sqrt();
+                    let inv = r.recip();
+                    let stretch = r - rest;
+                    (
+                        S::constant(0.5) * k * stretch * stretch,
+                        S::constant(1.0) - rest * inv,
+                        rest * inv * inv * inv,
+                    )
+                };
+                out.add(Output::L, -potential);
+                let sc = &mut ws.scratch;
+                for x in 0..sc.vars.len() {
+                    let i = sc.vars[x];
+                    sc.grad[i] = dot3(&d, &sc.dd[i]);
+                    out.add(Output::DlDq(i), -(k * beta * sc.grad[i]));
+                }
+                if full {
+                    // ib·∂²(½ d·d) first, then the r₀/r³ outer product.
+                    squared_distance_hessian(plan, ws, a, b, &d);
+                    let sc = &ws.scratch;
+                    let half = S::constant(0.5);
+                    for &i in &sc.vars {
+                        for &j in &sc.vars {
+                            let h = k
+                                * (rest_over_r3 * sc.grad[i] * sc.grad[j]
+                                    + beta * half * sc.hess_at(i, j));
+                            out.add(Output::D2lDqDq(i, j), -h);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The model's own generalized forces: per-variable damping `−c_i q̇_i` and dampers
+/// `F = −c ṙ ∇r` (`r = ‖d‖`, `ṙ = ∇r·q̇`), with `∂F/∂q̇ = −c ∇r∇rᵀ` and
+/// `∂F/∂q = −c(∇r (∇²r q̇)ᵀ + ṙ ∇²r)` at `Order::Full` (for the VI's Newton Jacobian).
+pub fn forces<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    dq: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    let full = order >= Order::Full;
+    for (i, &c) in plan.damping.iter().enumerate() {
+        if c != 0.0 {
+            out.add(Output::Force(i), -(S::constant(c) * dq[i]));
+            if full {
+                out.add(Output::DforceDdq(i, i), S::constant(-c));
+            }
+        }
+    }
+    for damper in &plan.dampers {
+        let [a, b] = damper.frames;
+        let c = S::constant(damper.damping);
+        let d = pair(plan, ws, a, b);
+        let r = dot3(&d, &d).sqrt();
+        let inv = r.recip();
+        let sc = &mut ws.scratch;
+        // ∇r_i = d·Dd_i / r
+        let mut rate = S::zero();
+        for x in 0..sc.vars.len() {
+            let i = sc.vars[x];
+            sc.grad[i] = dot3(&d, &sc.dd[i]) * inv;
+            rate += sc.grad[i] * dq[i];
+        }
+        for &i in &sc.vars {
+            out.add(Output::Force(i), -(c * rate * sc.grad[i]));
+        }
+        if !full {
+            continue;
+        }
+        // ∇²r = (∂²(½ d·d) − ∇r∇rᵀ)/r
+        squared_distance_hessian(plan, ws, a, b, &d);
+        let sc = &mut ws.scratch;
+        let half = S::constant(0.5);
+        for x in 0..sc.vars.len() {
+            for y in 0..sc.vars.len() {
+                let (i, j) = (sc.vars[x], sc.vars[y]);
+                let v = (half * sc.hess_at(i, j) - sc.grad[i] * sc.grad[j]) * inv;
+                sc.hess[i * sc.n + j] = v;
+            }
+        }
+        let sc = &ws.scratch;
+        for &j in &sc.vars {
+            // (∇²r q̇)_j
+            let mut rho = S::zero();
+            for &i in &sc.vars {
+                rho += sc.hess_at(i, j) * dq[i];
+            }
+            for &i in &sc.vars {
+                out.add(Output::DforceDdq(i, j), -(c * sc.grad[i] * sc.grad[j]));
+                out.add(
+                    Output::DforceDq(i, j),
+                    -(c * (sc.grad[i] * rho + rate * sc.hess_at(i, j))),
+                );
+            }
+        }
+    }
+}

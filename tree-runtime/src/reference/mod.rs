@@ -1,0 +1,156 @@
+//! The paper's own evaluation, kept as a reference: the per-mass sums of eqs. (15)–(18)
+//! over per-frame quantities either computed once and cached (`Cached`) or recomputed from
+//! the root on demand (`Uncached`, what a symbolic expansion pays — the paper's Fig. 3
+//! comparison). It serves the Fig. 3 reproduction and the tests as an independent oracle for
+//! the tree's Lagrangian; the main path is [`crate::TreeSystem`] (composite sweeps), which
+//! also carries constraints, springs, dampers and kinematic variables. Models with any of
+//! those are refused here.
+
+mod accumulate;
+mod cached;
+mod uncached;
+
+use nalgebra::Dyn;
+use tree_model::{Model, Motion};
+
+use crate::error::SimError;
+use crate::plan::TreePlan;
+use crate::se3::{Pose, Twist};
+use crate::sweeps::{self, Workspace};
+use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
+
+/// How the reference system evaluates the paper's sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PaperEvaluation {
+    /// Per-frame quantities (second derivatives of the body velocities included) computed
+    /// once per evaluation and cached.
+    #[default]
+    Cached,
+    /// Every quantity recomputed from the root on demand (caching off).
+    Uncached,
+}
+
+/// Index of `(a, b)`, `a ≥ b`, in a packed lower triangle.
+#[inline(always)]
+pub(crate) fn tri(a: usize, b: usize) -> usize {
+    a * (a + 1) / 2 + b
+}
+
+/// The tree's Lagrangian by the paper's per-mass sums.
+#[derive(Clone, Debug)]
+pub struct PaperSystem {
+    model: Model,
+    evaluation: PaperEvaluation,
+    plan: TreePlan,
+    ws: Workspace<f64>,
+    // Per frame, ∂²v/∂q̇_b∂q_a (b < a, at tri(a, b)) and ∂²v/∂q_a∂q_b (a ≥ b), in packed
+    // triangles starting at `tri_offset[k]`.
+    tri_offset: Vec<usize>,
+    d2v_ddq_dq: Vec<Twist>,
+    d2v_dq_dq: Vec<Twist>,
+}
+
+impl PaperSystem {
+    /// The reference system for a model of frames and masses only.
+    pub fn new(model: &Model, evaluation: PaperEvaluation) -> Result<Self, SimError> {
+        if model.has_elements() {
+            return Err(SimError::Unsupported(format!(
+                "model `{}` has constraints, springs, dampers or kinematic variables; the paper's reference evaluation covers the tree's Lagrangian only (use TreeSystem)",
+                model.name
+            )));
+        }
+        let plan = TreePlan::new(model);
+        let mut tri_offset = Vec::with_capacity(plan.frames.len());
+        let mut tris = 0;
+        for f in &plan.frames {
+            tri_offset.push(tris);
+            tris += f.n * (f.n + 1) / 2;
+        }
+        Ok(PaperSystem {
+            model: model.clone(),
+            evaluation,
+            ws: Workspace::new(&plan),
+            plan,
+            tri_offset,
+            d2v_ddq_dq: vec![[0.0; 6]; tris],
+            d2v_dq_dq: vec![[0.0; 6]; tris],
+        })
+    }
+
+    /// The evaluation mode.
+    pub fn evaluation(&self) -> PaperEvaluation {
+        self.evaluation
+    }
+}
+
+impl System for PaperSystem {
+    type N = Dyn;
+
+    fn dim(&self) -> Dyn {
+        Dyn(self.model.variables.len())
+    }
+
+    fn variable_name(&self, i: usize) -> &str {
+        &self.model.variables[i].name
+    }
+
+    fn frame_count(&self) -> usize {
+        self.model.frames.len()
+    }
+
+    fn frame_name(&self, k: usize) -> &str {
+        &self.model.frames[k].name
+    }
+
+    fn initial(&self, i: usize) -> (f64, f64) {
+        let v = &self.model.variables[i];
+        (v.q0, v.dq0)
+    }
+
+    fn damping(&self, i: usize) -> f64 {
+        self.model.variables[i].damping
+    }
+
+    fn motion(&self, _: usize) -> Option<Motion> {
+        None
+    }
+
+    fn constraint_count(&self) -> usize {
+        0
+    }
+
+    fn constraint_name(&self, r: usize) -> &str {
+        panic!("constraint {r} of a model without constraints")
+    }
+
+    fn constraints(&mut self, _: &Vector<Dyn>, _: &Vector<Dyn>, _: Order, _: &mut ConstraintTerms) {}
+
+    fn lagrangian(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        order: Order,
+        out: &mut Terms<Dyn>,
+    ) {
+        out.clear(order);
+        let (q, dq) = (q.as_slice(), dq.as_slice());
+        match self.evaluation {
+            PaperEvaluation::Cached => {
+                sweeps::forward(&self.plan, &mut self.ws, q, dq, false);
+                self.second_order_caches(order);
+                self.accumulate_cached(order, out);
+            }
+            PaperEvaluation::Uncached => self.accumulate_uncached(q, dq, order, out),
+        }
+        for (i, v) in self.model.variables.iter().enumerate() {
+            out.force[i] = -v.damping * dq[i];
+            if order >= Order::Full {
+                out.dforce_ddq[(i, i)] = -v.damping;
+            }
+        }
+    }
+
+    fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
+        sweeps::poses(&self.plan, q.as_slice(), out);
+    }
+}
