@@ -8,7 +8,7 @@ use std::time::Instant;
 use plotters::prelude::*;
 use tree_mech::integrate::{JacobianUpdate, MidpointVi, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
-use tree_mech::{tree_model, Evaluation, NoForce, System, TreeSystem};
+use tree_mech::{tree_model, NoForce, PaperEvaluation, PaperSystem, System, TreeSystem};
 
 tree_model!(struct P1 from "benches/models/pendulum-1.toml");
 tree_model!(struct P2 from "benches/models/pendulum-2.toml");
@@ -76,7 +76,8 @@ where
             jacobian,
             ..ViSettings::default()
         };
-        let mut vi = MidpointVi::new(sys.dim(), settings);
+        let mut vi = MidpointVi::new(sys, settings);
+        let mut motion = tree_mech::runtime::ModelMotions::of(sys);
         let mut q = q0.clone();
         let mut p = vi.initial_momentum(sys, &q0, &dq0);
         let mut next = q0.clone();
@@ -84,6 +85,7 @@ where
             vi.step(
                 sys,
                 &mut NoForce,
+                &mut motion,
                 k,
                 k as f64 * 0.01,
                 0.01,
@@ -102,9 +104,9 @@ fn main() {
     let modes = [
         ("generated, Jacobian reused", None),
         ("generated (tree_model!)", None),
-        ("interpreted, sweeps", Some(Evaluation::Sweeps)),
-        ("interpreted, cached (paper)", Some(Evaluation::Cached)),
-        ("interpreted, uncached (paper)", Some(Evaluation::Uncached)),
+        ("interpreted, sweeps", None),
+        ("interpreted, cached (paper)", Some(PaperEvaluation::Cached)),
+        ("interpreted, uncached (paper)", Some(PaperEvaluation::Uncached)),
     ];
     let mut rows: Vec<(usize, Vec<f64>)> = Vec::new();
     println!("| N | generated, reuse [ms] | generated [ms] | interpreted sweeps [ms] | interpreted cached [ms] | interpreted uncached [ms] | sweeps / generated | cached / generated | uncached / cached |");
@@ -116,8 +118,9 @@ fn main() {
             .enumerate()
             .map(|(k, &(_, mode))| match mode {
                 None if k == 0 => time_generated(n, JacobianUpdate::OncePerStep),
-                None => time_generated(n, JacobianUpdate::EveryIteration),
-                Some(mode) => time_vi(&mut TreeSystem::new(&model, mode).unwrap()),
+                None if k == 1 => time_generated(n, JacobianUpdate::EveryIteration),
+                None => time_vi(&mut TreeSystem::new(&model).unwrap()),
+                Some(mode) => time_vi(&mut PaperSystem::new(&model, mode).unwrap()),
             })
             .collect();
         println!(

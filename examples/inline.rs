@@ -29,6 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         method: Method::Vi(ViSettings::default()),
         dt: 0.01,
         duration: 5.0,
+        ..Default::default()
     };
     let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {})?;
     println!("t       slide     theta1    theta2    energy");

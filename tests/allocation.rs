@@ -6,7 +6,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, Rk45, Tolerance, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
-use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Terms, TreeSystem};
+use tree_mech::runtime::ModelMotions;
+use tree_mech::{
+    tree_model, ConstraintTerms, NoForce, Order, PaperEvaluation, PaperSystem, System, Terms,
+    TreeSystem,
+};
 
 struct Counting;
 
@@ -26,6 +30,7 @@ unsafe impl GlobalAlloc for Counting {
 static GLOBAL: Counting = Counting;
 
 tree_model!(struct Humanoid from "models/humanoid.toml");
+tree_model!(struct StringPendulum from "tests/models/string-pendulum.toml");
 
 /// Allocations made by `f`.
 fn allocations(f: impl FnOnce()) -> usize {
@@ -40,11 +45,13 @@ where
 {
     let (mut q, mut dq) = sys.initial_state();
     let mut terms = Terms::zeros(sys.dim());
-    let mut rk4 = Rk4::new(sys.dim());
-    let mut rk45 = Rk45::new(sys.dim(), Tolerance::default());
-    let mut vi = MidpointVi::new(sys.dim(), ViSettings::default());
+    let mut constraints = ConstraintTerms::zeros(sys.constraint_count(), sys.dof());
+    let mut motion = ModelMotions::of(&sys);
+    let mut rk4 = Rk4::new(&sys);
+    let mut rk45 = Rk45::new(&sys, Tolerance::default());
+    let mut vi = MidpointVi::new(&sys, ViSettings::default());
     let mut vi_reuse = MidpointVi::new(
-        sys.dim(),
+        &sys,
         ViSettings {
             jacobian: JacobianUpdate::OncePerStep,
             ..ViSettings::default()
@@ -57,17 +64,19 @@ where
     let n = allocations(|| {
         for order in [Order::First, Order::Dynamics, Order::Full] {
             sys.lagrangian(&q0, &dq0, order, &mut terms);
+            sys.constraints(&q0, &dq0, order, &mut constraints);
         }
         for k in 0..20 {
             let t = k as f64 * 0.01;
-            rk4.step(&mut sys, &mut NoForce, k, t, 0.01, &mut q, &mut dq)
+            rk4.step(&mut sys, &mut NoForce, &mut motion, k, t, 0.01, &mut q, &mut dq)
                 .unwrap();
             let mut h = 0.01;
-            rk45.step(&mut sys, &mut NoForce, k, t, 1.0, &mut h, &mut q, &mut dq)
+            rk45.step(&mut sys, &mut NoForce, &mut motion, k, t, 1.0, &mut h, &mut q, &mut dq)
                 .unwrap();
             vi.step(
                 &mut sys,
                 &mut NoForce,
+                &mut motion,
                 k,
                 t,
                 0.01,
@@ -80,6 +89,7 @@ where
                 .step(
                     &mut sys,
                     &mut NoForce,
+                    &mut motion,
                     k,
                     t,
                     0.01,
@@ -88,7 +98,7 @@ where
                     &mut next,
                 )
                 .unwrap();
-            vi.velocity_and_energy(&mut sys, k, t, &q2, &p, &mut dq)
+            vi.velocity_and_energy(&mut sys, &mut motion, k, t, &q2, &p, &mut dq)
                 .unwrap();
         }
     });
@@ -98,12 +108,18 @@ where
 #[test]
 fn evaluations_and_steps_allocate_nothing() {
     check(Humanoid, "generated humanoid");
-    for mode in [Evaluation::Sweeps, Evaluation::Cached, Evaluation::Uncached] {
+    check(TreeSystem::new(&Humanoid::model()).unwrap(), "interpreted");
+    for mode in [PaperEvaluation::Cached, PaperEvaluation::Uncached] {
         check(
-            TreeSystem::new(&Humanoid::model(), mode).unwrap(),
-            &format!("interpreted {mode:?}"),
+            PaperSystem::new(&Humanoid::model(), mode).unwrap(),
+            &format!("reference {mode:?}"),
         );
     }
+    check(StringPendulum, "generated string pendulum");
+    check(
+        TreeSystem::new(&StringPendulum::model()).unwrap(),
+        "interpreted string pendulum",
+    );
     // The counter does count: a Vec allocates.
     assert!(allocations(|| drop(std::hint::black_box(vec![1u8; 16]))) > 0);
 }

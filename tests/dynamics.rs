@@ -22,6 +22,7 @@ fn run(
         method,
         dt,
         duration,
+        ..Default::default()
     };
     simulate(sys, q0, dq0, &options, &mut NoForce, &mut |_| {}).unwrap()
 }
@@ -111,14 +112,15 @@ fn textbook_double_pendulum(q: &[f64], dq: &[f64], g: f64) -> [f64; 2] {
 #[test]
 fn double_pendulum_dynamics_match_the_textbook_equations() {
     let mut sys = interpreted(&load("double-pendulum.toml"));
-    let mut dynamics = Dynamics::new(Dyn(2));
+    let mut dynamics = Dynamics::new(&sys);
+    let mut motion = tree_mech::runtime::ModelMotions::of(&sys);
     let mut rng = Rng::new(3);
     for _ in 0..20 {
         let q = rng.vector(2, 3.0);
         let dq = rng.vector(2, 4.0);
         let mut qdd = Vector::<Dyn>::zeros(2);
         dynamics
-            .acceleration(&mut sys, &mut NoForce, 0, 0.0, &q, &dq, &mut qdd)
+            .acceleration(&mut sys, &mut NoForce, &mut motion, 0, 0.0, &q, &dq, &mut qdd)
             .unwrap();
         let expected = textbook_double_pendulum(q.as_slice(), dq.as_slice(), 9.81);
         for i in 0..2 {

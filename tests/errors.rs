@@ -27,6 +27,7 @@ fn a_singular_mass_matrix_is_an_error_naming_the_step() {
             method,
             dt: 0.01,
             duration: 1.0,
+            ..Default::default()
         };
         let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
         assert!(
@@ -55,6 +56,7 @@ fn newton_failure_reports_step_and_residual() {
         method: Method::Vi(settings),
         dt: 0.05,
         duration: 1.0,
+        ..Default::default()
     };
     let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
     match &err {
@@ -89,6 +91,7 @@ fn a_non_finite_force_stops_the_run_with_an_error() {
             method,
             dt: 0.01,
             duration: 1.0,
+            ..Default::default()
         };
         let err = simulate(&mut sys, &q0, &dq0, &options, &mut force, &mut |_| {}).unwrap_err();
         match err {
@@ -110,6 +113,7 @@ fn bad_arguments_are_errors() {
         method: Method::Rk4,
         dt: 0.01,
         duration: 1.0,
+        ..Default::default()
     };
     let e = simulate(&mut sys, &short, &dq0, &ok, &mut NoForce, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("the system has 1 variables"), "{e}");

@@ -7,7 +7,7 @@ use common::Rng;
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dyn};
 use tree_mech::integrate::{simulate, Method, SimOptions, ViSettings};
 use tree_mech::runtime::{Pose, Vector};
-use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Trajectory, TreeSystem};
+use tree_mech::{tree_model, NoForce, Order, System, Trajectory, TreeSystem};
 
 tree_model!(struct Pendulum from "models/pendulum.toml");
 tree_model!(struct DoublePendulum from "models/double-pendulum.toml");
@@ -75,7 +75,7 @@ fn check_equal<S: System>(mut generated: S, model: &tree_mech::tree_model::Model
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    let mut interpreted = TreeSystem::new(model, Evaluation::Sweeps).unwrap();
+    let mut interpreted = TreeSystem::new(model).unwrap();
     let n = generated.dof();
     assert_eq!(n, interpreted.dof());
     for i in 0..n {
@@ -156,6 +156,7 @@ where
             method,
             dt: 0.005,
             duration: 5.0,
+            ..Default::default()
         };
         let a: Trajectory = simulate(
             &mut generated,

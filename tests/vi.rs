@@ -5,18 +5,29 @@ mod common;
 
 use common::{interpreted, load, Rng};
 use nalgebra::Dyn;
-use tree_mech::integrate::{simulate, JacobianUpdate, Method, MidpointVi, SimOptions, ViSettings};
+use tree_mech::integrate::{
+    simulate, Forcing, JacobianUpdate, Method, MidpointVi, SimOptions, ViSettings,
+};
+use tree_mech::tree_model;
 use tree_mech::runtime::{Pose, Vector};
 use tree_mech::{NoForce, Order, System, Terms, TreeSystem};
 
 #[test]
 fn newton_jacobian_is_the_derivative_of_the_residual() {
-    for (name, alpha) in [
-        ("humanoid.toml", 0.5),
-        ("double-pendulum.toml", 0.3),
-        ("free-body.toml", 0.8),
+    let elements = tree_model::from_toml_file(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/models/elements.toml"
+    ))
+    .unwrap();
+    for (model, alpha, forcing) in [
+        (load("humanoid.toml"), 0.5, Forcing::Split),
+        (load("double-pendulum.toml"), 0.3, Forcing::Split),
+        (load("free-body.toml"), 0.8, Forcing::Left),
+        (elements.clone(), 0.5, Forcing::Split),
+        (elements, 0.4, Forcing::Left),
     ] {
-        let mut sys = interpreted(&load(name));
+        let name = model.name.clone();
+        let mut sys = interpreted(&model);
         let n = sys.dof();
         let mut rng = Rng::new(11);
         let q1 = rng.vector(n, 1.0);
@@ -25,29 +36,45 @@ fn newton_jacobian_is_the_derivative_of_the_residual() {
         let dt = 0.01;
         let settings = ViSettings {
             alpha,
+            forcing,
             ..ViSettings::default()
         };
-        let mut vi = MidpointVi::new(Dyn(n), settings);
+        let mut vi = MidpointVi::new(&sys, settings);
+        let dynamic = vi.split.dynamic.clone();
+        let (nd, m) = (dynamic.len(), vi.split.rows);
+        for s in 0..m {
+            vi.lambda[s] = rng.uniform();
+        }
+        vi.prepare(&mut sys, &q1);
         vi.residual(&mut sys, &mut NoForce, 0.0, dt, &q1, &p1, &q2, true);
         let jacobian = vi.jacobian().clone();
+        assert_eq!(jacobian.nrows(), nd + m);
         let h = 1e-7;
-        for j in 0..n {
-            let (mut qp, mut qm) = (q2.clone(), q2.clone());
-            qp[j] += h;
-            qm[j] -= h;
-            let fp = vi
-                .residual(&mut sys, &mut NoForce, 0.0, dt, &q1, &p1, &qp, false)
-                .clone();
-            let fm = vi
-                .residual(&mut sys, &mut NoForce, 0.0, dt, &q1, &p1, &qm, false)
-                .clone();
-            for i in 0..n {
-                let fd = (fp[i] - fm[i]) / (2.0 * h);
+        // Unknowns: the dynamic part of q2, then λ.
+        for col in 0..nd + m {
+            let residual_at = |vi: &mut MidpointVi<Dyn>, sys: &mut _, step: f64| {
+                let mut q = q2.clone();
+                let saved = vi.lambda.clone();
+                if col < nd {
+                    q[dynamic[col]] += step;
+                } else {
+                    vi.lambda[col - nd] += step;
+                }
+                let r = vi
+                    .residual(sys, &mut NoForce, 0.0, dt, &q1, &p1, &q, false)
+                    .clone();
+                vi.lambda = saved;
+                r
+            };
+            let fp = residual_at(&mut vi, &mut sys, h);
+            let fm = residual_at(&mut vi, &mut sys, -h);
+            for row in 0..nd + m {
+                let fd = (fp[row] - fm[row]) / (2.0 * h);
                 let scale = jacobian.amax();
                 assert!(
-                    (jacobian[(i, j)] - fd).abs() < 1e-6 * scale,
-                    "{name}: J[{i}][{j}] = {} vs {fd}",
-                    jacobian[(i, j)]
+                    (jacobian[(row, col)] - fd).abs() < 1e-6 * scale,
+                    "{name}: J[{row}][{col}] = {} vs {fd}",
+                    jacobian[(row, col)]
                 );
             }
         }
@@ -80,6 +107,24 @@ impl System for Counting {
     }
     fn damping(&self, i: usize) -> f64 {
         self.inner.damping(i)
+    }
+    fn motion(&self, i: usize) -> Option<tree_mech::tree_model::Motion> {
+        self.inner.motion(i)
+    }
+    fn constraint_count(&self) -> usize {
+        self.inner.constraint_count()
+    }
+    fn constraint_name(&self, r: usize) -> &str {
+        self.inner.constraint_name(r)
+    }
+    fn constraints(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        order: Order,
+        out: &mut tree_mech::ConstraintTerms,
+    ) {
+        self.inner.constraints(q, dq, order, out)
     }
     fn lagrangian(
         &mut self,
@@ -120,6 +165,7 @@ fn reusing_the_jacobian_reaches_the_same_solution_with_fewer_full_evaluations() 
                 method: Method::Vi(settings),
                 dt: 0.01,
                 duration: 2.0,
+                ..Default::default()
             };
             let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
             runs.push((traj, sys.full, sys.first));
@@ -150,12 +196,13 @@ fn damped_vi_loses_exactly_the_work_done_by_damping_in_the_limit() {
     // rule on the recorded velocities; the VI's discrete forcing agrees to O(Δt²).
     let mut model = load("pendulum.toml");
     model.variables[0].damping = 0.3;
-    let mut sys = TreeSystem::new(&model, tree_mech::Evaluation::Sweeps).unwrap();
+    let mut sys = TreeSystem::new(&model).unwrap();
     let (q0, dq0) = sys.initial_state();
     let options = SimOptions {
         method: Method::Vi(ViSettings::default()),
         dt: 1e-3,
         duration: 3.0,
+        ..Default::default()
     };
     let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
     let mut work = 0.0;

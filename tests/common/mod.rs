@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use nalgebra::Dyn;
-use tree_mech::runtime::{Evaluation, TreeSystem, Vector};
+use tree_mech::runtime::{TreeSystem, Vector};
 use tree_mech::tree_model::{self, Model};
 
 /// Every model file in `models/`.
@@ -29,7 +29,7 @@ pub fn load(name: &str) -> Model {
 }
 
 pub fn interpreted(model: &Model) -> TreeSystem {
-    TreeSystem::new(model, Evaluation::Sweeps).unwrap()
+    TreeSystem::new(model).unwrap()
 }
 
 /// A small deterministic generator (xorshift64*), so tests need no extra crate.

@@ -203,7 +203,9 @@ where
     // Y = M⁻¹Aᵀ with the factor already in mdd (cholesky_solve factors in place; solving
     // again reuses it through a zero-pivot-free triangular pair).
     for r in 0..m {
-        k.column.copy_from(&k.a.row(r).transpose());
+        for (c, x) in k.column.iter_mut().enumerate() {
+            *x = k.a[(r, c)];
+        }
         crate::linalg::cholesky_substitute::<Dyn>(&k.mdd, &mut k.column);
         k.y.set_column(r, &k.column);
     }

@@ -57,6 +57,13 @@ impl SimOptions {
     }
 }
 
+impl Default for SimOptions {
+    /// The VI for 10 s at Δt = 0.01, every step recorded.
+    fn default() -> Self {
+        SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 10.0)
+    }
+}
+
 /// What a run did, besides the samples it handed out.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RunSummary {

@@ -137,9 +137,19 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
+        // Whether the last rejection was for a non-finite stage (then that is the cause to
+        // report if the step shrinks to nothing).
+        let mut non_finite = false;
         loop {
             let h = dt.min(t_end - t);
             if h.is_nan() || h <= 1e-14 * t.abs().max(1.0) {
+                if non_finite {
+                    return Err(SimError::NonFinite {
+                        step,
+                        t,
+                        what: format!("rk45 stage (at every trial step down to {h:e} s)"),
+                    });
+                }
                 return Err(SimError::StepSizeTooSmall { step, t, dt: h });
             }
             let mut finite = true;
@@ -179,6 +189,7 @@ where
             }
             // Stage 0 stays valid for a retry from the same state.
             self.fsal = Some(t);
+            non_finite = !finite;
             if !finite {
                 self.rejected += 1;
                 *dt = 0.2 * h;
@@ -198,6 +209,7 @@ where
                 err = err.max((h * eq).abs() / sq).max((h * ev).abs() / sv);
             }
             if !err.is_finite() {
+                non_finite = true;
                 self.rejected += 1;
                 *dt = 0.2 * h;
                 continue;
