@@ -171,11 +171,187 @@ fn toml_syntax_errors_and_unknown_fields_name_their_line() {
     );
 }
 
+/// A two-link arm with a hook, a control point moved by kinematic `cx`, and room for elements.
+const ARM: &str = r#"name = "arm"
+[[frame]]
+name = "a"
+rx = "q"
+[[frame]]
+name = "b"
+parent = "a"
+tz = -1
+mass = 1
+[[frame]]
+name = "c"
+parent = "b"
+ry = "r"
+[[frame]]
+name = "d"
+parent = "c"
+tx = 0.5
+mass = 1
+[[frame]]
+name = "control"
+ty = "cx"
+[variables.cx]
+kinematic = true
+"#; // lines 1-23
+
 #[test]
-fn kinematic_variables_are_rejected_for_now() {
+fn kinematic_variables_elements_and_their_motions_parse() {
+    let text = format!(
+        "{ARM}[variables.len]\nkinematic = true\nsamples = [[0, 1], [1, 1.2], [2, 1.1]]\n\
+         [[constraint]]\nname = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"control\"]\nlength = \"len\"\n\
+         [[spring]]\nframes = [\"b\", \"control\"]\nstiffness = 3\nrest = 0.2\n\
+         [[spring]]\nvariable = \"r\"\nstiffness = 1\n\
+         [[damper]]\nframes = [\"b\", \"d\"]\ndamping = 0.5\n"
+    );
+    let m = from_toml_str(&text, None).unwrap();
+    // Frames' variables first, then the constraint's length.
+    let names: Vec<&str> = m.variables.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names, ["q", "r", "cx", "len"]);
+    assert_eq!(m.dynamic(), [0, 1]);
+    assert_eq!(m.kinematic(), [2, 3]);
+    assert!(m.variables[3].frame.is_none());
+    assert_eq!(m.variables[3].q0, 1.0, "a spline starts at its first sample");
+    assert_eq!((m.constraints.len(), m.springs.len(), m.dampers.len()), (1, 2, 1));
+}
+
+#[test]
+fn constraint_problems_name_their_line() {
+    let entry = |body: &str| format!("{ARM}[[constraint]]\n{body}");
+    // The entry starts on line 24 (`[[constraint]]`), its fields on the lines after it.
     assert_reports(
-        &format!("{GOOD_HEAD}mass = 1\ninertia = [1, 1, 1]\n[variables.q]\nkinematic = true\n"),
-        &["m.toml:7:", "kinematic"],
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"nowhere\"]\nlength = 1\n"),
+        &["m.toml:27: constraint `s`: unknown frame `nowhere`"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"d\"]\nlength = 1\n"),
+        &["m.toml:27: constraint `s`: connects frame `d` to itself"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"rope\"\nframes = [\"d\", \"b\"]\n"),
+        &["m.toml:26: constraint `s`: unknown kind `rope`: expected distance, plane or point"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"b\"]\n"),
+        &["m.toml:24: constraint `s`: a distance constraint needs `length`"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"b\"]\nlength = 1\nnormal = [0, 0, 1]\n"),
+        &["m.toml:29: constraint `s`: `normal` does not belong to a distance constraint"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"plane\"\nframes = [\"d\", \"b\"]\nnormal = [0, 0, 0]\n"),
+        &["m.toml:28: constraint `s`: normal [0, 0, 0] must be finite and not zero"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"plane\"\nframes = [\"d\", \"b\"]\n"),
+        &["m.toml:24: constraint `s`: a plane constraint needs `normal`"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"point\"\nframes = [\"d\", \"b\"]\naxes = \"xw\"\n"),
+        &["m.toml:28: constraint `s`: axes `xw` must list some of x, y, z, each once"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"point\"\nframes = [\"d\", \"b\"]\naxes = \"xx\"\n"),
+        &["axes `xx` must list some of x, y, z, each once"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"b\"]\nlength = -1\n"),
+        &["m.toml:28: constraint `s`: length -1 must be finite and not negative"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"b\"]\nlength = \"ghost\"\n"),
+        &["m.toml:28: constraint length `ghost` is not a variable"],
+    );
+    assert_reports(
+        &entry("name = \"s\"\nkind = \"distance\"\nframes = [\"d\"]\nlength = 1\n"),
+        &["m.toml:27: constraint `s`: `frames` must name exactly two frames, found 1"],
+    );
+    // Duplicate names (the second entry starts on line 29).
+    let twice = format!(
+        "{ARM}[[constraint]]\nname = \"s\"\nkind = \"point\"\nframes = [\"d\", \"b\"]\naxes = \"x\"\n\
+         [[constraint]]\nname = \"s\"\nkind = \"point\"\nframes = [\"d\", \"b\"]\naxes = \"y\"\n"
+    );
+    assert_reports(
+        &twice,
+        &["m.toml:30: duplicate constraint name `s` (constraints 1 and 2 of the list)"],
+    );
+    // More equations than dynamic variables (two: q and r).
+    let three = format!(
+        "{ARM}[[constraint]]\nname = \"s\"\nkind = \"point\"\nframes = [\"d\", \"control\"]\naxes = \"xyz\"\n"
+    );
+    assert_reports(
+        &three,
+        &["3 constraint equations but only 2 dynamic variables"],
+    );
+}
+
+#[test]
+fn spring_and_damper_problems_name_their_line() {
+    assert_reports(
+        &format!("{ARM}[[spring]]\nframes = [\"b\", \"d\"]\nstiffness = -2\n"),
+        &["m.toml:26: spring 1: stiffness -2 must be finite and not negative"],
+    );
+    assert_reports(
+        &format!("{ARM}[[spring]]\nframes = [\"b\", \"d\"]\nstiffness = 2\nrest = -1\n"),
+        &["m.toml:27: spring 1: rest -1 must be finite and not negative"],
+    );
+    assert_reports(
+        &format!("{ARM}[[spring]]\nvariable = \"cx\"\nstiffness = 2\n"),
+        &["m.toml:25: spring 1: variable `cx` is kinematic"],
+    );
+    assert_reports(
+        &format!("{ARM}[[spring]]\nframes = [\"b\", \"d\"]\nvariable = \"q\"\nstiffness = 2\n"),
+        &["m.toml:24: spring 1: give either `frames` (two frames) or `variable`"],
+    );
+    assert_reports(
+        &format!("{ARM}[[spring]]\nframes = [\"b\", \"zz\"]\nstiffness = 2\n"),
+        &["m.toml:25: spring 1: unknown frame `zz`"],
+    );
+    assert_reports(
+        &format!("{ARM}[[damper]]\nframes = [\"b\", \"d\"]\ndamping = -0.5\n"),
+        &["m.toml:26: damper 1: damping -0.5 must be finite and not negative"],
+    );
+    assert_reports(
+        &format!("{ARM}[[damper]]\nframes = [\"b\", \"d\"]\n"),
+        &["m.toml:24: damper 1: `damping` is missing"],
+    );
+}
+
+#[test]
+fn kinematic_variable_problems_name_their_line() {
+    let head = ARM.replace("[variables.cx]\nkinematic = true\n", "");
+    // The [variables.cx] table starts on line 22.
+    assert_reports(
+        &format!("{head}[variables.cx]\nmotion = {{ amplitude = 1.0 }}\n"),
+        &["m.toml:22: variable `cx` has a prescribed motion but is dynamic"],
+    );
+    assert_reports(
+        &format!("{head}[variables.cx]\nkinematic = true\ndamping = 0.1\n"),
+        &["m.toml:22: variable `cx` is kinematic: damping has no effect"],
+    );
+    assert_reports(
+        &format!("{head}[variables.cx]\nkinematic = true\nsamples = [[0, 1], [0, 2]]\n"),
+        &["m.toml:22: variable `cx`: samples must be at least two finite [t, q] pairs with t strictly increasing"],
+    );
+    assert_reports(
+        &format!("{head}[variables.cx]\nkinematic = true\nsamples = [[0, 1], [1, nan]]\n"),
+        &["samples must be at least two finite"],
+    );
+    assert_reports(
+        &format!("{head}[variables.cx]\nkinematic = true\nsamples = [[0, 1], [1, 2]]\nmotion = {{ amplitude = 1.0 }}\n"),
+        &["give `motion` or `samples`, not both"],
+    );
+    assert_reports(
+        &format!("{head}[variables.cx]\nkinematic = true\nmotion = {{ frequency = -1.0 }}\n"),
+        &["motion frequency must not be negative"],
+    );
+    // A frame-less length variable must be kinematic.
+    assert_reports(
+        &format!("{ARM}[variables.len]\nq0 = 1\n[[constraint]]\nname = \"s\"\nkind = \"distance\"\nframes = [\"d\", \"control\"]\nlength = \"len\"\n"),
+        &["m.toml:24: variable `len` sets a constraint length but drives no frame: it must be kinematic"],
     );
 }
 
