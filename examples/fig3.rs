@@ -106,7 +106,10 @@ fn main() {
         ("generated (tree_model!)", None),
         ("interpreted, sweeps", None),
         ("interpreted, cached (paper)", Some(PaperEvaluation::Cached)),
-        ("interpreted, uncached (paper)", Some(PaperEvaluation::Uncached)),
+        (
+            "interpreted, uncached (paper)",
+            Some(PaperEvaluation::Uncached),
+        ),
     ];
     let mut rows: Vec<(usize, Vec<f64>)> = Vec::new();
     println!("| N | generated, reuse [ms] | generated [ms] | interpreted sweeps [ms] | interpreted cached [ms] | interpreted uncached [ms] | sweeps / generated | cached / generated | uncached / cached |");

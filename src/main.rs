@@ -9,7 +9,9 @@ use std::time::Instant;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use tree_mech::integrate::{run, Forcing, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::integrate::{
+    run, Forcing, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings,
+};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::se3::Pose;
 use tree_mech::runtime::{Baumgarte, CsvStream, Dynamics, ModelMotions, Prescription, Vector};
@@ -188,9 +190,13 @@ fn main() -> ExitCode {
                         let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
                         run_simulate(sys, &model.name, options, out, plot)
                     }
-                    EvaluationArg::Cached => {
-                        run_simulate(paper(PaperEvaluation::Cached)?, &model.name, options, out, plot)
-                    }
+                    EvaluationArg::Cached => run_simulate(
+                        paper(PaperEvaluation::Cached)?,
+                        &model.name,
+                        options,
+                        out,
+                        plot,
+                    ),
                     EvaluationArg::Uncached => run_simulate(
                         paper(PaperEvaluation::Uncached)?,
                         &model.name,
@@ -225,7 +231,12 @@ fn parse_baumgarte(text: Option<&str>) -> Result<Baumgarte, String> {
     };
     let v: Vec<f64> = text
         .split(',')
-        .map(|s| s.trim().parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0))
+        .map(|s| {
+            s.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite() && *x >= 0.0)
+        })
         .collect::<Option<_>>()
         .ok_or_else(|| format!("--baumgarte: `{text}` is not two non-negative numbers a,b"))?;
     match v[..] {
@@ -322,7 +333,8 @@ fn run_simulate<S: System<N = Dyn>>(
     bar.finish_and_clear();
     let wall = start.elapsed();
     if let Some(csv) = csv {
-        csv.finish().map_err(|e| format!("cannot write the trajectory: {e}"))?;
+        csv.finish()
+            .map_err(|e| format!("cannot write the trajectory: {e}"))?;
     }
     if let Some(p) = plot_path {
         plot::plot(&picture, name, p)?;
@@ -424,22 +436,30 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>, time: f64) -> Result
     let mut dynamics = Dynamics::new(&sys);
     let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-    let (qdd_json, lambda_json) =
-        match dynamics.acceleration(&mut sys, &mut NoForce, &mut motion, 0, time, &q, &dq, &mut qdd) {
-            Ok(()) => (
-                json!(dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>()),
-                json!(dynamics.lambda.as_slice()),
-            ),
-            Err(e) => (json!({ "error": e.to_string() }), json!(null)),
-        };
+    let (qdd_json, lambda_json) = match dynamics.acceleration(
+        &mut sys,
+        &mut NoForce,
+        &mut motion,
+        0,
+        time,
+        &q,
+        &dq,
+        &mut qdd,
+    ) {
+        Ok(()) => (
+            json!(dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>()),
+            json!(dynamics.lambda.as_slice()),
+        ),
+        Err(e) => (json!({ "error": e.to_string() }), json!(null)),
+    };
     let rows = sys.constraint_count();
     let mut c = ConstraintTerms::zeros(rows, n);
     sys.constraints(&q, &dq, Order::First, &mut c);
-    let name_list = |list: &[usize]| -> Vec<String> {
-        list.iter().map(|&i| names[i].clone()).collect()
-    };
-    let constraint_names: Vec<String> =
-        (0..rows).map(|r| sys.constraint_name(r).to_string()).collect();
+    let name_list =
+        |list: &[usize]| -> Vec<String> { list.iter().map(|&i| names[i].clone()).collect() };
+    let constraint_names: Vec<String> = (0..rows)
+        .map(|r| sys.constraint_name(r).to_string())
+        .collect();
     let dh: Vec<Vec<f64>> = (0..rows)
         .map(|r| (0..n).map(|i| c.dh[(r, i)]).collect())
         .collect();
@@ -514,9 +534,7 @@ fn run_check(path: &Path) -> Result<(), String> {
                 amplitude,
                 frequency,
                 phase,
-            }) => format!(
-                "kinematic, {offset} + {amplitude}·sin(2π·{frequency}·t + {phase})"
-            ),
+            }) => format!("kinematic, {offset} + {amplitude}·sin(2π·{frequency}·t + {phase})"),
             Some(tree_model::Motion::Spline(s)) => {
                 let (a, b) = s.span();
                 format!("kinematic, spline through samples on [{a}, {b}] s")

@@ -68,11 +68,30 @@ where
         }
         for k in 0..20 {
             let t = k as f64 * 0.01;
-            rk4.step(&mut sys, &mut NoForce, &mut motion, k, t, 0.01, &mut q, &mut dq)
-                .unwrap();
+            rk4.step(
+                &mut sys,
+                &mut NoForce,
+                &mut motion,
+                k,
+                t,
+                0.01,
+                &mut q,
+                &mut dq,
+            )
+            .unwrap();
             let mut h = 0.01;
-            rk45.step(&mut sys, &mut NoForce, &mut motion, k, t, 1.0, &mut h, &mut q, &mut dq)
-                .unwrap();
+            rk45.step(
+                &mut sys,
+                &mut NoForce,
+                &mut motion,
+                k,
+                t,
+                1.0,
+                &mut h,
+                &mut q,
+                &mut dq,
+            )
+            .unwrap();
             vi.step(
                 &mut sys,
                 &mut NoForce,

@@ -35,7 +35,11 @@ fn fd<T>(
 fn check_model(model: &Model, seed: u64) {
     check_system(TreeSystem::new(model).unwrap(), model, seed);
     if !model.has_elements() {
-        check_system(PaperSystem::new(model, PaperEvaluation::Cached).unwrap(), model, seed);
+        check_system(
+            PaperSystem::new(model, PaperEvaluation::Cached).unwrap(),
+            model,
+            seed,
+        );
         if model.dof() <= 8 {
             let sys = PaperSystem::new(model, PaperEvaluation::Uncached).unwrap();
             check_system(sys, model, seed);

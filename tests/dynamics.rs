@@ -120,7 +120,16 @@ fn double_pendulum_dynamics_match_the_textbook_equations() {
         let dq = rng.vector(2, 4.0);
         let mut qdd = Vector::<Dyn>::zeros(2);
         dynamics
-            .acceleration(&mut sys, &mut NoForce, &mut motion, 0, 0.0, &q, &dq, &mut qdd)
+            .acceleration(
+                &mut sys,
+                &mut NoForce,
+                &mut motion,
+                0,
+                0.0,
+                &q,
+                &dq,
+                &mut qdd,
+            )
             .unwrap();
         let expected = textbook_double_pendulum(q.as_slice(), dq.as_slice(), 9.81);
         for i in 0..2 {

@@ -8,8 +8,8 @@ use nalgebra::Dyn;
 use tree_mech::integrate::{
     simulate, Forcing, JacobianUpdate, Method, MidpointVi, SimOptions, ViSettings,
 };
-use tree_mech::tree_model;
 use tree_mech::runtime::{Pose, Vector};
+use tree_mech::tree_model;
 use tree_mech::{NoForce, Order, System, Terms, TreeSystem};
 
 #[test]

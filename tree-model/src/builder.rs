@@ -119,7 +119,14 @@ impl ModelBuilder {
     }
 
     /// Makes a variable kinematic, moving as `offset + amplitude·sin(2πf t + phase)`.
-    pub fn sine(mut self, var: &str, offset: f64, amplitude: f64, frequency: f64, phase: f64) -> Self {
+    pub fn sine(
+        mut self,
+        var: &str,
+        offset: f64,
+        amplitude: f64,
+        frequency: f64,
+        phase: f64,
+    ) -> Self {
         let s = self.settings(var);
         s.kinematic = Some(true);
         s.motion = Some(SineSpec {
@@ -140,7 +147,13 @@ impl ModelBuilder {
     }
 
     /// A distance constraint `‖p_a − p_b‖² − ℓ² = 0`; `length` is a number or a variable name.
-    pub fn distance(mut self, name: &str, a: &str, b: &str, length: impl Into<crate::Value>) -> Self {
+    pub fn distance(
+        mut self,
+        name: &str,
+        a: &str,
+        b: &str,
+        length: impl Into<crate::Value>,
+    ) -> Self {
         let length = match length.into() {
             crate::Value::Constant(x) => ParameterSpec::Constant(x),
             crate::Value::Variable(v) => {

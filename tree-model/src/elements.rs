@@ -4,9 +4,7 @@
 use std::collections::HashMap;
 
 use crate::error::{Problem, Section, Site};
-use crate::model::{
-    Constraint, ConstraintKind, Damper, Parameter, Spring, SpringKind, Variable,
-};
+use crate::model::{Constraint, ConstraintKind, Damper, Parameter, Spring, SpringKind, Variable};
 use crate::spec::{ModelSpec, ParameterSpec};
 
 /// Collects element problems into the validator's list.
@@ -40,7 +38,10 @@ fn two_frames(
     if names.len() != 2 {
         report.at(
             Some("frames"),
-            format!("{what}: `frames` must name exactly two frames, found {}", names.len()),
+            format!(
+                "{what}: `frames` must name exactly two frames, found {}",
+                names.len()
+            ),
         );
         return None;
     }
@@ -111,7 +112,10 @@ pub(crate) fn validate_elements(
             if given {
                 report.at(
                     Some(field),
-                    format!("{what}: `{field}` does not belong to a {} constraint", c.kind),
+                    format!(
+                        "{what}: `{field}` does not belong to a {} constraint",
+                        c.kind
+                    ),
                 );
             }
         };
@@ -155,7 +159,10 @@ pub(crate) fn validate_elements(
                         if !(norm.is_finite() && norm > 0.0) {
                             report.at(
                                 Some("normal"),
-                                format!("{what}: normal [{}, {}, {}] must be finite and not zero", n[0], n[1], n[2]),
+                                format!(
+                                    "{what}: normal [{}, {}, {}] must be finite and not zero",
+                                    n[0], n[1], n[2]
+                                ),
                             );
                             [0.0, 0.0, 1.0]
                         } else {

@@ -198,7 +198,10 @@ impl Model {
         !self.constraints.is_empty()
             || !self.springs.is_empty()
             || !self.dampers.is_empty()
-            || self.variables.iter().any(|v| v.is_kinematic() || v.frame.is_none())
+            || self
+                .variables
+                .iter()
+                .any(|v| v.is_kinematic() || v.frame.is_none())
     }
 
     /// The frames a constraint, spring or damper attaches to, each once, in frame order.

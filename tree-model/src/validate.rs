@@ -187,8 +187,11 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     }
 
     // Variables that only set a constraint's length come next, in constraint order.
-    let settings: HashMap<&str, &VariableSpec> =
-        spec.variables.iter().map(|v| (v.name.as_str(), v)).collect();
+    let settings: HashMap<&str, &VariableSpec> = spec
+        .variables
+        .iter()
+        .map(|v| (v.name.as_str(), v))
+        .collect();
     for (c, con) in spec.constraints.iter().enumerate() {
         if let Some(ParameterSpec::Variable(name)) = &con.length {
             if var_index.contains_key(name.as_str()) {
@@ -290,7 +293,10 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                 } else if sine[2] < 0.0 {
                     errs.push(
                         site(),
-                        format!("variable `{}`: motion frequency must not be negative", v.name),
+                        format!(
+                            "variable `{}`: motion frequency must not be negative",
+                            v.name
+                        ),
                     );
                 }
                 Some(Motion::Sine {
@@ -346,7 +352,8 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         errs.push(Site::Model, "model has no frames".into());
     }
 
-    let elements = crate::elements::validate_elements(spec, &index_of, &var_index, &variables, &mut errs.0);
+    let elements =
+        crate::elements::validate_elements(spec, &index_of, &var_index, &variables, &mut errs.0);
 
     if errs.0.is_empty() {
         let (constraints, springs, dampers) = elements;

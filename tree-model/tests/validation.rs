@@ -213,8 +213,14 @@ fn kinematic_variables_elements_and_their_motions_parse() {
     assert_eq!(m.dynamic(), [0, 1]);
     assert_eq!(m.kinematic(), [2, 3]);
     assert!(m.variables[3].frame.is_none());
-    assert_eq!(m.variables[3].q0, 1.0, "a spline starts at its first sample");
-    assert_eq!((m.constraints.len(), m.springs.len(), m.dampers.len()), (1, 2, 1));
+    assert_eq!(
+        m.variables[3].q0, 1.0,
+        "a spline starts at its first sample"
+    );
+    assert_eq!(
+        (m.constraints.len(), m.springs.len(), m.dampers.len()),
+        (1, 2, 1)
+    );
 }
 
 #[test]

@@ -191,11 +191,13 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let m = lambda.len();
-    cholesky_solve::<Dyn>(&mut k.mdd, &mut k.rhs).map_err(|(i, pivot)| SimError::SingularMassMatrix {
-        step,
-        t,
-        variable: sys.variable_name(split.dynamic[i]).to_string(),
-        pivot,
+    cholesky_solve::<Dyn>(&mut k.mdd, &mut k.rhs).map_err(|(i, pivot)| {
+        SimError::SingularMassMatrix {
+            step,
+            t,
+            variable: sys.variable_name(split.dynamic[i]).to_string(),
+            pivot,
+        }
     })?;
     if m == 0 {
         return Ok(());
@@ -213,10 +215,12 @@ where
     k.schur.gemm(1.0, &k.a, &k.y, 0.0);
     lambda.copy_from(&k.gamma);
     lambda.gemv(-1.0, &k.a, &k.rhs, 1.0);
-    cholesky_solve::<Dyn>(&mut k.schur, lambda).map_err(|(r, _)| SimError::SingularConstraints {
-        step,
-        t,
-        constraint: sys.constraint_name(r).to_string(),
+    cholesky_solve::<Dyn>(&mut k.schur, lambda).map_err(|(r, _)| {
+        SimError::SingularConstraints {
+            step,
+            t,
+            constraint: sys.constraint_name(r).to_string(),
+        }
     })?;
     // q̈_d = q̈_free + Y λ
     k.rhs.gemv(1.0, &k.y, lambda, 1.0);

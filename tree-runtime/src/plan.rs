@@ -214,7 +214,10 @@ impl TreePlan {
             variable_frames: model
                 .variables
                 .iter()
-                .map(|v| v.frame.map(|f| kept[f].expect("driven frames are always kept")))
+                .map(|v| {
+                    v.frame
+                        .map(|f| kept[f].expect("driven frames are always kept"))
+                })
                 .collect(),
             gravity: model.gravity,
             columns,

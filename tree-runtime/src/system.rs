@@ -1,7 +1,9 @@
 //! The one trait every simulated system implements — the interpreted tree and the code
 //! `tree_model!` generates — and the Lagrangian terms it yields.
 
-use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector, U1};
+use nalgebra::{
+    allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector, U1,
+};
 use tree_model::Motion;
 
 pub use crate::order::Order;

@@ -15,7 +15,9 @@ pub use vi::{Forcing, JacobianUpdate, MidpointVi, ViSettings};
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
-use crate::dynamics::{prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription};
+use crate::dynamics::{
+    prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription,
+};
 use crate::error::SimError;
 use crate::system::{Order, System, Terms, Vector};
 use crate::trajectory::{Sample, Trajectory};
@@ -140,9 +142,8 @@ where
     let constraints = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
-    let capacity = (options.duration / options.dt / options.every.max(1) as f64)
-        .clamp(0.0, 1e6) as usize
-        + 2;
+    let capacity =
+        (options.duration / options.dt / options.every.max(1) as f64).clamp(0.0, 1e6) as usize + 2;
     let mut traj = Trajectory::new(names, constraints, capacity);
     let summary = run(sys, q0, dq0, options, force, &mut motion, &mut |s| {
         traj.push(s);
@@ -186,7 +187,14 @@ where
     let mut dq = dq0.clone();
     let mut dynamics = Dynamics::new(sys);
     dynamics.baumgarte = options.baumgarte;
-    prescribe(&dynamics.split.kinematic, motion, 0.0, &mut q, &mut dq, None);
+    prescribe(
+        &dynamics.split.kinematic,
+        motion,
+        0.0,
+        &mut q,
+        &mut dq,
+        None,
+    );
     if q.iter().chain(dq.iter()).any(|x| !x.is_finite()) {
         return Err(SimError::NonFinite {
             step: 0,
@@ -301,7 +309,17 @@ where
             )?;
             for k in 0..steps {
                 let t = k as f64 * options.dt;
-                vi.step(sys, force, motion, k, t, options.dt, &mut q, &mut p, &mut q_next)?;
+                vi.step(
+                    sys,
+                    force,
+                    motion,
+                    k,
+                    t,
+                    options.dt,
+                    &mut q,
+                    &mut p,
+                    &mut q_next,
+                )?;
                 summary.newton_iterations += vi.iterations;
                 summary.subdivided_steps += (vi.subdivisions > 0) as usize;
                 if (k + 1) % every == 0 || k + 1 == steps {

@@ -46,7 +46,11 @@ where
     let solve = |c: &ConstraintTerms, gram: &mut DMatrix<f64>, y: &mut DVector<f64>| {
         for r in 0..m {
             for s in 0..m {
-                gram[(r, s)] = split.dynamic.iter().map(|&i| c.dh[(r, i)] * c.dh[(s, i)]).sum();
+                gram[(r, s)] = split
+                    .dynamic
+                    .iter()
+                    .map(|&i| c.dh[(r, i)] * c.dh[(s, i)])
+                    .sum();
             }
         }
         cholesky_solve::<Dyn>(gram, y)

@@ -63,7 +63,14 @@ where
             }
             let ts = t + C[s] * dt;
             let kinematic = &self.dynamics.split.kinematic;
-            prescribe(kinematic, motion, ts, &mut self.q_stage, &mut self.v_stage, None);
+            prescribe(
+                kinematic,
+                motion,
+                ts,
+                &mut self.q_stage,
+                &mut self.v_stage,
+                None,
+            );
             self.kq[s].copy_from(&self.v_stage);
             self.dynamics.acceleration(
                 sys,

@@ -165,7 +165,14 @@ where
                 }
                 let ts = t + C[s] * h;
                 let kinematic = &self.dynamics.split.kinematic;
-                prescribe(kinematic, motion, ts, &mut self.q_stage, &mut self.v_stage, None);
+                prescribe(
+                    kinematic,
+                    motion,
+                    ts,
+                    &mut self.q_stage,
+                    &mut self.v_stage,
+                    None,
+                );
                 self.kq[s].copy_from(&self.v_stage);
                 self.evaluations += 1;
                 match self.dynamics.acceleration(

@@ -206,8 +206,8 @@ where
         let nd = split.dynamic.len();
         // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + f⁻ + Δt Dh(q1)ᵀλ
         for (r, &i) in split.dynamic.iter().enumerate() {
-            let mut x = p1[i] + (1.0 - a) * dt * t2.dl_dq[i] - t2.dl_ddq[i]
-                + left * dt * self.force[i];
+            let mut x =
+                p1[i] + (1.0 - a) * dt * t2.dl_dq[i] - t2.dl_ddq[i] + left * dt * self.force[i];
             for s in 0..split.rows {
                 x += dt * self.dh1[(s, i)] * self.lambda[s];
             }
@@ -479,7 +479,14 @@ where
         self.velocity.fill(0.0);
         sys.lagrangian(q, &self.velocity, Order::Dynamics, &mut self.terms);
         self.q_alpha.copy_from(q);
-        prescribe(&self.split.kinematic, motion, t, &mut self.q_alpha, dq, None);
+        prescribe(
+            &self.split.kinematic,
+            motion,
+            t,
+            &mut self.q_alpha,
+            dq,
+            None,
+        );
         let split = &self.split;
         let k = &mut self.reduced;
         let mass = &self.terms.mass;
@@ -497,7 +504,11 @@ where
             let c = &mut self.constraint_terms;
             sys.constraints(q, &self.velocity, Order::First, c);
             for r in 0..split.rows {
-                k.gamma[r] = -split.kinematic.iter().map(|&j| c.dh[(r, j)] * dq[j]).sum::<f64>();
+                k.gamma[r] = -split
+                    .kinematic
+                    .iter()
+                    .map(|&j| c.dh[(r, j)] * dq[j])
+                    .sum::<f64>();
                 for (col, &j) in split.dynamic.iter().enumerate() {
                     k.a[(r, col)] = c.dh[(r, j)];
                 }

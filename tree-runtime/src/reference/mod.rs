@@ -123,7 +123,8 @@ impl System for PaperSystem {
         panic!("constraint {r} of a model without constraints")
     }
 
-    fn constraints(&mut self, _: &Vector<Dyn>, _: &Vector<Dyn>, _: Order, _: &mut ConstraintTerms) {}
+    fn constraints(&mut self, _: &Vector<Dyn>, _: &Vector<Dyn>, _: Order, _: &mut ConstraintTerms) {
+    }
 
     fn lagrangian(
         &mut self,
