@@ -8,7 +8,10 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
-use tree_mech::{tree_model, Evaluation, NoForce, Order, System, Terms, TreeSystem};
+use tree_mech::runtime::ModelMotions;
+use tree_mech::{
+    tree_model, NoForce, Order, PaperEvaluation, PaperSystem, System, Terms, TreeSystem,
+};
 
 tree_model!(struct P1 from "benches/models/pendulum-1.toml");
 tree_model!(struct P2 from "benches/models/pendulum-2.toml");
@@ -58,7 +61,8 @@ where
             jacobian,
             ..ViSettings::default()
         };
-        let mut vi = MidpointVi::new(sys.dim(), settings);
+        let mut vi = MidpointVi::new(&sys, settings);
+        let mut motion = ModelMotions::of(&sys);
         let p0 = vi.initial_momentum(&mut sys, &q, &dq);
         let mut next = q.clone();
         c.bench_function(&format!("{name}/{label}/{size}"), |b| {
@@ -66,19 +70,30 @@ where
                 || (q.clone(), p0.clone()),
                 |(qk, pk)| {
                     vi.last_velocity.copy_from(&dq);
-                    vi.step(&mut sys, &mut NoForce, 0, 0.0, 0.01, qk, pk, &mut next)
-                        .unwrap();
+                    vi.step(
+                        &mut sys,
+                        &mut NoForce,
+                        &mut motion,
+                        0,
+                        0.0,
+                        0.01,
+                        qk,
+                        pk,
+                        &mut next,
+                    )
+                    .unwrap();
                 },
                 criterion::BatchSize::SmallInput,
             )
         });
     }
-    let mut rk = Rk4::new(sys.dim());
+    let mut rk = Rk4::new(&sys);
+    let mut motion = ModelMotions::of(&sys);
     c.bench_function(&format!("rk4_step/{label}/{size}"), |b| {
         b.iter_batched_ref(
             || (q.clone(), dq.clone()),
             |(qk, vk)| {
-                rk.step(&mut sys, &mut NoForce, 0, 0.0, 0.01, qk, vk)
+                rk.step(&mut sys, &mut NoForce, &mut motion, 0, 0.0, 0.01, qk, vk)
                     .unwrap()
             },
             criterion::BatchSize::SmallInput,
@@ -87,15 +102,15 @@ where
 }
 
 fn bench_interpreted(c: &mut Criterion, size: &str, model: &tree_model::Model) {
+    bench_system(c, "sweeps", size, TreeSystem::new(model).unwrap());
     for (label, mode) in [
-        ("sweeps", Evaluation::Sweeps),
-        ("cached", Evaluation::Cached),
-        ("uncached", Evaluation::Uncached),
+        ("cached", PaperEvaluation::Cached),
+        ("uncached", PaperEvaluation::Uncached),
     ] {
-        if mode == Evaluation::Uncached && model.dof() > 19 {
+        if mode == PaperEvaluation::Uncached && model.dof() > 19 {
             continue;
         }
-        bench_system(c, label, size, TreeSystem::new(model, mode).unwrap());
+        bench_system(c, label, size, PaperSystem::new(model, mode).unwrap());
     }
 }
 

@@ -76,6 +76,9 @@ impl Default for ViSettings {
     }
 }
 
+/// A state saved before a step that may be subdivided: `(q, p, last velocity, λ)`.
+type SavedState<N> = (Vector<N>, Vector<N>, Vector<N>, DVector<f64>);
+
 /// Variational-integrator workspace (nothing allocated per step).
 #[derive(Clone, Debug)]
 pub struct MidpointVi<N: Dim>
@@ -102,7 +105,7 @@ where
     /// Multipliers of the velocity projection in `velocity_and_energy`.
     projection: DVector<f64>,
     /// States saved before a step, one per subdivision level: `(q, p, last velocity, λ)`.
-    saved: Vec<(Vector<N>, Vector<N>, Vector<N>, DVector<f64>)>,
+    saved: Vec<SavedState<N>>,
     /// The last step's average velocity `(q_{k+1} − q_k)/Δt`, used to predict the next.
     pub last_velocity: Vector<N>,
     /// Newton iterations of the last step (all its sub-steps).
