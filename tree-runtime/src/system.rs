@@ -22,7 +22,7 @@ pub struct Terms<N: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    /// `L = Σ_k ½ v_kᵀ M_k v_k + m_k γ·p_k` (eq. (15), gravity sign as in docs/derivations.md §2 §3).
+    /// `L = Σ_k ½ v_kᵀ M_k v_k + m_k γ·p_k` (eq. (15), gravity sign as in docs/derivations.md §2).
     pub l: f64,
     /// `∂L/∂q` (eq. (16)).
     pub dl_dq: Vector<N>,
