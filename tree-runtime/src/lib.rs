@@ -12,7 +12,7 @@
 //! let model = tree_model::n_link_pendulum(2);
 //! let mut sys = TreeSystem::new(&model).unwrap();
 //! let (q0, dq0) = sys.initial_state();
-//! let options = SimOptions { method: Method::Vi(ViSettings::default()), dt: 0.01, duration: 1.0 };
+//! let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 1.0);
 //! let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
 //! assert_eq!(traj.len(), 101);
 //! assert!(traj.max_energy_error() < 1e-2);
