@@ -103,7 +103,7 @@ where
                 &mut p,
                 &mut next,
             )
-            .unwrap();
+            .unwrap_or_else(|e| panic!("{what}: {e}"));
             vi_reuse
                 .step(
                     &mut sys,

@@ -63,29 +63,18 @@ impl Recorder {
     }
 }
 
-/// The constraints up to `order`, traced.
-fn constraints_program(plan: &TreePlan, order: Order) -> Program {
-    let n = plan.dof();
-    let (nodes, outputs) = trace::record(|| {
-        let q: Vec<Term> = (0..n).map(trace::q).collect();
-        let dq: Vec<Term> = (0..n).map(trace::dq).collect();
-        let mut ws = Workspace::<Term>::new(plan);
-        let mut out = Recorder::default();
-        sweeps::constraints(plan, &mut ws, &q, &dq, order, &mut out);
-        out.into_outputs()
-    });
-    Program { nodes, outputs }
-}
+/// One of the runtime's evaluations over the tree (`sweeps::evaluate`, `sweeps::constraints`).
+type Evaluation = fn(&TreePlan, &mut Workspace<Term>, &[Term], &[Term], Order, &mut Recorder);
 
-/// The Lagrangian terms up to `order`, traced.
-fn lagrangian_program(plan: &TreePlan, order: Order) -> Program {
+/// `evaluation` up to `order`, traced.
+fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Program {
     let n = plan.dof();
     let (nodes, outputs) = trace::record(|| {
         let q: Vec<Term> = (0..n).map(trace::q).collect();
         let dq: Vec<Term> = (0..n).map(trace::dq).collect();
         let mut ws = Workspace::<Term>::new(plan);
         let mut out = Recorder::default();
-        sweeps::evaluate(plan, &mut ws, &q, &dq, order, &mut out);
+        evaluation(plan, &mut ws, &q, &dq, order, &mut out);
         out.into_outputs()
     });
     Program { nodes, outputs }
@@ -131,7 +120,7 @@ fn constant_name(prefix: &str, name: &str) -> String {
 }
 
 /// Associated items the expansion defines itself.
-const RESERVED: [&str; 8] = [
+const RESERVED: [&str; 9] = [
     "DOF",
     "VARIABLES",
     "FRAMES",
@@ -140,6 +129,7 @@ const RESERVED: [&str; 8] = [
     "DAMPING",
     "STATEMENTS",
     "CONSTRAINTS",
+    "KINEMATIC",
 ];
 
 /// Named index constants, failing on two names that map to one constant or on a reserved one.
@@ -253,15 +243,17 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         .collect();
 
     let terms_ty = quote!(::tree_mech::runtime::Terms<::tree_mech::runtime::nalgebra::Const<#n>>);
-    let first = lagrangian_program(&plan, Order::First).emit("__first", n, &terms_ty);
-    let dynamics = lagrangian_program(&plan, Order::Dynamics).emit("__dynamics", n, &terms_ty);
-    let full = lagrangian_program(&plan, Order::Full).emit("__full", n, &terms_ty);
+    let lagrangian: Evaluation = sweeps::evaluate;
+    let constraints: Evaluation = sweeps::constraints;
+    let first = traced(&plan, Order::First, lagrangian).emit("__first", n, &terms_ty);
+    let dynamics = traced(&plan, Order::Dynamics, lagrangian).emit("__dynamics", n, &terms_ty);
+    let full = traced(&plan, Order::Full, lagrangian).emit("__full", n, &terms_ty);
     let poses = poses_program(&plan).emit("__poses", n, &quote!([::tree_mech::runtime::Pose]));
     let constraint_ty = quote!(::tree_mech::runtime::ConstraintTerms);
-    let c_first = constraints_program(&plan, Order::First).emit("__c_first", n, &constraint_ty);
+    let c_first = traced(&plan, Order::First, constraints).emit("__c_first", n, &constraint_ty);
     let c_dynamics =
-        constraints_program(&plan, Order::Dynamics).emit("__c_dynamics", n, &constraint_ty);
-    let c_full = constraints_program(&plan, Order::Full).emit("__c_full", n, &constraint_ty);
+        traced(&plan, Order::Dynamics, constraints).emit("__c_dynamics", n, &constraint_ty);
+    let c_full = traced(&plan, Order::Full, constraints).emit("__c_full", n, &constraint_ty);
     let functions = [
         &first.functions,
         &dynamics.functions,
@@ -275,18 +267,15 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         (&c_first.body, &c_dynamics.body, &c_full.body);
     let rows = plan.rows;
     let constraint_names = model.constraint_row_names();
-    let motions: Vec<TokenStream> = model
-        .variables
-        .iter()
-        .map(|v| match &v.motion {
-            None => quote!(None),
-            Some(_) => quote!(Self::model().variables[i].motion.clone()),
-        })
-        .collect();
     let (first_body, dynamics_body, full_body, poses_body) =
         (&first.body, &dynamics.body, &full.body, &poses.body);
     let statements = full.statements;
-    let indices: Vec<usize> = (0..n).collect();
+    // The Full evaluation writes force derivatives exactly when the model has damping or
+    // dampers (elements::forces).
+    let mark_force_derivatives = (plan.damping.iter().any(|&c| c != 0.0)
+        || !plan.dampers.is_empty())
+    .then(|| quote!(out.force_derivatives = true;));
+    let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
     let full_path = file
         .as_ref()
         .map(|(full, shown)| (full.to_string_lossy().into_owned(), shown.clone()));
@@ -330,6 +319,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             pub const DQ0: [f64; #n] = [#(#dq0),*];
             /// Damping coefficients.
             pub const DAMPING: [f64; #n] = [#(#damping),*];
+            /// Which variables are kinematic (prescribed).
+            pub const KINEMATIC: [bool; #n] = [#(#kinematic),*];
             /// Constraint equation names, in order.
             pub const CONSTRAINTS: [&'static str; #rows] = [#(#constraint_names),*];
             /// Statements in one full (second-order) evaluation.
@@ -377,11 +368,17 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 Self::DAMPING[i]
             }
 
+            /// Read from the model (allocates): call it when setting up, not per step.
             fn motion(&self, i: usize) -> Option<::tree_mech::tree_model::Motion> {
-                match i {
-                    #(#indices => #motions,)*
-                    _ => None,
+                if Self::KINEMATIC[i] {
+                    Self::model().variables[i].motion.clone()
+                } else {
+                    None
                 }
+            }
+
+            fn is_kinematic(&self, i: usize) -> bool {
+                Self::KINEMATIC[i]
             }
 
             fn constraint_count(&self) -> usize {
@@ -422,7 +419,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 match order {
                     ::tree_mech::runtime::Order::First => { #first_body }
                     ::tree_mech::runtime::Order::Dynamics => { #dynamics_body }
-                    ::tree_mech::runtime::Order::Full => { #full_body }
+                    ::tree_mech::runtime::Order::Full => { #full_body #mark_force_derivatives }
                 }
             }
 

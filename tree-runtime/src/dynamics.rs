@@ -7,7 +7,7 @@ use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dy
 use tree_model::Motion;
 
 use crate::error::SimError;
-use crate::linalg::cholesky_solve;
+use crate::linalg::{cholesky_solve, cholesky_substitute};
 use crate::system::{ConstraintTerms, Matrix, Order, System, Terms, Vector};
 
 /// An external generalized force `u(t, q, q̇)` (joint torques, actuators, …), added to the
@@ -148,18 +148,17 @@ where
     reduced: ReducedKkt,
 }
 
-/// The dynamic rows of `M q̈ = rhs + Dhᵀλ` with the constraint rows, solved by the
-/// Cholesky factor of `M_dd` and the Schur complement `Dh_d M_dd⁻¹ Dh_dᵀ`.
+/// Scratch for the reduced system of the dynamic variables (see [`ReducedKkt::solve`]).
 #[derive(Clone, Debug)]
 pub(crate) struct ReducedKkt {
-    pub(crate) mdd: DMatrix<f64>,
-    pub(crate) rhs: DVector<f64>,
-    pub(crate) a: DMatrix<f64>,
+    mdd: DMatrix<f64>,
+    rhs: DVector<f64>,
+    a: DMatrix<f64>,
     /// `M_dd⁻¹ Dh_dᵀ`, column by column.
     y: DMatrix<f64>,
     column: DVector<f64>,
     schur: DMatrix<f64>,
-    pub(crate) gamma: DVector<f64>,
+    gamma: DVector<f64>,
 }
 
 impl ReducedKkt {
@@ -174,57 +173,85 @@ impl ReducedKkt {
             gamma: DVector::zeros(m),
         }
     }
-}
 
-/// Solves the reduced system: on entry `k.mdd`, `k.rhs`, `k.a` (Dh_d) and `k.gamma` (the
-/// constraint's right side) are set; on exit `k.rhs` holds `q̈_d` and `lambda` the
-/// multipliers. Errors name the dynamic variable or the constraint.
-pub(crate) fn solve_reduced<S: System>(
-    k: &mut ReducedKkt,
-    lambda: &mut DVector<f64>,
-    sys: &S,
-    split: &Split,
-    step: usize,
-    t: f64,
-) -> Result<(), SimError>
-where
-    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
-{
-    let m = lambda.len();
-    cholesky_solve::<Dyn>(&mut k.mdd, &mut k.rhs).map_err(|(i, pivot)| {
-        SimError::SingularMassMatrix {
-            step,
-            t,
-            variable: sys.variable_name(split.dynamic[i]).to_string(),
-            pivot,
+    /// Solves for the dynamic entries of `x` (its kinematic entries given)
+    /// `M_dd x_d − Dh_dᵀλ = b_d − M_dk x_k` and `Dh_d x_d = γ − Dh_k x_k`, by the Cholesky
+    /// factor of `M_dd` and the Schur complement `Dh_d M_dd⁻¹ Dh_dᵀ` (docs/derivations.md §6).
+    /// Without constraints `dh` and `gamma` are not read. Errors name the dynamic variable or
+    /// the constraint at fault.
+    pub(crate) fn solve<S: System>(
+        &mut self,
+        sys: &S,
+        split: &Split,
+        mass: &Matrix<S::N>,
+        b: &Vector<S::N>,
+        dh: &DMatrix<f64>,
+        gamma: impl Fn(usize) -> f64,
+        x: &mut Vector<S::N>,
+        lambda: &mut DVector<f64>,
+        step: usize,
+        t: f64,
+    ) -> Result<(), SimError>
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        for (r, &i) in split.dynamic.iter().enumerate() {
+            self.rhs[r] = b[i]
+                - split
+                    .kinematic
+                    .iter()
+                    .map(|&k| mass[(i, k)] * x[k])
+                    .sum::<f64>();
+            for (c, &j) in split.dynamic.iter().enumerate() {
+                self.mdd[(r, c)] = mass[(i, j)];
+            }
         }
-    })?;
-    if m == 0 {
-        return Ok(());
+        for r in 0..split.rows {
+            self.gamma[r] = gamma(r)
+                - split
+                    .kinematic
+                    .iter()
+                    .map(|&k| dh[(r, k)] * x[k])
+                    .sum::<f64>();
+            for (c, &j) in split.dynamic.iter().enumerate() {
+                self.a[(r, c)] = dh[(r, j)];
+            }
+        }
+        cholesky_solve::<Dyn>(&mut self.mdd, &mut self.rhs).map_err(|(i, pivot)| {
+            SimError::SingularMassMatrix {
+                step,
+                t,
+                variable: sys.variable_name(split.dynamic[i]).to_string(),
+                pivot,
+            }
+        })?;
+        if split.rows > 0 {
+            // Y = M_dd⁻¹ Dh_dᵀ with the factor now in `mdd`.
+            for r in 0..split.rows {
+                for (c, v) in self.column.iter_mut().enumerate() {
+                    *v = self.a[(r, c)];
+                }
+                cholesky_substitute::<Dyn>(&self.mdd, &mut self.column);
+                self.y.set_column(r, &self.column);
+            }
+            // (A Y) λ = γ − A x_free, then x_d = x_free + Y λ.
+            self.schur.gemm(1.0, &self.a, &self.y, 0.0);
+            lambda.copy_from(&self.gamma);
+            lambda.gemv(-1.0, &self.a, &self.rhs, 1.0);
+            cholesky_solve::<Dyn>(&mut self.schur, lambda).map_err(|(r, _)| {
+                SimError::SingularConstraints {
+                    step,
+                    t,
+                    constraint: sys.constraint_name(r).to_string(),
+                }
+            })?;
+            self.rhs.gemv(1.0, &self.y, lambda, 1.0);
+        }
+        for (r, &i) in split.dynamic.iter().enumerate() {
+            x[i] = self.rhs[r];
+        }
+        Ok(())
     }
-    // Y = M⁻¹Aᵀ with the factor already in mdd (cholesky_solve factors in place; solving
-    // again reuses it through a zero-pivot-free triangular pair).
-    for r in 0..m {
-        for (c, x) in k.column.iter_mut().enumerate() {
-            *x = k.a[(r, c)];
-        }
-        crate::linalg::cholesky_substitute::<Dyn>(&k.mdd, &mut k.column);
-        k.y.set_column(r, &k.column);
-    }
-    // S = A Y, right side γ − A q̈_free.
-    k.schur.gemm(1.0, &k.a, &k.y, 0.0);
-    lambda.copy_from(&k.gamma);
-    lambda.gemv(-1.0, &k.a, &k.rhs, 1.0);
-    cholesky_solve::<Dyn>(&mut k.schur, lambda).map_err(|(r, _)| {
-        SimError::SingularConstraints {
-            step,
-            t,
-            constraint: sys.constraint_name(r).to_string(),
-        }
-    })?;
-    // q̈_d = q̈_free + Y λ
-    k.rhs.gemv(1.0, &k.y, lambda, 1.0);
-    Ok(())
 }
 
 impl<N: Dim> Dynamics<N>
@@ -284,46 +311,31 @@ where
                 }
             })?;
         } else {
-            let split = &self.split;
-            for &i in &split.kinematic {
+            for &i in &self.split.kinematic {
                 qdd[i] = motion.kinematic(i, t)[2];
             }
-            let k = &mut self.reduced;
-            let mass = &self.terms.mass;
-            for (r, &i) in split.dynamic.iter().enumerate() {
-                let mut x = self.rhs[i];
-                for &j in &split.kinematic {
-                    x -= mass[(i, j)] * qdd[j];
-                }
-                k.rhs[r] = x;
-                for (c, &j) in split.dynamic.iter().enumerate() {
-                    k.mdd[(r, c)] = mass[(i, j)];
-                }
-            }
-            if split.rows > 0 {
-                let c = &mut self.constraint_terms;
+            let c = &mut self.constraint_terms;
+            if self.split.rows > 0 {
                 sys.constraints(q, dq, Order::Dynamics, c);
-                let b = self.baumgarte;
-                for r in 0..split.rows {
-                    // γ = −Dh_k q̈_k − q̇ᵀD²h q̇ − 2a ḣ − b² h
-                    let mut gamma = -c.dh_dot[r] - b.b * b.b * c.h[r];
-                    if b.a != 0.0 {
-                        let rate: f64 = (0..dq.len()).map(|i| c.dh[(r, i)] * dq[i]).sum();
-                        gamma -= 2.0 * b.a * rate;
-                    }
-                    for &j in &split.kinematic {
-                        gamma -= c.dh[(r, j)] * qdd[j];
-                    }
-                    k.gamma[r] = gamma;
-                    for (col, &j) in split.dynamic.iter().enumerate() {
-                        k.a[(r, col)] = c.dh[(r, j)];
-                    }
-                }
             }
-            solve_reduced(k, &mut self.lambda, sys, split, step, t)?;
-            for (r, &i) in split.dynamic.iter().enumerate() {
-                qdd[i] = k.rhs[r];
-            }
+            // γ = −q̇ᵀD²h q̇ − 2a ḣ − b² h (the Dh_k q̈_k part is the solver's).
+            let b = self.baumgarte;
+            let gamma = |r: usize| {
+                let rate: f64 = (0..dq.len()).map(|i| c.dh[(r, i)] * dq[i]).sum();
+                -c.dh_dot[r] - 2.0 * b.a * rate - b.b * b.b * c.h[r]
+            };
+            self.reduced.solve(
+                sys,
+                &self.split,
+                &self.terms.mass,
+                &self.rhs,
+                &c.dh,
+                gamma,
+                qdd,
+                &mut self.lambda,
+                step,
+                t,
+            )?;
         }
         if qdd.iter().chain(self.lambda.iter()).any(|x| !x.is_finite()) {
             return Err(SimError::NonFinite {

@@ -40,6 +40,9 @@ where
     pub dforce_dq: Matrix<N>,
     /// `∂F/∂q̇` (at `Order::Full`).
     pub dforce_ddq: Matrix<N>,
+    /// Whether the last evaluation wrote `dforce_dq`/`dforce_ddq`; while false both are zero
+    /// (a model without damping or dampers leaves them so, and consumers may skip them).
+    pub force_derivatives: bool,
 }
 
 impl<N: Dim> Terms<N>
@@ -58,6 +61,7 @@ where
             force: Vector::zeros_generic(n, U1),
             dforce_dq: Matrix::zeros_generic(n, n),
             dforce_ddq: Matrix::zeros_generic(n, n),
+            force_derivatives: false,
         }
     }
 
@@ -73,8 +77,11 @@ where
         }
         if order >= Order::Full {
             self.d2l_dq_dq.fill(0.0);
-            self.dforce_dq.fill(0.0);
-            self.dforce_ddq.fill(0.0);
+            if self.force_derivatives {
+                self.dforce_dq.fill(0.0);
+                self.dforce_ddq.fill(0.0);
+                self.force_derivatives = false;
+            }
         }
     }
 
@@ -98,8 +105,14 @@ where
             Output::D2lDdqDq(i, j) => self.d2l_ddq_dq[(i, j)] += x,
             Output::D2lDqDq(i, j) => self.d2l_dq_dq[(i, j)] += x,
             Output::Force(i) => self.force[i] += x,
-            Output::DforceDq(i, j) => self.dforce_dq[(i, j)] += x,
-            Output::DforceDdq(i, j) => self.dforce_ddq[(i, j)] += x,
+            Output::DforceDq(i, j) => {
+                self.force_derivatives = true;
+                self.dforce_dq[(i, j)] += x
+            }
+            Output::DforceDdq(i, j) => {
+                self.force_derivatives = true;
+                self.dforce_ddq[(i, j)] += x
+            }
             Output::H(_) | Output::Dh(..) | Output::DhDot(_) | Output::D2h(..) => {}
         }
     }

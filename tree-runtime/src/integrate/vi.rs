@@ -6,6 +6,10 @@
 //! `p₁ + D₁L_d(q₁, q₂) + f⁻ + Δt·Dh(q₁)ᵀλ = 0` (dynamic rows) and `h(q₂) = 0`, by Newton with
 //! the exact Jacobian (eq. (26), the forces' derivatives, `Δt·Dh(q₁)ᵀ` and `Dh(q₂)`); the
 //! kinematic part of `q₂` is its prescription at `t₂`. Then `p₂ = D₂L_d(q₁, q₂) + f⁺`.
+//! The Newton system `[[J, B], [C, 0]]` (J over all variables, identity on the kinematic
+//! ones; `B = Δt Dh(q₁)ᵀ`, `C = Dh(q₂)`) is solved by block elimination: the LU factor of the
+//! fixed-size `J`, then the `m × m` Schur complement `C J⁻¹ B`. Without constraints that is
+//! the plain Newton step on `J` alone.
 //! In trep's notation `p₁ + D₁L_d + f⁻ − Dh(q₁)ᵀλ₁ = 0`, so trep's `λ₁ = −Δt·λ`: ours is a
 //! force, comparable with the continuous multipliers.
 //!
@@ -15,12 +19,10 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dyn};
 
-use crate::dynamics::{
-    prescribe, solve_reduced, GeneralizedForce, Prescription, ReducedKkt, Split,
-};
+use crate::dynamics::{prescribe, GeneralizedForce, Prescription, ReducedKkt, Split};
 use crate::error::SimError;
-use crate::linalg::{lu_factor, lu_solve_factored, Pivots};
-use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
+use crate::linalg::{lu_factor, lu_solve, lu_solve_factored, Pivots};
+use crate::system::{ConstraintTerms, Matrix, Order, System, Terms, Vector};
 
 /// When the VI's Newton iteration re-evaluates its exact Jacobian (eq. (26)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -76,9 +78,6 @@ impl Default for ViSettings {
     }
 }
 
-/// A state saved before a step that may be subdivided: `(q, p, last velocity, λ)`.
-type SavedState<N> = (Vector<N>, Vector<N>, Vector<N>, DVector<f64>);
-
 /// Variational-integrator workspace (nothing allocated per step).
 #[derive(Clone, Debug)]
 pub struct MidpointVi<N: Dim>
@@ -94,20 +93,33 @@ where
     pub split: Split,
     /// The constraint forces of the last step (see the module docs for trep's scaling).
     pub lambda: DVector<f64>,
-    residual: DVector<f64>,
-    jacobian: DMatrix<f64>,
-    factors: DMatrix<f64>,
-    pivots: Pivots<Dyn>,
+    /// Dynamic rows of the residual (kinematic entries zero).
+    residual: Vector<N>,
+    /// `∂r/∂q₂`, identity on the kinematic variables.
+    jacobian: Matrix<N>,
+    factors: Matrix<N>,
+    pivots: Pivots<N>,
+    /// `J⁻¹B`, column by column, for the factor in `factors`.
+    y: DMatrix<f64>,
+    column: Vector<N>,
+    schur: DMatrix<f64>,
+    /// Newton's update of λ.
+    dlambda: DVector<f64>,
     q_alpha: Vector<N>,
     velocity: Vector<N>,
     force: Vector<N>,
+    /// A zero velocity (constraints are evaluated at rest: `h`, `Dh` do not depend on q̇).
+    zero: Vector<N>,
     reduced: ReducedKkt,
     /// Multipliers of the velocity projection in `velocity_and_energy`.
     projection: DVector<f64>,
-    /// States saved before a step, one per subdivision level: `(q, p, last velocity, λ)`.
-    saved: Vec<SavedState<N>>,
+    /// `λ` saved before a step, one per subdivision level (a failed step leaves q, p and the
+    /// predictor untouched; only Newton's λ moves).
+    saved_lambda: Vec<DVector<f64>>,
     /// The last step's average velocity `(q_{k+1} − q_k)/Δt`, used to predict the next.
     pub last_velocity: Vector<N>,
+    /// The step length of the last residual.
+    dt: f64,
     /// Newton iterations of the last step (all its sub-steps).
     pub iterations: usize,
     /// Subdivisions the last step needed (0 when it went through whole).
@@ -129,19 +141,23 @@ where
             constraint_terms: ConstraintTerms::zeros(m, n.value()),
             dh1: DMatrix::zeros(m, n.value()),
             lambda: DVector::zeros(m),
-            residual: DVector::zeros(nd + m),
-            jacobian: DMatrix::zeros(nd + m, nd + m),
-            factors: DMatrix::zeros(nd + m, nd + m),
-            pivots: Pivots::<Dyn>::zeros_generic(Dyn(nd + m), nalgebra::U1),
+            residual: z(),
+            jacobian: Matrix::zeros_generic(n, n),
+            factors: Matrix::zeros_generic(n, n),
+            pivots: Pivots::<N>::zeros_generic(n, nalgebra::U1),
+            y: DMatrix::zeros(n.value(), m),
+            column: z(),
+            schur: DMatrix::zeros(m, m),
+            dlambda: DVector::zeros(m),
             q_alpha: z(),
             velocity: z(),
             force: z(),
+            zero: z(),
             reduced: ReducedKkt::new(nd, m),
             projection: DVector::zeros(m),
-            saved: (0..=settings.max_subdivisions)
-                .map(|_| (z(), z(), z(), DVector::zeros(m)))
-                .collect(),
+            saved_lambda: vec![DVector::zeros(m); settings.max_subdivisions + 1],
             last_velocity: z(),
+            dt: 0.0,
             iterations: 0,
             subdivisions: 0,
             split,
@@ -163,8 +179,7 @@ where
     /// Evaluates `Dh(q₁)` for the step from `q₁` (before [`Self::residual`]).
     pub fn prepare<S: System<N = N>>(&mut self, sys: &mut S, q1: &Vector<N>) {
         if self.split.rows > 0 {
-            self.velocity.fill(0.0);
-            sys.constraints(q1, &self.velocity, Order::First, &mut self.constraint_terms);
+            sys.constraints(q1, &self.zero, Order::First, &mut self.constraint_terms);
             self.dh1.copy_from(&self.constraint_terms.dh);
         }
     }
@@ -185,7 +200,7 @@ where
         p1: &Vector<N>,
         q2: &Vector<N>,
         jacobian: bool,
-    ) -> &DVector<f64>
+    ) -> &Vector<N>
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
@@ -201,60 +216,160 @@ where
         self.velocity /= dt;
         self.q_alpha.copy_from(q1);
         self.q_alpha.axpy(a * dt, &self.velocity, 1.0);
+        self.dt = dt;
         let order = if jacobian { Order::Full } else { Order::First };
         sys.lagrangian(&self.q_alpha, &self.velocity, order, &mut self.terms);
         self.force.copy_from(&self.terms.force);
         force.add_force(t + a * dt, &self.q_alpha, &self.velocity, &mut self.force);
         let (split, t2) = (&self.split, &self.terms);
-        let nd = split.dynamic.len();
-        // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + f⁻ + Δt Dh(q1)ᵀλ
-        for (r, &i) in split.dynamic.iter().enumerate() {
+        // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + f⁻ + Δt Dh(q1)ᵀλ on the dynamic rows.
+        for &i in &split.dynamic {
             let mut x =
                 p1[i] + (1.0 - a) * dt * t2.dl_dq[i] - t2.dl_ddq[i] + left * dt * self.force[i];
             for s in 0..split.rows {
                 x += dt * self.dh1[(s, i)] * self.lambda[s];
             }
-            self.residual[r] = x;
+            self.residual[i] = x;
         }
         if split.rows > 0 {
-            let zero = &mut self.q_alpha;
-            zero.fill(0.0);
-            sys.constraints(q2, zero, Order::First, &mut self.constraint_terms);
-            for s in 0..split.rows {
-                self.residual[nd + s] = self.constraint_terms.h[s];
-            }
+            sys.constraints(q2, &self.zero, Order::First, &mut self.constraint_terms);
         }
         if jacobian {
-            let t = &self.terms;
             // D2 D1 L_d = (1−α)αΔt L_qq + (1−α) (L_q̇q)ᵀ − α L_q̇q − M/Δt,
             // L_q̇q[i][j] = ∂²L/∂q̇_i∂q_j; plus ∂f⁻/∂q2 = wΔt(α ∂F/∂q + ∂F/∂q̇ /Δt).
-            for (r, &i) in split.dynamic.iter().enumerate() {
-                for (c, &j) in split.dynamic.iter().enumerate() {
-                    self.jacobian[(r, c)] = (1.0 - a) * a * dt * t.d2l_dq_dq[(i, j)]
-                        + (1.0 - a) * t.d2l_ddq_dq[(j, i)]
-                        - a * t.d2l_ddq_dq[(i, j)]
-                        - t.mass[(i, j)] / dt
-                        + left * (a * dt * t.dforce_dq[(i, j)] + t.dforce_ddq[(i, j)]);
-                }
-                for s in 0..split.rows {
-                    self.jacobian[(r, nd + s)] = dt * self.dh1[(s, i)];
+            // Column-major slices: entry (i, j) is at j·n + i.
+            let t = &self.terms;
+            let n = q1.len();
+            let (lqq, lvq, mass) = (
+                t.d2l_dq_dq.as_slice(),
+                t.d2l_ddq_dq.as_slice(),
+                t.mass.as_slice(),
+            );
+            let (k_qq, k_vq) = ((1.0 - a) * a * dt, 1.0 - a);
+            let jac = self.jacobian.as_mut_slice();
+            for j in 0..n {
+                for i in 0..n {
+                    let ij = j * n + i;
+                    jac[ij] = k_qq * lqq[ij] + k_vq * lvq[i * n + j] - a * lvq[ij] - mass[ij] / dt;
                 }
             }
-            for s in 0..split.rows {
-                for (c, &j) in split.dynamic.iter().enumerate() {
-                    self.jacobian[(nd + s, c)] = self.constraint_terms.dh[(s, j)];
+            if t.force_derivatives {
+                let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
+                for ij in 0..n * n {
+                    jac[ij] += left * (a * dt * fq[ij] + fv[ij]);
                 }
-                for s2 in 0..split.rows {
-                    self.jacobian[(nd + s, nd + s2)] = 0.0;
+            }
+            // Kinematic variables are not unknowns: identity rows and columns.
+            for &k in &split.kinematic {
+                for i in 0..n {
+                    jac[k * n + i] = 0.0;
+                    jac[i * n + k] = 0.0;
                 }
+                jac[k * n + k] = 1.0;
             }
         }
         &self.residual
     }
 
-    /// The Newton Jacobian of the last [`Self::residual`] call with `jacobian` set: rows and
-    /// columns are the dynamic variables, then the constraints.
-    pub fn jacobian(&self) -> &DMatrix<f64> {
+    /// The full Newton matrix of the last [`Self::residual`] call with `jacobian` set, rows and
+    /// columns the dynamic variables then the constraints: `[[J_dd, Δt Dh(q₁)_dᵀ],
+    /// [Dh(q₂)_d, 0]]`. Allocates (for tests and diagnostics; steps never form it).
+    pub fn newton_matrix(&self) -> DMatrix<f64> {
+        let (d, m) = (&self.split.dynamic, self.split.rows);
+        let nd = d.len();
+        DMatrix::from_fn(nd + m, nd + m, |r, c| match (r < nd, c < nd) {
+            (true, true) => self.jacobian[(d[r], d[c])],
+            (true, false) => self.dt * self.dh1[(c - nd, d[r])],
+            (false, true) => self.constraint_terms.dh[(r - nd, d[c])],
+            (false, false) => 0.0,
+        })
+    }
+
+    /// The dynamic rows of the residual at the last guess, then `h(q₂)`, as one vector
+    /// (allocates; for tests and diagnostics).
+    pub fn residual_vector(&self) -> DVector<f64> {
+        let d = &self.split.dynamic;
+        DVector::from_iterator(
+            d.len() + self.split.rows,
+            d.iter()
+                .map(|&i| self.residual[i])
+                .chain(self.constraint_terms.h.iter().copied()),
+        )
+    }
+
+    /// Factors `J` (and, with constraints, forms `Y = J⁻¹B`, `B = Δt Dh(q₁)ᵀ`).
+    fn factor<S: System<N = N>>(&mut self, sys: &S, step: usize, t: f64) -> Result<(), SimError> {
+        self.factors.copy_from(&self.jacobian);
+        lu_factor(&mut self.factors, &mut self.pivots).map_err(|i| SimError::SingularJacobian {
+            step,
+            t,
+            variable: sys.variable_name(i).to_string(),
+        })?;
+        for s in 0..self.split.rows {
+            self.column.fill(0.0);
+            for &i in &self.split.dynamic {
+                self.column[i] = self.dt * self.dh1[(s, i)];
+            }
+            lu_solve_factored(&self.factors, &self.pivots, &mut self.column);
+            for (i, x) in self.column.iter().enumerate() {
+                self.y[(i, s)] = *x;
+            }
+        }
+        Ok(())
+    }
+
+    /// The Newton update: on exit `residual` holds `Δq₂` and `dlambda` `Δλ`, from
+    /// `J Δq + B Δλ = −r`, `C Δq = −h` by the factor of `J` and the Schur complement `C Y`.
+    fn newton_update<S: System<N = N>>(
+        &mut self,
+        sys: &S,
+        step: usize,
+        t: f64,
+    ) -> Result<(), SimError> {
+        self.residual.neg_mut();
+        lu_solve_factored(&self.factors, &self.pivots, &mut self.residual);
+        let m = self.split.rows;
+        if m == 0 {
+            return Ok(());
+        }
+        // J Δq + B Δλ = −r, C Δq = −h: with z = −J⁻¹r, Δq = z − Y Δλ and (C Y) Δλ = h + C z.
+        let c = &self.constraint_terms.dh;
+        for r in 0..m {
+            for s in 0..m {
+                self.schur[(r, s)] = self
+                    .split
+                    .dynamic
+                    .iter()
+                    .map(|&i| c[(r, i)] * self.y[(i, s)])
+                    .sum();
+            }
+            self.dlambda[r] = self.constraint_terms.h[r]
+                + self
+                    .split
+                    .dynamic
+                    .iter()
+                    .map(|&i| c[(r, i)] * self.residual[i])
+                    .sum::<f64>();
+        }
+        lu_solve::<Dyn>(&mut self.schur, &mut self.dlambda).map_err(|r| {
+            SimError::SingularJacobian {
+                step,
+                t,
+                variable: format!("λ of constraint `{}`", sys.constraint_name(r)),
+            }
+        })?;
+        for &i in &self.split.dynamic {
+            self.residual[i] -= (0..m)
+                .map(|s| self.y[(i, s)] * self.dlambda[s])
+                .sum::<f64>();
+        }
+        Ok(())
+    }
+
+    /// `∂r/∂q₂` of the last [`Self::residual`] call with `jacobian` set (eq. (26) plus the
+    /// forces' derivatives), over all variables with identity rows and columns on the kinematic
+    /// ones; see [`Self::newton_matrix`] for the whole system with constraints.
+    pub fn jacobian(&self) -> &Matrix<N> {
         &self.jacobian
     }
 
@@ -302,23 +417,17 @@ where
         P: Prescription,
     {
         let can_split = depth < self.settings.max_subdivisions;
-        if can_split {
-            let saved = &mut self.saved[depth];
-            saved.0.copy_from(q);
-            saved.1.copy_from(p);
-            saved.2.copy_from(&self.last_velocity);
-            saved.3.copy_from(&self.lambda);
+        if can_split && self.split.rows > 0 {
+            self.saved_lambda[depth].copy_from(&self.lambda);
         }
         match self.step_once(sys, force, motion, step, t, dt, q, p, q_next) {
             Err(SimError::NewtonFailed { .. } | SimError::SingularJacobian { .. })
             | Err(SimError::NonFinite { .. })
                 if can_split =>
             {
-                let saved = &self.saved[depth];
-                q.copy_from(&saved.0);
-                p.copy_from(&saved.1);
-                self.last_velocity.copy_from(&saved.2);
-                self.lambda.copy_from(&saved.3);
+                if self.split.rows > 0 {
+                    self.lambda.copy_from(&self.saved_lambda[depth]);
+                }
                 self.subdivisions += 1;
                 let h = 0.5 * dt;
                 self.advance(sys, force, motion, step, t, h, q, p, q_next, depth + 1)?;
@@ -328,7 +437,8 @@ where
         }
     }
 
-    /// One step of length `dt`, no subdivision.
+    /// One step of length `dt`, no subdivision. On failure `q`, `p` and the predictor are
+    /// left as they were.
     fn step_once<S, F, P>(
         &mut self,
         sys: &mut S,
@@ -353,7 +463,6 @@ where
         for &i in &self.split.kinematic {
             q_next[i] = motion.kinematic(i, t + dt)[0];
         }
-        let nd = self.split.dynamic.len();
         let scale = self
             .split
             .dynamic
@@ -366,7 +475,7 @@ where
         loop {
             let fresh = !(reuse && factored);
             self.residual(sys, force, t, dt, q, p, q_next, fresh);
-            let (mut residual, violation) = self.residual_norms(nd);
+            let (mut residual, violation) = self.residual_norms();
             if !residual.is_finite() || !violation.is_finite() {
                 self.iterations += iterations;
                 return Err(SimError::NonFinite {
@@ -394,36 +503,23 @@ where
             if !fresh && combined > 0.5 * last_residual {
                 // The reused Jacobian has stopped paying: evaluate it here.
                 self.residual(sys, force, t, dt, q, p, q_next, true);
-                residual = self.residual_norms(nd).0;
+                residual = self.residual_norms().0;
                 refactor = true;
             }
             if refactor {
-                self.factors.copy_from(&self.jacobian);
-                lu_factor::<Dyn>(&mut self.factors, &mut self.pivots).map_err(|i| {
-                    SimError::SingularJacobian {
-                        step,
-                        t,
-                        variable: if i < nd {
-                            sys.variable_name(self.split.dynamic[i]).to_string()
-                        } else {
-                            format!("λ of constraint `{}`", sys.constraint_name(i - nd))
-                        },
-                    }
-                })?;
+                self.factor(sys, step, t)?;
                 factored = true;
             }
             last_residual = residual + violation;
             iterations += 1;
-            // Newton: J Δ = −f
-            self.residual.neg_mut();
-            lu_solve_factored::<Dyn>(&self.factors, &self.pivots, &mut self.residual);
+            self.newton_update(sys, step, t)?;
             let mut largest: f64 = 0.0;
-            for (r, &i) in self.split.dynamic.iter().enumerate() {
-                q_next[i] += self.residual[r];
-                largest = largest.max(self.residual[r].abs());
+            for &i in &self.split.dynamic {
+                q_next[i] += self.residual[i];
+                largest = largest.max(self.residual[i].abs());
             }
-            for s in 0..self.split.rows {
-                self.lambda[s] += self.residual[nd + s];
+            if self.split.rows > 0 {
+                self.lambda += &self.dlambda;
             }
             // An update lost in the last bits of q: the residual is at its rounding floor
             // (≈ ε‖M‖‖q‖/Δt), which a large, stiff model can hold above the tolerance.
@@ -439,26 +535,31 @@ where
             Forcing::Split => a * dt,
             Forcing::Left => 0.0,
         };
-        p.copy_from(&self.terms.dl_ddq);
-        p.axpy(a * dt, &self.terms.dl_dq, 1.0);
-        p.axpy(plus, &self.force, 1.0);
-        self.last_velocity.copy_from(&self.velocity);
-        std::mem::swap(q, q_next);
-        if q.iter().chain(p.iter()).any(|x| !x.is_finite()) {
+        let p2 = &mut self.q_alpha;
+        p2.copy_from(&self.terms.dl_ddq);
+        p2.axpy(a * dt, &self.terms.dl_dq, 1.0);
+        p2.axpy(plus, &self.force, 1.0);
+        if q_next.iter().chain(p2.iter()).any(|x| !x.is_finite()) {
             return Err(SimError::NonFinite {
                 step,
                 t: t + dt,
                 what: "configuration or momentum".into(),
             });
         }
+        p.copy_from(p2);
+        self.last_velocity.copy_from(&self.velocity);
+        std::mem::swap(q, q_next);
         Ok(())
     }
 
-    /// `(max |dynamic residual|, max |h|)` of the residual vector.
-    fn residual_norms(&self, nd: usize) -> (f64, f64) {
-        let r = self.residual.as_slice();
-        let amax = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        (amax(&r[..nd]), amax(&r[nd..]))
+    /// `(max |dynamic residual|, max |h(q₂)|)`.
+    fn residual_norms(&self) -> (f64, f64) {
+        let violation = if self.split.rows > 0 {
+            self.constraint_terms.violation()
+        } else {
+            0.0
+        };
+        (self.residual.amax(), violation)
     }
 
     /// The continuous velocity and energy at `(q, p)` and time `t`: kinematic `q̇` from the
@@ -479,8 +580,7 @@ where
         S: System<N = N>,
         P: Prescription,
     {
-        self.velocity.fill(0.0);
-        sys.lagrangian(q, &self.velocity, Order::Dynamics, &mut self.terms);
+        sys.lagrangian(q, &self.zero, Order::Dynamics, &mut self.terms);
         self.q_alpha.copy_from(q);
         prescribe(
             &self.split.kinematic,
@@ -490,37 +590,21 @@ where
             dq,
             None,
         );
-        let split = &self.split;
-        let k = &mut self.reduced;
-        let mass = &self.terms.mass;
-        for (r, &i) in split.dynamic.iter().enumerate() {
-            let mut x = p[i];
-            for &j in &split.kinematic {
-                x -= mass[(i, j)] * dq[j];
-            }
-            k.rhs[r] = x;
-            for (c, &j) in split.dynamic.iter().enumerate() {
-                k.mdd[(r, c)] = mass[(i, j)];
-            }
+        if self.split.rows > 0 {
+            sys.constraints(q, &self.zero, Order::First, &mut self.constraint_terms);
         }
-        if split.rows > 0 {
-            let c = &mut self.constraint_terms;
-            sys.constraints(q, &self.velocity, Order::First, c);
-            for r in 0..split.rows {
-                k.gamma[r] = -split
-                    .kinematic
-                    .iter()
-                    .map(|&j| c.dh[(r, j)] * dq[j])
-                    .sum::<f64>();
-                for (col, &j) in split.dynamic.iter().enumerate() {
-                    k.a[(r, col)] = c.dh[(r, j)];
-                }
-            }
-        }
-        solve_reduced(k, &mut self.projection, sys, split, step, t)?;
-        for (r, &i) in split.dynamic.iter().enumerate() {
-            dq[i] = k.rhs[r];
-        }
+        self.reduced.solve(
+            sys,
+            &self.split,
+            &self.terms.mass,
+            p,
+            &self.constraint_terms.dh,
+            |_| 0.0,
+            dq,
+            &mut self.projection,
+            step,
+            t,
+        )?;
         // E = ½ q̇ᵀMq̇ − L(q, 0), and L(q, 0) = −V(q).
         self.q_alpha.gemv(1.0, &self.terms.mass, dq, 0.0);
         Ok(0.5 * dq.dot(&self.q_alpha) - self.terms.l)
