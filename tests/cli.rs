@@ -85,6 +85,58 @@ fn eval_prints_every_term_as_json() {
 }
 
 #[test]
+fn constrained_models_report_constraints_everywhere() {
+    let model = "tests/models/string-pendulum.toml";
+    // eval: the new fields, λ at rest at 0.5 rad: 2ℓλ = −m g cos θ.
+    let (ok, stdout, stderr) = tree_mech(&["eval", model]);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["dynamic"], serde_json::json!(["x", "y", "z"]));
+    assert_eq!(v["kinematic"], serde_json::json!([]));
+    assert_eq!(v["constraints"], serde_json::json!(["string"]));
+    assert!(v["h"][0].as_f64().unwrap().abs() < 1e-12);
+    assert_eq!(v["dh_dq"][0].as_array().unwrap().len(), 3);
+    let lambda = v["lambda"][0].as_f64().unwrap();
+    assert!(
+        (3.0 * lambda + 9.81 * 0.5f64.cos()).abs() < 1e-9,
+        "λ = {lambda}"
+    );
+    // simulate: λ and violation columns, every second step recorded, worst violation said.
+    let csv = std::env::temp_dir().join(format!("tree-mech-string-{}.csv", std::process::id()));
+    let (ok, stdout, stderr) = tree_mech(&[
+        "simulate",
+        model,
+        "--duration",
+        "0.1",
+        "--every",
+        "2",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("Worst constraint violation"), "{stdout}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], "t,x,y,z,dx,dy,dz,energy,lambda_string,violation");
+    assert_eq!(lines.len(), 1 + 6, "t = 0, 0.02, …, 0.1");
+    // check: the constraint is listed.
+    let (ok, stdout, _) = tree_mech(&["check", "tests/models/elements.toml"]);
+    assert!(ok);
+    for expected in [
+        "string               distance `len` between `tip` and `hand_z`",
+        "kinematic, 0.3 + 0.1·sin(2π·0.5·t + 0.3)",
+        "spring on `bend`: k = 5, rest = 0.1",
+        "damper between `lower` and `hand_z`: c = 0.7",
+        "len                  sets a constraint length",
+    ] {
+        assert!(
+            stdout.contains(expected),
+            "missing `{expected}` in:\n{stdout}"
+        );
+    }
+}
+
+#[test]
 fn check_draws_the_tree() {
     let (ok, stdout, _) = tree_mech(&["check", "models/humanoid.toml"]);
     assert!(ok);
@@ -97,7 +149,23 @@ fn bad_input_is_a_short_error_and_a_failing_exit() {
     let bad = std::env::temp_dir().join(format!("tree-mech-bad-{}.toml", std::process::id()));
     std::fs::write(&bad, "name = \"bad\"\n[[frame]]\nname = \"a\"\nbogus = 2\n").unwrap();
     let bad_shown = format!("{}:4: TOML error: unknown field `bogus`", bad.display());
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 10] = [
+        (
+            &["simulate", "models/pendulum.toml", "--dt", "1e-300"],
+            "the run needs 1.00e301 steps",
+        ),
+        (
+            &["simulate", "models/pendulum.toml", "--every", "0"],
+            "every K-th step needs K ≥ 1",
+        ),
+        (
+            &["simulate", "models/pendulum.toml", "--baumgarte", "1"],
+            "--baumgarte: `1` is not two numbers a,b",
+        ),
+        (
+            &["eval", "models/pendulum.toml", "--t", "nan"],
+            "--t: `NaN` is not a finite time",
+        ),
         (&["check", "models/missing.toml"], "cannot read model file"),
         (&["simulate"], "required"),
         (

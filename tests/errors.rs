@@ -142,3 +142,89 @@ fn bad_arguments_are_errors() {
         Err(SimError::NonFinite { step: 0, .. })
     ));
 }
+
+/// The string pendulum of tests/models with extra constraints appended.
+fn string_pendulum_with(extra: &str) -> tree_mech::tree_model::Model {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/models/string-pendulum.toml"
+    );
+    let text = std::fs::read_to_string(path).unwrap() + extra;
+    tree_mech::tree_model::from_toml_str(&text, None).unwrap()
+}
+
+#[test]
+fn a_run_that_cannot_finish_is_refused_up_front() {
+    let mut sys = interpreted(&load("pendulum.toml"));
+    let (q0, dq0) = sys.initial_state();
+    let options = SimOptions::new(Method::Rk4, 1e-300, 1.0);
+    let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+    assert!(
+        matches!(err, SimError::TooManySteps { steps } if steps > 0.99e300),
+        "{err:?}"
+    );
+    assert!(
+        err.to_string()
+            .contains("1.00e300 steps, more than the limit of 1e9"),
+        "{err}"
+    );
+    let every = SimOptions {
+        every: 0,
+        ..SimOptions::new(Method::Rk4, 0.01, 1.0)
+    };
+    let err = simulate(&mut sys, &q0, &dq0, &every, &mut NoForce, &mut |_| {}).unwrap_err();
+    assert!(err.to_string().contains("K ≥ 1"), "{err}");
+}
+
+#[test]
+fn an_unsatisfiable_constraint_is_named() {
+    // A second string from the anchor to a fixed point 2 m away that must be 3 m long:
+    // no dynamic variable moves either end.
+    let model = string_pendulum_with(
+        "[[frame]]\nname = \"post\"\nty = 2.0\n\
+         [[constraint]]\nname = \"impossible\"\nkind = \"distance\"\nframes = [\"anchor\", \"post\"]\nlength = 3.0\n",
+    );
+    for method in methods() {
+        let mut sys = interpreted(&model);
+        let (q0, dq0) = sys.initial_state();
+        let options = SimOptions::new(method, 0.01, 0.1);
+        let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+        match &err {
+            SimError::Unsatisfiable {
+                constraint,
+                violation,
+            } => {
+                assert_eq!(constraint, "impossible");
+                assert!(
+                    (violation - 5.0).abs() < 1e-12,
+                    "h = 2² − 3² = −5, got {violation}"
+                );
+            }
+            other => panic!("{method:?}: expected Unsatisfiable, got {other:?}"),
+        }
+        assert!(err
+            .to_string()
+            .contains("cannot satisfy constraint `impossible`"));
+    }
+}
+
+#[test]
+fn redundant_constraints_are_an_error_naming_one() {
+    let model = string_pendulum_with(
+        "[[constraint]]\nname = \"again\"\nkind = \"distance\"\nframes = [\"bob\", \"anchor\"]\nlength = 1.5\n",
+    );
+    for method in methods() {
+        let mut sys = interpreted(&model);
+        let (q0, dq0) = sys.initial_state();
+        let options = SimOptions::new(method, 0.01, 0.1);
+        let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+        match &err {
+            SimError::SingularConstraints {
+                step, constraint, ..
+            } => {
+                assert_eq!((*step, constraint.as_str()), (0, "again"), "{method:?}");
+            }
+            other => panic!("{method:?}: expected SingularConstraints, got {other:?}"),
+        }
+    }
+}

@@ -34,6 +34,8 @@ pub struct Scratch<S> {
     /// The variables the current element depends on.
     vars: Vec<usize>,
     involved: Vec<bool>,
+    /// Whether the current element wrote into `hess` (so `reset` must clear it).
+    hess_used: bool,
 }
 
 impl<S: Scalar> Scratch<S> {
@@ -45,6 +47,7 @@ impl<S: Scalar> Scratch<S> {
             hess: vec![S::zero(); n * n],
             vars: Vec::with_capacity(n),
             involved: vec![false; n],
+            hess_used: false,
         }
     }
 
@@ -54,10 +57,13 @@ impl<S: Scalar> Scratch<S> {
             self.dd[i] = [S::zero(); 3];
             self.grad[i] = S::zero();
             self.involved[i] = false;
-            for &j in &self.vars {
-                self.hess[i * self.n + j] = S::zero();
+            if self.hess_used {
+                for &j in &self.vars {
+                    self.hess[i * self.n + j] = S::zero();
+                }
             }
         }
+        self.hess_used = false;
         self.vars.clear();
     }
 
@@ -69,6 +75,7 @@ impl<S: Scalar> Scratch<S> {
     }
 
     fn add_hess(&mut self, i: usize, j: usize, x: S) {
+        self.hess_used = true;
         self.hess[i * self.n + j] += x;
     }
 
@@ -407,6 +414,7 @@ pub fn forces<S: Scalar>(
                 let (i, j) = (sc.vars[x], sc.vars[y]);
                 let v = (half * sc.hess_at(i, j) - sc.grad[i] * sc.grad[j]) * inv;
                 sc.hess[i * sc.n + j] = v;
+                sc.hess_used = true;
             }
         }
         let sc = &ws.scratch;

@@ -64,7 +64,7 @@ impl fmt::Display for SimError {
             ),
             SimError::TooManySteps { steps } => write!(
                 f,
-                "the run needs {steps:e} steps, more than the limit of 1e9: lengthen --dt or shorten --duration"
+                "the run needs {steps:.2e} steps, more than the limit of 1e9: lengthen --dt or shorten --duration"
             ),
             SimError::SingularJacobian { step, t, variable } => write!(
                 f,

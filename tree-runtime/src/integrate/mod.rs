@@ -202,111 +202,73 @@ where
             what: "initial state".into(),
         });
     }
-    let mut summary = RunSummary {
-        moved: project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?,
-        ..RunSummary::default()
+    let moved = project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?;
+    let mut rec = Recorder {
+        summary: RunSummary {
+            moved,
+            ..RunSummary::default()
+        },
+        observe,
+        terms: Terms::zeros(n),
+        qdd: sys.zero_vector(),
     };
-    let rows = dynamics.split.rows;
-    let mut terms = Terms::zeros(n);
     let every = options.every;
-    let mut observed = |summary: &mut RunSummary, s: &Sample| {
-        summary.recorded += 1;
-        summary.worst_violation = summary.worst_violation.max(s.violation);
-        observe(s)
-    };
+    let recorded = |k: usize, last: bool| k.is_multiple_of(every) || last;
     match options.method {
-        Method::Rk4 | Method::Rk45(_) => {
-            // Energy, constraint forces and violation at a recorded state.
-            let mut qdd = sys.zero_vector();
-            let mut report = |sys: &mut S,
-                              dynamics: &mut Dynamics<S::N>,
-                              force: &mut F,
-                              motion: &mut P,
-                              step: usize,
-                              t: f64,
-                              q: &Vector<S::N>,
-                              dq: &Vector<S::N>|
-             -> Result<(f64, f64), SimError> {
-                sys.lagrangian(q, dq, Order::First, &mut terms);
-                let energy = terms.energy(dq);
-                if rows == 0 {
-                    return Ok((energy, 0.0));
+        Method::Rk4 => {
+            let mut rk = Rk4::new(sys);
+            rk.dynamics.baumgarte = options.baumgarte;
+            rec.continuous(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
+            for k in 0..steps {
+                let t = k as f64 * options.dt;
+                rk.step(sys, force, motion, k, t, options.dt, &mut q, &mut dq)?;
+                let t = (k + 1) as f64 * options.dt;
+                check_finite(k + 1, t, &q, &dq)?;
+                if recorded(k + 1, k + 1 == steps) {
+                    rec.continuous(sys, &mut dynamics, force, motion, k + 1, t, &q, &dq)?;
                 }
-                dynamics.acceleration(sys, force, motion, step, t, q, dq, &mut qdd)?;
-                Ok((energy, dynamics.constraint_terms.violation()))
-            };
-            let (e, v) = report(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
-            observed(
-                &mut summary,
-                &sample(0, 0.0, &q, &dq, dynamics.lambda.as_slice(), e, v),
-            )?;
-            if let Method::Rk4 = options.method {
-                let mut rk = Rk4::new(sys);
-                rk.dynamics.baumgarte = options.baumgarte;
-                for k in 0..steps {
-                    let t = k as f64 * options.dt;
-                    rk.step(sys, force, motion, k, t, options.dt, &mut q, &mut dq)?;
-                    check_finite(k + 1, t + options.dt, &q, &dq)?;
-                    if (k + 1) % every == 0 || k + 1 == steps {
-                        let t = (k + 1) as f64 * options.dt;
-                        let (e, v) = report(sys, &mut dynamics, force, motion, k + 1, t, &q, &dq)?;
-                        let lambda = dynamics.lambda.as_slice();
-                        observed(&mut summary, &sample(k + 1, t, &q, &dq, lambda, e, v))?;
-                    }
-                }
-                summary.steps = steps;
-            } else if let Method::Rk45(tol) = options.method {
-                let mut rk = Rk45::new(sys, tol);
-                rk.dynamics.baumgarte = options.baumgarte;
-                let (mut t, mut dt, mut k) = (0.0, options.dt, 0);
-                let t_end = options.duration;
-                while t < t_end {
-                    let h = rk.step(sys, force, motion, k, t, t_end, &mut dt, &mut q, &mut dq)?;
-                    t = if t + h >= t_end * (1.0 - 1e-15) {
-                        t_end
-                    } else {
-                        t + h
-                    };
-                    k += 1;
-                    check_finite(k, t, &q, &dq)?;
-                    if k % every == 0 || t >= t_end {
-                        let (e, v) = report(sys, &mut dynamics, force, motion, k, t, &q, &dq)?;
-                        let lambda = dynamics.lambda.as_slice();
-                        observed(&mut summary, &sample(k, t, &q, &dq, lambda, e, v))?;
-                    }
-                }
-                summary.steps = k;
             }
+            rec.summary.steps = steps;
+        }
+        Method::Rk45(tol) => {
+            let mut rk = Rk45::new(sys, tol);
+            rk.dynamics.baumgarte = options.baumgarte;
+            rec.continuous(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
+            let (mut t, mut dt, mut k) = (0.0, options.dt, 0);
+            let t_end = options.duration;
+            while t < t_end {
+                let h = rk.step(sys, force, motion, k, t, t_end, &mut dt, &mut q, &mut dq)?;
+                t = if t + h >= t_end * (1.0 - 1e-15) {
+                    t_end
+                } else {
+                    t + h
+                };
+                k += 1;
+                check_finite(k, t, &q, &dq)?;
+                if recorded(k, t >= t_end) {
+                    rec.continuous(sys, &mut dynamics, force, motion, k, t, &q, &dq)?;
+                }
+            }
+            rec.summary.steps = k;
         }
         Method::Vi(settings) => {
             let mut vi = MidpointVi::new(sys, settings);
             let mut p = vi.initial_momentum(sys, &q, &dq);
             let mut q_next = q.clone();
-            // The start's constraint forces, from the continuous equations.
-            let mut e = {
-                sys.lagrangian(&q, &dq, Order::First, &mut terms);
-                terms.energy(&dq)
-            };
-            let mut violation = 0.0;
-            if rows > 0 {
-                let mut qdd = sys.zero_vector();
-                dynamics.acceleration(sys, force, motion, 0, 0.0, &q, &dq, &mut qdd)?;
-                vi.lambda.copy_from(&dynamics.lambda);
-                violation = dynamics.constraint_terms.violation();
-            }
-            observed(
-                &mut summary,
-                &Sample {
-                    step: 0,
-                    t: 0.0,
-                    q: q.as_slice(),
-                    dq: dq.as_slice(),
-                    p: Some(p.as_slice()),
-                    energy: e,
-                    lambda: vi.lambda.as_slice(),
-                    violation,
-                },
-            )?;
+            // The start as the continuous equations see it, λ included.
+            let (energy, violation) =
+                rec.state(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
+            vi.lambda.copy_from(&dynamics.lambda);
+            rec.record(&Sample {
+                step: 0,
+                t: 0.0,
+                q: q.as_slice(),
+                dq: dq.as_slice(),
+                p: Some(p.as_slice()),
+                energy,
+                lambda: vi.lambda.as_slice(),
+                violation,
+            })?;
             for k in 0..steps {
                 let t = k as f64 * options.dt;
                 vi.step(
@@ -320,55 +282,106 @@ where
                     &mut p,
                     &mut q_next,
                 )?;
-                summary.newton_iterations += vi.iterations;
-                summary.subdivided_steps += (vi.subdivisions > 0) as usize;
-                if (k + 1) % every == 0 || k + 1 == steps {
+                rec.summary.newton_iterations += vi.iterations;
+                rec.summary.subdivided_steps += (vi.subdivisions > 0) as usize;
+                if recorded(k + 1, k + 1 == steps) {
                     let t = (k + 1) as f64 * options.dt;
-                    violation = vi.constraint_terms.violation();
-                    e = vi.velocity_and_energy(sys, motion, k + 1, t, &q, &p, &mut dq)?;
-                    observed(
-                        &mut summary,
-                        &Sample {
-                            step: k + 1,
-                            t,
-                            q: q.as_slice(),
-                            dq: dq.as_slice(),
-                            p: Some(p.as_slice()),
-                            energy: e,
-                            lambda: vi.lambda.as_slice(),
-                            violation,
-                        },
-                    )?;
+                    let violation = vi.constraint_terms.violation();
+                    let energy = vi.velocity_and_energy(sys, motion, k + 1, t, &q, &p, &mut dq)?;
+                    rec.record(&Sample {
+                        step: k + 1,
+                        t,
+                        q: q.as_slice(),
+                        dq: dq.as_slice(),
+                        p: Some(p.as_slice()),
+                        energy,
+                        lambda: vi.lambda.as_slice(),
+                        violation,
+                    })?;
                 }
             }
-            summary.steps = steps;
+            rec.summary.steps = steps;
         }
     }
-    Ok(summary)
+    Ok(rec.summary)
 }
 
-/// A continuous method's sample.
-fn sample<'a, N: Dim>(
-    step: usize,
-    t: f64,
-    q: &'a Vector<N>,
-    dq: &'a Vector<N>,
-    lambda: &'a [f64],
-    energy: f64,
-    violation: f64,
-) -> Sample<'a>
+/// Hands samples to the caller's observer and keeps the run's summary.
+struct Recorder<'a, N: Dim>
 where
-    DefaultAllocator: Allocator<N>,
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    Sample {
-        step,
-        t,
-        q: q.as_slice(),
-        dq: dq.as_slice(),
-        p: None,
-        energy,
-        lambda,
-        violation,
+    summary: RunSummary,
+    observe: &'a mut dyn FnMut(&Sample) -> Result<(), SimError>,
+    terms: Terms<N>,
+    qdd: Vector<N>,
+}
+
+impl<N: Dim> Recorder<'_, N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    fn record(&mut self, s: &Sample) -> Result<(), SimError> {
+        self.summary.recorded += 1;
+        self.summary.worst_violation = self.summary.worst_violation.max(s.violation);
+        (self.observe)(s)
+    }
+
+    /// Energy and constraint violation at `(q, q̇)`; with constraints the forces `λ` are left
+    /// in `dynamics.lambda` (from the continuous equations).
+    fn state<S, F, P>(
+        &mut self,
+        sys: &mut S,
+        dynamics: &mut Dynamics<N>,
+        force: &mut F,
+        motion: &mut P,
+        step: usize,
+        t: f64,
+        q: &Vector<N>,
+        dq: &Vector<N>,
+    ) -> Result<(f64, f64), SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        sys.lagrangian(q, dq, Order::First, &mut self.terms);
+        let energy = self.terms.energy(dq);
+        if dynamics.split.rows == 0 {
+            return Ok((energy, 0.0));
+        }
+        dynamics.acceleration(sys, force, motion, step, t, q, dq, &mut self.qdd)?;
+        Ok((energy, dynamics.constraint_terms.violation()))
+    }
+
+    /// Records a continuous method's state.
+    fn continuous<S, F, P>(
+        &mut self,
+        sys: &mut S,
+        dynamics: &mut Dynamics<N>,
+        force: &mut F,
+        motion: &mut P,
+        step: usize,
+        t: f64,
+        q: &Vector<N>,
+        dq: &Vector<N>,
+    ) -> Result<(), SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        let (energy, violation) = self.state(sys, dynamics, force, motion, step, t, q, dq)?;
+        self.record(&Sample {
+            step,
+            t,
+            q: q.as_slice(),
+            dq: dq.as_slice(),
+            p: None,
+            energy,
+            lambda: dynamics.lambda.as_slice(),
+            violation,
+        })
     }
 }
 
