@@ -10,7 +10,7 @@ use tree_mech::integrate::{
 };
 use tree_mech::runtime::{Pose, Vector};
 use tree_mech::tree_model;
-use tree_mech::{NoForce, Order, System, Terms, TreeSystem};
+use tree_mech::{NoForce, Order, PaperEvaluation, PaperSystem, System, Terms, TreeSystem};
 
 #[test]
 fn newton_jacobian_is_the_derivative_of_the_residual() {
@@ -26,8 +26,17 @@ fn newton_jacobian_is_the_derivative_of_the_residual() {
         (elements.clone(), 0.5, Forcing::Split),
         (elements, 0.4, Forcing::Left),
     ] {
-        let name = model.name.clone();
-        let mut sys = interpreted(&model);
+        check_newton_matrix(interpreted(&model), &model.name, alpha, forcing);
+    }
+    // The paper's reference evaluation feeds the same Newton matrix (humanoid: damped).
+    let humanoid = load("humanoid.toml");
+    let reference = PaperSystem::new(&humanoid, PaperEvaluation::Cached).unwrap();
+    check_newton_matrix(reference, "humanoid (reference)", 0.5, Forcing::Split);
+}
+
+/// The Newton matrix against central differences of the residual in `(q₂_d, λ)`.
+fn check_newton_matrix<S: System<N = Dyn>>(mut sys: S, name: &str, alpha: f64, forcing: Forcing) {
+    {
         let n = sys.dof();
         let mut rng = Rng::new(11);
         let q1 = rng.vector(n, 1.0);

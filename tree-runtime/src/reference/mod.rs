@@ -16,7 +16,7 @@ use tree_model::{Model, Motion};
 use crate::error::SimError;
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
-use crate::sweeps::{self, Workspace};
+use crate::sweeps::{self, Output, Sink, Workspace};
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
 
 /// How the reference system evaluates the paper's sums.
@@ -143,10 +143,13 @@ impl System for PaperSystem {
             }
             PaperEvaluation::Uncached => self.accumulate_uncached(q, dq, order, out),
         }
+        // Damping, through the same sink as the interpreted system's forces.
         for (i, v) in self.model.variables.iter().enumerate() {
-            out.force[i] = -v.damping * dq[i];
-            if order >= Order::Full {
-                out.dforce_ddq[(i, i)] = -v.damping;
+            if v.damping != 0.0 {
+                out.add(Output::Force(i), -v.damping * dq[i]);
+                if order >= Order::Full {
+                    out.add(Output::DforceDdq(i, i), -v.damping);
+                }
             }
         }
     }
