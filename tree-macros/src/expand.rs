@@ -270,11 +270,17 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let (first_body, dynamics_body, full_body, poses_body) =
         (&first.body, &dynamics.body, &full.body, &poses.body);
     let statements = full.statements;
-    // The Full evaluation writes force derivatives exactly when the model has damping or
-    // dampers (elements::forces).
-    let mark_force_derivatives = (plan.damping.iter().any(|&c| c != 0.0)
-        || !plan.dampers.is_empty())
-    .then(|| quote!(out.force_derivatives = true;));
+    // Where the Full evaluation writes force derivatives (elements::forces): dampers fill
+    // both matrices, per-variable damping only ∂F/∂q̇'s diagonal.
+    let sparsity = if !plan.dampers.is_empty() {
+        Some(quote!(Dense))
+    } else if plan.damping.iter().any(|&c| c != 0.0) {
+        Some(quote!(Diagonal))
+    } else {
+        None
+    };
+    let mark_force_derivatives = sparsity
+        .map(|s| quote!(out.force_derivatives = ::tree_mech::runtime::system::Sparsity::#s;));
     let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
     let full_path = file
         .as_ref()

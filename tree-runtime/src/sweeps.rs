@@ -60,9 +60,15 @@ pub enum Output {
 }
 
 /// Where evaluations put what they produce: the interpreted system's matrices, or the
-/// compiler's record of which traced value lands in which output. Contributions add up.
+/// compiler's record of which traced value lands in which output. Contributions add up;
+/// `set` is for an output written first and once (the tree's own terms, before springs and
+/// forces add to them), and may skip reading the old value.
 pub trait Sink<S> {
     fn add(&mut self, at: Output, x: S);
+
+    fn set(&mut self, at: Output, x: S) {
+        self.add(at, x)
+    }
 }
 
 /// Per-frame storage for one evaluation (allocated once, reused).
@@ -254,7 +260,7 @@ pub fn evaluate<S: Scalar>(
 ) {
     forward(plan, ws, q, dq, false);
     let l = inward(plan, ws, order);
-    out.add(Output::L, l);
+    out.set(Output::L, l);
     let gravity = plan.gravity.map(S::constant);
     for (j, fk) in plan.variable_frames.iter().enumerate() {
         let Some(fk) = *fk else { continue };
@@ -269,8 +275,8 @@ pub fn evaluate<S: Scalar>(
         let hg = cross(&h, &g);
         let gravity_wrench = [mc * g[0], mc * g[1], mc * g[2], hg[0], hg[1], hg[2]];
         let dv_own = ws.dv_dq[kc + own];
-        out.add(Output::DlDdq(j), component(&w, kind));
-        out.add(
+        out.set(Output::DlDdq(j), component(&w, kind));
+        out.set(
             Output::DlDq(j),
             dot(&w, &dv_own) + component(&gravity_wrench, kind),
         );
@@ -285,14 +291,14 @@ pub fn evaluate<S: Scalar>(
             let ja = ws.jac[kc + a];
             let dva = ws.dv_dq[kc + a];
             let mij = dot(&ja, &y);
-            out.add(Output::Mass(i, j), mij);
+            out.set(Output::Mass(i, j), mij);
             let mut x = dot(&z, &ja);
             if a < own {
-                out.add(Output::Mass(j, i), mij);
+                out.set(Output::Mass(j, i), mij);
                 x += dot(&w, &bracket_with_axis(&ja, kind));
-                out.add(Output::D2lDdqDq(j, i), dot(&dva, &y));
+                out.set(Output::D2lDdqDq(j, i), dot(&dva, &y));
             }
-            out.add(Output::D2lDdqDq(i, j), x);
+            out.set(Output::D2lDdqDq(i, j), x);
             if order >= Order::Full {
                 let delta = cross(&g, &[ja[3], ja[4], ja[5]]);
                 let hd = cross(&h, &delta);
@@ -306,9 +312,9 @@ pub fn evaluate<S: Scalar>(
                 ];
                 let x =
                     dot(&z, &dva) + dot(&w, &bracket_with_axis(&dva, kind)) + component(&gw, kind);
-                out.add(Output::D2lDqDq(i, j), x);
+                out.set(Output::D2lDqDq(i, j), x);
                 if a < own {
-                    out.add(Output::D2lDqDq(j, i), x);
+                    out.set(Output::D2lDqDq(j, i), x);
                 }
             }
         }

@@ -40,9 +40,21 @@ where
     pub dforce_dq: Matrix<N>,
     /// `∂F/∂q̇` (at `Order::Full`).
     pub dforce_ddq: Matrix<N>,
-    /// Whether the last evaluation wrote `dforce_dq`/`dforce_ddq`; while false both are zero
-    /// (a model without damping or dampers leaves them so, and consumers may skip them).
-    pub force_derivatives: bool,
+    /// Which entries of `dforce_dq`/`dforce_ddq` the last evaluation may have written; all
+    /// others are zero (consumers and `clear` skip them).
+    pub force_derivatives: Sparsity,
+}
+
+/// Where a pair of matrices may be non-zero.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Sparsity {
+    /// All zero.
+    #[default]
+    Zero,
+    /// Only `dforce_ddq`'s diagonal (per-variable damping).
+    Diagonal,
+    /// Anywhere (dampers).
+    Dense,
 }
 
 impl<N: Dim> Terms<N>
@@ -61,7 +73,7 @@ where
             force: Vector::zeros_generic(n, U1),
             dforce_dq: Matrix::zeros_generic(n, n),
             dforce_ddq: Matrix::zeros_generic(n, n),
-            force_derivatives: false,
+            force_derivatives: Sparsity::Zero,
         }
     }
 
@@ -77,11 +89,15 @@ where
         }
         if order >= Order::Full {
             self.d2l_dq_dq.fill(0.0);
-            if self.force_derivatives {
-                self.dforce_dq.fill(0.0);
-                self.dforce_ddq.fill(0.0);
-                self.force_derivatives = false;
+            match self.force_derivatives {
+                Sparsity::Zero => {}
+                Sparsity::Diagonal => self.dforce_ddq.fill_diagonal(0.0),
+                Sparsity::Dense => {
+                    self.dforce_dq.fill(0.0);
+                    self.dforce_ddq.fill(0.0);
+                }
             }
+            self.force_derivatives = Sparsity::Zero;
         }
     }
 
@@ -106,14 +122,32 @@ where
             Output::D2lDqDq(i, j) => self.d2l_dq_dq[(i, j)] += x,
             Output::Force(i) => self.force[i] += x,
             Output::DforceDq(i, j) => {
-                self.force_derivatives = true;
+                self.force_derivatives = Sparsity::Dense;
                 self.dforce_dq[(i, j)] += x
             }
             Output::DforceDdq(i, j) => {
-                self.force_derivatives = true;
+                let at = if i == j {
+                    Sparsity::Diagonal
+                } else {
+                    Sparsity::Dense
+                };
+                self.force_derivatives = self.force_derivatives.max(at);
                 self.dforce_ddq[(i, j)] += x
             }
             Output::H(_) | Output::Dh(..) | Output::DhDot(_) | Output::D2h(..) => {}
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, at: Output, x: f64) {
+        match at {
+            Output::L => self.l = x,
+            Output::DlDq(i) => self.dl_dq[i] = x,
+            Output::DlDdq(i) => self.dl_ddq[i] = x,
+            Output::Mass(i, j) => self.mass[(i, j)] = x,
+            Output::D2lDdqDq(i, j) => self.d2l_ddq_dq[(i, j)] = x,
+            Output::D2lDqDq(i, j) => self.d2l_dq_dq[(i, j)] = x,
+            other => self.add(other, x),
         }
     }
 }

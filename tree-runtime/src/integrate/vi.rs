@@ -22,7 +22,7 @@ use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dy
 use crate::dynamics::{prescribe, GeneralizedForce, Prescription, ReducedKkt, Split};
 use crate::error::SimError;
 use crate::linalg::{lu_factor, lu_solve, lu_solve_factored, Pivots};
-use crate::system::{ConstraintTerms, Matrix, Order, System, Terms, Vector};
+use crate::system::{ConstraintTerms, Matrix, Order, Sparsity, System, Terms, Vector};
 
 /// When the VI's Newton iteration re-evaluates its exact Jacobian (eq. (26)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -253,10 +253,18 @@ where
                     jac[ij] = k_qq * lqq[ij] + k_vq * lvq[i * n + j] - a * lvq[ij] - mass[ij] / dt;
                 }
             }
-            if t.force_derivatives {
-                let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
-                for ij in 0..n * n {
-                    jac[ij] += left * (a * dt * fq[ij] + fv[ij]);
+            let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
+            match t.force_derivatives {
+                Sparsity::Zero => {}
+                Sparsity::Diagonal => {
+                    for i in 0..n {
+                        jac[i * n + i] += left * fv[i * n + i];
+                    }
+                }
+                Sparsity::Dense => {
+                    for ij in 0..n * n {
+                        jac[ij] += left * (a * dt * fq[ij] + fv[ij]);
+                    }
                 }
             }
             // Kinematic variables are not unknowns: identity rows and columns.

@@ -55,7 +55,7 @@ impl PaperSystem {
     pub fn new(model: &Model, evaluation: PaperEvaluation) -> Result<Self, SimError> {
         if model.has_elements() {
             return Err(SimError::Unsupported(format!(
-                "model `{}` has constraints, springs, dampers or kinematic variables; the paper's reference evaluation covers the tree's Lagrangian only (use TreeSystem)",
+                "model `{}` has constraints, springs, dampers or kinematic variables; the paper's reference evaluation covers the tree's Lagrangian only (the default evaluation handles them: TreeSystem, or `--evaluation sweeps`)",
                 model.name
             )));
         }
