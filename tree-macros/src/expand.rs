@@ -341,7 +341,14 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             /// The same model for the interpreted runtime (`TreeSystem::new(&Self::model(), …)`).
             pub fn model() -> ::tree_mech::tree_model::Model {
-                #constructor
+                Self::model_ref().clone()
+            }
+
+            /// The model, built once (a file model is parsed on first use only).
+            fn model_ref() -> &'static ::tree_mech::tree_model::Model {
+                static MODEL: ::std::sync::OnceLock<::tree_mech::tree_model::Model> =
+                    ::std::sync::OnceLock::new();
+                MODEL.get_or_init(|| #constructor)
             }
 
             #(#functions)*
@@ -377,7 +384,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             /// Read from the model (allocates): call it when setting up, not per step.
             fn motion(&self, i: usize) -> Option<::tree_mech::tree_model::Motion> {
                 if Self::KINEMATIC[i] {
-                    Self::model().variables[i].motion.clone()
+                    Self::model_ref().variables[i].motion.clone()
                 } else {
                     None
                 }

@@ -77,24 +77,25 @@ where
         }
     }
 
-    /// Zeroes what `order` asks for, ready to accumulate.
+    /// Zeroes what `order` asks for, ready to accumulate. Each buffer is one contiguous
+    /// `memset` (nalgebra's element iterator costs several times that on 40×40 matrices).
     pub fn clear(&mut self, order: Order) {
         self.l = 0.0;
-        self.dl_dq.fill(0.0);
-        self.dl_ddq.fill(0.0);
-        self.force.fill(0.0);
+        zero(self.dl_dq.as_mut_slice());
+        zero(self.dl_ddq.as_mut_slice());
+        zero(self.force.as_mut_slice());
         if order >= Order::Dynamics {
-            self.mass.fill(0.0);
-            self.d2l_ddq_dq.fill(0.0);
+            zero(self.mass.as_mut_slice());
+            zero(self.d2l_ddq_dq.as_mut_slice());
         }
         if order >= Order::Full {
-            self.d2l_dq_dq.fill(0.0);
+            zero(self.d2l_dq_dq.as_mut_slice());
             match self.force_derivatives {
                 Sparsity::Zero => {}
                 Sparsity::Diagonal => self.dforce_ddq.fill_diagonal(0.0),
                 Sparsity::Dense => {
-                    self.dforce_dq.fill(0.0);
-                    self.dforce_ddq.fill(0.0);
+                    zero(self.dforce_dq.as_mut_slice());
+                    zero(self.dforce_ddq.as_mut_slice());
                 }
             }
             self.force_derivatives = Sparsity::Zero;
@@ -184,13 +185,13 @@ impl ConstraintTerms {
 
     /// Zeroes what `order` asks for, ready to accumulate.
     pub fn clear(&mut self, order: Order) {
-        self.h.fill(0.0);
-        self.dh.fill(0.0);
+        zero(self.h.as_mut_slice());
+        zero(self.dh.as_mut_slice());
         if order >= Order::Dynamics {
-            self.dh_dot.fill(0.0);
+            zero(self.dh_dot.as_mut_slice());
         }
         if order >= Order::Full {
-            self.d2h.iter_mut().for_each(|m| m.fill(0.0));
+            self.d2h.iter_mut().for_each(|m| zero(m.as_mut_slice()));
         }
     }
 
@@ -211,6 +212,12 @@ impl Sink<f64> for ConstraintTerms {
             _ => {}
         }
     }
+}
+
+/// Zeroes a contiguous buffer.
+#[inline]
+fn zero(x: &mut [f64]) {
+    x.fill(0.0);
 }
 
 /// A mechanical system in generalized coordinates: a tree whose Lagrangian and derivatives
