@@ -1,5 +1,6 @@
 //! The `tree-mech` command line: simulate a model, evaluate it at a state, check it.
 
+mod animate;
 mod plot;
 
 use std::path::{Path, PathBuf};
@@ -93,9 +94,12 @@ enum Command {
         /// Baumgarte stabilisation of the constraints for rk4/rk45: `a,b` in ḧ + 2aḣ + b²h = 0.
         #[arg(long, allow_hyphen_values = true)]
         baumgarte: Option<String>,
-        /// PNG plot of the variables and the energy.
+        /// PNG plot of the variables and the energy (and constraint forces, with constraints).
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// GIF animation of the figure in perspective, 25 frames per simulated second.
+        #[arg(long)]
+        animate: Option<PathBuf>,
         /// VI quadrature point α (½ is second order).
         #[arg(long, default_value_t = 0.5)]
         alpha: f64,
@@ -133,7 +137,26 @@ enum Command {
     Check { model: PathBuf },
 }
 
+/// Lets a closed stdout (`tree-mech check … | head`) end the process quietly, as it does
+/// for other command-line tools, instead of a panic in `println!`.
+#[cfg(unix)]
+fn default_sigpipe() {
+    extern "C" {
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: restoring the default disposition of one signal before any thread starts.
+    unsafe {
+        signal(SIGPIPE, SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn default_sigpipe() {}
+
 fn main() -> ExitCode {
+    default_sigpipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate {
@@ -147,6 +170,7 @@ fn main() -> ExitCode {
             no_subdivide,
             baumgarte,
             plot,
+            animate,
             alpha,
             newton_tol,
             jacobian,
@@ -182,28 +206,24 @@ fn main() -> ExitCode {
                     baumgarte,
                     ..SimOptions::new(method, dt, duration)
                 };
-                let (out, plot) = (out.as_deref(), plot.as_deref());
+                let outputs = Outputs {
+                    csv: out.as_deref(),
+                    plot: plot.as_deref(),
+                    animate: animate.as_deref(),
+                };
                 let model = tree_model::from_toml_file(&model).map_err(|e| e.to_string())?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
                         let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
-                        run_simulate(sys, &model.name, options, out, plot)
+                        run_simulate(sys, &model, options, &outputs)
                     }
-                    EvaluationArg::Cached => run_simulate(
-                        paper(PaperEvaluation::Cached)?,
-                        &model.name,
-                        options,
-                        out,
-                        plot,
-                    ),
-                    EvaluationArg::Uncached => run_simulate(
-                        paper(PaperEvaluation::Uncached)?,
-                        &model.name,
-                        options,
-                        out,
-                        plot,
-                    ),
+                    EvaluationArg::Cached => {
+                        run_simulate(paper(PaperEvaluation::Cached)?, &model, options, &outputs)
+                    }
+                    EvaluationArg::Uncached => {
+                        run_simulate(paper(PaperEvaluation::Uncached)?, &model, options, &outputs)
+                    }
                 }
             })
         }
@@ -257,13 +277,21 @@ fn num(x: f64) -> String {
 /// Most samples kept in memory for the picture (the CSV gets every recorded step).
 const PLOT_SAMPLES: usize = 20_000;
 
+/// Where `simulate` writes what it produces.
+struct Outputs<'a> {
+    csv: Option<&'a Path>,
+    plot: Option<&'a Path>,
+    animate: Option<&'a Path>,
+}
+
 fn run_simulate<S: System<N = Dyn>>(
     mut sys: S,
-    name: &str,
+    model: &tree_model::Model,
     options: SimOptions,
-    out: Option<&Path>,
-    plot_path: Option<&Path>,
+    outputs: &Outputs,
 ) -> Result<(), String> {
+    let name = model.name.as_str();
+    let (out, plot_path) = (outputs.csv, outputs.plot);
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
     bar.set_style(
@@ -296,6 +324,10 @@ fn run_simulate<S: System<N = Dyn>>(
     let mut picture = Trajectory::new(names.clone(), constraints.clone(), 0);
     let (mut e0, mut e_end, mut t_end, mut k) = (f64::NAN, f64::NAN, 0.0, 0usize);
     let mut motion = ModelMotions::of(&sys);
+    // The animation keeps the configuration at every 1/FPS s of simulated time (fewer for
+    // long runs); poses are computed after the run.
+    let frame_interval = (1.0 / animate::FPS).max(options.duration / animate::MAX_FRAMES as f64);
+    let (mut frame_times, mut frame_q) = (Vec::new(), Vec::new());
     let summary = run(
         &mut sys,
         &q0,
@@ -311,6 +343,11 @@ fn run_simulate<S: System<N = Dyn>>(
             }
             if plot_path.is_some() && k % thin == 0 {
                 picture.push(sample);
+            }
+            let next_frame = frame_times.len() as f64 * frame_interval;
+            if outputs.animate.is_some() && sample.t >= next_frame - 1e-9 * frame_interval {
+                frame_times.push(sample.t);
+                frame_q.push(sample.q.to_vec());
             }
             k += 1;
             if e0.is_nan() {
@@ -338,6 +375,16 @@ fn run_simulate<S: System<N = Dyn>>(
     }
     if let Some(p) = plot_path {
         plot::plot(&picture, name, p)?;
+    }
+    if let Some(path) = outputs.animate {
+        let mut poses = Vec::with_capacity(frame_q.len());
+        for q in &frame_q {
+            let mut frame = vec![tree_mech::runtime::Pose::IDENTITY; sys.frame_count()];
+            sys.poses(&Vector::<Dyn>::from_column_slice(q), &mut frame);
+            poses.push(frame);
+        }
+        let delay_ms = (1000.0 * frame_interval).round() as u32;
+        animate::write_gif(model, &frame_times, &poses, delay_ms, path)?;
     }
     for m in &summary.moved {
         println!(
@@ -385,7 +432,7 @@ fn run_simulate<S: System<N = Dyn>>(
     };
     println!(
         "Simulated `{name}` ({} variables) for {t_end} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
-         Energy went from {} to {} J{energy_note} (drift {:+.3e} J).{constrained}{}{}",
+         Energy went from {} to {} J{energy_note} (drift {:+.3e} J).{constrained}{}{}{}",
         sys.dof(),
         summary.steps,
         wall.as_secs_f64(),
@@ -394,6 +441,10 @@ fn run_simulate<S: System<N = Dyn>>(
         e_end - e0,
         out.map(|p| format!(" Trajectory: {}.", p.display())).unwrap_or_default(),
         plot_path.map(|p| format!(" Plot: {}.", p.display())).unwrap_or_default(),
+        outputs
+            .animate
+            .map(|p| format!(" Animation: {}.", p.display()))
+            .unwrap_or_default(),
     );
     Ok(())
 }

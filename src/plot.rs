@@ -5,7 +5,7 @@ use plotters::style::{register_font, FontStyle};
 use tree_mech::Trajectory;
 
 /// DejaVu Sans, bundled so plots need no system fonts (licence in `assets/`).
-static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+pub static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
@@ -70,13 +70,17 @@ fn panel(
     Ok(())
 }
 
-/// Writes a PNG of `traj` to `path`: every variable over time above, total energy below.
+/// Writes a PNG of `traj` to `path`: every variable over time above, total energy below, and
+/// with constraints a third panel of the constraint forces λ.
 pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<(), String> {
     let err = |e: &dyn std::fmt::Display| format!("cannot draw `{}`: {e}", path.display());
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
-    let root = BitMapBackend::new(path, (1200, 900)).into_drawing_area();
+    let constrained = !traj.constraints.is_empty();
+    let height = if constrained { 1220 } else { 900 };
+    let root = BitMapBackend::new(path, (1200, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
-    let (top, bottom) = root.split_vertically(560);
+    let (top, rest) = root.split_vertically(560);
+    let (bottom, forces) = rest.split_vertically(340);
     let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
     let variables: Vec<Series> = (0..traj.dof())
         .map(|i| {
@@ -101,6 +105,24 @@ pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<()
     )
     .map_err(|e| err(&e))?;
     panel(&bottom, "total energy", "E [J]", t_end, &energy).map_err(|e| err(&e))?;
+    if constrained {
+        let lambda: Vec<Series> = (0..traj.constraints.len())
+            .map(|r| {
+                let points = (0..traj.len())
+                    .map(|k| (traj.t[k], traj.lambda(k)[r]))
+                    .collect();
+                (traj.constraints[r].clone(), points)
+            })
+            .collect();
+        panel(
+            &forces,
+            "constraint forces (λ; a taut string has λ < 0)",
+            "λ",
+            t_end,
+            &lambda,
+        )
+        .map_err(|e| err(&e))?;
+    }
     root.present().map_err(|e| err(&e))?;
     Ok(())
 }

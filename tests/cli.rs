@@ -192,3 +192,84 @@ fn bad_input_is_a_short_error_and_a_failing_exit() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+#[test]
+fn simulate_animates_the_marionette_and_plots_its_constraint_forces() {
+    let dir = std::env::temp_dir().join(format!("tree-mech-anim-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (gif, png) = (dir.join("m.gif"), dir.join("m.png"));
+    let (ok, stdout, stderr) = tree_mech(&[
+        "simulate",
+        "models/marionette.toml",
+        "--duration",
+        "0.4",
+        "--animate",
+        gif.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("Animation: "), "{stdout}");
+    let bytes = std::fs::read(&gif).unwrap();
+    assert_eq!(&bytes[..6], b"GIF89a");
+    // 0.4 s at 25 frames a second: frames at 0, 0.04, …, 0.4, each 640×480.
+    let mut decoder = gif::DecodeOptions::new()
+        .read_info(std::io::Cursor::new(&bytes))
+        .unwrap();
+    assert_eq!((decoder.width(), decoder.height()), (640, 480));
+    let mut frames = 0;
+    while let Some(frame) = decoder.read_next_frame().unwrap() {
+        assert_eq!(frame.delay, 4, "40 ms a frame");
+        frames += 1;
+    }
+    assert_eq!(frames, 11, "GIF frames");
+    // The plot grows a third panel (constraint forces) when the model has constraints.
+    let png = std::fs::read(&png).unwrap();
+    let height = u32::from_be_bytes(png[20..24].try_into().unwrap());
+    assert_eq!(height, 1220);
+}
+
+#[test]
+fn huge_energies_are_printed_in_scientific_notation() {
+    let dir = std::env::temp_dir().join(format!("tree-mech-huge-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = dir.join("heavy.toml");
+    std::fs::write(
+        &model,
+        "[[frame]]\nname = \"j\"\nrx = \"q\"\n[[frame]]\nname = \"b\"\nparent = \"j\"\n\
+         tz = -1.0\nmass = 1e300\n[variables.q]\nq0 = 0.5\n",
+    )
+    .unwrap();
+    let (ok, stdout, stderr) =
+        tree_mech(&["simulate", model.to_str().unwrap(), "--duration", "0.1"]);
+    assert!(ok, "{stderr}");
+    let summary = stdout.lines().last().unwrap();
+    assert!(summary.contains("Energy went from -8.6"), "{summary}");
+    assert!(summary.contains("e300"), "{summary}");
+    assert!(summary.len() < 400, "no 300-digit numbers: {summary}");
+}
+
+#[test]
+fn a_closed_pipe_ends_the_output_quietly() {
+    use std::io::Read;
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tree-mech"))
+        .args(["check", "models/marionette.toml"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read one byte, then close the pipe as `| head -c 1` would.
+    let mut first = [0u8; 1];
+    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    child.wait().unwrap();
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

@@ -263,7 +263,9 @@ fn a_mass_hanging_at_rest_has_two_l_lambda_equal_to_minus_m_g() {
             &mut |_| {},
         )
         .unwrap();
-        for k in [0, traj.len() - 1] {
+        // Every sample, the first VI step's included (its impulse spans a whole step only when
+        // the start momentum is the discrete one, `start_constrained`).
+        for k in 0..traj.len() {
             // Sign convention: d/dt ∂L/∂q̇ − ∂L/∂q = u + Dhᵀλ, so a taut string has λ < 0.
             assert_close(
                 2.0 * 1.5 * traj.lambda(k)[0],

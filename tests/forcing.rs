@@ -61,7 +61,7 @@ fn a_moving_pivot_changes_the_energy_by_the_work_it_does() {
         let traj = run(&model, method, dt, 2.0);
         let y_bob = |k: usize| traj.q(k)[0] + traj.q(k)[1].sin();
         let mut work = 0.0;
-        let mut power = |k: usize| {
+        let power = |k: usize| {
             let acceleration = (y_bob(k + 1) - 2.0 * y_bob(k) + y_bob(k - 1)) / (dt * dt);
             2.0 * acceleration * traj.dq(k)[0]
         };

@@ -258,7 +258,6 @@ where
             // The start as the continuous equations see it, λ included.
             let (energy, violation) =
                 rec.state(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
-            vi.lambda.copy_from(&dynamics.lambda);
             rec.record(&Sample {
                 step: 0,
                 t: 0.0,
@@ -266,9 +265,13 @@ where
                 dq: dq.as_slice(),
                 p: Some(p.as_slice()),
                 energy,
-                lambda: vi.lambda.as_slice(),
+                lambda: dynamics.lambda.as_slice(),
                 violation,
             })?;
+            if dynamics.split.rows > 0 {
+                let dh0 = &dynamics.constraint_terms.dh;
+                vi.start_constrained(dh0, &dynamics.lambda, options.dt, &mut p);
+            }
             for k in 0..steps {
                 let t = k as f64 * options.dt;
                 vi.step(

@@ -176,6 +176,27 @@ where
         self.terms.dl_ddq.clone()
     }
 
+    /// Turns the continuous momentum `p(0)` at a constrained start into the discrete one the
+    /// first step expects: `p₀⁻ = p(0) − ½Δt Dh(q₀)_dᵀλ(0)` (docs/derivations.md §7). The
+    /// impulse `Δt Dh(q₁)ᵀλ` of a step stands for half a step either side of its node, but
+    /// nothing came before `t = 0`: without this the first step's λ is half the force (its
+    /// impulse covers only `[0, Δt/2]`). `dh0` and `lambda0` are the continuous equations'
+    /// at `q₀`; λ is also kept as the first Newton guess.
+    pub fn start_constrained(
+        &mut self,
+        dh0: &DMatrix<f64>,
+        lambda0: &DVector<f64>,
+        dt: f64,
+        p: &mut Vector<N>,
+    ) {
+        self.lambda.copy_from(lambda0);
+        for &i in &self.split.dynamic {
+            for s in 0..self.split.rows {
+                p[i] -= 0.5 * dt * dh0[(s, i)] * lambda0[s];
+            }
+        }
+    }
+
     /// Evaluates `Dh(q₁)` for the step from `q₁` (before [`Self::residual`]).
     pub fn prepare<S: System<N = N>>(&mut self, sys: &mut S, q1: &Vector<N>) {
         if self.split.rows > 0 {
