@@ -313,3 +313,71 @@ fn kinematic_variables_follow_their_prescription_exactly() {
         assert_eq!(checked, 51);
     }
 }
+
+compile! {
+    /// tests/models/elements.toml written inline: every element, motion and spline.
+    struct InlineElements;
+    frame base = rz(yaw) {
+        frame shoulder = ry(pitch) {
+            frame upper = tz(0.5) {
+                mass = 1.0;
+                inertia = [0.02, 0.03, 0.01];
+                frame elbow = rx(bend) {
+                    frame lower = ty(0.4) {
+                        mass = 0.5;
+                        inertia = [0.01, 0.005, 0.01];
+                        frame tip = tx(slide) { mass = 0.2; }
+                    }
+                }
+            }
+        }
+    }
+    frame hand = tx(hand_x) { frame hand_z = tz(hand_z); }
+    frame floor = tz(-1.0);
+    variable yaw { q0 = 0.2; }
+    variable bend { q0 = 0.3; }
+    variable pitch { damping = 0.2; }
+    variable hand_x {
+        kinematic = true;
+        motion = sine(offset = 0.3, amplitude = 0.1, frequency = 0.5, phase = 0.3);
+    }
+    variable hand_z { kinematic = true; samples = [[0.0, 1.2], [0.5, 1.3], [1.0, 1.15], [2.0, 1.25]]; }
+    variable len { kinematic = true; motion = sine(offset = 0.9, amplitude = 0.05, frequency = 1.0); }
+    constraint string = distance(tip, hand_z) { length = len; }
+    constraint wall = plane(upper, tip) { normal = [0.0, 1.0, 1.0]; }
+    constraint rail = point(lower, floor) { axes = "x"; }
+    spring(upper, hand_z) { stiffness = 20.0; rest = 0.3; }
+    spring(bend) { stiffness = 5.0; rest = 0.1; }
+    damper(lower, hand_z) { damping = 0.7; }
+}
+
+#[test]
+fn inline_elements_compile_to_the_same_model_and_system_as_the_file() {
+    let mut file = elements();
+    let mut inline = InlineElements::model();
+    file.name.clear();
+    inline.name.clear();
+    assert_eq!(inline, file, "the inline model is the file's");
+    assert_eq!(InlineElements::CONSTRAINTS, Elements::CONSTRAINTS);
+    assert_eq!(InlineElements::KINEMATIC, Elements::KINEMATIC);
+    let mut rng = Rng::new(31);
+    let (mut a, mut b) = (InlineElements, Elements);
+    for _ in 0..3 {
+        let qd = rng.vector(7, 1.0);
+        let q = tree_mech::runtime::Vector::<nalgebra::Const<7>>::from_column_slice(qd.as_slice());
+        let ta = a.evaluate(&q, &q, Order::Full);
+        let tb = b.evaluate(&q, &q, Order::Full);
+        assert_eq!(ta.l, tb.l);
+        assert_eq!(ta.d2l_dq_dq, tb.d2l_dq_dq);
+        assert_eq!(ta.dforce_dq, tb.dforce_dq);
+        let mut ca = ConstraintTerms::zeros(3, 7);
+        let mut cb = ConstraintTerms::zeros(3, 7);
+        a.constraints(&q, &q, Order::Full, &mut ca);
+        b.constraints(&q, &q, Order::Full, &mut cb);
+        assert_eq!(ca.dh, cb.dh);
+        assert_eq!(ca.d2h, cb.d2h);
+    }
+    for i in 0..7 {
+        assert_eq!(a.motion(i), b.motion(i), "motion of variable {i}");
+    }
+}

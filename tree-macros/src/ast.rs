@@ -12,6 +12,9 @@ mod kw {
     syn::custom_keyword!(mass);
     syn::custom_keyword!(inertia);
     syn::custom_keyword!(variable);
+    syn::custom_keyword!(constraint);
+    syn::custom_keyword!(spring);
+    syn::custom_keyword!(damper);
 }
 
 /// `tree_model!(pub struct Name from "file.toml")` or `tree_model! { pub struct Name; … }`.
@@ -33,6 +36,30 @@ pub struct InlineModel {
     pub gravity: Option<([f64; 3], Span)>,
     pub frames: Vec<InlineFrame>,
     pub variables: Vec<InlineVariable>,
+    /// Constraints, springs and dampers, each list in the order written.
+    pub elements: Vec<InlineElement>,
+}
+
+/// Which list an inline element belongs to.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum ElementKind {
+    Constraint,
+    Spring,
+    Damper,
+}
+
+/// `constraint NAME = KIND(a, b) { … }`, `spring(a, b) { … }` or `spring(var) { … }`,
+/// `damper(a, b) { … }`: what the TOML `[[constraint]]`, `[[spring]]`, `[[damper]]` tables say.
+pub struct InlineElement {
+    pub element: ElementKind,
+    /// The keyword (`constraint`, `spring`, `damper`): where whole-element errors point.
+    pub keyword: Span,
+    pub name: Option<Ident>,
+    /// A constraint's kind (`distance`, `plane`, `point`).
+    pub kind: Option<Ident>,
+    /// The frames (or, for a one-argument spring, the variable) in the parentheses.
+    pub arguments: Vec<Ident>,
+    pub settings: Vec<(Ident, Setting)>,
 }
 
 /// A number with the span it was written at.
@@ -63,9 +90,29 @@ pub struct InlineVariable {
     pub settings: Vec<(Ident, Setting)>,
 }
 
+/// A setting's value: `1.0`, `true`, `name`, `"xyz"`, `[1.0, 0.0, 0.0]`, `[[t, q], …]` or
+/// `sine(offset = …, amplitude = …, frequency = …, phase = …)`.
 pub enum Setting {
     Number(Number),
-    Bool(bool),
+    Bool(bool, Span),
+    Name(Ident),
+    Text(LitStr),
+    Vector(Vec<Number>, Span),
+    Pairs(Vec<[f64; 2]>, Span),
+    Sine(Vec<(Ident, Number)>, Span),
+}
+
+impl Setting {
+    /// Where the value was written.
+    pub fn span(&self) -> Span {
+        match self {
+            Setting::Number(n) => n.span,
+            Setting::Bool(_, s) => *s,
+            Setting::Name(i) => i.span(),
+            Setting::Text(t) => t.span(),
+            Setting::Vector(_, s) | Setting::Pairs(_, s) | Setting::Sine(_, s) => *s,
+        }
+    }
 }
 
 fn parse_number(input: ParseStream) -> syn::Result<Number> {
@@ -125,6 +172,7 @@ impl Parse for Input {
             gravity: None,
             frames: Vec::new(),
             variables: Vec::new(),
+            elements: Vec::new(),
         };
         while !input.is_empty() {
             let lookahead = input.lookahead1();
@@ -140,6 +188,11 @@ impl Parse for Input {
                 model.frames.push(input.parse()?);
             } else if lookahead.peek(kw::variable) {
                 model.variables.push(input.parse()?);
+            } else if lookahead.peek(kw::constraint)
+                || lookahead.peek(kw::spring)
+                || lookahead.peek(kw::damper)
+            {
+                model.elements.push(input.parse()?);
             } else {
                 return Err(lookahead.error());
             }
@@ -221,20 +274,116 @@ impl Parse for InlineVariable {
     fn parse(input: ParseStream) -> syn::Result<Self> {
         input.parse::<kw::variable>()?;
         let name: Ident = input.parse()?;
-        let body;
-        braced!(body in input);
-        let mut settings = Vec::new();
-        while !body.is_empty() {
-            let key: Ident = body.parse()?;
-            body.parse::<Token![=]>()?;
-            let value = if body.peek(syn::LitBool) {
-                Setting::Bool(body.parse::<syn::LitBool>()?.value)
-            } else {
-                Setting::Number(parse_number(&body)?)
-            };
-            body.parse::<Token![;]>()?;
-            settings.push((key, value));
-        }
+        let settings = parse_settings(input)?;
         Ok(InlineVariable { name, settings })
     }
+}
+
+impl Parse for InlineElement {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let lookahead = input.lookahead1();
+        let (element, keyword, name, kind) = if lookahead.peek(kw::constraint) {
+            let k: kw::constraint = input.parse()?;
+            let name: Ident = input.parse()?;
+            input.parse::<Token![=]>()?;
+            let kind: Ident = input.parse()?;
+            (ElementKind::Constraint, k.span, Some(name), Some(kind))
+        } else if lookahead.peek(kw::spring) {
+            let k: kw::spring = input.parse()?;
+            (ElementKind::Spring, k.span, None, None)
+        } else if lookahead.peek(kw::damper) {
+            let k: kw::damper = input.parse()?;
+            (ElementKind::Damper, k.span, None, None)
+        } else {
+            return Err(lookahead.error());
+        };
+        let content;
+        parenthesized!(content in input);
+        let arguments = content.parse_terminated(Ident::parse, Token![,])?;
+        let settings = parse_settings(input)?;
+        Ok(InlineElement {
+            element,
+            keyword,
+            name,
+            kind,
+            arguments: arguments.into_iter().collect(),
+            settings,
+        })
+    }
+}
+
+/// `{ key = value; … }`
+fn parse_settings(input: ParseStream) -> syn::Result<Vec<(Ident, Setting)>> {
+    let body;
+    braced!(body in input);
+    let mut settings = Vec::new();
+    while !body.is_empty() {
+        let key: Ident = body.parse()?;
+        body.parse::<Token![=]>()?;
+        let value = parse_setting(&body)?;
+        body.parse::<Token![;]>()?;
+        settings.push((key, value));
+    }
+    Ok(settings)
+}
+
+fn parse_setting(input: ParseStream) -> syn::Result<Setting> {
+    if input.peek(syn::LitBool) {
+        let b: syn::LitBool = input.parse()?;
+        return Ok(Setting::Bool(b.value, b.span));
+    }
+    if input.peek(LitStr) {
+        return Ok(Setting::Text(input.parse()?));
+    }
+    if input.peek(Ident) && input.peek2(syn::token::Paren) {
+        let function: Ident = input.parse()?;
+        if function != "sine" {
+            return Err(syn::Error::new(
+                function.span(),
+                format!("unknown motion `{function}`: expected sine(offset = …, amplitude = …, frequency = …, phase = …)"),
+            ));
+        }
+        let content;
+        let paren = parenthesized!(content in input);
+        let mut terms = Vec::new();
+        while !content.is_empty() {
+            let key: Ident = content.parse()?;
+            content.parse::<Token![=]>()?;
+            terms.push((key, parse_number(&content)?));
+            if !content.is_empty() {
+                content.parse::<Token![,]>()?;
+            }
+        }
+        return Ok(Setting::Sine(terms, paren.span.join()));
+    }
+    if input.peek(Ident) {
+        return Ok(Setting::Name(input.parse()?));
+    }
+    if input.peek(syn::token::Bracket) {
+        let content;
+        let bracket = bracketed!(content in input);
+        let span = bracket.span.join();
+        if content.peek(syn::token::Bracket) {
+            let mut pairs = Vec::new();
+            while !content.is_empty() {
+                let inner;
+                let b = bracketed!(inner in content);
+                let items = inner.parse_terminated(parse_number, Token![,])?;
+                if items.len() != 2 {
+                    return Err(syn::Error::new(
+                        b.span.join(),
+                        format!("expected a pair [t, q], found {} numbers", items.len()),
+                    ));
+                }
+                pairs.push([items[0].value, items[1].value]);
+                if !content.is_empty() {
+                    content.parse::<Token![,]>()?;
+                }
+            }
+            return Ok(Setting::Pairs(pairs, span));
+        }
+        let items = content.parse_terminated(parse_number, Token![,])?;
+        return Ok(Setting::Vector(items.into_iter().collect(), span));
+    }
+    Ok(Setting::Number(parse_number(input)?))
 }

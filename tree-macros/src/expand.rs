@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote};
-use tree_model::{Joint, Model};
+use tree_model::{ModelSpec, ParameterSpec, Value};
 use tree_runtime::plan::TreePlan;
 use tree_runtime::se3::Pose;
 use tree_runtime::sweeps::{self, Output, Sink, Workspace};
@@ -165,65 +165,168 @@ fn index_constants(
 }
 
 /// `Model` rebuilt at run time, so `Name::model()` gives the interpreted twin: a file model
-/// is read again from the text compiled in, an inline one rebuilt by the builder.
-fn model_constructor(model: &Model, file: Option<(&str, &str)>) -> TokenStream {
+/// is read again from the text compiled in, an inline one validated again from its spec —
+/// either way through the one validator, so every field the spec has is carried over.
+fn model_constructor(spec: Option<&ModelSpec>, file: Option<(&str, &str)>) -> TokenStream {
     if let Some((path, shown)) = file {
         return quote! {
             ::tree_mech::tree_model::from_toml_str(include_str!(#path), Some(#shown))
                 .expect("the model was validated when it was compiled")
         };
     }
-    let name = &model.name;
-    let g = model.gravity.map(constant);
-    let mut calls = quote!(.gravity([#(#g),*]));
-    for f in &model.frames {
-        let fname = &f.name;
-        let parent = f.parent.map_or("world", |p| model.frames[p].name.as_str());
-        let kind = format_ident!("{}", format!("{:?}", f.primitive));
-        let value = match f.joint {
-            Joint::Constant(x) => constant(x),
-            Joint::Variable(i) => {
-                let v = &model.variables[i].name;
-                quote!(#v)
-            }
-        };
-        calls.extend(
-            quote!(.frame(#fname, #parent, ::tree_mech::tree_model::PrimitiveKind::#kind, #value)),
-        );
-        if let Some(m) = f.mass {
-            let (mass, inertia) = (constant(m.mass), m.inertia.map(constant));
-            calls.extend(quote!(.mass(#fname, #mass, [#(#inertia),*])));
-        }
-    }
-    for v in &model.variables {
-        let (vname, q0, dq0, c) = (
-            &v.name,
-            constant(v.q0),
-            constant(v.dq0),
-            constant(v.damping),
-        );
-        calls.extend(quote!(.initial(#vname, #q0, #dq0)));
-        if v.is_kinematic() {
-            calls.extend(quote!(.kinematic(#vname)));
-        } else {
-            calls.extend(quote!(.damping(#vname, #c)));
-        }
-    }
+    let spec = spec_tokens(spec.expect("an inline model has its spec"));
     quote! {
-        ::tree_mech::tree_model::ModelBuilder::new(#name)
-            #calls
-            .build()
+        ::tree_mech::tree_model::validate(&#spec)
+            .ok()
             .expect("the model was validated when it was compiled")
     }
 }
 
+/// Rust tokens that build `spec` (a `ModelSpec` literal).
+fn spec_tokens(spec: &ModelSpec) -> TokenStream {
+    let m = quote!(::tree_mech::tree_model);
+    let opt = |x: Option<f64>| match x {
+        Some(x) => {
+            let x = constant(x);
+            quote!(Some(#x))
+        }
+        None => quote!(None),
+    };
+    let opt3 = |x: Option<[f64; 3]>| match x {
+        Some(v) => {
+            let v = v.map(constant);
+            quote!(Some([#(#v),*]))
+        }
+        None => quote!(None),
+    };
+    let string = |x: &str| quote!(::std::string::String::from(#x));
+    let opt_string = |x: Option<&str>| match x {
+        Some(x) => {
+            let x = string(x);
+            quote!(Some(#x))
+        }
+        None => quote!(None),
+    };
+    let strings = |xs: &[String]| {
+        let xs = xs.iter().map(|x| string(x));
+        quote!(::std::vec![#(#xs),*])
+    };
+    let frames = spec.frames.iter().map(|f| {
+        let primitives = f.primitives.iter().map(|p| {
+            let kind = format_ident!("{}", format!("{:?}", p.kind));
+            let value = match &p.value {
+                Value::Constant(x) => {
+                    let x = constant(*x);
+                    quote!(#m::Value::Constant(#x))
+                }
+                Value::Variable(v) => {
+                    let v = string(v);
+                    quote!(#m::Value::Variable(#v))
+                }
+            };
+            quote!(#m::Primitive { kind: #m::PrimitiveKind::#kind, value: #value })
+        });
+        let (name, parent) = (string(&f.name), opt_string(f.parent.as_deref()));
+        let (mass, inertia) = (opt(f.mass), opt3(f.inertia));
+        quote!(#m::FrameSpec {
+            name: #name,
+            parent: #parent,
+            primitives: ::std::vec![#(#primitives),*],
+            mass: #mass,
+            inertia: #inertia,
+        })
+    });
+    let variables = spec.variables.iter().map(|v| {
+        let name = string(&v.name);
+        let (q0, dq0, damping) = (opt(v.q0), opt(v.dq0), opt(v.damping));
+        let kinematic = match v.kinematic {
+            Some(b) => quote!(Some(#b)),
+            None => quote!(None),
+        };
+        let motion = match &v.motion {
+            Some(s) => {
+                let (o, a, f, p) = (
+                    opt(s.offset),
+                    opt(s.amplitude),
+                    opt(s.frequency),
+                    opt(s.phase),
+                );
+                quote!(Some(#m::SineSpec { offset: #o, amplitude: #a, frequency: #f, phase: #p }))
+            }
+            None => quote!(None),
+        };
+        let samples = match &v.samples {
+            Some(pairs) => {
+                let pairs = pairs.iter().map(|[t, q]| {
+                    let (t, q) = (constant(*t), constant(*q));
+                    quote!([#t, #q])
+                });
+                quote!(Some(::std::vec![#(#pairs),*]))
+            }
+            None => quote!(None),
+        };
+        quote!(#m::VariableSpec {
+            name: #name, q0: #q0, dq0: #dq0, damping: #damping, kinematic: #kinematic,
+            motion: #motion, samples: #samples,
+        })
+    });
+    let constraints = spec.constraints.iter().map(|c| {
+        let (name, kind, frames) = (opt_string(c.name.as_deref()), string(&c.kind), strings(&c.frames));
+        let length = match &c.length {
+            Some(ParameterSpec::Constant(x)) => {
+                let x = constant(*x);
+                quote!(Some(#m::ParameterSpec::Constant(#x)))
+            }
+            Some(ParameterSpec::Variable(v)) => {
+                let v = string(v);
+                quote!(Some(#m::ParameterSpec::Variable(#v)))
+            }
+            None => quote!(None),
+        };
+        let (normal, axes) = (opt3(c.normal), opt_string(c.axes.as_deref()));
+        quote!(#m::ConstraintSpec {
+            name: #name, kind: #kind, frames: #frames, length: #length, normal: #normal, axes: #axes,
+        })
+    });
+    let springs = spec.springs.iter().map(|s| {
+        let frames = match &s.frames {
+            Some(f) => {
+                let f = strings(f);
+                quote!(Some(#f))
+            }
+            None => quote!(None),
+        };
+        let variable = opt_string(s.variable.as_deref());
+        let (stiffness, rest) = (opt(s.stiffness), opt(s.rest));
+        quote!(#m::SpringSpec { frames: #frames, variable: #variable, stiffness: #stiffness, rest: #rest })
+    });
+    let dampers = spec.dampers.iter().map(|d| {
+        let (frames, damping) = (strings(&d.frames), opt(d.damping));
+        quote!(#m::DamperSpec { frames: #frames, damping: #damping })
+    });
+    let name = string(&spec.name);
+    let gravity = opt3(spec.gravity);
+    quote!(#m::ModelSpec {
+        name: #name,
+        gravity: #gravity,
+        frames: ::std::vec![#(#frames),*],
+        variables: ::std::vec![#(#variables),*],
+        constraints: ::std::vec![#(#constraints),*],
+        springs: ::std::vec![#(#springs),*],
+        dampers: ::std::vec![#(#dampers),*],
+    })
+}
+
 pub fn expand(input: Input) -> syn::Result<TokenStream> {
-    let (model, file) = match &input.source {
+    let (model, spec, file) = match &input.source {
         Source::File(path) => {
             let (model, full) = lower::from_file(path)?;
-            (model, Some((full, path.value())))
+            (model, None, Some((full, path.value())))
         }
-        Source::Inline(inline) => (lower::from_inline(&input.name, inline)?, None),
+        Source::Inline(inline) => {
+            let (model, spec) = lower::from_inline(&input.name, inline)?;
+            (model, Some(spec), None)
+        }
     };
     let (attrs, vis, name) = (&input.attrs, &input.vis, &input.name);
     let plan = TreePlan::folded(&model);
@@ -286,7 +389,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         .as_ref()
         .map(|(full, shown)| (full.to_string_lossy().into_owned(), shown.clone()));
     let constructor = model_constructor(
-        &model,
+        spec.as_ref(),
         full_path.as_ref().map(|(p, s)| (p.as_str(), s.as_str())),
     );
     let rebuild = full_path.as_ref().map(|(path, _)| {

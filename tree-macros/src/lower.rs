@@ -7,10 +7,11 @@ use std::path::PathBuf;
 use proc_macro2::Span;
 use syn::LitStr;
 use tree_model::{
-    FrameField, FrameSpec, Model, ModelSpec, Primitive, PrimitiveKind, Site, Value, VariableSpec,
+    ConstraintSpec, DamperSpec, FrameField, FrameSpec, Model, ModelSpec, ParameterSpec, Primitive,
+    PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value, VariableSpec,
 };
 
-use crate::ast::{Argument, InlineFrame, InlineModel, Setting};
+use crate::ast::{Argument, ElementKind, InlineElement, InlineFrame, InlineModel, Setting};
 
 /// Collects errors and fails with all of them (the serde_derive `Ctxt` pattern).
 #[derive(Default)]
@@ -23,6 +24,10 @@ impl Errors {
             Some(all) => all.combine(e),
             None => self.0 = Some(e),
         }
+    }
+    /// How many errors so far.
+    fn count(&self) -> usize {
+        self.0.as_ref().map_or(0, |e| e.into_iter().count())
     }
     fn finish(self) -> syn::Result<()> {
         self.0.map_or(Ok(()), Err)
@@ -94,8 +99,200 @@ fn flatten(
     }
 }
 
-/// Builds and validates the inline model named `name`.
-pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<Model> {
+/// A variable's settings as a [`VariableSpec`]; wrong keys and values are errors at them.
+fn variable_spec(
+    name: &syn::Ident,
+    settings: &[(syn::Ident, Setting)],
+    errors: &mut Errors,
+) -> VariableSpec {
+    let mut spec = VariableSpec {
+        name: name.to_string(),
+        ..VariableSpec::default()
+    };
+    for (key, value) in settings {
+        match (key.to_string().as_str(), value) {
+            ("q0", Setting::Number(n)) => spec.q0 = Some(n.value),
+            ("dq0", Setting::Number(n)) => spec.dq0 = Some(n.value),
+            ("damping", Setting::Number(n)) => spec.damping = Some(n.value),
+            ("kinematic", Setting::Bool(b, _)) => spec.kinematic = Some(*b),
+            ("motion", Setting::Sine(terms, _)) => {
+                let mut sine = SineSpec::default();
+                for (k, n) in terms {
+                    let slot = match k.to_string().as_str() {
+                        "offset" => &mut sine.offset,
+                        "amplitude" => &mut sine.amplitude,
+                        "frequency" => &mut sine.frequency,
+                        "phase" => &mut sine.phase,
+                        _ => {
+                            errors.push(k.span(), format!("unknown sine parameter `{k}`: expected offset, amplitude, frequency or phase"));
+                            continue;
+                        }
+                    };
+                    *slot = Some(n.value);
+                }
+                spec.motion = Some(sine);
+            }
+            ("samples", Setting::Pairs(pairs, _)) => spec.samples = Some(pairs.clone()),
+            ("q0" | "dq0" | "damping", v) => errors.push(v.span(), format!("`{key}` takes a number")),
+            ("kinematic", v) => errors.push(v.span(), "`kinematic` takes true or false"),
+            ("motion", v) => errors.push(
+                v.span(),
+                "`motion` takes sine(offset = …, amplitude = …, frequency = …, phase = …)",
+            ),
+            ("samples", v) => errors.push(v.span(), "`samples` takes pairs [[t, q], …]"),
+            _ => errors.push(
+                key.span(),
+                format!(
+                    "unknown variable setting `{key}`: expected q0, dq0, damping, kinematic, motion or samples"
+                ),
+            ),
+        }
+    }
+    spec
+}
+
+/// Where an inline element's parts were written, so the validator's problems point there.
+struct ElementSpans {
+    keyword: Span,
+    name: Option<Span>,
+    kind: Option<Span>,
+    arguments: Vec<(String, Span)>,
+    settings: Vec<(String, Span)>,
+}
+
+impl ElementSpans {
+    /// The span for a problem with `field` and `message`: the frame or variable the message
+    /// names, the setting's key, or the keyword.
+    fn of(&self, field: Option<&str>, message: &str) -> Span {
+        match field {
+            Some("frames" | "variable") => self
+                .arguments
+                .iter()
+                .find(|(name, _)| message.contains(&format!("`{name}`")))
+                .or(self.arguments.first())
+                .map_or(self.keyword, |a| a.1),
+            Some("kind") => self.kind.unwrap_or(self.keyword),
+            Some("name") => self.name.unwrap_or(self.keyword),
+            Some(f) => self
+                .settings
+                .iter()
+                .find(|(k, _)| k == f)
+                .map_or(self.keyword, |s| s.1),
+            None => self.keyword,
+        }
+    }
+}
+
+/// The spec lists an inline element adds to, and its spans.
+fn element_spec(
+    e: &InlineElement,
+    spec: &mut ModelSpec,
+    errors: &mut Errors,
+) -> (Section, ElementSpans) {
+    let names: Vec<String> = e.arguments.iter().map(|a| a.to_string()).collect();
+    let spans = ElementSpans {
+        keyword: e.keyword,
+        name: e.name.as_ref().map(|n| n.span()),
+        kind: e.kind.as_ref().map(|k| k.span()),
+        arguments: names
+            .iter()
+            .cloned()
+            .zip(e.arguments.iter().map(|a| a.span()))
+            .collect(),
+        settings: e
+            .settings
+            .iter()
+            .map(|(k, _)| (k.to_string(), k.span()))
+            .collect(),
+    };
+    let number = |key: &syn::Ident, v: &Setting, errors: &mut Errors| match v {
+        Setting::Number(n) => Some(n.value),
+        other => {
+            errors.push(other.span(), format!("`{key}` takes a number"));
+            None
+        }
+    };
+    let unknown = |key: &syn::Ident, what: &str, expected: &str, errors: &mut Errors| {
+        errors.push(
+            key.span(),
+            format!("unknown {what} setting `{key}`: expected {expected}"),
+        );
+    };
+    match e.element {
+        ElementKind::Constraint => {
+            let mut c = ConstraintSpec {
+                name: e.name.as_ref().map(|n| n.to_string()),
+                kind: e.kind.as_ref().map(|k| k.to_string()).unwrap_or_default(),
+                frames: names,
+                ..ConstraintSpec::default()
+            };
+            for (key, value) in &e.settings {
+                match (key.to_string().as_str(), value) {
+                    ("length", Setting::Number(n)) => {
+                        c.length = Some(ParameterSpec::Constant(n.value))
+                    }
+                    ("length", Setting::Name(v)) => {
+                        c.length = Some(ParameterSpec::Variable(v.to_string()))
+                    }
+                    ("length", v) => {
+                        errors.push(v.span(), "`length` takes a number or a variable name")
+                    }
+                    ("normal", Setting::Vector(n, span)) => {
+                        if n.len() == 3 {
+                            c.normal = Some([n[0].value, n[1].value, n[2].value]);
+                        } else {
+                            errors
+                                .push(*span, format!("expected three numbers, found {}", n.len()));
+                        }
+                    }
+                    ("normal", v) => {
+                        errors.push(v.span(), "`normal` takes three numbers [x, y, z]")
+                    }
+                    ("axes", Setting::Text(t)) => c.axes = Some(t.value()),
+                    ("axes", Setting::Name(t)) => c.axes = Some(t.to_string()),
+                    ("axes", v) => errors.push(v.span(), "`axes` takes some of x, y, z (e.g. xz)"),
+                    _ => unknown(key, "constraint", "length, normal or axes", errors),
+                }
+            }
+            spec.constraints.push(c);
+            (Section::Constraint, spans)
+        }
+        ElementKind::Spring => {
+            let mut s = SpringSpec::default();
+            match names.len() {
+                1 => s.variable = Some(names[0].clone()),
+                _ => s.frames = Some(names),
+            }
+            for (key, value) in &e.settings {
+                match key.to_string().as_str() {
+                    "stiffness" => s.stiffness = number(key, value, errors),
+                    "rest" => s.rest = number(key, value, errors),
+                    _ => unknown(key, "spring", "stiffness or rest", errors),
+                }
+            }
+            spec.springs.push(s);
+            (Section::Spring, spans)
+        }
+        ElementKind::Damper => {
+            let mut d = DamperSpec {
+                frames: names,
+                damping: None,
+            };
+            for (key, value) in &e.settings {
+                match key.to_string().as_str() {
+                    "damping" => d.damping = number(key, value, errors),
+                    _ => unknown(key, "damper", "damping", errors),
+                }
+            }
+            spec.dampers.push(d);
+            (Section::Damper, spans)
+        }
+    }
+}
+
+/// Builds and validates the inline model named `name`; returns the spec too, from which the
+/// expansion rebuilds the same model at run time.
+pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<(Model, ModelSpec)> {
     let mut errors = Errors::default();
     let mut frames = Vec::new();
     let mut spans = Vec::new();
@@ -104,35 +301,19 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<Model
     }
     let mut variables = Vec::new();
     let mut variable_spans = Vec::new();
+    // A value the lowering already refused is left out of the spec; the validator's
+    // complaints about it (a missing field, say) would only repeat the error, so they are
+    // dropped for that variable or element.
+    let mut tainted_variables = Vec::new();
     for v in &inline.variables {
-        let mut spec = VariableSpec {
-            name: v.name.to_string(),
-            ..VariableSpec::default()
-        };
-        for (key, value) in &v.settings {
-            match (key.to_string().as_str(), value) {
-                ("q0", Setting::Number(n)) => spec.q0 = Some(n.value),
-                ("dq0", Setting::Number(n)) => spec.dq0 = Some(n.value),
-                ("damping", Setting::Number(n)) => spec.damping = Some(n.value),
-                ("kinematic", Setting::Bool(b)) => spec.kinematic = Some(*b),
-                ("q0" | "dq0" | "damping", Setting::Bool(_)) => {
-                    errors.push(key.span(), format!("`{key}` takes a number"))
-                }
-                ("kinematic", Setting::Number(_)) => {
-                    errors.push(key.span(), "`kinematic` takes true or false")
-                }
-                _ => errors.push(
-                    key.span(),
-                    format!(
-                        "unknown variable setting `{key}`: expected q0, dq0, damping or kinematic"
-                    ),
-                ),
-            }
-        }
-        variables.push(spec);
+        let before = errors.count();
+        variables.push(variable_spec(&v.name, &v.settings, &mut errors));
         variable_spans.push((v.name.to_string(), v.name.span()));
+        if errors.count() > before {
+            tainted_variables.push(v.name.to_string());
+        }
     }
-    let spec = ModelSpec {
+    let mut spec = ModelSpec {
         name: name.to_string(),
         gravity: inline.gravity.map(|g| g.0),
         frames,
@@ -141,16 +322,42 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<Model
         springs: Vec::new(),
         dampers: Vec::new(),
     };
+    let mut element_spans: Vec<(Section, ElementSpans, bool)> = Vec::new();
+    for e in &inline.elements {
+        let before = errors.count();
+        let (section, spans) = element_spec(e, &mut spec, &mut errors);
+        element_spans.push((section, spans, errors.count() > before));
+    }
     let model = tree_model::validate(&spec);
     if let Err(problems) = &model {
         for p in problems {
+            let repeats = match &p.site {
+                Site::VariableSettings { name } => tainted_variables.contains(name),
+                Site::Element { section, index, .. } => element_spans
+                    .iter()
+                    .filter(|(s, ..)| s == section)
+                    .nth(*index)
+                    .is_some_and(|e| e.2),
+                _ => false,
+            };
+            if repeats {
+                continue;
+            }
             let span = match &p.site {
                 Site::Model => name.span(),
                 Site::VariableSettings { name: v } => variable_spans
                     .iter()
                     .find(|(n, _)| n == v)
                     .map_or(name.span(), |s| s.1),
-                Site::Element { .. } => name.span(),
+                Site::Element {
+                    section,
+                    index,
+                    field,
+                } => element_spans
+                    .iter()
+                    .filter(|(s, ..)| s == section)
+                    .nth(*index)
+                    .map_or(name.span(), |(_, s, _)| s.of(*field, &p.message)),
                 Site::Frame { index, field } => {
                     let s = &spans[*index];
                     match field {
@@ -166,5 +373,5 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<Model
         }
     }
     errors.finish()?;
-    Ok(model.expect("no problems were reported"))
+    Ok((model.expect("no problems were reported"), spec))
 }

@@ -211,7 +211,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                 errs.element(
                     c,
                     "length",
-                    format!("constraint length `{name}` is not a variable: it drives no frame and has no [variables.{name}] table"),
+                    format!("constraint length `{name}` is not a variable: it drives no frame and has no settings (declare it kinematic)"),
                 );
             }
         }
