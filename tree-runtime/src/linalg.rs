@@ -95,28 +95,19 @@ where
 /// Row interchanges of an LU factorisation.
 pub type Pivots<N> = nalgebra::OVector<usize, N>;
 
-/// Factors `a` in place into `P A = L U` (unit lower `L`), recording the row interchanges in
-/// `pivots`, for [`lu_solve_factored`]. On a zero pivot returns its column.
-pub fn lu_factor<N: Dim>(a: &mut Matrix<N>, pivots: &mut Pivots<N>) -> Result<(), usize>
-where
-    DefaultAllocator: Allocator<N> + Allocator<N, N>,
-{
-    let n = pivots.len();
-    let pivots = pivots.as_mut_slice();
-    lu_core_factor(a.as_mut_slice(), n, |j, p| pivots[j] = p)
+/// Factors the `n × n` column-major matrix in `a[..n²]` in place (`P A = L U`, partial
+/// pivoting), recording the interchanges in `pivots[..n]`. The caller may pack a smaller
+/// system into larger fixed-size storage. On failure returns the column whose pivot vanished.
+pub fn lu_factor_packed(a: &mut [f64], n: usize, pivots: &mut [usize]) -> Result<(), usize> {
+    lu_core_factor(&mut a[..n * n], n, |j, p| pivots[j] = p)
 }
 
-/// Solves `A x = b` with the factors from [`lu_factor`]; `b` becomes `x`.
-pub fn lu_solve_factored<N: Dim>(a: &Matrix<N>, pivots: &Pivots<N>, b: &mut Vector<N>)
-where
-    DefaultAllocator: Allocator<N> + Allocator<N, N>,
-{
-    let n = b.len();
-    let (a, b) = (a.as_slice(), b.as_mut_slice());
-    for (j, &p) in pivots.iter().enumerate() {
+/// Solves `A x = b[..n]` with the factors from [`lu_factor_packed`]; `b` becomes `x`.
+pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
+    for (j, &p) in pivots[..n].iter().enumerate() {
         b.swap(p, j);
     }
-    forward_backward(a, n, b);
+    forward_backward(&a[..n * n], n, &mut b[..n]);
 }
 
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors.

@@ -21,7 +21,7 @@ use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dy
 
 use crate::dynamics::{prescribe, GeneralizedForce, Prescription, ReducedKkt, Split};
 use crate::error::SimError;
-use crate::linalg::{lu_factor, lu_solve, lu_solve_factored, Pivots};
+use crate::linalg::{lu_factor_packed, lu_solve, lu_solve_packed, Pivots};
 use crate::system::{ConstraintTerms, Matrix, Order, Sparsity, System, Terms, Vector};
 
 /// When the VI's Newton iteration re-evaluates its exact Jacobian (eq. (26)).
@@ -326,22 +326,35 @@ where
         )
     }
 
-    /// Factors `J` (and, with constraints, forms `Y = J⁻¹B`, `B = Δt Dh(q₁)ᵀ`).
+    /// Factors `J` (and, with constraints, forms `Y = J⁻¹B`, `B = Δt Dh(q₁)ᵀ`). `J` is the
+    /// identity on kinematic rows and columns, so only its dynamic block is factored, packed
+    /// into the top of `factors` (18 of the marionette's 42 variables are kinematic: a 24×24
+    /// factorisation instead of 42×42).
     fn factor<S: System<N = N>>(&mut self, sys: &S, step: usize, t: f64) -> Result<(), SimError> {
-        self.factors.copy_from(&self.jacobian);
-        lu_factor(&mut self.factors, &mut self.pivots).map_err(|i| SimError::SingularJacobian {
-            step,
-            t,
-            variable: sys.variable_name(i).to_string(),
-        })?;
-        for s in 0..self.split.rows {
-            self.column.fill(0.0);
-            for &i in &self.split.dynamic {
-                self.column[i] = self.dt * self.dh1[(s, i)];
+        let dynamic = &self.split.dynamic;
+        let (n, nd) = (self.jacobian.nrows(), dynamic.len());
+        let (jac, packed) = (self.jacobian.as_slice(), self.factors.as_mut_slice());
+        for (cj, &j) in dynamic.iter().enumerate() {
+            for (ci, &i) in dynamic.iter().enumerate() {
+                packed[cj * nd + ci] = jac[j * n + i];
             }
-            lu_solve_factored(&self.factors, &self.pivots, &mut self.column);
-            for (i, x) in self.column.iter().enumerate() {
-                self.y[(i, s)] = *x;
+        }
+        lu_factor_packed(packed, nd, self.pivots.as_mut_slice()).map_err(|c| {
+            SimError::SingularJacobian {
+                step,
+                t,
+                variable: sys.variable_name(dynamic[c]).to_string(),
+            }
+        })?;
+        let (packed, pivots) = (self.factors.as_slice(), self.pivots.as_slice());
+        let column = self.column.as_mut_slice();
+        for s in 0..self.split.rows {
+            for (ci, &i) in dynamic.iter().enumerate() {
+                column[ci] = self.dt * self.dh1[(s, i)];
+            }
+            lu_solve_packed(packed, nd, pivots, column);
+            for (ci, &i) in dynamic.iter().enumerate() {
+                self.y[(i, s)] = column[ci];
             }
         }
         Ok(())
@@ -349,14 +362,31 @@ where
 
     /// The Newton update: on exit `residual` holds `Δq₂` and `dlambda` `Δλ`, from
     /// `J Δq + B Δλ = −r`, `C Δq = −h` by the factor of `J` and the Schur complement `C Y`.
+    /// Kinematic entries of `Δq₂` are zero (their rows of `J` are the identity, their
+    /// residual zero).
     fn newton_update<S: System<N = N>>(
         &mut self,
         sys: &S,
         step: usize,
         t: f64,
     ) -> Result<(), SimError> {
-        self.residual.neg_mut();
-        lu_solve_factored(&self.factors, &self.pivots, &mut self.residual);
+        let dynamic = &self.split.dynamic;
+        let column = self.column.as_mut_slice();
+        for (ci, &i) in dynamic.iter().enumerate() {
+            column[ci] = -self.residual[i];
+        }
+        lu_solve_packed(
+            self.factors.as_slice(),
+            dynamic.len(),
+            self.pivots.as_slice(),
+            column,
+        );
+        for &k in &self.split.kinematic {
+            self.residual[k] = 0.0;
+        }
+        for (ci, &i) in dynamic.iter().enumerate() {
+            self.residual[i] = column[ci];
+        }
         let m = self.split.rows;
         if m == 0 {
             return Ok(());
