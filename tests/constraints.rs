@@ -381,3 +381,34 @@ fn inline_elements_compile_to_the_same_model_and_system_as_the_file() {
         assert_eq!(a.motion(i), b.motion(i), "motion of variable {i}");
     }
 }
+
+compile! {
+    /// The README's inline example.
+    pub struct Swing;
+    frame x = tx(x) { frame y = ty(y) { frame bob = tz(z) { mass = 1.0; } } }
+    frame hand = ty(hand) { frame hand_top = tz(1.0); }
+    frame wall = tz(0.0);
+    variable z { q0 = -0.5; damping = 0.1; }
+    variable hand { kinematic = true; motion = sine(amplitude = 0.2, frequency = 0.5); }
+    variable len { kinematic = true; samples = [[0.0, 1.5], [2.0, 1.2], [4.0, 1.5]]; }
+    constraint string = distance(bob, hand_top) { length = len; }
+    constraint wall = plane(wall, bob) { normal = [1.0, 0.0, 0.0]; }
+    spring(bob, hand_top) { stiffness = 20.0; rest = 0.3; }
+    spring(z) { stiffness = 5.0; }
+    damper(bob, hand_top) { damping = 0.7; }
+}
+
+#[test]
+fn the_readme_inline_example_runs_on_its_constraints() {
+    let mut sys = Swing;
+    let (q0, dq0) = sys.initial_state();
+    let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 4.0);
+    let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
+    assert_eq!(Swing::CONSTRAINTS, ["string", "wall"]);
+    assert!(traj.worst_violation() < 1e-9, "{}", traj.worst_violation());
+    for k in 0..traj.len() {
+        assert!(traj.q(k)[Swing::X].abs() < 1e-9, "the wall holds x = 0");
+        let hand = 0.2 * (std::f64::consts::PI * traj.t[k]).sin();
+        assert!((traj.q(k)[Swing::HAND] - hand).abs() < 1e-12);
+    }
+}

@@ -12,7 +12,7 @@ tree_mech::tree_model! {
     constraint e = distance(hook, tip) { length = -2.0; }
     constraint g = distance(hook, tip) { length = unknown_len; }
     constraint h = distance(hook, tip) {}
-    spring(hook, tip) { stiffness = -1.0; }
+    spring(hook, tip) { stiffness = -1.0; rest = -0.2; }
     spring(len) { stiffness = 1.0; }
     damper(hook, tip) { damping = -0.5; }
 }
