@@ -7,6 +7,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, ViSettings};
+use tree_mech::model;
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{
@@ -101,7 +102,7 @@ where
     });
 }
 
-fn bench_interpreted(c: &mut Criterion, size: &str, model: &tree_model::Model) {
+fn bench_interpreted(c: &mut Criterion, size: &str, model: &model::Model) {
     bench_system(c, "sweeps", size, TreeSystem::new(model).unwrap());
     for (label, mode) in [
         ("cached", PaperEvaluation::Cached),
@@ -118,7 +119,7 @@ fn benches(c: &mut Criterion) {
     macro_rules! pendulum {
         ($ty:ident, $n:expr) => {
             bench_system(c, "generated", stringify!($n), $ty);
-            bench_interpreted(c, stringify!($n), &tree_model::n_link_pendulum($n));
+            bench_interpreted(c, stringify!($n), &model::n_link_pendulum($n));
         };
     }
     pendulum!(P1, 1);

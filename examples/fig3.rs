@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use plotters::prelude::*;
 use tree_mech::integrate::{JacobianUpdate, MidpointVi, ViSettings};
+use tree_mech::model;
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{tree_model, NoForce, PaperEvaluation, PaperSystem, System, TreeSystem};
 
@@ -115,7 +116,7 @@ fn main() {
     println!("| N | generated, reuse [ms] | generated [ms] | interpreted sweeps [ms] | interpreted cached [ms] | interpreted uncached [ms] | sweeps / generated | cached / generated | uncached / cached |");
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for n in 1..=19 {
-        let model = tree_model::n_link_pendulum(n);
+        let model = model::n_link_pendulum(n);
         let times: Vec<f64> = modes
             .iter()
             .enumerate()

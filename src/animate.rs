@@ -6,8 +6,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
+use tree_mech::model::{ConstraintKind, Joint, Model, SpringKind};
 use tree_mech::runtime::Pose;
-use tree_mech::tree_model::{ConstraintKind, Joint, Model, SpringKind};
 
 use crate::plot::FONT;
 

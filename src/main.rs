@@ -13,12 +13,13 @@ use serde_json::json;
 use tree_mech::integrate::{
     run, Forcing, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings,
 };
+use tree_mech::model;
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::se3::Pose;
 use tree_mech::runtime::{Baumgarte, CsvStream, Dynamics, ModelMotions, Prescription, Vector};
 use tree_mech::{
-    tree_model, ConstraintTerms, NoForce, Order, PaperEvaluation, PaperSystem, SimError, System,
-    Trajectory, TreeSystem,
+    ConstraintTerms, NoForce, Order, PaperEvaluation, PaperSystem, SimError, System, Trajectory,
+    TreeSystem,
 };
 
 #[derive(Parser)]
@@ -211,7 +212,7 @@ fn main() -> ExitCode {
                     plot: plot.as_deref(),
                     animate: animate.as_deref(),
                 };
-                let model = tree_model::from_toml_file(&model).map_err(|e| e.to_string())?;
+                let model = model::from_toml_file(&model).map_err(|e| e.to_string())?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
@@ -240,7 +241,7 @@ fn main() -> ExitCode {
 }
 
 fn load(path: &Path) -> Result<TreeSystem, String> {
-    let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
+    let model = model::from_toml_file(path).map_err(|e| e.to_string())?;
     TreeSystem::new(&model).map_err(|e| e.to_string())
 }
 
@@ -286,7 +287,7 @@ struct Outputs<'a> {
 
 fn run_simulate<S: System<N = Dyn>>(
     mut sys: S,
-    model: &tree_model::Model,
+    model: &model::Model,
     options: SimOptions,
     outputs: &Outputs,
 ) -> Result<(), String> {
@@ -559,7 +560,7 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>, time: f64) -> Result
 }
 
 fn run_check(path: &Path) -> Result<(), String> {
-    let model = tree_model::from_toml_file(path).map_err(|e| e.to_string())?;
+    let model = model::from_toml_file(path).map_err(|e| e.to_string())?;
     let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
     println!("model `{}`: valid", model.name);
     println!(
@@ -577,16 +578,16 @@ fn run_check(path: &Path) -> Result<(), String> {
         };
         let how = match &v.motion {
             None => format!("dynamic, damping = {}", v.damping),
-            Some(tree_model::Motion::Steady { q0, dq0 }) => {
+            Some(model::Motion::Steady { q0, dq0 }) => {
                 format!("kinematic, held at q0 = {q0} moving at {dq0}")
             }
-            Some(tree_model::Motion::Sine {
+            Some(model::Motion::Sine {
                 offset,
                 amplitude,
                 frequency,
                 phase,
             }) => format!("kinematic, {offset} + {amplitude}·sin(2π·{frequency}·t + {phase})"),
-            Some(tree_model::Motion::Spline(s)) => {
+            Some(model::Motion::Spline(s)) => {
                 let (a, b) = s.span();
                 format!("kinematic, spline through samples on [{a}, {b}] s")
             }
@@ -601,16 +602,16 @@ fn run_check(path: &Path) -> Result<(), String> {
         for c in &model.constraints {
             let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
             let what = match &c.kind {
-                tree_model::ConstraintKind::Distance { length } => match length {
-                    tree_model::Parameter::Constant(l) => format!("distance {l}"),
-                    tree_model::Parameter::Variable(i) => {
+                model::ConstraintKind::Distance { length } => match length {
+                    model::Parameter::Constant(l) => format!("distance {l}"),
+                    model::Parameter::Variable(i) => {
                         format!("distance `{}`", model.variables[*i].name)
                     }
                 },
-                tree_model::ConstraintKind::Plane { normal } => {
+                model::ConstraintKind::Plane { normal } => {
                     format!("plane, normal {normal:?} in `{a}`")
                 }
-                tree_model::ConstraintKind::Point { axes } => format!(
+                model::ConstraintKind::Point { axes } => format!(
                     "point, axes {}",
                     axes.iter().map(|&k| ["x", "y", "z"][k]).collect::<String>()
                 ),
@@ -620,11 +621,11 @@ fn run_check(path: &Path) -> Result<(), String> {
     }
     for s in &model.springs {
         match s.kind {
-            tree_model::SpringKind::Frames([a, b]) => println!(
+            model::SpringKind::Frames([a, b]) => println!(
                 "spring between `{}` and `{}`: k = {}, rest = {}",
                 model.frames[a].name, model.frames[b].name, s.stiffness, s.rest
             ),
-            tree_model::SpringKind::Variable(i) => println!(
+            model::SpringKind::Variable(i) => println!(
                 "spring on `{}`: k = {}, rest = {}",
                 model.variables[i].name, s.stiffness, s.rest
             ),
@@ -644,10 +645,7 @@ fn run_check(path: &Path) -> Result<(), String> {
     );
     for f in masses {
         let m = f.mass.unwrap();
-        println!(
-            "  {:<20} m = {}, I = ({}, {}, {})",
-            f.name, m.mass, m.inertia[0], m.inertia[1], m.inertia[2]
-        );
+        println!("  {:<20} {}", f.name, m.describe());
     }
     println!("tree:\n{}", model.tree_text().trim_end());
     Ok(())

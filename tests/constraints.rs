@@ -6,8 +6,8 @@ mod common;
 use common::{assert_close, interpreted, Rng};
 use nalgebra::Dyn;
 use tree_mech::integrate::{run, simulate, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::model::{self, Model};
 use tree_mech::runtime::{ModelMotions, Vector};
-use tree_mech::tree_model::{self, Model};
 use tree_mech::{tree_model as compile, ConstraintTerms, NoForce, Order, System, Terms};
 
 compile!(struct Elements from "tests/models/elements.toml");
@@ -195,9 +195,9 @@ fn compiled_constrained_trajectory_equals_interpreted() {
 #[test]
 fn a_point_on_a_string_swings_like_the_pendulum_of_that_length() {
     let l = 1.5;
-    let pendulum = tree_model::ModelBuilder::new("rx")
-        .frame("pivot", "world", tree_model::PrimitiveKind::Rx, "theta")
-        .frame("bob", "pivot", tree_model::PrimitiveKind::Tz, -l)
+    let pendulum = model::ModelBuilder::new("rx")
+        .frame("pivot", "world", model::PrimitiveKind::Rx, "theta")
+        .frame("bob", "pivot", model::PrimitiveKind::Tz, -l)
         .mass("bob", 1.0, [0.0; 3])
         .initial("theta", 0.5, 0.0)
         .build()
@@ -250,7 +250,7 @@ fn a_mass_hanging_at_rest_has_two_l_lambda_equal_to_minus_m_g() {
     .unwrap()
     .replace("q0 = 0.7191383079063045   # 1.5 sin 0.5", "q0 = 0.0")
     .replace("q0 = -1.3163738428355591  # -1.5 cos 0.5", "q0 = -1.5");
-    let model = tree_model::from_toml_str(&text, None).unwrap();
+    let model = model::from_toml_str(&text, None).unwrap();
     for method in [Method::Rk4, Method::Vi(ViSettings::default())] {
         let mut sys = interpreted(&model);
         let (q0, dq0) = sys.initial_state();

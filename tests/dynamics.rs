@@ -6,8 +6,8 @@ mod common;
 use common::{interpreted, load, Rng};
 use nalgebra::Dyn;
 use tree_mech::integrate::{simulate, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::model::{ModelBuilder, PrimitiveKind};
 use tree_mech::runtime::{Dynamics, Vector};
-use tree_mech::tree_model::{ModelBuilder, PrimitiveKind};
 use tree_mech::{NoForce, System, Trajectory, TreeSystem};
 
 fn run(
@@ -187,11 +187,8 @@ fn free_body_momenta(sys: &mut TreeSystem, q: &Vector<Dyn>, dq: &Vector<Dyn>) ->
     let g = nalgebra::Matrix3::from_fn(|i, j| poses[body].r[i][j]);
     let p = nalgebra::Vector3::from_column_slice(&poses[body].p);
     let lin = g * nalgebra::Vector3::new(v[0], v[1], v[2]) * m.mass;
-    let ang_body = nalgebra::Vector3::new(
-        m.inertia[0] * v[3],
-        m.inertia[1] * v[4],
-        m.inertia[2] * v[5],
-    );
+    let inertia = m.diagonal().expect("the free body is centred on its frame");
+    let ang_body = nalgebra::Vector3::new(inertia[0] * v[3], inertia[1] * v[4], inertia[2] * v[5]);
     let ang = g * ang_body + p.cross(&lin);
     [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z]
 }

@@ -144,13 +144,13 @@ fn bad_arguments_are_errors() {
 }
 
 /// The string pendulum of tests/models with extra constraints appended.
-fn string_pendulum_with(extra: &str) -> tree_mech::tree_model::Model {
+fn string_pendulum_with(extra: &str) -> tree_mech::model::Model {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/tests/models/string-pendulum.toml"
     );
     let text = std::fs::read_to_string(path).unwrap() + extra;
-    tree_mech::tree_model::from_toml_str(&text, None).unwrap()
+    tree_mech::model::from_toml_str(&text, None).unwrap()
 }
 
 #[test]

@@ -7,11 +7,11 @@ mod common;
 
 use common::interpreted;
 use tree_mech::integrate::{simulate, Forcing, Method, SimOptions, Tolerance, ViSettings};
-use tree_mech::tree_model::{self, n_link_pendulum, Model};
+use tree_mech::model::{self, n_link_pendulum, Model};
 use tree_mech::{NoForce, System, Trajectory};
 
 fn model(text: &str) -> Model {
-    tree_model::from_toml_str(text, None).unwrap()
+    model::from_toml_str(text, None).unwrap()
 }
 
 fn run(model: &Model, method: Method, dt: f64, duration: f64) -> Trajectory {

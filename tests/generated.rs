@@ -71,7 +71,7 @@ where
 }
 
 /// Every output of a generated system against the interpreted one built from its model.
-fn check_equal<S: System>(mut generated: S, model: &tree_mech::tree_model::Model, seed: u64)
+fn check_equal<S: System>(mut generated: S, model: &tree_mech::model::Model, seed: u64)
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -201,11 +201,9 @@ fn interpreted_run(
     simulate(sys, &q0, &dq0, options, &mut NoForce, &mut |_| {}).unwrap()
 }
 
-fn file_model(path: &str) -> tree_mech::tree_model::Model {
-    tree_mech::tree_model::from_toml_file(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path),
-    )
-    .unwrap()
+fn file_model(path: &str) -> tree_mech::model::Model {
+    tree_mech::model::from_toml_file(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path))
+        .unwrap()
 }
 
 #[test]

@@ -8,13 +8,13 @@ use nalgebra::Dyn;
 use tree_mech::integrate::{
     simulate, Forcing, JacobianUpdate, Method, MidpointVi, SimOptions, ViSettings,
 };
+use tree_mech::model;
 use tree_mech::runtime::{Pose, Vector};
-use tree_mech::tree_model;
 use tree_mech::{NoForce, Order, PaperEvaluation, PaperSystem, System, Terms, TreeSystem};
 
 #[test]
 fn newton_jacobian_is_the_derivative_of_the_residual() {
-    let elements = tree_model::from_toml_file(concat!(
+    let elements = model::from_toml_file(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/tests/models/elements.toml"
     ))
@@ -115,7 +115,7 @@ impl System for Counting {
     fn damping(&self, i: usize) -> f64 {
         self.inner.damping(i)
     }
-    fn motion(&self, i: usize) -> Option<tree_mech::tree_model::Motion> {
+    fn motion(&self, i: usize) -> Option<tree_mech::model::Motion> {
         self.inner.motion(i)
     }
     fn constraint_count(&self) -> usize {

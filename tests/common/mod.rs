@@ -5,8 +5,8 @@
 use std::path::PathBuf;
 
 use nalgebra::Dyn;
+use tree_mech::model::{self, Model};
 use tree_mech::runtime::{TreeSystem, Vector};
-use tree_mech::tree_model::{self, Model};
 
 /// Every model file in `models/`.
 pub fn model_files() -> Vec<PathBuf> {
@@ -25,7 +25,7 @@ pub fn load(name: &str) -> Model {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("models")
         .join(name);
-    tree_model::from_toml_file(path).unwrap()
+    model::from_toml_file(path).unwrap()
 }
 
 pub fn interpreted(model: &Model) -> TreeSystem {

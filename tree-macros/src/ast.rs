@@ -11,6 +11,7 @@ mod kw {
     syn::custom_keyword!(frame);
     syn::custom_keyword!(mass);
     syn::custom_keyword!(inertia);
+    syn::custom_keyword!(com);
     syn::custom_keyword!(variable);
     syn::custom_keyword!(constraint);
     syn::custom_keyword!(spring);
@@ -69,13 +70,15 @@ pub struct Number {
     pub span: Span,
 }
 
-/// `frame name = rx(theta) { mass = 1.0; inertia = [..]; frame … }`
+/// `frame name = rx(theta) { mass = 1.0; com = [..]; inertia = [..]; frame … }`
 pub struct InlineFrame {
     pub name: Ident,
     pub primitive: Ident,
     pub argument: Argument,
     pub mass: Option<Number>,
-    pub inertia: Option<([f64; 3], Span)>,
+    /// Three (principal) or six numbers, checked by the validator.
+    pub inertia: Option<(Vec<f64>, Span)>,
+    pub com: Option<([f64; 3], Span)>,
     pub children: Vec<InlineFrame>,
 }
 
@@ -234,6 +237,7 @@ impl Parse for InlineFrame {
             argument,
             mass: None,
             inertia: None,
+            com: None,
             children: Vec::new(),
         };
         if input.peek(Token![;]) {
@@ -258,7 +262,19 @@ impl Parse for InlineFrame {
                     return Err(syn::Error::new(kw.span, "inertia is given twice"));
                 }
                 body.parse::<Token![=]>()?;
-                frame.inertia = Some(parse_vector3(&body)?);
+                let content;
+                let bracket = bracketed!(content in body);
+                let items = content.parse_terminated(parse_number, Token![,])?;
+                frame.inertia =
+                    Some((items.iter().map(|n| n.value).collect(), bracket.span.join()));
+                body.parse::<Token![;]>()?;
+            } else if lookahead.peek(kw::com) {
+                let kw: kw::com = body.parse()?;
+                if frame.com.is_some() {
+                    return Err(syn::Error::new(kw.span, "com is given twice"));
+                }
+                body.parse::<Token![=]>()?;
+                frame.com = Some(parse_vector3(&body)?);
                 body.parse::<Token![;]>()?;
             } else if lookahead.peek(kw::frame) {
                 frame.children.push(body.parse()?);

@@ -170,13 +170,13 @@ fn index_constants(
 fn model_constructor(spec: Option<&ModelSpec>, file: Option<(&str, &str)>) -> TokenStream {
     if let Some((path, shown)) = file {
         return quote! {
-            ::tree_mech::tree_model::from_toml_str(include_str!(#path), Some(#shown))
+            ::tree_mech::model::from_toml_str(include_str!(#path), Some(#shown))
                 .expect("the model was validated when it was compiled")
         };
     }
     let spec = spec_tokens(spec.expect("an inline model has its spec"));
     quote! {
-        ::tree_mech::tree_model::validate(&#spec)
+        ::tree_mech::model::validate(&#spec)
             .ok()
             .expect("the model was validated when it was compiled")
     }
@@ -184,7 +184,7 @@ fn model_constructor(spec: Option<&ModelSpec>, file: Option<(&str, &str)>) -> To
 
 /// Rust tokens that build `spec` (a `ModelSpec` literal).
 fn spec_tokens(spec: &ModelSpec) -> TokenStream {
-    let m = quote!(::tree_mech::tree_model);
+    let m = quote!(::tree_mech::model);
     let opt = |x: Option<f64>| match x {
         Some(x) => {
             let x = constant(x);
@@ -227,12 +227,20 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
             quote!(#m::Primitive { kind: #m::PrimitiveKind::#kind, value: #value })
         });
         let (name, parent) = (string(&f.name), opt_string(f.parent.as_deref()));
-        let (mass, inertia) = (opt(f.mass), opt3(f.inertia));
+        let (mass, com) = (opt(f.mass), opt3(f.com));
+        let inertia = match &f.inertia {
+            Some(v) => {
+                let v = v.iter().map(|x| constant(*x));
+                quote!(Some(::std::vec![#(#v),*]))
+            }
+            None => quote!(None),
+        };
         quote!(#m::FrameSpec {
             name: #name,
             parent: #parent,
             primitives: ::std::vec![#(#primitives),*],
             mass: #mass,
+            com: #com,
             inertia: #inertia,
         })
     });
@@ -443,13 +451,13 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             }
 
             /// The same model for the interpreted runtime (`TreeSystem::new(&Self::model(), …)`).
-            pub fn model() -> ::tree_mech::tree_model::Model {
+            pub fn model() -> ::tree_mech::model::Model {
                 Self::model_ref().clone()
             }
 
             /// The model, built once (a file model is parsed on first use only).
-            fn model_ref() -> &'static ::tree_mech::tree_model::Model {
-                static MODEL: ::std::sync::OnceLock<::tree_mech::tree_model::Model> =
+            fn model_ref() -> &'static ::tree_mech::model::Model {
+                static MODEL: ::std::sync::OnceLock<::tree_mech::model::Model> =
                     ::std::sync::OnceLock::new();
                 MODEL.get_or_init(|| #constructor)
             }
@@ -485,7 +493,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             }
 
             /// Read from the model (allocates): call it when setting up, not per step.
-            fn motion(&self, i: usize) -> Option<::tree_mech::tree_model::Motion> {
+            fn motion(&self, i: usize) -> Option<::tree_mech::model::Motion> {
                 if Self::KINEMATIC[i] {
                     Self::model_ref().variables[i].motion.clone()
                 } else {

@@ -2,10 +2,10 @@
 //!
 //! Compiles a tree model into a concrete type implementing `tree_mech::System`, its
 //! evaluations unrolled into straight-line Rust for that one topology: the runtime's
-//! recursions are run at compile time over a tracing scalar ([`trace`]), which folds constants
+//! recursions are run at compile time over a tracing scalar (module `trace`), which folds constants
 //! (constant transform chains included), drops structurally zero terms (massless branches,
 //! zero inertias, the untouched columns of each primitive) and records what is left
-//! ([`program`]). The model is validated by `tree-model`, the same code the interpreted
+//! (module `program`). The model is validated by `tree-model`, the same code the interpreted
 //! runtime uses; every problem is a compile error at the token, or the file line, at fault.
 //!
 //! ```ignore

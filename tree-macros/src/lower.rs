@@ -66,6 +66,7 @@ struct FrameSpans {
     primitive: Span,
     mass: Option<Span>,
     inertia: Option<Span>,
+    com: Option<Span>,
 }
 
 fn flatten(
@@ -85,14 +86,16 @@ fn flatten(
         parent: parent.map(|p| p.name.to_string()),
         primitives: vec![Primitive { kind, value }],
         mass: frame.mass.map(|m| m.value),
-        inertia: frame.inertia.map(|i| i.0),
+        com: frame.com.map(|c| c.0),
+        inertia: frame.inertia.as_ref().map(|i| i.0.clone()),
     });
     spans.push(FrameSpans {
         name: frame.name.span(),
         parent: parent.map_or(frame.name.span(), |p| p.name.span()),
         primitive: arg_span,
         mass: frame.mass.map(|m| m.span),
-        inertia: frame.inertia.map(|i| i.1),
+        inertia: frame.inertia.as_ref().map(|i| i.1),
+        com: frame.com.map(|c| c.1),
     });
     for child in &frame.children {
         flatten(child, Some(frame), specs, spans);
@@ -366,6 +369,7 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<(Mode
                         FrameField::Primitive => s.primitive,
                         FrameField::Mass => s.mass.unwrap_or(s.name),
                         FrameField::Inertia => s.inertia.unwrap_or(s.name),
+                        FrameField::Com => s.com.unwrap_or(s.name),
                     }
                 }
             };

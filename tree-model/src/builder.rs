@@ -65,6 +65,7 @@ impl ModelBuilder {
             parent: (parent != "world").then(|| parent.into()),
             primitives: vec![Primitive::new(kind, value)],
             mass: None,
+            com: None,
             inertia: None,
         });
         self
@@ -72,11 +73,19 @@ impl ModelBuilder {
 
     /// Puts a mass with diagonal inertia at the origin of the frame named `frame`
     /// (added earlier). An unknown name is reported by `build`.
-    pub fn mass(mut self, frame: &str, mass: f64, inertia: [f64; 3]) -> Self {
+    pub fn mass(self, frame: &str, mass: f64, inertia: [f64; 3]) -> Self {
+        self.body(frame, mass, [0.0; 3], &inertia)
+    }
+
+    /// Puts a rigid body on the frame named `frame`: its mass, centre of mass `com` and
+    /// inertia about the centre of mass in the frame's axes, `[ixx, iyy, izz]` or
+    /// `[ixx, iyy, izz, ixy, ixz, iyz]`. An unknown name is reported by `build`.
+    pub fn body(mut self, frame: &str, mass: f64, com: [f64; 3], inertia: &[f64]) -> Self {
         match self.spec.frames.iter_mut().find(|f| f.name == frame) {
             Some(f) => {
                 f.mass = Some(mass);
-                f.inertia = Some(inertia);
+                f.com = (com != [0.0; 3]).then_some(com);
+                f.inertia = Some(inertia.to_vec());
             }
             None => self.pending.push(Problem {
                 site: Site::Model,

@@ -11,6 +11,7 @@ pub enum FrameField {
     Primitive,
     Mass,
     Inertia,
+    Com,
 }
 
 /// Where in a model a problem sits.

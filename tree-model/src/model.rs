@@ -7,26 +7,71 @@ use crate::primitive::PrimitiveKind;
 /// Standard gravity along −Z, the default.
 pub const DEFAULT_GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 
-/// A mass at a frame's origin, principal axes along the frame's axes.
+/// A frame's rigid body: its mass, centre of mass and inertia tensor.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mass {
     pub mass: f64,
-    /// `(Ixx, Iyy, Izz)`.
-    pub inertia: [f64; 3],
+    /// The centre of mass in the frame's axes (the frame origin by default).
+    pub com: [f64; 3],
+    /// The inertia tensor about the centre of mass, in the frame's axes (symmetric).
+    pub inertia: [[f64; 3]; 3],
 }
 
 impl Mass {
-    /// A point mass.
+    /// A point mass at the frame origin.
     pub fn point(mass: f64) -> Self {
+        Mass::principal(mass, [0.0; 3])
+    }
+
+    /// A body centred at the frame origin with principal axes along the frame's axes.
+    pub fn principal(mass: f64, moments: [f64; 3]) -> Self {
+        let mut inertia = [[0.0; 3]; 3];
+        for k in 0..3 {
+            inertia[k][k] = moments[k];
+        }
         Mass {
             mass,
-            inertia: [0.0; 3],
+            com: [0.0; 3],
+            inertia,
         }
     }
 
-    /// True when it has positive mass or any positive inertia.
+    /// `(Ixx, Iyy, Izz)` when the body is centred at the frame origin with principal axes
+    /// along the frame's (the paper's bodies); `None` otherwise.
+    pub fn diagonal(&self) -> Option<[f64; 3]> {
+        let i = &self.inertia;
+        let off = [i[0][1], i[0][2], i[1][2]];
+        (self.com == [0.0; 3] && off == [0.0; 3]).then_some([i[0][0], i[1][1], i[2][2]])
+    }
+
+    /// The tensor as written in files: `[ixx, iyy, izz, ixy, ixz, iyz]`.
+    pub fn inertia6(&self) -> [f64; 6] {
+        let i = &self.inertia;
+        [i[0][0], i[1][1], i[2][2], i[0][1], i[0][2], i[1][2]]
+    }
+
+    /// `m = …, I = (…)`, with the centre of mass and products of inertia when present.
+    pub fn describe(&self) -> String {
+        let i = self.inertia6();
+        let mut s = match self.diagonal() {
+            Some(d) => format!("m = {}, I = ({}, {}, {})", self.mass, d[0], d[1], d[2]),
+            None => format!(
+                "m = {}, I = (xx {}, yy {}, zz {}, xy {}, xz {}, yz {})",
+                self.mass, i[0], i[1], i[2], i[3], i[4], i[5]
+            ),
+        };
+        if self.com != [0.0; 3] {
+            s += &format!(
+                ", com = ({}, {}, {})",
+                self.com[0], self.com[1], self.com[2]
+            );
+        }
+        s
+    }
+
+    /// True when it has positive mass or any non-zero inertia.
     pub fn is_nonzero(&self) -> bool {
-        self.mass > 0.0 || self.inertia.iter().any(|&i| i > 0.0)
+        self.mass > 0.0 || self.inertia.iter().flatten().any(|&i| i != 0.0)
     }
 }
 
@@ -272,10 +317,7 @@ impl Model {
                 Joint::Variable(i) => self.variables[i].name.clone(),
             };
             let mass = match f.mass {
-                Some(m) => format!(
-                    "  [m = {}, I = ({}, {}, {})]",
-                    m.mass, m.inertia[0], m.inertia[1], m.inertia[2]
-                ),
+                Some(m) => format!("  [{}]", m.describe()),
                 None => String::new(),
             };
             out.push_str(&format!(

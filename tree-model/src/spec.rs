@@ -12,8 +12,11 @@ pub struct FrameSpec {
     pub parent: Option<String>,
     pub primitives: Vec<Primitive>,
     pub mass: Option<f64>,
-    /// `(Ixx, Iyy, Izz)` about the frame's own axes.
-    pub inertia: Option<[f64; 3]>,
+    /// The centre of mass in the frame's axes.
+    pub com: Option<[f64; 3]>,
+    /// About the centre of mass in the frame's axes: `[ixx, iyy, izz]` (principal axes along
+    /// the frame's) or `[ixx, iyy, izz, ixy, ixz, iyz]` (validated).
+    pub inertia: Option<Vec<f64>>,
 }
 
 /// Per-variable settings as written; every field optional.

@@ -81,7 +81,8 @@ struct RawFrame {
     ry: Option<Spanned<RawValue>>,
     rz: Option<Spanned<RawValue>>,
     mass: Option<Spanned<f64>>,
-    inertia: Option<Spanned<[f64; 3]>>,
+    com: Option<Spanned<[f64; 3]>>,
+    inertia: Option<Spanned<Vec<f64>>>,
 }
 
 #[derive(Deserialize)]
@@ -145,6 +146,7 @@ struct FrameLines {
     primitive: Option<usize>,
     mass: Option<usize>,
     inertia: Option<usize>,
+    com: Option<usize>,
 }
 
 /// Parses and validates a model from TOML text. `source_name` (a file name) prefixes every
@@ -188,13 +190,15 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             primitive: primitive_line,
             mass: rf.mass.as_ref().map(|m| at(m.span())),
             inertia: rf.inertia.as_ref().map(|m| at(m.span())),
+            com: rf.com.as_ref().map(|m| at(m.span())),
         });
         frames.push(FrameSpec {
             name: rf.name.get_ref().clone(),
             parent: rf.parent.as_ref().map(|p| p.get_ref().clone()),
             primitives,
             mass: rf.mass.as_ref().map(|m| *m.get_ref()),
-            inertia: rf.inertia.as_ref().map(|m| *m.get_ref()),
+            com: rf.com.as_ref().map(|m| *m.get_ref()),
+            inertia: rf.inertia.as_ref().map(|m| m.get_ref().clone()),
         });
     }
     let mut variable_lines = BTreeMap::new();
@@ -324,6 +328,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                         FrameField::Primitive => l.primitive,
                         FrameField::Mass => l.mass,
                         FrameField::Inertia => l.inertia,
+                        FrameField::Com => l.com,
                     };
                     Some(specific.unwrap_or(l.whole))
                 }

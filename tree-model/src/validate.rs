@@ -7,7 +7,7 @@ use crate::error::{FrameField, Problem, Site};
 use crate::model::{Frame, Joint, Mass, Model, Variable, DEFAULT_GRAVITY};
 use crate::motion::{CubicSpline, Motion};
 use crate::primitive::{PrimitiveKind, Value};
-use crate::spec::{ModelSpec, ParameterSpec, VariableSpec};
+use crate::spec::{FrameSpec, ModelSpec, ParameterSpec, VariableSpec};
 
 /// Collects problems; `finish` fails if there are any.
 struct Problems(Vec<Problem>);
@@ -176,7 +176,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             }
         };
 
-        let mass = mass_of(k, f.name.as_str(), f.mass, f.inertia, &mut errs);
+        let mass = mass_of(k, f, &mut errs);
         frames.push(Frame {
             name: f.name.clone(),
             parent,
@@ -397,18 +397,15 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     Err(errs.0)
 }
 
-fn mass_of(
-    k: usize,
-    name: &str,
-    mass: Option<f64>,
-    inertia: Option<[f64; 3]>,
-    errs: &mut Problems,
-) -> Option<Mass> {
-    if mass.is_none() && inertia.is_none() {
+/// The frame's body, checked: mass finite and not negative, centre of mass finite, inertia
+/// three or six finite numbers forming a tensor that a real body can have (positive
+/// semi-definite, principal moments obeying the triangle inequalities).
+fn mass_of(k: usize, f: &FrameSpec, errs: &mut Problems) -> Option<Mass> {
+    if f.mass.is_none() && f.inertia.is_none() && f.com.is_none() {
         return None;
     }
-    let m = mass.unwrap_or(0.0);
-    let inertia = inertia.unwrap_or([0.0; 3]);
+    let name = &f.name;
+    let m = f.mass.unwrap_or(0.0);
     if !m.is_finite() || m < 0.0 {
         errs.frame(
             k,
@@ -416,17 +413,123 @@ fn mass_of(
             format!("frame `{name}`: mass {m} must be finite and not negative"),
         );
     }
-    if inertia.iter().any(|i| !i.is_finite() || *i < 0.0) {
+    let com = f.com.unwrap_or([0.0; 3]);
+    if com.iter().any(|x| !x.is_finite()) {
         errs.frame(
             k,
-            FrameField::Inertia,
+            FrameField::Com,
             format!(
-                "frame `{name}`: inertia [{}, {}, {}] must be finite and not negative",
-                inertia[0], inertia[1], inertia[2]
+                "frame `{name}`: com [{}, {}, {}] must be finite",
+                com[0], com[1], com[2]
             ),
         );
     }
-    Some(Mass { mass: m, inertia })
+    let written = f.inertia.clone().unwrap_or_else(|| vec![0.0; 3]);
+    let shown = written
+        .iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let six = match written[..] {
+        [a, b, c] => [a, b, c, 0.0, 0.0, 0.0],
+        [a, b, c, d, e, g] => [a, b, c, d, e, g],
+        _ => {
+            errs.frame(
+                k,
+                FrameField::Inertia,
+                format!(
+                    "frame `{name}`: inertia has {} numbers; give 3 (ixx, iyy, izz) or 6 (ixx, iyy, izz, ixy, ixz, iyz)",
+                    written.len()
+                ),
+            );
+            [0.0; 6]
+        }
+    };
+    let mut body = Mass::point(m);
+    body.com = com;
+    body.inertia = [
+        [six[0], six[3], six[4]],
+        [six[3], six[1], six[5]],
+        [six[4], six[5], six[2]],
+    ];
+    if six.iter().any(|x| !x.is_finite()) {
+        errs.frame(
+            k,
+            FrameField::Inertia,
+            format!("frame `{name}`: inertia [{shown}] must be finite"),
+        );
+    } else if let Err(why) = physical_inertia(&body.inertia) {
+        errs.frame(
+            k,
+            FrameField::Inertia,
+            format!("frame `{name}`: inertia [{shown}] {why}"),
+        );
+    }
+    Some(body)
+}
+
+/// Whether a symmetric tensor is one a rigid body can have: its principal moments (the
+/// eigenvalues) are not negative and each is at most the sum of the other two.
+fn physical_inertia(i: &[[f64; 3]; 3]) -> Result<(), String> {
+    let moments = symmetric_eigenvalues(i);
+    let scale = moments.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+    let slack = 1e-9 * scale;
+    if moments.iter().any(|&x| x < -slack) {
+        return Err(format!(
+            "is not positive semi-definite (principal moments {}, {}, {})",
+            short(moments[0]),
+            short(moments[1]),
+            short(moments[2])
+        ));
+    }
+    for k in 0..3 {
+        let (a, b, c) = (moments[k], moments[(k + 1) % 3], moments[(k + 2) % 3]);
+        if a > b + c + slack {
+            let (a, b, c) = (short(a), short(b), short(c));
+            return Err(format!(
+                "breaks the triangle inequality: principal moment {a} exceeds the sum of the others ({b} + {c})"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A computed number to six significant digits, for messages.
+fn short(x: f64) -> String {
+    let s = format!("{x:.5e}");
+    match s.split_once('e') {
+        Some((m, e)) => {
+            let m = m.trim_end_matches('0').trim_end_matches('.');
+            if e == "0" {
+                m.to_string()
+            } else {
+                format!("{m}e{e}")
+            }
+        }
+        None => s,
+    }
+}
+
+/// Eigenvalues of a symmetric 3×3 matrix, in increasing order (the trigonometric solution of
+/// the characteristic cubic).
+fn symmetric_eigenvalues(a: &[[f64; 3]; 3]) -> [f64; 3] {
+    let p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+    if p1 == 0.0 {
+        let mut d = [a[0][0], a[1][1], a[2][2]];
+        d.sort_by(f64::total_cmp);
+        return d;
+    }
+    let p2 = (a[0][0] - q).powi(2) + (a[1][1] - q).powi(2) + (a[2][2] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    let b = |i: usize, j: usize| (a[i][j] - if i == j { q } else { 0.0 }) / p;
+    let det = b(0, 0) * (b(1, 1) * b(2, 2) - b(1, 2) * b(2, 1))
+        - b(0, 1) * (b(1, 0) * b(2, 2) - b(1, 2) * b(2, 0))
+        + b(0, 2) * (b(1, 0) * b(2, 1) - b(1, 1) * b(2, 0));
+    let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let largest = q + 2.0 * p * phi.cos();
+    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+    [smallest, 3.0 * q - largest - smallest, largest]
 }
 
 /// Whether variable `i` moves some mass. A translation moves any mass below it; a rotation
@@ -453,10 +556,11 @@ fn variable_moves_mass(model: &Model, i: usize) -> bool {
             continue;
         }
         if let Some(m) = frame.mass {
+            let off_axis = offset[k] || m.com != [0.0; 3];
             let moved = if !rotation {
                 m.is_nonzero()
             } else {
-                m.inertia.iter().any(|&x| x > 0.0) || (offset[k] && m.mass > 0.0)
+                m.inertia.iter().flatten().any(|&x| x != 0.0) || (off_axis && m.mass > 0.0)
             };
             if moved {
                 return true;

@@ -42,7 +42,7 @@ fn a_valid_model_parses_with_variables_in_order_of_appearance() {
     assert_eq!(m.variables[1].q0, 0.25);
     assert_eq!(m.variables[1].damping, 0.5);
     assert_eq!(m.frames[1].mass.unwrap().mass, 2.0);
-    assert_eq!(m.frames[2].mass.unwrap().inertia, [1.0, 2.0, 3.0]);
+    assert_eq!(m.frames[2].mass.unwrap().diagonal(), Some([1.0, 2.0, 3.0]));
     assert_eq!(m.gravity, [0.0, 0.0, -9.81]);
 }
 
@@ -113,8 +113,58 @@ fn negative_or_non_finite_mass_and_inertia() {
     );
     assert_reports(
         &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = 1\ninertia = [1, -2, inf]\n"),
-        &["m.toml:10:", "frame `b`: inertia [1, -2, inf] must be finite and not negative"],
+        &["m.toml:10:", "frame `b`: inertia [1, -2, inf] must be finite"],
     );
+}
+
+/// `body` is the frame's fields after `mass = 1`; the frame starts on line 5.
+fn body_error(body: &str) -> String {
+    error_of(&format!(
+        "{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = 1\n{body}\n"
+    ))
+}
+
+#[test]
+fn full_rigid_bodies_parse_and_bad_ones_are_named() {
+    let m = from_toml_str(
+        &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = 2\ncom = [0.1, 0.2, 0.3]\ninertia = [1, 2, 2.5, 0.1, -0.2, 0.3]\n"),
+        None,
+    )
+    .unwrap();
+    let b = m.frames[1].mass.unwrap();
+    assert_eq!(b.com, [0.1, 0.2, 0.3]);
+    assert_eq!(b.inertia6(), [1.0, 2.0, 2.5, 0.1, -0.2, 0.3]);
+    assert_eq!(b.inertia[1][0], 0.1, "symmetric");
+    assert_eq!(b.diagonal(), None);
+
+    let e = body_error("inertia = [1, 1, 1, 2, 0, 0]");
+    assert!(
+        e.contains("m.toml:10:")
+            && e.contains("frame `b`: inertia [1, 1, 1, 2, 0, 0] is not positive semi-definite"),
+        "{e}"
+    );
+    let e = body_error("inertia = [1, 1, 3]");
+    assert!(
+        e.contains("m.toml:10:")
+            && e.contains("breaks the triangle inequality: principal moment 3"),
+        "{e}"
+    );
+    let e = body_error("inertia = [1, 1, 1, 0]");
+    assert!(
+        e.contains("inertia has 4 numbers; give 3 (ixx, iyy, izz) or 6"),
+        "{e}"
+    );
+    let e = body_error("com = [0, nan, 0]");
+    assert!(
+        e.contains("m.toml:10:") && e.contains("frame `b`: com [0, NaN, 0] must be finite"),
+        "{e}"
+    );
+    // A rod: principal moments (0, I, I) are on the triangle's edge, and allowed.
+    assert!(from_toml_str(
+        &format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = 1\ninertia = [0.5, 0.5, 0]\n"),
+        None
+    )
+    .is_ok());
 }
 
 #[test]

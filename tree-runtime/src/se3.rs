@@ -528,6 +528,27 @@ impl<S: Scalar> SpatialInertia<S> {
         s
     }
 
+    /// The spatial inertia at the frame origin of a body of mass `m` with centre of mass `c`
+    /// and inertia `i_c` about it (all in the frame's axes):
+    /// `[[m 1, −m ĉ], [m ĉ, I_c − m ĉ ĉ]]` (docs/derivations.md §2).
+    pub fn body(m: f64, com: &[f64; 3], i_c: &[[f64; 3]; 3]) -> Self {
+        let hat = [
+            [0.0, -com[2], com[1]],
+            [com[2], 0.0, -com[0]],
+            [-com[1], com[0], 0.0],
+        ];
+        let mut s = SpatialInertia::default();
+        for r in 0..3 {
+            s.vv[r][r] = c(m);
+            for k in 0..3 {
+                s.vw[r][k] = c(-m * hat[r][k]);
+                let hh: f64 = (0..3).map(|j| hat[r][j] * hat[j][k]).sum();
+                s.ww[r][k] = c(i_c[r][k] - m * hh);
+            }
+        }
+        s
+    }
+
     /// `self += other`.
     #[inline(always)]
     pub fn add(&mut self, other: &SpatialInertia<S>) {

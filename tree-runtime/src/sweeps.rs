@@ -199,15 +199,40 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
         }
         ws.moment[k] = [S::zero(); 3];
         match f.mass {
-            Some(m) => {
+            // The paper's body: at the frame origin, principal axes along the frame.
+            Some(m) if m.diagonal().is_some() => {
+                let inertia = m.diagonal().unwrap_or_default();
                 let v = &ws.velocity[k];
                 let p = &ws.pose[k].p;
-                ws.wrench[k] = inertia_times(m.mass, &m.inertia, v);
+                ws.wrench[k] = inertia_times(m.mass, &inertia, v);
                 l += S::constant(0.5) * dot(v, &ws.wrench[k])
                     + S::constant(m.mass)
                         * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
                 if dynamics {
-                    ws.inertia[k] = SpatialInertia::diagonal(m.mass, &m.inertia);
+                    ws.inertia[k] = SpatialInertia::diagonal(m.mass, &inertia);
+                }
+            }
+            // Any rigid body: the full spatial inertia at the frame origin; the centre of
+            // mass at p + R c enters the potential and the first mass moment h = m c.
+            Some(m) => {
+                let body = SpatialInertia::body(m.mass, &m.com, &m.inertia);
+                let v = &ws.velocity[k];
+                let pose = &ws.pose[k];
+                let g_local = pose.rotate_inverse(&gravity);
+                let com = m.com.map(S::constant);
+                let mass = S::constant(m.mass);
+                ws.wrench[k] = body.times(v);
+                ws.moment[k] = com.map(|x| mass * x);
+                l += S::constant(0.5) * dot(v, &ws.wrench[k])
+                    + mass
+                        * (gravity[0] * pose.p[0]
+                            + gravity[1] * pose.p[1]
+                            + gravity[2] * pose.p[2]
+                            + g_local[0] * com[0]
+                            + g_local[1] * com[1]
+                            + g_local[2] * com[2]);
+                if dynamics {
+                    ws.inertia[k] = body;
                 }
             }
             None => {

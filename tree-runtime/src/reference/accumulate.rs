@@ -38,7 +38,10 @@ pub(crate) fn add_mass_terms(
     let gk = pose.rotate_inverse(gravity);
     let mg = [m.mass * gk[0], m.mass * gk[1], m.mass * gk[2]];
     let v = fq.velocity();
-    let mv = inertia_times(m.mass, &m.inertia, &v);
+    let inertia = m.diagonal().expect(
+        "PaperSystem::new admits only bodies centred on their frame, principal axes along it",
+    );
+    let mv = inertia_times(m.mass, &inertia, &v);
     out.l += 0.5 * dot(&v, &mv)
         + m.mass * (gravity[0] * pose.p[0] + gravity[1] * pose.p[1] + gravity[2] * pose.p[2]);
     for (a, &i) in vars.iter().enumerate() {
@@ -52,7 +55,7 @@ pub(crate) fn add_mass_terms(
     }
     for (a, &i) in vars.iter().enumerate() {
         let ja = fq.jac(a);
-        let m_ja = inertia_times(m.mass, &m.inertia, &ja);
+        let m_ja = inertia_times(m.mass, &inertia, &ja);
         for (b, &j) in vars.iter().enumerate() {
             // M_ij = Σ J_iᵀ M_k J_j (eq. (18)), one triangle mirrored.
             if b <= a {
@@ -75,7 +78,7 @@ pub(crate) fn add_mass_terms(
     }
     for (a, &i) in vars.iter().enumerate() {
         let dva = fq.dv_dq(a);
-        let m_dva = inertia_times(m.mass, &m.inertia, &dva);
+        let m_dva = inertia_times(m.mass, &inertia, &dva);
         let ja = fq.jac(a);
         for (b, &j) in vars.iter().enumerate().take(a + 1) {
             // ∂²L/∂q_i∂q_j = Σ (∂v/∂q_j)ᵀ M_k ∂v/∂q_i + v_kᵀ M_k ∂²v/∂q_i∂q_j + m γ·∂²p/∂q_i∂q_j,

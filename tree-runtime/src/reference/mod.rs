@@ -59,6 +59,16 @@ impl PaperSystem {
                 model.name
             )));
         }
+        if let Some(f) = model
+            .frames
+            .iter()
+            .find(|f| f.mass.is_some_and(|m| m.diagonal().is_none()))
+        {
+            return Err(SimError::Unsupported(format!(
+                "frame `{}` of model `{}` has a centre of mass off its origin or products of inertia; the paper's per-mass sums take masses at frame origins with principal axes along the frame (the default evaluation handles any body: TreeSystem, or `--evaluation sweeps`)",
+                f.name, model.name
+            )));
+        }
         let plan = TreePlan::new(model);
         let mut tri_offset = Vec::with_capacity(plan.frames.len());
         let mut tris = 0;
