@@ -31,6 +31,10 @@ use tree_mech::{
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// URDF models: add a floating base (root_x root_y root_z root_yaw root_pitch root_roll:
+    /// tx ty tz rz ry rx) between the world and the root link.
+    #[arg(long, global = true)]
+    floating_base: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -69,7 +73,7 @@ enum Command {
     /// Simulate a model and write its trajectory (CSV) and a picture (PNG).
     #[command(allow_negative_numbers = true)]
     Simulate {
-        /// Model file (TOML).
+        /// Model file (TOML, or URDF by its .urdf extension).
         model: PathBuf,
         #[arg(long, value_enum, default_value = "vi")]
         integrator: Integrator,
@@ -159,6 +163,9 @@ fn default_sigpipe() {}
 fn main() -> ExitCode {
     default_sigpipe();
     let cli = Cli::parse();
+    let urdf = model::UrdfOptions {
+        floating_base: cli.floating_base,
+    };
     let result = match cli.command {
         Command::Simulate {
             model,
@@ -212,7 +219,7 @@ fn main() -> ExitCode {
                     plot: plot.as_deref(),
                     animate: animate.as_deref(),
                 };
-                let model = model::from_toml_file(&model).map_err(|e| e.to_string())?;
+                let model = model::from_file(&model, urdf).map_err(|e| e.to_string())?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
@@ -228,8 +235,8 @@ fn main() -> ExitCode {
                 }
             })
         }
-        Command::Eval { model, q, dq, t } => run_eval(&model, q.as_deref(), dq.as_deref(), t),
-        Command::Check { model } => run_check(&model),
+        Command::Eval { model, q, dq, t } => run_eval(&model, urdf, q.as_deref(), dq.as_deref(), t),
+        Command::Check { model } => run_check(&model, urdf),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -240,8 +247,8 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path) -> Result<TreeSystem, String> {
-    let model = model::from_toml_file(path).map_err(|e| e.to_string())?;
+fn load(path: &Path, urdf: model::UrdfOptions) -> Result<TreeSystem, String> {
+    let model = model::from_file(path, urdf).map_err(|e| e.to_string())?;
     TreeSystem::new(&model).map_err(|e| e.to_string())
 }
 
@@ -472,8 +479,14 @@ fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Ve
     Ok(Vector::<Dyn>::from_vec(values))
 }
 
-fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>, time: f64) -> Result<(), String> {
-    let mut sys = load(path)?;
+fn run_eval(
+    path: &Path,
+    urdf: model::UrdfOptions,
+    q: Option<&str>,
+    dq: Option<&str>,
+    time: f64,
+) -> Result<(), String> {
+    let mut sys = load(path, urdf)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
     let (q0, dq0) = sys.initial_state();
@@ -559,8 +572,8 @@ fn run_eval(path: &Path, q: Option<&str>, dq: Option<&str>, time: f64) -> Result
     Ok(())
 }
 
-fn run_check(path: &Path) -> Result<(), String> {
-    let model = model::from_toml_file(path).map_err(|e| e.to_string())?;
+fn run_check(path: &Path, urdf: model::UrdfOptions) -> Result<(), String> {
+    let model = model::from_file(path, urdf).map_err(|e| e.to_string())?;
     let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
     println!("model `{}`: valid", model.name);
     println!(
@@ -592,8 +605,12 @@ fn run_check(path: &Path) -> Result<(), String> {
                 format!("kinematic, spline through samples on [{a}, {b}] s")
             }
         };
+        let limits = v
+            .limits
+            .map(|[lo, hi]| format!("; limits [{lo}, {hi}] (not enforced)"))
+            .unwrap_or_default();
         println!(
-            "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}",
+            "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}{limits}",
             v.name, v.q0, v.dq0
         );
     }

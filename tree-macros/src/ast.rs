@@ -7,6 +7,7 @@ use syn::{braced, bracketed, parenthesized, Ident, LitStr, Token, Visibility};
 
 mod kw {
     syn::custom_keyword!(from);
+    syn::custom_keyword!(floating_base);
     syn::custom_keyword!(gravity);
     syn::custom_keyword!(frame);
     syn::custom_keyword!(mass);
@@ -28,7 +29,9 @@ pub struct Input {
 }
 
 pub enum Source {
-    File(LitStr),
+    /// A model file (TOML, or URDF by its extension), and for URDF whether to add a
+    /// floating base (`from "robot.urdf", floating_base`).
+    File(LitStr, bool),
     Inline(InlineModel),
 }
 
@@ -159,6 +162,12 @@ impl Parse for Input {
         if input.peek(kw::from) {
             input.parse::<kw::from>()?;
             let path: LitStr = input.parse()?;
+            let mut floating_base = false;
+            if input.peek(Token![,]) {
+                input.parse::<Token![,]>()?;
+                input.parse::<kw::floating_base>()?;
+                floating_base = true;
+            }
             input.parse::<Option<Token![;]>>()?;
             if !input.is_empty() {
                 return Err(input.error("unexpected tokens after the model file path"));
@@ -167,7 +176,7 @@ impl Parse for Input {
                 attrs,
                 vis,
                 name,
-                source: Source::File(path),
+                source: Source::File(path, floating_base),
             });
         }
         input.parse::<Token![;]>()?;

@@ -167,8 +167,22 @@ fn index_constants(
 /// `Model` rebuilt at run time, so `Name::model()` gives the interpreted twin: a file model
 /// is read again from the text compiled in, an inline one validated again from its spec —
 /// either way through the one validator, so every field the spec has is carried over.
-fn model_constructor(spec: Option<&ModelSpec>, file: Option<(&str, &str)>) -> TokenStream {
+fn model_constructor(
+    spec: Option<&ModelSpec>,
+    file: Option<(&str, &str)>,
+    floating_base: bool,
+) -> TokenStream {
     if let Some((path, shown)) = file {
+        if lower::is_urdf(shown) {
+            return quote! {
+                ::tree_mech::model::from_urdf_str(
+                    include_str!(#path),
+                    Some(#shown),
+                    ::tree_mech::model::UrdfOptions { floating_base: #floating_base },
+                )
+                .expect("the model was validated when it was compiled")
+            };
+        }
         return quote! {
             ::tree_mech::model::from_toml_str(include_str!(#path), Some(#shown))
                 .expect("the model was validated when it was compiled")
@@ -273,9 +287,16 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
             }
             None => quote!(None),
         };
+        let limits = match v.limits {
+            Some([lo, hi]) => {
+                let (lo, hi) = (constant(lo), constant(hi));
+                quote!(Some([#lo, #hi]))
+            }
+            None => quote!(None),
+        };
         quote!(#m::VariableSpec {
             name: #name, q0: #q0, dq0: #dq0, damping: #damping, kinematic: #kinematic,
-            motion: #motion, samples: #samples,
+            motion: #motion, samples: #samples, limits: #limits,
         })
     });
     let constraints = spec.constraints.iter().map(|c| {
@@ -327,8 +348,8 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
 
 pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let (model, spec, file) = match &input.source {
-        Source::File(path) => {
-            let (model, full) = lower::from_file(path)?;
+        Source::File(path, floating_base) => {
+            let (model, full) = lower::from_file(path, *floating_base)?;
             (model, None, Some((full, path.value())))
         }
         Source::Inline(inline) => {
@@ -396,9 +417,11 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let full_path = file
         .as_ref()
         .map(|(full, shown)| (full.to_string_lossy().into_owned(), shown.clone()));
+    let floating_base = matches!(input.source, Source::File(_, true));
     let constructor = model_constructor(
         spec.as_ref(),
         full_path.as_ref().map(|(p, s)| (p.as_str(), s.as_str())),
+        floating_base,
     );
     let rebuild = full_path.as_ref().map(|(path, _)| {
         quote!(

@@ -34,9 +34,17 @@ impl Errors {
     }
 }
 
-/// A model read from a file: the model and the absolute path, so the expansion can make
-/// cargo rebuild when the file changes.
-pub fn from_file(path: &LitStr) -> syn::Result<(Model, PathBuf)> {
+/// Whether a model file is URDF (by its extension).
+pub fn is_urdf(path: &str) -> bool {
+    std::path::Path::new(path)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+}
+
+/// A model read from a file (TOML, or URDF by extension, with a floating base when asked):
+/// the model and the absolute path, so the expansion can make cargo rebuild when the file
+/// changes.
+pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, PathBuf)> {
     let written = path.value();
     let base = std::env::var_os("CARGO_MANIFEST_DIR_OVERRIDE")
         .or_else(|| std::env::var_os("CARGO_MANIFEST_DIR"))
@@ -49,7 +57,18 @@ pub fn from_file(path: &LitStr) -> syn::Result<(Model, PathBuf)> {
             format!("cannot read model file `{written}`: {e}"),
         )
     })?;
-    let model = tree_model::from_toml_str(&text, Some(&written)).map_err(|e| {
+    let model = if is_urdf(&written) {
+        let options = tree_model::UrdfOptions { floating_base };
+        tree_model::from_urdf_str(&text, Some(&written), options)
+    } else if floating_base {
+        return Err(syn::Error::new(
+            path.span(),
+            "`floating_base` applies to URDF models only; a TOML model declares its own base variables",
+        ));
+    } else {
+        tree_model::from_toml_str(&text, Some(&written))
+    };
+    let model = model.map_err(|e| {
         let mut errors = Errors::default();
         for line in e.to_string().lines() {
             errors.push(path.span(), line);
@@ -136,6 +155,10 @@ fn variable_spec(
                 spec.motion = Some(sine);
             }
             ("samples", Setting::Pairs(pairs, _)) => spec.samples = Some(pairs.clone()),
+            ("limits", Setting::Vector(v, _)) if v.len() == 2 => {
+                spec.limits = Some([v[0].value, v[1].value])
+            }
+            ("limits", v) => errors.push(v.span(), "`limits` takes two numbers [lower, upper]"),
             ("q0" | "dq0" | "damping", v) => errors.push(v.span(), format!("`{key}` takes a number")),
             ("kinematic", v) => errors.push(v.span(), "`kinematic` takes true or false"),
             ("motion", v) => errors.push(
@@ -146,7 +169,7 @@ fn variable_spec(
             _ => errors.push(
                 key.span(),
                 format!(
-                    "unknown variable setting `{key}`: expected q0, dq0, damping, kinematic, motion or samples"
+                    "unknown variable setting `{key}`: expected q0, dq0, damping, kinematic, motion, samples or limits"
                 ),
             ),
         }

@@ -4,7 +4,8 @@
 //! Continuous Mechanics for Tree Representations of Mechanical Systems*, ICRA 2008, §II): each frame hangs off its parent by one primitive transform (`tx ty tz rx ry rz`),
 //! constant or driven by one configuration variable; masses sit at frame origins.
 //!
-//! Models come from TOML ([`from_toml_str`], [`from_toml_file`]), from the
+//! Models come from TOML ([`from_toml_str`], [`from_toml_file`]), from URDF
+//! ([`from_urdf_str`], [`from_urdf_file`]; [`from_file`] picks by extension), from the
 //! [`ModelBuilder`], or from the `tree_model!` macro. All three produce a [`ModelSpec`]
 //! that one validator turns into a [`Model`], so a model means the same on every path.
 
@@ -16,6 +17,7 @@ mod motion;
 mod primitive;
 mod spec;
 mod toml_format;
+mod urdf_format;
 mod validate;
 
 pub use builder::{n_link_pendulum, ModelBuilder};
@@ -31,4 +33,5 @@ pub use spec::{
     VariableSpec,
 };
 pub use toml_format::{from_toml_file, from_toml_str};
+pub use urdf_format::{from_file, from_urdf_file, from_urdf_str, UrdfOptions, FLOATING_BASE};
 pub use validate::validate;

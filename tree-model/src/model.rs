@@ -108,6 +108,9 @@ pub struct Variable {
     pub damping: f64,
     /// A prescribed variable's motion (`None`: a dynamic variable, simulated).
     pub motion: Option<Motion>,
+    /// `[lower, upper]` joint limits (from URDF or `limits = [..]`): kept and reported by
+    /// `check`, not enforced.
+    pub limits: Option<[f64; 2]>,
 }
 
 impl Variable {

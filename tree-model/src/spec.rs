@@ -31,6 +31,8 @@ pub struct VariableSpec {
     pub motion: Option<SineSpec>,
     /// Samples `(t, q)` of a spline prescription (kinematic variables only).
     pub samples: Option<Vec<[f64; 2]>>,
+    /// `[lower, upper]` joint limits: kept and reported, not enforced.
+    pub limits: Option<[f64; 2]>,
 }
 
 /// A whole model as written.

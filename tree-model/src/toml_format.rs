@@ -101,6 +101,7 @@ struct RawVariable {
     kinematic: Option<bool>,
     motion: Option<RawMotion>,
     samples: Option<Vec<[f64; 2]>>,
+    limits: Option<[f64; 2]>,
 }
 
 /// Lines of one constraint, spring or damper: the entry's first line and each field's.
@@ -221,6 +222,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                     phase: m.phase,
                 }),
                 samples: v.samples.clone(),
+                limits: v.limits,
             }
         })
         .collect();

@@ -154,6 +154,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                                 dq0: 0.0,
                                 damping: 0.0,
                                 motion: None,
+                                limits: None,
                             });
                             Joint::Variable(i)
                         }
@@ -206,6 +207,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                     dq0: 0.0,
                     damping: 0.0,
                     motion: None,
+                    limits: None,
                 });
             } else {
                 errs.element(
@@ -246,8 +248,20 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                 format!("variable `{}`: damping must not be negative", v.name),
             );
         }
+        if let Some([lo, hi]) = v.limits {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                errs.push(
+                    site(),
+                    format!(
+                        "variable `{}`: limits [{lo}, {hi}] must be finite with lower ≤ upper",
+                        v.name
+                    ),
+                );
+            }
+        }
         let kinematic = v.kinematic.unwrap_or(false);
         let var = &mut variables[i];
+        var.limits = v.limits;
         var.q0 = v.q0.unwrap_or(0.0);
         var.dq0 = v.dq0.unwrap_or(0.0);
         var.damping = v.damping.unwrap_or(0.0);

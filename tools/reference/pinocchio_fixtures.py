@@ -1,0 +1,94 @@
+#!/usr/bin/env python3
+"""Writes tests/fixtures/pinocchio-<model>.json: Pinocchio's numbers for every shipped URDF
+at seeded random states, for tests/pinocchio.rs (which reads them without Python).
+
+    pip install pin==4.1.0
+    python3 tools/reference/pinocchio_fixtures.py
+
+For each state: q, v, tau, a (random), and from Pinocchio the mass matrix (CRBA), the
+generalized gravity, the nonlinear effects C(q,v)v + g, ABA's acceleration for tau, RNEA's
+torque for a, every link's pose (4×4, row-major) and the kinetic and potential energy.
+Vectors are in Pinocchio's joint order; `variables` names it (joint names), so the Rust
+side maps by name. The floating base is a composite joint PX PY PZ RZ RY RX, whose q and v
+are tree-mech's root_x … root_roll. Pinocchio's ABA ignores joint damping; so do these
+numbers.
+"""
+import json
+import pathlib
+
+import numpy as np
+import pinocchio as pin
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+MODELS = [
+    ("ur5", "models/ur5.urdf", False),
+    ("panda", "models/panda.urdf", False),
+    ("solo12", "models/solo12.urdf", True),
+]
+STATES = 5
+
+
+def build(path, floating):
+    if floating:
+        base = pin.JointModelComposite()
+        for joint in (pin.JointModelPX(), pin.JointModelPY(), pin.JointModelPZ(),
+                      pin.JointModelRZ(), pin.JointModelRY(), pin.JointModelRX()):
+            base.addJoint(joint)
+        return pin.buildModelFromUrdf(str(path), base)
+    return pin.buildModelFromUrdf(str(path))
+
+
+def variables(model, floating):
+    names = []
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        if model.nqs[j] == 6 and floating and j == 1:
+            names += ["root_x", "root_y", "root_z", "root_yaw", "root_pitch", "root_roll"]
+        else:
+            assert model.nqs[j] == 1, f"{name}: {model.nqs[j]} coordinates"
+            names.append(name)
+    return names
+
+
+def main():
+    rng = np.random.default_rng(20261201)
+    for label, rel, floating in MODELS:
+        model = build(ROOT / rel, floating)
+        data = model.createData()
+        links = [f for f in model.frames if f.type == pin.FrameType.BODY]
+        out = {
+            "model": label,
+            "file": rel,
+            "floating_base": floating,
+            "pinocchio": pin.__version__,
+            "variables": variables(model, floating),
+            "states": [],
+        }
+        for _ in range(STATES):
+            q = rng.uniform(-1.5, 1.5, model.nq)
+            v = rng.uniform(-2.0, 2.0, model.nv)
+            tau = rng.uniform(-5.0, 5.0, model.nv)
+            a = rng.uniform(-3.0, 3.0, model.nv)
+            M = pin.crba(model, data, q)
+            M = np.triu(M) + np.triu(M, 1).T
+            g = pin.computeGeneralizedGravity(model, data, q).copy()
+            nle = pin.nonLinearEffects(model, data, q, v).copy()
+            ddq = pin.aba(model, data, q, v, tau).copy()
+            rnea = pin.rnea(model, data, q, v, a).copy()
+            kinetic = pin.computeKineticEnergy(model, data, q, v)
+            potential = pin.computePotentialEnergy(model, data, q)
+            pin.framesForwardKinematics(model, data, q)
+            poses = {f.name: data.oMf[model.getFrameId(f.name, pin.FrameType.BODY)].homogeneous.flatten().tolist()
+                     for f in links}
+            out["states"].append({
+                "q": q.tolist(), "v": v.tolist(), "tau": tau.tolist(), "a": a.tolist(),
+                "M": M.tolist(), "g": g.tolist(), "nle": nle.tolist(), "ddq": ddq.tolist(),
+                "rnea": rnea.tolist(), "kinetic": kinetic, "potential": potential, "poses": poses,
+            })
+        path = ROOT / "tests" / "fixtures" / f"pinocchio-{label}.json"
+        path.write_text(json.dumps(out, indent=1) + "\n")
+        print(f"wrote {path.relative_to(ROOT)}: {model.nq} coordinates, {len(links)} links")
+
+
+if __name__ == "__main__":
+    main()
