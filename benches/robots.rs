@@ -1,0 +1,174 @@
+//! The URDF robots (UR5, Panda, Solo-12 with a floating base) against Pinocchio: tree-mech's
+//! mass matrix (an `Order::Dynamics` evaluation: L, ∂L, M and ∂²L/∂q̇∂q), q̈ (the library's
+//! dynamics), a full second-order evaluation, one VI step and one RK4 step, compiled and
+//! interpreted; beside them Pinocchio's CRBA, RNEA (nonlinear effects), ABA and ABA
+//! derivatives from `target/pinocchio-timing.json` when `tools/reference/pinocchio_bench.sh`
+//! has written it. Same timing method on both sides: best of 5 batches, mean per call.
+//! Run: `cargo bench --bench robots`.
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use tree_mech::integrate::{MidpointVi, Rk4, ViSettings};
+use tree_mech::model::{self, UrdfOptions};
+use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
+use tree_mech::runtime::{Dynamics, ModelMotions, Vector};
+use tree_mech::{tree_model, NoForce, Order, System, Terms, TreeSystem};
+
+tree_model!(struct Ur5 from "models/ur5.urdf");
+tree_model!(struct Panda from "models/panda.urdf");
+tree_model!(struct Solo12 from "models/solo12.urdf", floating_base);
+
+/// Mean ns per call of `f`: the best of 5 batches.
+fn time_ns(calls: usize, mut f: impl FnMut()) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..5 {
+        let start = Instant::now();
+        for _ in 0..calls {
+            f();
+        }
+        best = best.min(start.elapsed().as_secs_f64() * 1e9 / calls as f64);
+    }
+    best
+}
+
+/// `[M, q̈, full evaluation, VI step, RK4 step]` in ns, at the state Pinocchio is timed at.
+fn measure<S: System>(mut sys: S) -> [f64; 5]
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let n = sys.dof();
+    let (mut q, mut dq) = (sys.zero_vector(), sys.zero_vector());
+    for i in 0..n {
+        q[i] = 0.3 * (0.7 * i as f64).sin();
+        dq[i] = 0.5 * (1.3 * i as f64).cos();
+    }
+    let calls = 20_000;
+    let mut terms = Terms::zeros(sys.dim());
+    let mass = time_ns(calls, || {
+        sys.lagrangian(black_box(&q), black_box(&dq), Order::Dynamics, &mut terms);
+        black_box(terms.mass[(0, 0)]);
+    });
+    let full = time_ns(calls, || {
+        sys.lagrangian(black_box(&q), black_box(&dq), Order::Full, &mut terms);
+        black_box(terms.d2l_dq_dq[(0, 0)]);
+    });
+    let mut dynamics = Dynamics::new(&sys);
+    let mut motion = ModelMotions::of(&sys);
+    let mut qdd = sys.zero_vector();
+    let accel = time_ns(calls, || {
+        dynamics
+            .acceleration(
+                &mut sys,
+                &mut NoForce,
+                &mut motion,
+                0,
+                0.0,
+                &q,
+                &dq,
+                &mut qdd,
+            )
+            .unwrap();
+        black_box(qdd[0]);
+    });
+    let mut vi = MidpointVi::new(&sys, ViSettings::default());
+    let p0 = vi.initial_momentum(&mut sys, &q, &dq);
+    let (mut qk, mut pk, mut next) = (q.clone(), p0.clone(), q.clone());
+    let vi_step = time_ns(calls / 10, || {
+        qk.copy_from(&q);
+        pk.copy_from(&p0);
+        vi.last_velocity.copy_from(&dq);
+        vi.step(
+            &mut sys,
+            &mut NoForce,
+            &mut motion,
+            0,
+            0.0,
+            0.001,
+            &mut qk,
+            &mut pk,
+            &mut next,
+        )
+        .unwrap();
+    });
+    let mut rk = Rk4::new(&sys);
+    let (mut qr, mut vr): (Vector<S::N>, Vector<S::N>) = (q.clone(), dq.clone());
+    let rk4 = time_ns(calls / 10, || {
+        qr.copy_from(&q);
+        vr.copy_from(&dq);
+        rk.step(
+            &mut sys,
+            &mut NoForce,
+            &mut motion,
+            0,
+            0.0,
+            0.001,
+            &mut qr,
+            &mut vr,
+        )
+        .unwrap();
+    });
+    [mass, accel, full, vi_step, rk4]
+}
+
+fn interpreted(file: &str, floating_base: bool) -> TreeSystem {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+    TreeSystem::new(&model::from_file(path, UrdfOptions { floating_base }).unwrap()).unwrap()
+}
+
+/// Pinocchio's `[crba, nle, aba, aba_derivatives]` for `label`, if measured.
+fn pinocchio(label: &str) -> Option<[f64; 4]> {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/pinocchio-timing.json");
+    let text = std::fs::read_to_string(path).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let r = &v[label];
+    let get = |k: &str| r[k].as_f64();
+    Some([
+        get("crba_ns")?,
+        get("nle_ns")?,
+        get("aba_ns")?,
+        get("aba_derivatives_ns")?,
+    ])
+}
+
+fn main() {
+    let rows = [
+        (
+            "UR5 (6)",
+            "ur5",
+            measure(Ur5),
+            measure(interpreted("models/ur5.urdf", false)),
+        ),
+        (
+            "Panda (9)",
+            "panda",
+            measure(Panda),
+            measure(interpreted("models/panda.urdf", false)),
+        ),
+        (
+            "Solo-12, floating base (18)",
+            "solo12",
+            measure(Solo12),
+            measure(interpreted("models/solo12.urdf", true)),
+        ),
+    ];
+    println!("| robot (dof) | | M | q̈ | full 2nd-order evaluation | VI step | RK4 step |");
+    println!("|---|---|---:|---:|---:|---:|---:|");
+    for (name, label, generated, interp) in &rows {
+        let f = |x: &[f64; 5]| x.map(|t| format!("{:.0} ns", t)).join(" | ");
+        println!("| {name} | tree-mech compiled | {} |", f(generated));
+        println!("| | tree-mech interpreted | {} |", f(interp));
+        if let Some([crba, nle, aba, abad]) = pinocchio(label) {
+            println!(
+                "| | Pinocchio (C++) | CRBA {crba:.0} ns (nle {nle:.0} ns) | ABA {aba:.0} ns | ABA derivatives {abad:.0} ns | — | — |"
+            );
+            println!(
+                "| | compiled / Pinocchio | {:.2}× CRBA | {:.2}× ABA | {:.2}× ABA derivatives | | |",
+                generated[0] / crba,
+                generated[1] / aba,
+                generated[2] / abad
+            );
+        }
+    }
+}
