@@ -323,13 +323,15 @@ impl Model {
                 Some(m) => format!("  [{}]", m.describe()),
                 None => String::new(),
             };
+            // Deep trees are indented up to 24 levels, then labelled with their depth.
+            let indent = if depth[k] <= 24 {
+                "   ".repeat(depth[k] - 1)
+            } else {
+                format!("{}[depth {}] ", "   ".repeat(23), depth[k])
+            };
             out.push_str(&format!(
-                "{}└─ {} = {}({}){}\n",
-                "   ".repeat(depth[k] - 1),
-                f.name,
-                f.primitive,
-                param,
-                mass
+                "{indent}└─ {} = {}({}){}\n",
+                f.name, f.primitive, param, mass
             ));
         }
         out

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use crate::error::{ModelError, Problem, Site};
+use crate::error::{FrameField, ModelError, Problem, Site};
 use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind, Value};
 use crate::spec::{FrameSpec, ModelSpec, VariableSpec};
@@ -46,6 +46,13 @@ pub fn from_urdf_str(
         |message: String, line: Option<usize>| ModelError::single(src.clone(), message, line);
     let document = roxmltree::Document::parse(text)
         .map_err(|e| fail(format!("XML error: {e}"), Some(e.pos().row as usize)))?;
+    // Line of a byte offset (roxmltree's own lookup rescans the text each time).
+    let newlines: Vec<usize> = text
+        .bytes()
+        .enumerate()
+        .filter_map(|(i, b)| (b == b'\n').then_some(i))
+        .collect();
+    let line_at = |offset: usize| newlines.partition_point(|&n| n < offset) + 1;
     let root = document.root_element();
     if root.tag_name().name() != "robot" {
         return Err(fail(
@@ -53,14 +60,14 @@ pub fn from_urdf_str(
                 "URDF: the root element is <{}>, not <robot>",
                 root.tag_name().name()
             ),
-            Some(document.text_pos_at(root.range().start).row as usize),
+            Some(line_at(root.range().start)),
         ));
     }
     // The line of each <link> and <joint>, by name.
     let mut link_lines = HashMap::new();
     let mut joint_lines = HashMap::new();
     for node in root.children().filter(|n| n.is_element()) {
-        let line = document.text_pos_at(node.range().start).row as usize;
+        let line = line_at(node.range().start);
         let name = node.attribute("name").unwrap_or_default().to_string();
         let (lines, what) = match node.tag_name().name() {
             "link" => (&mut link_lines, "link"),
@@ -368,6 +375,8 @@ pub fn from_urdf_str(
     }
 
     // Bodies: <inertial> origin and tensor, turned into the link's axes.
+    // Problems with a body point at its <link>, other frame problems at the joint.
+    let mut body_lines: HashMap<usize, Option<usize>> = HashMap::new();
     for (l, link) in robot.links.iter().enumerate() {
         let inertial = &link.inertial;
         let i = &inertial.inertia;
@@ -394,6 +403,7 @@ pub fn from_urdf_str(
             }
         }
         let Some(f) = link_frame[l] else { continue };
+        body_lines.insert(f, link_line(&link.name));
         let frame = &mut spec.frames[f];
         frame.mass = Some(m);
         let com = inertial.origin.xyz.0;
@@ -414,7 +424,12 @@ pub fn from_urdf_str(
             .into_iter()
             .map(|p| {
                 let line = match &p.site {
-                    Site::Frame { index, .. } => frame_lines.get(*index).copied().flatten(),
+                    Site::Frame { index, field } => match field {
+                        FrameField::Mass | FrameField::Inertia | FrameField::Com => {
+                            body_lines.get(index).copied().flatten()
+                        }
+                        _ => frame_lines.get(*index).copied().flatten(),
+                    },
                     Site::VariableSettings { name } => joint_line(name),
                     _ => None,
                 };

@@ -290,3 +290,20 @@ fn nearest_kept(model: &Model, kept: &[Option<usize>], k: usize) -> Option<usize
     }
     None
 }
+
+/// The most Jacobian columns (a frame's `∂v/∂q̇_i` and `∂v/∂q_i` for each variable above it)
+/// an interpreted system allocates: about 480 MB, a chain some 3 000 variables deep.
+pub const MAX_COLUMNS: usize = 5_000_000;
+
+/// How many Jacobian columns the sweeps keep for `model`: Σ over frames of the variables at
+/// or above each (an upper bound for the folded plan). O(frames), before anything is built.
+pub fn column_count(model: &Model) -> usize {
+    let mut above = vec![0usize; model.frames.len()];
+    let mut total = 0usize;
+    for (k, f) in model.frames.iter().enumerate() {
+        let own = usize::from(matches!(f.joint, Joint::Variable(_)));
+        above[k] = f.parent.map_or(0, |p| above[p]) + own;
+        total = total.saturating_add(above[k]);
+    }
+    total
+}

@@ -29,6 +29,14 @@ pub struct TreeSystem {
 impl TreeSystem {
     /// Builds the interpreted system for a validated model.
     pub fn new(model: &Model) -> Result<Self, SimError> {
+        let columns = crate::plan::column_count(model);
+        if columns > crate::plan::MAX_COLUMNS {
+            return Err(SimError::InvalidInput(format!(
+                "model `{}` would need {columns} Jacobian columns (each frame's, for every variable above it); the interpreted system allocates at most {}: a chain about 3 000 variables deep",
+                model.name,
+                crate::plan::MAX_COLUMNS
+            )));
+        }
         let plan = TreePlan::folded(model);
         Ok(TreeSystem {
             model: model.clone(),

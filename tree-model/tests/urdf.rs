@@ -1,0 +1,182 @@
+//! URDF: what each element becomes, and every unsupported or broken input as a one-line
+//! error naming the element and its line.
+
+use tree_model::{from_file, from_urdf_str, Joint, PrimitiveKind, UrdfOptions};
+
+const FIXED: UrdfOptions = UrdfOptions {
+    floating_base: false,
+};
+
+fn error_of(text: &str) -> String {
+    match from_urdf_str(text, Some("r.urdf"), FIXED) {
+        Ok(_) => panic!("should be rejected:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// A two-link arm; `joint2` is spliced in.
+fn arm(joint2: &str) -> String {
+    format!(
+        r#"<robot name="arm">
+  <link name="base"/>
+  <link name="upper">
+    <inertial>
+      <origin xyz="0 0 0.2" rpy="0.1 0.2 0.3"/>
+      <mass value="2.0"/>
+      <inertia ixx="0.03" ixy="0.001" ixz="0" iyy="0.025" iyz="0" izz="0.01"/>
+    </inertial>
+  </link>
+  <link name="lower"><inertial><mass value="1.0"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/></inertial></link>
+  <joint name="joint1" type="revolute">
+    <parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/>
+    <limit lower="-1" upper="2" effort="10" velocity="1"/>
+    <dynamics damping="0.5"/>
+  </joint>
+{joint2}
+</robot>"#
+    )
+}
+
+const GOOD_JOINT2: &str = r#"  <joint name="joint2" type="prismatic">
+    <parent link="upper"/><child link="lower"/>
+    <origin xyz="0.1 0 0.4" rpy="0 1.5707963267948966 0"/>
+    <axis xyz="0 -1 1"/>
+  </joint>"#;
+
+#[test]
+fn joints_become_chains_of_primitives_and_links_bodies() {
+    let m = from_urdf_str(&arm(GOOD_JOINT2), Some("r.urdf"), FIXED).unwrap();
+    assert_eq!(m.name, "arm");
+    let names: Vec<&str> = m.variables.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names, ["joint1", "joint2"]);
+    let j1 = &m.variables[0];
+    assert_eq!(j1.damping, 0.5);
+    assert_eq!(j1.limits, Some([-1.0, 2.0]));
+    // joint1: tz(0.1), then rz(joint1) — the axis is +z — as link `upper`.
+    let upper = m.frame_index("upper").unwrap();
+    assert_eq!(m.frames[upper].primitive, PrimitiveKind::Rz);
+    assert_eq!(m.frames[upper].joint, Joint::Variable(0));
+    // The inertial's rotation is applied: the tensor in link axes is not diagonal, and the
+    // centre of mass is the inertial origin.
+    let body = m.frames[upper].mass.unwrap();
+    assert_eq!(body.com, [0.0, 0.0, 0.2]);
+    assert!(body.diagonal().is_none());
+    let trace: f64 = (0..3).map(|k| body.inertia[k][k]).sum();
+    assert!((trace - 0.065).abs() < 1e-15, "rotation keeps the trace");
+    // joint2 on an oblique axis: prismatic along it, turned onto z and back, the last
+    // frame is link `lower`.
+    let driven = m.variables[1].frame.unwrap();
+    assert_eq!(m.frames[driven].primitive, PrimitiveKind::Tz);
+    assert_eq!(m.variables[1].limits, None, "no <limit>: none kept");
+}
+
+#[test]
+fn a_floating_base_adds_six_variables_above_the_root() {
+    let options = UrdfOptions {
+        floating_base: true,
+    };
+    let m = from_urdf_str(&arm(GOOD_JOINT2), None, options).unwrap();
+    let names: Vec<&str> = m.variables.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "root_x",
+            "root_y",
+            "root_z",
+            "root_yaw",
+            "root_pitch",
+            "root_roll",
+            "joint1",
+            "joint2"
+        ]
+    );
+    let base = m.frame_index("base").unwrap();
+    assert_eq!(m.frames[base].primitive, PrimitiveKind::Rx);
+}
+
+#[test]
+fn unsupported_and_broken_urdf_is_named_with_its_line() {
+    let cases: [(String, &str); 9] = [
+        (
+            arm(r#"  <joint name="joint2" type="floating"><parent link="upper"/><child link="lower"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2` is floating; only revolute, continuous, prismatic and fixed joints",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="planar"><parent link="upper"/><child link="lower"/><axis xyz="0 0 1"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2` is planar",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><mimic joint="joint1"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2` mimics joint `joint1`; mimic joints are not supported",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="fixed"><parent link="upper"/><child link="hand"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2`: child link `hand` does not exist",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="fixed"><parent link="base"/><child link="upper"/></joint>"#),
+            "r.urdf:18: URDF: link `upper` has two parents (joints `joint1` and `joint2`)",
+        ),
+        (
+            arm(""),
+            "URDF: 2 links have no parent joint (base, lower); a tree has one root",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="fixed"><parent link="upper"/><child link="lower"/></joint>
+  <joint name="joint3" type="fixed"><parent link="lower"/><child link="base"/></joint>"#),
+            "URDF: every link has a parent joint: the joints form a cycle",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><axis xyz="0 0 0"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2`: axis [0 0 0] is zero or not finite",
+        ),
+        (
+            "<robot name=\"r\">\n  <link name=\"a\">\n  </lnk>\n</robot>".to_string(),
+            "r.urdf:3: XML error",
+        ),
+    ];
+    for (text, expected) in cases {
+        let e = error_of(&text);
+        assert!(e.contains(expected), "expected `{expected}` in:\n{e}");
+        assert_eq!(e.lines().count(), 1, "one line: {e}");
+    }
+}
+
+#[test]
+fn a_body_no_rigid_body_can_have_is_named_at_its_link() {
+    let text = arm(GOOD_JOINT2).replace(
+        r#"<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/>"#,
+        r#"<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.05"/>"#,
+    );
+    let e = error_of(&text);
+    assert!(
+        e.contains("frame `lower`: inertia") && e.contains("triangle inequality"),
+        "{e}"
+    );
+    assert!(e.starts_with("r.urdf:10:"), "the line of the <link>: {e}");
+}
+
+#[test]
+fn from_file_reads_urdf_by_extension_and_refuses_a_floating_toml() {
+    let dir = std::env::temp_dir().join(format!("tree-model-urdf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let urdf = dir.join("arm.URDF");
+    std::fs::write(&urdf, arm(GOOD_JOINT2)).unwrap();
+    assert_eq!(from_file(&urdf, FIXED).unwrap().dof(), 2);
+    let toml = dir.join("p.toml");
+    std::fs::write(&toml, "[[frame]]\nname = \"a\"\nrx = \"q\"\nmass = 1.0\n").unwrap();
+    let e = from_file(
+        &toml,
+        UrdfOptions {
+            floating_base: true,
+        },
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("floating base is added to URDF models only"),
+        "{e}"
+    );
+}
