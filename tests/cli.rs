@@ -278,11 +278,20 @@ fn a_closed_pipe_ends_the_output_quietly() {
 fn urdf_models_are_read_wherever_toml_is() {
     let (ok, stdout, stderr) = tree_mech(&["check", "models/ur5.urdf"]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("model `ur5`: valid") && stdout.contains("6 variables"), "{stdout}");
-    assert!(stdout.contains("limits [-3.14159265359, 3.14159265359] (not enforced)"), "{stdout}");
+    assert!(
+        stdout.contains("model `ur5`: valid") && stdout.contains("6 variables"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("limits [-3.14159265359, 3.14159265359] (not enforced)"),
+        "{stdout}"
+    );
     let (ok, stdout, stderr) = tree_mech(&["check", "models/solo12.urdf", "--floating-base"]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("18 variables") && stdout.contains("root_pitch"), "{stdout}");
+    assert!(
+        stdout.contains("18 variables") && stdout.contains("root_pitch"),
+        "{stdout}"
+    );
     let (ok, stdout, stderr) = tree_mech(&["eval", "models/panda.urdf"]);
     assert!(ok, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
@@ -300,5 +309,8 @@ fn urdf_models_are_read_wherever_toml_is() {
     assert!(ok, "{stderr}");
     assert!(stdout.contains("Simulated `ur5` (6 variables)"), "{stdout}");
     let (ok, _, stderr) = tree_mech(&["check", "models/pendulum.toml", "--floating-base"]);
-    assert!(!ok && stderr.contains("floating base is added to URDF models only"), "{stderr}");
+    assert!(
+        !ok && stderr.contains("floating base is added to URDF models only"),
+        "{stderr}"
+    );
 }

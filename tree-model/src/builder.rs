@@ -31,6 +31,7 @@ pub struct ModelBuilder {
 }
 
 impl ModelBuilder {
+    /// An empty model named `name` (gravity (0, 0, −9.81)).
     pub fn new(name: &str) -> Self {
         ModelBuilder {
             spec: ModelSpec {
@@ -46,6 +47,7 @@ impl ModelBuilder {
         }
     }
 
+    /// Sets the gravity vector (m/s², world axes).
     pub fn gravity(mut self, g: [f64; 3]) -> Self {
         self.spec.gravity = Some(g);
         self
@@ -235,6 +237,7 @@ impl ModelBuilder {
         self
     }
 
+    /// Validates the model built so far: every problem at once, as for a file.
     pub fn build(self) -> Result<Model, ModelError> {
         let result = validate(&self.spec);
         let mut problems = self.pending;

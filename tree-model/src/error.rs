@@ -5,12 +5,19 @@ use std::fmt;
 /// Which part of a frame a problem is about (lets TOML point at a line and the macro at a token).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FrameField {
+    /// The frame as a whole.
     Whole,
+    /// Its `name`.
     Name,
+    /// Its `parent`.
     Parent,
+    /// Its primitive (`tx` … `rz`) and parameter.
     Primitive,
+    /// Its `mass`.
     Mass,
+    /// Its `inertia`.
     Inertia,
+    /// Its centre of mass, `com`.
     Com,
 }
 
@@ -20,14 +27,25 @@ pub enum Site {
     /// The model as a whole (no variables, bad gravity, a syntax error, a missing file).
     Model,
     /// The frame at this position of the specification's frame list.
-    Frame { index: usize, field: FrameField },
+    Frame {
+        /// Position in the frame list.
+        index: usize,
+        /// The part of the frame at fault.
+        field: FrameField,
+    },
     /// The settings of the variable of this name.
-    VariableSettings { name: String },
+    VariableSettings {
+        /// The variable's name.
+        name: String,
+    },
     /// A constraint, spring or damper (by position in its list) and the field at fault
     /// (`None`: the whole entry).
     Element {
+        /// Which list.
         section: Section,
+        /// Position in that list.
         index: usize,
+        /// The field at fault (`None`: the whole entry).
         field: Option<&'static str>,
     },
 }
@@ -35,8 +53,11 @@ pub enum Site {
 /// The lists of elements a model has besides its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Section {
+    /// `[[constraint]]`
     Constraint,
+    /// `[[spring]]`
     Spring,
+    /// `[[damper]]`
     Damper,
 }
 
@@ -54,7 +75,9 @@ impl Section {
 /// One problem with a model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Problem {
+    /// Where the problem is.
     pub site: Site,
+    /// What is wrong, naming the thing at fault.
     pub message: String,
     /// 1-based line in the source file, when the model came from a file.
     pub line: Option<usize>,
@@ -65,6 +88,7 @@ pub struct Problem {
 pub struct ModelError {
     /// The file the model came from, if any.
     pub source_name: Option<String>,
+    /// Every problem found, in the order found.
     pub problems: Vec<Problem>,
 }
 

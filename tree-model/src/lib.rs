@@ -8,6 +8,32 @@
 //! ([`from_urdf_str`], [`from_urdf_file`]; [`from_file`] picks by extension), from the
 //! [`ModelBuilder`], or from the `tree_model!` macro. All three produce a [`ModelSpec`]
 //! that one validator turns into a [`Model`], so a model means the same on every path.
+//!
+//! ```
+//! let model = tree_model::from_toml_str(
+//!     r#"
+//!     [[frame]]
+//!     name = "shoulder"
+//!     rx = "theta"
+//!     [[frame]]
+//!     name = "bob"
+//!     parent = "shoulder"
+//!     tz = -1.0
+//!     mass = 1.0
+//!     [variables.theta]
+//!     q0 = 0.5
+//!     "#,
+//!     Some("pendulum.toml"),
+//! )?;
+//! assert_eq!(model.dof(), 1);
+//! assert_eq!(model.variables[0].q0, 0.5);
+//! // Every problem at once, each with its line:
+//! let err = tree_model::from_toml_str("[[frame]]\nname = \"a\"\nrx = \"q\"\nmass = -1.0\n", Some("bad.toml"))
+//!     .unwrap_err();
+//! assert!(err.to_string().starts_with("bad.toml:4: frame `a`: mass -1"));
+//! # Ok::<(), tree_model::ModelError>(())
+//! ```
+#![warn(missing_docs)]
 
 mod builder;
 mod elements;

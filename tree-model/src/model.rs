@@ -10,6 +10,7 @@ pub const DEFAULT_GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 /// A frame's rigid body: its mass, centre of mass and inertia tensor.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mass {
+    /// Mass in kg.
     pub mass: f64,
     /// The centre of mass in the frame's axes (the frame origin by default).
     pub com: [f64; 3],
@@ -78,6 +79,7 @@ impl Mass {
 /// The parameter of a frame's primitive after validation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Joint {
+    /// A fixed parameter (m or rad).
     Constant(f64),
     /// Index into [`Model::variables`].
     Variable(usize),
@@ -86,23 +88,30 @@ pub enum Joint {
 /// A frame of the validated tree.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
+    /// Unique name.
     pub name: String,
     /// Index of the parent frame; `None` for a child of the world frame. Always smaller
     /// than this frame's own index.
     pub parent: Option<usize>,
+    /// The transform by which it hangs off its parent.
     pub primitive: PrimitiveKind,
+    /// The transform's parameter: a constant or a variable.
     pub joint: Joint,
+    /// The rigid body it carries, if any.
     pub mass: Option<Mass>,
 }
 
 /// A configuration variable and its settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variable {
+    /// Unique name.
     pub name: String,
     /// The one frame this variable drives; `None` for a variable that only sets a constraint's
     /// length (always kinematic).
     pub frame: Option<usize>,
+    /// Initial value.
     pub q0: f64,
+    /// Initial velocity.
     pub dq0: f64,
     /// Viscous damping coefficient: generalized force `−c q̇`.
     pub damping: f64,
@@ -123,6 +132,7 @@ impl Variable {
 /// A scalar that is a constant or a configuration variable (a constraint's length).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Parameter {
+    /// A fixed length.
     Constant(f64),
     /// Index into [`Model::variables`].
     Variable(usize),
@@ -132,17 +142,31 @@ pub enum Parameter {
 #[derive(Clone, Debug, PartialEq)]
 pub enum ConstraintKind {
     /// `h = ‖p_a − p_b‖² − ℓ²`.
-    Distance { length: Parameter },
+    /// `h = ‖p_a − p_b‖² − ℓ²` with ℓ `length`.
+    Distance {
+        /// The length ℓ: a number or a (usually kinematic) variable.
+        length: Parameter,
+    },
     /// `h = n·(p_b − p_a)` with `n` fixed in frame a's axes (unit length after validation).
-    Plane { normal: [f64; 3] },
+    /// `h = n·(p_b − p_a)` with unit `normal` n in frame a's axes.
+    Plane {
+        /// The unit normal, in frame a's axes.
+        normal: [f64; 3],
+    },
     /// `h_i = e_i·(p_a − p_b)` for each listed world axis (0, 1, 2 for x, y, z): one row each.
-    Point { axes: Vec<usize> },
+    /// `h_i = e_i·(p_a − p_b)` for each world axis in `axes`.
+    Point {
+        /// World axes held equal, each 0, 1 or 2.
+        axes: Vec<usize>,
+    },
 }
 
 /// A holonomic constraint between two frames.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Constraint {
+    /// Unique name (the rows of a point constraint are `name.x` …).
     pub name: String,
+    /// What it holds.
     pub kind: ConstraintKind,
     /// Frames `a` and `b` (indices into [`Model::frames`]).
     pub frames: [usize; 2],
@@ -181,29 +205,39 @@ pub enum SpringKind {
 /// A linear spring with potential `½k(x − rest)²`, part of the Lagrangian.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Spring {
+    /// Between two frames, or on one variable.
     pub kind: SpringKind,
+    /// Stiffness k (N/m, or N·m/rad on a rotation).
     pub stiffness: f64,
+    /// Rest length or rest value.
     pub rest: f64,
 }
 
 /// A linear damper between two frames' origins: force `−c·ḋ` along the line joining them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Damper {
+    /// The two frames (indices into [`Model::frames`]).
     pub frames: [usize; 2],
+    /// Damping coefficient c (N·s/m).
     pub damping: f64,
 }
 
 /// A validated tree model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
+    /// The model's name.
     pub name: String,
+    /// Gravity in world axes (m/s²).
     pub gravity: [f64; 3],
     /// Frames in topological order (every parent before its children).
     pub frames: Vec<Frame>,
     /// Variables in the order they first appear in `frames`, then in `constraints`.
     pub variables: Vec<Variable>,
+    /// Holonomic constraints `h(q) = 0`.
     pub constraints: Vec<Constraint>,
+    /// Springs: potentials inside L.
     pub springs: Vec<Spring>,
+    /// Dampers between frames: forces.
     pub dampers: Vec<Damper>,
 }
 

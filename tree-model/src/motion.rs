@@ -4,12 +4,21 @@
 #[derive(Clone, Debug, PartialEq)]
 pub enum Motion {
     /// `q = q0 + dq0·t` (held at `q0` when `dq0 = 0`).
-    Steady { q0: f64, dq0: f64 },
+    Steady {
+        /// Value at t = 0.
+        q0: f64,
+        /// Constant velocity.
+        dq0: f64,
+    },
     /// `q = offset + amplitude·sin(2πf t + phase)`.
     Sine {
+        /// Mean value.
         offset: f64,
+        /// Amplitude.
         amplitude: f64,
+        /// Frequency f in Hz.
         frequency: f64,
+        /// Phase at t = 0, rad.
         phase: f64,
     },
     /// A natural cubic spline through samples `(t, q)` (C²), continued linearly outside them.

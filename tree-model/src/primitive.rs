@@ -6,11 +6,17 @@ use std::fmt;
 /// the parent frame's axes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PrimitiveKind {
+    /// Translation along x.
     Tx,
+    /// Translation along y.
     Ty,
+    /// Translation along z.
     Tz,
+    /// Rotation about x.
     Rx,
+    /// Rotation about y.
     Ry,
+    /// Rotation about z.
     Rz,
 }
 
@@ -77,7 +83,9 @@ impl fmt::Display for PrimitiveKind {
 /// What a primitive's parameter is: a constant, or a named configuration variable.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Value {
+    /// A fixed parameter (m or rad).
     Constant(f64),
+    /// Driven by the configuration variable of this name.
     Variable(String),
 }
 
@@ -96,11 +104,14 @@ impl From<&str> for Value {
 /// A primitive transform together with its parameter, as written in a model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Primitive {
+    /// Which primitive.
     pub kind: PrimitiveKind,
+    /// Its parameter.
     pub value: Value,
 }
 
 impl Primitive {
+    /// `kind` with `value` (a number or a variable name).
     pub fn new(kind: PrimitiveKind, value: impl Into<Value>) -> Self {
         Primitive {
             kind,

@@ -7,10 +7,13 @@ use crate::primitive::Primitive;
 /// requires exactly one).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameSpec {
+    /// The frame's name.
     pub name: String,
     /// `None` means the world frame.
     pub parent: Option<String>,
+    /// Every primitive written for it.
     pub primitives: Vec<Primitive>,
+    /// Mass in kg.
     pub mass: Option<f64>,
     /// The centre of mass in the frame's axes.
     pub com: Option<[f64; 3]>,
@@ -22,10 +25,15 @@ pub struct FrameSpec {
 /// Per-variable settings as written; every field optional.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct VariableSpec {
+    /// The variable's name.
     pub name: String,
+    /// Initial value.
     pub q0: Option<f64>,
+    /// Initial velocity.
     pub dq0: Option<f64>,
+    /// Viscous damping coefficient.
     pub damping: Option<f64>,
+    /// Whether the variable is prescribed rather than simulated.
     pub kinematic: Option<bool>,
     /// A sinusoidal prescription (kinematic variables only).
     pub motion: Option<SineSpec>,
@@ -38,54 +46,79 @@ pub struct VariableSpec {
 /// A whole model as written.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModelSpec {
+    /// The model's name.
     pub name: String,
+    /// Gravity (default (0, 0, −9.81)).
     pub gravity: Option<[f64; 3]>,
+    /// Frames in order, parents first.
     pub frames: Vec<FrameSpec>,
+    /// Per-variable settings.
     pub variables: Vec<VariableSpec>,
+    /// `[[constraint]]` entries.
     pub constraints: Vec<ConstraintSpec>,
+    /// `[[spring]]` entries.
     pub springs: Vec<SpringSpec>,
+    /// `[[damper]]` entries.
     pub dampers: Vec<DamperSpec>,
 }
 
 /// A prescribed sinusoid as written: `q = offset + amplitude·sin(2πf t + phase)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SineSpec {
+    /// Mean value (default 0).
     pub offset: Option<f64>,
+    /// Amplitude (default 0).
     pub amplitude: Option<f64>,
+    /// Frequency in Hz (default 0).
     pub frequency: Option<f64>,
+    /// Phase in rad (default 0).
     pub phase: Option<f64>,
 }
 
 /// A constraint's length as written: a number or a variable name.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ParameterSpec {
+    /// A fixed length.
     Constant(f64),
+    /// A variable's name.
     Variable(String),
 }
 
 /// A `[[constraint]]` as written; which fields belong depends on `kind` (validated).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ConstraintSpec {
+    /// Name (default `constraint<n>`).
     pub name: Option<String>,
+    /// `distance`, `plane` or `point`.
     pub kind: String,
+    /// The two frames, by name.
     pub frames: Vec<String>,
+    /// A distance constraint's length.
     pub length: Option<ParameterSpec>,
+    /// A plane constraint's normal, in frame a's axes.
     pub normal: Option<[f64; 3]>,
+    /// A point constraint's world axes, e.g. `"xz"`.
     pub axes: Option<String>,
 }
 
 /// A `[[spring]]` as written: between two frames, or on one variable.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SpringSpec {
+    /// Two frames, for a spring between them.
     pub frames: Option<Vec<String>>,
+    /// One variable, for a spring on it.
     pub variable: Option<String>,
+    /// Stiffness k.
     pub stiffness: Option<f64>,
+    /// Rest length or value (default 0).
     pub rest: Option<f64>,
 }
 
 /// A `[[damper]]` as written.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DamperSpec {
+    /// The two frames, by name.
     pub frames: Vec<String>,
+    /// Damping coefficient c.
     pub damping: Option<f64>,
 }

@@ -36,6 +36,23 @@ pub const FLOATING_BASE: [(&str, PrimitiveKind); 6] = [
 ];
 
 /// Reads a model from URDF text. `source_name` (a file name) prefixes every message.
+///
+/// ```
+/// use tree_model::{from_urdf_str, UrdfOptions};
+/// let urdf = r#"<robot name="arm">
+///   <link name="base"/>
+///   <link name="upper"><inertial><origin xyz="0 0 0.2"/><mass value="2"/>
+///     <inertia ixx="0.03" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.01"/></inertial></link>
+///   <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+///     <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="5" velocity="1"/></joint>
+/// </robot>"#;
+/// let model = from_urdf_str(urdf, Some("arm.urdf"), UrdfOptions::default())?;
+/// assert_eq!(model.variables[0].name, "shoulder");
+/// assert_eq!(model.variables[0].limits, Some([-1.0, 1.0]));
+/// let floating = from_urdf_str(urdf, None, UrdfOptions { floating_base: true })?;
+/// assert_eq!(floating.dof(), 7);
+/// # Ok::<(), tree_model::ModelError>(())
+/// ```
 pub fn from_urdf_str(
     text: &str,
     source_name: Option<&str>,

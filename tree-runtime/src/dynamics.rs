@@ -100,12 +100,16 @@ pub fn prescribe<N: Dim>(
 /// Which variables are simulated and which prescribed, and how many constraint rows.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Split {
+    /// Indices of the simulated variables.
     pub dynamic: Vec<usize>,
+    /// Indices of the prescribed variables.
     pub kinematic: Vec<usize>,
+    /// Number of constraint equations.
     pub rows: usize,
 }
 
 impl Split {
+    /// The split of `sys`'s variables and its constraint count.
     pub fn of<S: System>(sys: &S) -> Self
     where
         DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -127,7 +131,9 @@ impl Split {
 /// Baumgarte stabilisation of the acceleration-level constraint: `ḧ + 2a ḣ + b² h = 0`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Baumgarte {
+    /// Damping rate a.
     pub a: f64,
+    /// Stiffness rate b.
     pub b: f64,
 }
 
@@ -137,11 +143,15 @@ pub struct Dynamics<N: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// The Lagrangian terms of the last evaluation.
     pub terms: Terms<N>,
+    /// The constraint terms of the last evaluation.
     pub constraint_terms: ConstraintTerms,
     /// The constraint forces `λ` of the last evaluation.
     pub lambda: DVector<f64>,
+    /// Constraint stabilisation (off by default).
     pub baumgarte: Baumgarte,
+    /// Which variables are simulated.
     pub split: Split,
     factor: Matrix<N>,
     rhs: Vector<N>,
@@ -258,6 +268,7 @@ impl<N: Dim> Dynamics<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// Buffers sized for `sys`.
     pub fn new<S: System<N = N>>(sys: &S) -> Self {
         let n = sys.dim();
         let split = Split::of(sys);

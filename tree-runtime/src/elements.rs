@@ -39,6 +39,7 @@ pub struct Scratch<S> {
 }
 
 impl<S: Scalar> Scratch<S> {
+    /// Empty, for `n` variables.
     pub fn new(n: usize) -> Self {
         Scratch {
             n,

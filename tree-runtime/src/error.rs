@@ -7,40 +7,76 @@ use std::fmt;
 pub enum SimError {
     /// `M(q)` is not positive definite (Cholesky failed at this variable's pivot).
     SingularMassMatrix {
+        /// The step at which it happened (0: the initial state).
         step: usize,
+        /// The simulated time then.
         t: f64,
+        /// The variable whose pivot failed.
         variable: String,
+        /// The pivot's value.
         pivot: f64,
     },
     /// The constraints' Jacobian has lost rank (redundant or degenerate constraints): the
     /// Schur complement `Dh M⁻¹ Dhᵀ` is singular at this constraint's pivot.
     SingularConstraints {
+        /// The step at which it happened.
         step: usize,
+        /// The simulated time then.
         t: f64,
+        /// The constraint equation whose pivot failed.
         constraint: String,
     },
     /// The initial configuration cannot be brought onto `h(q) = 0` by moving the dynamic
     /// variables.
-    Unsatisfiable { constraint: String, violation: f64 },
+    Unsatisfiable {
+        /// The constraint equation left violated.
+        constraint: String,
+        /// Its `|h|` after the projection gave up.
+        violation: f64,
+    },
     /// The run would take more steps than can be stored or finished.
-    TooManySteps { steps: f64 },
+    TooManySteps {
+        /// The steps the run would take.
+        steps: f64,
+    },
     /// The VI's Newton iteration matrix (eq. (26)) is singular.
     SingularJacobian {
+        /// The step at which it happened.
         step: usize,
+        /// The simulated time then.
         t: f64,
+        /// The unknown (a variable, or a constraint's λ) whose pivot vanished.
         variable: String,
     },
     /// Newton did not reach the tolerance on the discrete Euler–Lagrange residual.
     NewtonFailed {
+        /// The step that failed.
         step: usize,
+        /// The simulated time at its start.
         t: f64,
+        /// The iterations tried.
         iterations: usize,
+        /// The residual's norm at the end.
         residual: f64,
     },
     /// A state or derivative stopped being finite.
-    NonFinite { step: usize, t: f64, what: String },
+    NonFinite {
+        /// The step at which it happened.
+        step: usize,
+        /// The simulated time then.
+        t: f64,
+        /// What was not finite.
+        what: String,
+    },
     /// The adaptive step size fell below what floating point can resolve.
-    StepSizeTooSmall { step: usize, t: f64, dt: f64 },
+    StepSizeTooSmall {
+        /// The step at which it happened.
+        step: usize,
+        /// The simulated time then.
+        t: f64,
+        /// The step size reached.
+        dt: f64,
+    },
     /// Bad arguments (sizes, step, tolerances).
     InvalidInput(String),
     /// The model uses something this runtime does not do yet.

@@ -17,7 +17,7 @@
 //! assert_eq!(traj.len(), 101);
 //! assert!(traj.max_energy_error() < 1e-2);
 //! ```
-
+#![warn(missing_docs)]
 // Integrator steps take the system, the force, the step's labels and the state as separate
 // arguments on purpose.
 #![allow(clippy::too_many_arguments)]

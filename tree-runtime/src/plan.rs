@@ -14,14 +14,18 @@ use crate::se3::{LocalTransform, Pose};
 /// One frame of the plan.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FramePlan {
+    /// Index of the parent frame (`None`: the world).
     pub parent: Option<usize>,
     /// A constant transform applied before the primitive (folded constant frames).
     pub pre: Option<Pose>,
+    /// Its primitive.
     pub kind: PrimitiveKind,
+    /// Its parameter.
     pub joint: Joint,
     /// The variables that move this frame, root first (own last when driven):
     /// `TreePlan::vars[var_start..var_start + n]`. A parent's list is a prefix of its child's.
     pub var_start: usize,
+    /// Number of variables at or above this frame (its columns).
     pub n: usize,
     /// Offset of this frame's `n` columns (`∂v/∂q̇_i`, `∂v/∂q_i`) in the column buffers.
     pub col_offset: usize,
@@ -46,8 +50,11 @@ impl FramePlan {
 /// A model frame as the pose recursion (eq. (1)) needs it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseFrame {
+    /// Index of the parent frame (`None`: the world).
     pub parent: Option<usize>,
+    /// Its primitive.
     pub kind: PrimitiveKind,
+    /// Its parameter.
     pub joint: Joint,
 }
 
@@ -63,6 +70,7 @@ pub struct TreePlan {
     pub vars: Vec<usize>,
     /// The frame each variable drives (`None`: a variable that moves no frame).
     pub variable_frames: Vec<Option<usize>>,
+    /// Gravity in world axes.
     pub gravity: [f64; 3],
     /// Total number of columns over all frames.
     pub columns: usize,
@@ -70,7 +78,9 @@ pub struct TreePlan {
     pub damping: Vec<f64>,
     /// The model's constraints, springs and dampers, their frames as indices into `frames`.
     pub constraints: Vec<Constraint>,
+    /// The model's springs.
     pub springs: Vec<Spring>,
+    /// The model's dampers.
     pub dampers: Vec<Damper>,
     /// Number of constraint rows.
     pub rows: usize,

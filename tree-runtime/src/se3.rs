@@ -33,7 +33,9 @@ pub fn zero6<S: Scalar>() -> [S; 6] {
 /// A rigid transform: rotation `r` (row-major 3×3) and translation `p`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose<S = f64> {
+    /// Rotation, row-major.
     pub r: [[S; 3]; 3],
+    /// Translation.
     pub p: [S; 3],
 }
 
@@ -44,6 +46,7 @@ impl Default for Pose {
 }
 
 impl Pose {
+    /// The identity transform.
     pub const IDENTITY: Pose = Pose {
         r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         p: [0.0; 3],
@@ -124,6 +127,7 @@ impl<S: Scalar> Pose<S> {
 /// for translations the distance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LocalTransform<S = f64> {
+    /// Which primitive.
     pub kind: PrimitiveKind,
     /// cos x (rotations) or x (translations).
     pub a: S,
@@ -501,8 +505,11 @@ fn transpose3<S: Scalar>(a: &[[S; 3]; 3]) -> [[S; 3]; 3] {
 /// `[[vv, vw], [vwᵀ, ww]]`; its product with a twist is a wrench (momentum).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpatialInertia<S = f64> {
+    /// Linear–linear block (m 1 for a body).
     pub vv: [[S; 3]; 3],
+    /// Linear–angular block (−m ĉ for a body).
     pub vw: [[S; 3]; 3],
+    /// Angular–angular block (I_c − m ĉĉ for a body).
     pub ww: [[S; 3]; 3],
 }
 

@@ -64,8 +64,10 @@ pub enum Output {
 /// `set` is for an output written first and once (the tree's own terms, before springs and
 /// forces add to them), and may skip reading the old value.
 pub trait Sink<S> {
+    /// Adds `x` to the output `at`.
     fn add(&mut self, at: Output, x: S);
 
+    /// Writes output `at`, which no other contribution touches (default: adds).
     fn set(&mut self, at: Output, x: S) {
         self.add(at, x)
     }
@@ -74,15 +76,21 @@ pub trait Sink<S> {
 /// Per-frame storage for one evaluation (allocated once, reused).
 #[derive(Clone, Debug)]
 pub struct Workspace<S: Scalar> {
+    /// Each frame's primitive at the current q.
     pub local: Vec<LocalTransform<S>>,
+    /// Each frame's pose in the world.
     pub pose: Vec<Pose<S>>,
+    /// Each frame's body velocity.
     pub velocity: Vec<Twist<S>>,
     /// `∂v_k/∂q̇_a` for each frame's ancestor variables (the body Jacobian columns).
     pub jac: Vec<Twist<S>>,
     /// `∂v_k/∂q_a`.
     pub dv_dq: Vec<Twist<S>>,
+    /// Each subtree's composite spatial inertia at its root.
     pub inertia: Vec<SpatialInertia<S>>,
+    /// Each subtree's momentum wrench at its root.
     pub wrench: Vec<Wrench<S>>,
+    /// Each subtree's first mass moment at its root.
     pub moment: Vec<[S; 3]>,
     /// World point Jacobian columns `∂p_k/∂q_a = R_k (∂v_k/∂q̇_a)_lin` (attached frames only).
     pub point_jac: Vec<[S; 3]>,
@@ -93,6 +101,7 @@ pub struct Workspace<S: Scalar> {
 }
 
 impl<S: Scalar> Workspace<S> {
+    /// Buffers sized for `plan`.
     pub fn new(plan: &TreePlan) -> Self {
         let nf = plan.frames.len();
         Workspace {

@@ -6,9 +6,13 @@ use std::io::{self, Write};
 /// One recorded state, as an integrator hands it out.
 #[derive(Clone, Copy, Debug)]
 pub struct Sample<'a> {
+    /// Step index (0: the start).
     pub step: usize,
+    /// Time, s.
     pub t: f64,
+    /// Configuration.
     pub q: &'a [f64],
+    /// Velocity.
     pub dq: &'a [f64],
     /// The VI's discrete momentum.
     pub p: Option<&'a [f64]>,
@@ -27,6 +31,7 @@ pub struct Trajectory {
     pub variables: Vec<String>,
     /// Constraint equation names, in order.
     pub constraints: Vec<String>,
+    /// Time of each sample.
     pub t: Vec<f64>,
     q: Vec<f64>,
     dq: Vec<f64>,
@@ -43,6 +48,7 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
+    /// Empty, with room for `capacity` samples.
     pub fn new(variables: Vec<String>, constraints: Vec<String>, capacity: usize) -> Self {
         let n = variables.len();
         Trajectory {
@@ -56,6 +62,7 @@ impl Trajectory {
         }
     }
 
+    /// Number of variables.
     pub fn dof(&self) -> usize {
         self.variables.len()
     }
@@ -65,6 +72,7 @@ impl Trajectory {
         self.t.len()
     }
 
+    /// Whether no sample was recorded.
     pub fn is_empty(&self) -> bool {
         self.t.is_empty()
     }
@@ -82,11 +90,13 @@ impl Trajectory {
         self.violation.push(s.violation);
     }
 
+    /// Configuration of sample `k`.
     pub fn q(&self, k: usize) -> &[f64] {
         let n = self.dof();
         &self.q[k * n..(k + 1) * n]
     }
 
+    /// Velocity of sample `k`.
     pub fn dq(&self, k: usize) -> &[f64] {
         let n = self.dof();
         &self.dq[k * n..(k + 1) * n]
@@ -147,6 +157,7 @@ pub struct CsvStream<W: Write> {
 }
 
 impl<W: Write> CsvStream<W> {
+    /// Writes the header to `out`.
     pub fn new(mut out: W, variables: &[String], constraints: &[String]) -> io::Result<Self> {
         let mut header = vec!["t".to_string()];
         header.extend(variables.iter().cloned());
@@ -163,6 +174,7 @@ impl<W: Write> CsvStream<W> {
         })
     }
 
+    /// Writes one sample as a CSV row.
     pub fn write(&mut self, s: &Sample) -> io::Result<()> {
         write!(self.out, "{}", s.t)?;
         for x in s.q.iter().chain(s.dq) {
@@ -178,6 +190,7 @@ impl<W: Write> CsvStream<W> {
         writeln!(self.out)
     }
 
+    /// Flushes the output.
     pub fn finish(mut self) -> io::Result<()> {
         self.out.flush()
     }

@@ -28,17 +28,22 @@ pub const MAX_STEPS: f64 = 1e9;
 /// Which integrator to run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Method {
+    /// Classical fixed-step fourth-order Runge–Kutta.
     Rk4,
     /// Adaptive; records every accepted step, `dt` is the first step tried.
     Rk45(Tolerance),
+    /// The midpoint variational integrator.
     Vi(ViSettings),
 }
 
 /// What to simulate for how long, and what to record.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimOptions {
+    /// The integrator.
     pub method: Method,
+    /// Time step (the first one tried, for rk45).
     pub dt: f64,
+    /// Simulated time, s.
     pub duration: f64,
     /// Record every K-th step (the first and the last are always recorded).
     pub every: usize,
@@ -69,11 +74,15 @@ impl Default for SimOptions {
 /// What a run did, besides the samples it handed out.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RunSummary {
+    /// Steps taken.
     pub steps: usize,
+    /// Samples handed to the observer.
     pub recorded: usize,
+    /// Newton iterations over the run (VI).
     pub newton_iterations: usize,
     /// VI steps that Newton could only take in pieces.
     pub subdivided_steps: usize,
+    /// The largest `max |h|` over the recorded samples.
     pub worst_violation: f64,
     /// What the projection of the initial state onto the constraints moved.
     pub moved: Vec<Moved>,

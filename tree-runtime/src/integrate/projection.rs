@@ -12,10 +12,13 @@ use crate::system::{ConstraintTerms, Order, System, Vector};
 /// A variable the projection changed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Moved {
+    /// The variable moved.
     pub variable: String,
     /// `true` for its velocity, `false` for its value.
     pub velocity: bool,
+    /// Its value before.
     pub from: f64,
+    /// Its value after.
     pub to: f64,
 }
 

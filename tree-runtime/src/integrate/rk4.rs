@@ -13,6 +13,7 @@ pub struct Rk4<N: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// The accelerations' solver (its Baumgarte setting applies).
     pub dynamics: Dynamics<N>,
     kq: [Vector<N>; 4],
     kv: [Vector<N>; 4],
@@ -24,6 +25,7 @@ impl<N: Dim> Rk4<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// An integrator with buffers sized for `sys`.
     pub fn new<S: System<N = N>>(sys: &S) -> Self {
         let n = sys.dim();
         let z = || Vector::<N>::zeros_generic(n, nalgebra::U1);

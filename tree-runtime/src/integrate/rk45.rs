@@ -65,7 +65,9 @@ const B4: [f64; 7] = [
 /// `atol + rtol·|y|`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tolerance {
+    /// Relative tolerance.
     pub rtol: f64,
+    /// Absolute tolerance.
     pub atol: f64,
 }
 
@@ -84,7 +86,9 @@ pub struct Rk45<N: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// The error tolerance each accepted step meets.
     pub tolerance: Tolerance,
+    /// The accelerations' solver (its Baumgarte setting applies).
     pub dynamics: Dynamics<N>,
     kq: [Vector<N>; 7],
     kv: [Vector<N>; 7],
@@ -102,6 +106,7 @@ impl<N: Dim> Rk45<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// An integrator with buffers sized for `sys`.
     pub fn new<S: System<N = N>>(sys: &S, tolerance: Tolerance) -> Self {
         let n = sys.dim();
         let z = || Vector::<N>::zeros_generic(n, nalgebra::U1);

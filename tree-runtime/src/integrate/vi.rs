@@ -56,9 +56,13 @@ pub struct ViSettings {
     /// below `constraint_tolerance`, or when an update is below the rounding of q (the
     /// residual then sits at its floor).
     pub tolerance: f64,
+    /// Newton's tolerance on `max |h(q₂)|`.
     pub constraint_tolerance: f64,
+    /// Newton iterations before a step fails (and is subdivided).
     pub max_iterations: usize,
+    /// When Newton re-evaluates its Jacobian.
     pub jacobian: JacobianUpdate,
+    /// How forces enter the discrete equations.
     pub forcing: Forcing,
     /// When Newton fails, retry the step as two half steps, recursively, this deep (0: never).
     pub max_subdivisions: usize,
@@ -84,12 +88,15 @@ pub struct MidpointVi<N: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// The settings in force.
     pub settings: ViSettings,
+    /// The Lagrangian terms at the last quadrature point.
     pub terms: Terms<N>,
     /// Constraints at the current guess `q₂` (and, after `velocity_and_energy`, at its `q`).
     pub constraint_terms: ConstraintTerms,
     /// `Dh(q₁)` of the step under way.
     dh1: DMatrix<f64>,
+    /// Which variables are unknowns.
     pub split: Split,
     /// The constraint forces of the last step (see the module docs for trep's scaling).
     pub lambda: DVector<f64>,
@@ -130,6 +137,7 @@ impl<N: Dim> MidpointVi<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// An integrator with buffers sized for `sys`.
     pub fn new<S: System<N = N>>(sys: &S, settings: ViSettings) -> Self {
         let n = sys.dim();
         let z = || Vector::<N>::zeros_generic(n, nalgebra::U1);
