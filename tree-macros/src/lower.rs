@@ -340,13 +340,10 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<(Mode
         }
     }
     let mut spec = ModelSpec {
-        name: name.to_string(),
         gravity: inline.gravity.map(|g| g.0),
         frames,
         variables,
-        constraints: Vec::new(),
-        springs: Vec::new(),
-        dampers: Vec::new(),
+        ..ModelSpec::new(name.to_string())
     };
     let mut element_spans: Vec<(Section, ElementSpans, bool)> = Vec::new();
     for e in &inline.elements {

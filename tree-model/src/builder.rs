@@ -34,15 +34,7 @@ impl ModelBuilder {
     /// An empty model named `name` (gravity (0, 0, −9.81)).
     pub fn new(name: &str) -> Self {
         ModelBuilder {
-            spec: ModelSpec {
-                name: name.into(),
-                gravity: None,
-                frames: Vec::new(),
-                variables: Vec::new(),
-                constraints: Vec::new(),
-                springs: Vec::new(),
-                dampers: Vec::new(),
-            },
+            spec: ModelSpec::new(name),
             pending: Vec::new(),
         }
     }

@@ -62,6 +62,21 @@ pub struct ModelSpec {
     pub dampers: Vec<DamperSpec>,
 }
 
+impl ModelSpec {
+    /// A model named `name` with nothing in it yet (default gravity).
+    pub fn new(name: impl Into<String>) -> Self {
+        ModelSpec {
+            name: name.into(),
+            gravity: None,
+            frames: Vec::new(),
+            variables: Vec::new(),
+            constraints: Vec::new(),
+            springs: Vec::new(),
+            dampers: Vec::new(),
+        }
+    }
+}
+
 /// A prescribed sinusoid as written: `q = offset + amplitude·sin(2πf t + phase)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SineSpec {

@@ -190,21 +190,14 @@ pub fn from_urdf_str(
         }
     };
 
-    let mut spec = ModelSpec {
-        name: if robot.name.is_empty() {
-            source_name
-                .and_then(|s| Path::new(s).file_stem())
-                .map_or("robot".into(), |s| s.to_string_lossy().into_owned())
-        } else {
-            robot.name.clone()
-        },
-        gravity: None,
-        frames: Vec::new(),
-        variables: Vec::new(),
-        constraints: Vec::new(),
-        springs: Vec::new(),
-        dampers: Vec::new(),
+    let name = if robot.name.is_empty() {
+        source_name
+            .and_then(|s| Path::new(s).file_stem())
+            .map_or("robot".into(), |s| s.to_string_lossy().into_owned())
+    } else {
+        robot.name.clone()
     };
+    let mut spec = ModelSpec::new(name);
     // The source line of each frame, for validation problems.
     let mut frame_lines: Vec<Option<usize>> = Vec::new();
     let mut push = |spec: &mut ModelSpec,
