@@ -6,7 +6,8 @@
 //! `tx ty tz` (the non-zero ones), `rz(yaw) ry(pitch) rx(roll)` (URDF's fixed-axis roll,
 //! pitch, yaw: `R = Rz Ry Rx`), then the motion: `rk(q)`/`tk(q)` when the axis is `+e_k`, else
 //! `rz(α) ry(β)` turning `e_z` onto the axis, `rz(q)`/`tz(q)`, and `ry(−β) rz(−α)` back. The
-//! last frame of the chain is link C's. Constant chains fold into one transform at plan time.
+//! last frame of the chain is link C's. Constant chains fold into one transform at plan time
+//! (docs/derivations.md §8).
 
 use std::collections::HashMap;
 use std::path::Path;
