@@ -142,19 +142,16 @@ pub enum Parameter {
 #[derive(Clone, Debug, PartialEq)]
 pub enum ConstraintKind {
     /// `h = ‖p_a − p_b‖² − ℓ²`.
-    /// `h = ‖p_a − p_b‖² − ℓ²` with ℓ `length`.
     Distance {
         /// The length ℓ: a number or a (usually kinematic) variable.
         length: Parameter,
     },
     /// `h = n·(p_b − p_a)` with `n` fixed in frame a's axes (unit length after validation).
-    /// `h = n·(p_b − p_a)` with unit `normal` n in frame a's axes.
     Plane {
         /// The unit normal, in frame a's axes.
         normal: [f64; 3],
     },
     /// `h_i = e_i·(p_a − p_b)` for each listed world axis (0, 1, 2 for x, y, z): one row each.
-    /// `h_i = e_i·(p_a − p_b)` for each world axis in `axes`.
     Point {
         /// World axes held equal, each 0, 1 or 2.
         axes: Vec<usize>,

@@ -9,7 +9,57 @@
 
 use tree_model::{Constraint, Damper, Joint, Mass, Model, PrimitiveKind, Spring, SpringKind};
 
-use crate::se3::{LocalTransform, Pose};
+use crate::se3::{LocalTransform, Pose, SpatialInertia};
+
+/// A frame's rigid body as the inward sweep uses it, classified and prepared once.
+// Kept inline (not boxed): one per frame, read by every inward sweep.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Body {
+    /// The paper's body: at the frame origin, principal axes along the frame's.
+    Principal {
+        /// Mass.
+        mass: f64,
+        /// `(Ixx, Iyy, Izz)`.
+        moments: [f64; 3],
+    },
+    /// Any other body: its spatial inertia at the frame origin (docs/derivations.md §2).
+    Full {
+        /// Mass.
+        mass: f64,
+        /// Centre of mass in the frame's axes.
+        com: [f64; 3],
+        /// `[[m 1, −m ĉ], [m ĉ, I_c − m ĉĉ]]`.
+        inertia: SpatialInertia<f64>,
+    },
+}
+
+impl Body {
+    /// The body of `m`, or `None` when it has neither mass nor inertia.
+    pub fn of(m: &Mass) -> Option<Body> {
+        if !m.is_nonzero() {
+            return None;
+        }
+        Some(match m.diagonal() {
+            Some(moments) => Body::Principal {
+                mass: m.mass,
+                moments,
+            },
+            None => Body::Full {
+                mass: m.mass,
+                com: m.com,
+                inertia: SpatialInertia::body(m.mass, &m.com, &m.inertia),
+            },
+        })
+    }
+
+    /// Its mass.
+    pub fn mass(&self) -> f64 {
+        match *self {
+            Body::Principal { mass, .. } | Body::Full { mass, .. } => mass,
+        }
+    }
+}
 
 /// One frame of the plan.
 #[derive(Clone, Debug, PartialEq)]
@@ -34,8 +84,8 @@ pub struct FramePlan {
     pub needed: bool,
     /// A constraint, spring or damper attaches here: its world point Jacobian is computed.
     pub attached: bool,
-    /// A non-zero mass at this frame's origin.
-    pub mass: Option<Mass>,
+    /// The rigid body this frame carries, if it has any mass or inertia.
+    pub body: Option<Body>,
     /// Total mass of the subtree rooted here.
     pub subtree_mass: f64,
 }
@@ -94,7 +144,7 @@ struct Draft {
     joint: Joint,
     needed: bool,
     attached: bool,
-    mass: Option<Mass>,
+    body: Option<Body>,
 }
 
 impl TreePlan {
@@ -113,7 +163,7 @@ impl TreePlan {
                 joint: f.joint,
                 needed: has_mass[k],
                 attached: attached[k],
-                mass: f.mass.filter(|m| m.is_nonzero()),
+                body: f.mass.as_ref().and_then(Body::of),
             })
             .collect();
         Self::from_drafts(model, drafts, (0..model.frames.len()).map(Some).collect())
@@ -131,7 +181,7 @@ impl TreePlan {
         let mut kept: Vec<Option<usize>> = Vec::with_capacity(model.frames.len());
         let mut carried: Vec<Option<Pose>> = Vec::with_capacity(model.frames.len());
         for (k, f) in model.frames.iter().enumerate() {
-            let mass = f.mass.filter(|m| m.is_nonzero());
+            let body = f.mass.as_ref().and_then(Body::of);
             // The kept ancestor and the constant transform from it to this frame's parent.
             let (parent, pre) = match f.parent {
                 None => (None, None),
@@ -140,7 +190,7 @@ impl TreePlan {
                     None => (nearest_kept(model, &kept, p), carried[p]),
                 },
             };
-            if matches!(f.joint, Joint::Variable(_)) || mass.is_some() || attached[k] {
+            if matches!(f.joint, Joint::Variable(_)) || body.is_some() || attached[k] {
                 let (pre, kind, joint) = match (f.joint, pre) {
                     // A constant frame after a folded chain joins the chain; its own primitive
                     // becomes the identity.
@@ -160,7 +210,7 @@ impl TreePlan {
                     joint,
                     needed: has_mass[k],
                     attached: attached[k],
-                    mass,
+                    body,
                 });
             } else {
                 let Joint::Constant(x) = f.joint else {
@@ -198,13 +248,13 @@ impl TreePlan {
                 col_offset: columns,
                 needed: d.needed,
                 attached: d.attached,
-                mass: d.mass,
+                body: d.body,
                 subtree_mass: 0.0,
             });
             columns += n;
         }
         for k in (0..frames.len()).rev() {
-            frames[k].subtree_mass += frames[k].mass.map_or(0.0, |m| m.mass);
+            frames[k].subtree_mass += frames[k].body.map_or(0.0, |b| b.mass());
             if let Some(p) = frames[k].parent {
                 frames[p].subtree_mass += frames[k].subtree_mass;
             }

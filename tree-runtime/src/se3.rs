@@ -513,6 +513,39 @@ pub struct SpatialInertia<S = f64> {
     pub ww: [[S; 3]; 3],
 }
 
+impl SpatialInertia<f64> {
+    /// The spatial inertia at the frame origin of a body of mass `m` with centre of mass `c`
+    /// and inertia `i_c` about it (all in the frame's axes):
+    /// `[[m 1, −m ĉ], [m ĉ, I_c − m ĉ ĉ]]` (docs/derivations.md §2).
+    pub fn body(m: f64, com: &[f64; 3], i_c: &[[f64; 3]; 3]) -> Self {
+        let hat = [
+            [0.0, -com[2], com[1]],
+            [com[2], 0.0, -com[0]],
+            [-com[1], com[0], 0.0],
+        ];
+        let mut s = SpatialInertia::default();
+        for r in 0..3 {
+            s.vv[r][r] = m;
+            for k in 0..3 {
+                s.vw[r][k] = -m * hat[r][k];
+                let hh: f64 = (0..3).map(|j| hat[r][j] * hat[j][k]).sum();
+                s.ww[r][k] = i_c[r][k] - m * hh;
+            }
+        }
+        s
+    }
+
+    /// The same inertia in scalar `S` (constants, for the sweeps and the tracer).
+    pub fn constant<S: Scalar>(&self) -> SpatialInertia<S> {
+        let c = |b: &[[f64; 3]; 3]| b.map(|row| row.map(S::constant));
+        SpatialInertia {
+            vv: c(&self.vv),
+            vw: c(&self.vw),
+            ww: c(&self.ww),
+        }
+    }
+}
+
 impl<S: Scalar> Default for SpatialInertia<S> {
     fn default() -> Self {
         let z = [[S::zero(); 3]; 3];
@@ -531,27 +564,6 @@ impl<S: Scalar> SpatialInertia<S> {
         for k in 0..3 {
             s.vv[k][k] = c(m);
             s.ww[k][k] = c(inertia[k]);
-        }
-        s
-    }
-
-    /// The spatial inertia at the frame origin of a body of mass `m` with centre of mass `c`
-    /// and inertia `i_c` about it (all in the frame's axes):
-    /// `[[m 1, −m ĉ], [m ĉ, I_c − m ĉ ĉ]]` (docs/derivations.md §2).
-    pub fn body(m: f64, com: &[f64; 3], i_c: &[[f64; 3]; 3]) -> Self {
-        let hat = [
-            [0.0, -com[2], com[1]],
-            [com[2], 0.0, -com[0]],
-            [-com[1], com[0], 0.0],
-        ];
-        let mut s = SpatialInertia::default();
-        for r in 0..3 {
-            s.vv[r][r] = c(m);
-            for k in 0..3 {
-                s.vw[r][k] = c(-m * hat[r][k]);
-                let hh: f64 = (0..3).map(|j| hat[r][j] * hat[j][k]).sum();
-                s.ww[r][k] = c(i_c[r][k] - m * hh);
-            }
         }
         s
     }

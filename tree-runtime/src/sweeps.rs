@@ -20,7 +20,7 @@ use tree_model::Joint;
 
 use crate::elements;
 use crate::order::Order;
-use crate::plan::TreePlan;
+use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
 use crate::se3::{
     bracket_with_axis, component, cross, dot, inertia_times, zero6, LocalTransform, Pose,
@@ -207,32 +207,28 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
             continue;
         }
         ws.moment[k] = [S::zero(); 3];
-        match f.mass {
-            // The paper's body: at the frame origin, principal axes along the frame.
-            Some(m) if m.diagonal().is_some() => {
-                let inertia = m.diagonal().unwrap_or_default();
+        match f.body {
+            Some(Body::Principal { mass, moments }) => {
                 let v = &ws.velocity[k];
                 let p = &ws.pose[k].p;
-                ws.wrench[k] = inertia_times(m.mass, &inertia, v);
+                ws.wrench[k] = inertia_times(mass, &moments, v);
                 l += S::constant(0.5) * dot(v, &ws.wrench[k])
-                    + S::constant(m.mass)
+                    + S::constant(mass)
                         * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
                 if dynamics {
-                    ws.inertia[k] = SpatialInertia::diagonal(m.mass, &inertia);
+                    ws.inertia[k] = SpatialInertia::diagonal(mass, &moments);
                 }
             }
-            // Any rigid body: the full spatial inertia at the frame origin; the centre of
-            // mass at p + R c enters the potential and the first mass moment h = m c.
-            Some(m) => {
-                let body = SpatialInertia::body(m.mass, &m.com, &m.inertia);
-                let v = &ws.velocity[k];
+            // The centre of mass at p + R c enters the potential and the first mass moment
+            // h = m c.
+            Some(Body::Full { mass, com, inertia }) => {
+                let inertia = inertia.constant::<S>();
                 let pose = &ws.pose[k];
                 let g_local = pose.rotate_inverse(&gravity);
-                let com = m.com.map(S::constant);
-                let mass = S::constant(m.mass);
-                ws.wrench[k] = body.times(v);
+                let (com, mass) = (com.map(S::constant), S::constant(mass));
+                ws.wrench[k] = inertia.times(&ws.velocity[k]);
                 ws.moment[k] = com.map(|x| mass * x);
-                l += S::constant(0.5) * dot(v, &ws.wrench[k])
+                l += S::constant(0.5) * dot(&ws.velocity[k], &ws.wrench[k])
                     + mass
                         * (gravity[0] * pose.p[0]
                             + gravity[1] * pose.p[1]
@@ -241,7 +237,7 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
                             + g_local[1] * com[1]
                             + g_local[2] * com[2]);
                 if dynamics {
-                    ws.inertia[k] = body;
+                    ws.inertia[k] = inertia;
                 }
             }
             None => {

@@ -81,21 +81,21 @@ where
     /// `memset` (nalgebra's element iterator costs several times that on 40×40 matrices).
     pub fn clear(&mut self, order: Order) {
         self.l = 0.0;
-        zero(self.dl_dq.as_mut_slice());
-        zero(self.dl_ddq.as_mut_slice());
-        zero(self.force.as_mut_slice());
+        self.dl_dq.as_mut_slice().fill(0.0);
+        self.dl_ddq.as_mut_slice().fill(0.0);
+        self.force.as_mut_slice().fill(0.0);
         if order >= Order::Dynamics {
-            zero(self.mass.as_mut_slice());
-            zero(self.d2l_ddq_dq.as_mut_slice());
+            self.mass.as_mut_slice().fill(0.0);
+            self.d2l_ddq_dq.as_mut_slice().fill(0.0);
         }
         if order >= Order::Full {
-            zero(self.d2l_dq_dq.as_mut_slice());
+            self.d2l_dq_dq.as_mut_slice().fill(0.0);
             match self.force_derivatives {
                 Sparsity::Zero => {}
                 Sparsity::Diagonal => self.dforce_ddq.fill_diagonal(0.0),
                 Sparsity::Dense => {
-                    zero(self.dforce_dq.as_mut_slice());
-                    zero(self.dforce_ddq.as_mut_slice());
+                    self.dforce_dq.as_mut_slice().fill(0.0);
+                    self.dforce_ddq.as_mut_slice().fill(0.0);
                 }
             }
             self.force_derivatives = Sparsity::Zero;
@@ -185,13 +185,13 @@ impl ConstraintTerms {
 
     /// Zeroes what `order` asks for, ready to accumulate.
     pub fn clear(&mut self, order: Order) {
-        zero(self.h.as_mut_slice());
-        zero(self.dh.as_mut_slice());
+        self.h.as_mut_slice().fill(0.0);
+        self.dh.as_mut_slice().fill(0.0);
         if order >= Order::Dynamics {
-            zero(self.dh_dot.as_mut_slice());
+            self.dh_dot.as_mut_slice().fill(0.0);
         }
         if order >= Order::Full {
-            self.d2h.iter_mut().for_each(|m| zero(m.as_mut_slice()));
+            self.d2h.iter_mut().for_each(|m| m.as_mut_slice().fill(0.0));
         }
     }
 
@@ -212,12 +212,6 @@ impl Sink<f64> for ConstraintTerms {
             _ => {}
         }
     }
-}
-
-/// Zeroes a contiguous buffer.
-#[inline]
-fn zero(x: &mut [f64]) {
-    x.fill(0.0);
 }
 
 /// A mechanical system in generalized coordinates: a tree whose Lagrangian and derivatives

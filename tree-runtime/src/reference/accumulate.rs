@@ -6,7 +6,6 @@ use nalgebra::Dyn;
 
 use crate::se3::{dot, inertia_times, Pose, Twist};
 use crate::system::{Order, Terms};
-use tree_model::Mass;
 
 /// The per-frame quantities of one massive frame k; positions `a, b` index its ancestor
 /// variables (root first).
@@ -24,9 +23,11 @@ pub(crate) trait FrameQuantities {
     fn d2v_dq_dq(&mut self, a: usize, b: usize) -> Twist;
 }
 
-/// Adds mass `m` at frame k to `out`. `vars[a]` is the global index of ancestor position `a`.
+/// Adds the paper's body (mass `mass` at frame k's origin, principal moments `inertia` along
+/// its axes) to `out`. `vars[a]` is the global index of ancestor position `a`.
 pub(crate) fn add_mass_terms(
-    m: &Mass,
+    mass: f64,
+    inertia: &[f64; 3],
     gravity: &[f64; 3],
     vars: &[usize],
     order: Order,
@@ -36,14 +37,11 @@ pub(crate) fn add_mass_terms(
     let pose = fq.pose();
     // Gravity in body coordinates: γ·∂p_k/∂q_i = (R_kᵀγ)·(∂v_k/∂q̇_i)_lin, since ∂g_sk/∂q_i = g_sk Ĵ_i.
     let gk = pose.rotate_inverse(gravity);
-    let mg = [m.mass * gk[0], m.mass * gk[1], m.mass * gk[2]];
+    let mg = [mass * gk[0], mass * gk[1], mass * gk[2]];
     let v = fq.velocity();
-    let inertia = m.diagonal().expect(
-        "PaperSystem::new admits only bodies centred on their frame, principal axes along it",
-    );
-    let mv = inertia_times(m.mass, &inertia, &v);
+    let mv = inertia_times(mass, inertia, &v);
     out.l += 0.5 * dot(&v, &mv)
-        + m.mass * (gravity[0] * pose.p[0] + gravity[1] * pose.p[1] + gravity[2] * pose.p[2]);
+        + mass * (gravity[0] * pose.p[0] + gravity[1] * pose.p[1] + gravity[2] * pose.p[2]);
     for (a, &i) in vars.iter().enumerate() {
         let ja = fq.jac(a);
         let dva = fq.dv_dq(a);
@@ -55,7 +53,7 @@ pub(crate) fn add_mass_terms(
     }
     for (a, &i) in vars.iter().enumerate() {
         let ja = fq.jac(a);
-        let m_ja = inertia_times(m.mass, &inertia, &ja);
+        let m_ja = inertia_times(mass, inertia, &ja);
         for (b, &j) in vars.iter().enumerate() {
             // M_ij = Σ J_iᵀ M_k J_j (eq. (18)), one triangle mirrored.
             if b <= a {
@@ -78,7 +76,7 @@ pub(crate) fn add_mass_terms(
     }
     for (a, &i) in vars.iter().enumerate() {
         let dva = fq.dv_dq(a);
-        let m_dva = inertia_times(m.mass, &inertia, &dva);
+        let m_dva = inertia_times(mass, inertia, &dva);
         let ja = fq.jac(a);
         for (b, &j) in vars.iter().enumerate().take(a + 1) {
             // ∂²L/∂q_i∂q_j = Σ (∂v/∂q_j)ᵀ M_k ∂v/∂q_i + v_kᵀ M_k ∂²v/∂q_i∂q_j + m γ·∂²p/∂q_i∂q_j,

@@ -6,6 +6,7 @@ use nalgebra::Dyn;
 
 use super::accumulate::{add_mass_terms, FrameQuantities};
 use super::{tri, PaperSystem};
+use crate::plan::Body;
 use crate::se3::{bracket_with_axis, Pose, Twist};
 use crate::system::{Order, Terms};
 
@@ -62,11 +63,20 @@ impl PaperSystem {
     pub(crate) fn accumulate_cached(&mut self, order: Order, out: &mut Terms<Dyn>) {
         let gravity = self.plan.gravity;
         for k in 0..self.plan.frames.len() {
-            let Some(m) = self.plan.frames[k].mass else {
+            // `PaperSystem::new` admits only principal bodies.
+            let Some(Body::Principal { mass, moments }) = self.plan.frames[k].body else {
                 continue;
             };
             let mut view = CachedFrame { sys: self, k };
-            add_mass_terms(&m, &gravity, self.plan.ancestors(k), order, &mut view, out);
+            add_mass_terms(
+                mass,
+                &moments,
+                &gravity,
+                self.plan.ancestors(k),
+                order,
+                &mut view,
+                out,
+            );
         }
     }
 }

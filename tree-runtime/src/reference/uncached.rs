@@ -6,7 +6,7 @@ use tree_model::Joint;
 
 use super::accumulate::{add_mass_terms, FrameQuantities};
 use super::PaperSystem;
-use crate::plan::FramePlan;
+use crate::plan::{Body, FramePlan};
 use crate::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
 use crate::system::{Order, Terms};
 
@@ -19,7 +19,10 @@ impl PaperSystem {
         out: &mut Terms<Dyn>,
     ) {
         for (k, f) in self.plan.frames.iter().enumerate() {
-            let Some(m) = f.mass else { continue };
+            // `PaperSystem::new` admits only principal bodies.
+            let Some(Body::Principal { mass, moments }) = f.body else {
+                continue;
+            };
             let mut view = Recompute {
                 frames: &self.plan.frames,
                 q,
@@ -27,7 +30,8 @@ impl PaperSystem {
                 k,
             };
             add_mass_terms(
-                &m,
+                mass,
+                &moments,
                 &self.plan.gravity,
                 self.plan.ancestors(k),
                 order,
