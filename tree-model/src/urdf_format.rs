@@ -96,6 +96,7 @@ pub fn from_urdf_str(
             return Err(fail(format!("URDF: duplicate {what} `{name}`"), Some(line)));
         }
     }
+    check_numbers(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
     let robot = urdf_rs::read_from_string(text).map_err(|e| fail(format!("URDF: {e}"), None))?;
     let joint_line = |name: &str| joint_lines.get(name).copied();
     let link_line = |name: &str| link_lines.get(name).copied();
@@ -384,6 +385,17 @@ pub fn from_urdf_str(
         link_frame[child_link] = Some(spec.frames.len() - 1);
         stack.extend(children[child_link].iter().rev().copied());
     }
+    // A link the walk never reached hangs in a cycle of its own, apart from the root.
+    let reached = |l: usize| l == root_link || link_frame[l].is_some();
+    if let Some(l) = (0..robot.links.len()).find(|&l| !reached(l)) {
+        let name = &robot.links[l].name;
+        return Err(fail(
+            format!(
+                "URDF: link `{name}` is not reachable from the root link `{root_name}`: its joints form a cycle"
+            ),
+            link_line(name),
+        ));
+    }
 
     // Bodies: <inertial> origin and tensor, turned into the link's axes.
     // Problems with a body point at its <link>, other frame problems at the joint.
@@ -448,6 +460,71 @@ pub fn from_urdf_str(
             })
             .collect(),
     })
+}
+
+/// The numeric attributes URDF's dynamics read, and how many numbers each holds.
+const NUMERIC: [(&str, usize); 15] = [
+    ("xyz", 3),
+    ("rpy", 3),
+    ("value", 1),
+    ("ixx", 1),
+    ("ixy", 1),
+    ("ixz", 1),
+    ("iyy", 1),
+    ("iyz", 1),
+    ("izz", 1),
+    ("lower", 1),
+    ("upper", 1),
+    ("effort", 1),
+    ("velocity", 1),
+    ("damping", 1),
+    ("friction", 1),
+];
+
+/// Checks every numeric attribute of the `<link>` and `<joint>` elements before urdf-rs reads
+/// them (its own errors name neither element nor line): `(message, line)` of the first bad
+/// one. Visuals and collisions are skipped; their numbers do not enter the dynamics.
+fn check_numbers(
+    root: roxmltree::Node,
+    line_at: &dyn Fn(usize) -> usize,
+) -> Result<(), (String, usize)> {
+    let parts = root
+        .children()
+        .filter(|n| matches!(n.tag_name().name(), "link" | "joint"));
+    for part in parts {
+        let owner = format!(
+            "{} `{}`",
+            part.tag_name().name(),
+            part.attribute("name").unwrap_or_default()
+        );
+        let skipped = |n: &roxmltree::Node| {
+            n.ancestors()
+                .any(|a| matches!(a.tag_name().name(), "visual" | "collision"))
+        };
+        for node in part.descendants().filter(|n| n.is_element() && !skipped(n)) {
+            for (attribute, count) in NUMERIC {
+                let Some(text) = node.attribute(attribute) else {
+                    continue;
+                };
+                let numbers: Vec<&str> = text.split_whitespace().collect();
+                if numbers.len() != count || numbers.iter().any(|x| x.parse::<f64>().is_err()) {
+                    let expected = if count == 1 {
+                        "a number".to_string()
+                    } else {
+                        format!("{count} numbers")
+                    };
+                    return Err((
+                        format!(
+                            "URDF: {owner}: <{} {attribute}=\"{text}\"> must be {expected}",
+                            node.tag_name().name()
+                        ),
+                        line_at(node.range().start),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// URDF's `R = Rz(yaw) Ry(pitch) Rx(roll)` from `[roll, pitch, yaw]`.

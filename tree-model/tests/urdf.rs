@@ -98,7 +98,7 @@ fn a_floating_base_adds_six_variables_above_the_root() {
 
 #[test]
 fn unsupported_and_broken_urdf_is_named_with_its_line() {
-    let cases: [(String, &str); 9] = [
+    let cases: [(String, &str); 12] = [
         (
             arm(r#"  <joint name="joint2" type="floating"><parent link="upper"/><child link="lower"/></joint>"#),
             "r.urdf:18: URDF: joint `joint2` is floating; only revolute, continuous, prismatic and fixed joints",
@@ -135,6 +135,21 @@ fn unsupported_and_broken_urdf_is_named_with_its_line() {
         (
             "<robot name=\"r\">\n  <link name=\"a\">\n  </lnk>\n</robot>".to_string(),
             "r.urdf:3: XML error",
+        ),
+        (
+            arm(GOOD_JOINT2).replace(r#"<mass value="1.0"/>"#, r#"<mass value="heavy"/>"#),
+            r#"r.urdf:10: URDF: link `lower`: <mass value="heavy"> must be a number"#,
+        ),
+        (
+            arm(GOOD_JOINT2).replace(r#"<origin xyz="0.1 0 0.4""#, r#"<origin xyz="0.1 0""#),
+            r#"r.urdf:20: URDF: joint `joint2`: <origin xyz="0.1 0"> must be 3 numbers"#,
+        ),
+        (
+            // `lower` and a new link `hand` hold each other: a cycle apart from the root.
+            arm(r#"  <link name="hand"/>
+  <joint name="joint2" type="fixed"><parent link="lower"/><child link="hand"/></joint>
+  <joint name="joint3" type="fixed"><parent link="hand"/><child link="lower"/></joint>"#),
+            "URDF: link `lower` is not reachable from the root link `base`: its joints form a cycle",
         ),
     ];
     for (text, expected) in cases {
