@@ -21,7 +21,8 @@ struct WalkForward {
 impl Prescription for WalkForward {
     fn kinematic(&mut self, i: usize, t: f64) -> [f64; 3] {
         let [q, v, a] = self.file.kinematic(i, t);
-        if Marionette::VARIABLES[i].ends_with("_y") {
+        // Asked for kinematic variables only: the control points' y (`left_hand_y`, …).
+        if Marionette::KINEMATIC[i] && Marionette::VARIABLES[i].ends_with("_y") {
             // Start at rest: the walk ramps in smoothly, s(t) = speed·(t − (1 − e^{−t})).
             let e = (-t).exp();
             [

@@ -13,9 +13,9 @@ use crate::plot::FONT;
 
 /// Picture size in pixels.
 const SIZE: (u32, u32) = (640, 480);
-/// Frames per second of simulated time (the GIF plays in real time).
+/// Frames per second of simulated time, at most (the GIF plays in real time).
 pub const FPS: f64 = 25.0;
-/// The most frames a GIF gets; longer runs play faster than real time.
+/// The most frames a GIF gets: longer runs get fewer frames per simulated second.
 pub const MAX_FRAMES: usize = 500;
 
 /// What is drawn, read once from the model.
@@ -167,14 +167,19 @@ impl Camera {
 }
 
 /// Writes the animation of the frame poses `frames` (one `Vec<Pose>` per picture, taken at
-/// the times `times`) of `model` to `path`.
+/// the times `times`) of `model` to `path`, played in real time: each picture shows for the
+/// mean spacing of `times` (the samples a run records need not fall on a 1/FPS grid).
 pub fn write_gif(
     model: &Model,
     times: &[f64],
     frames: &[Vec<Pose>],
-    delay_ms: u32,
     path: &std::path::Path,
 ) -> Result<(), String> {
+    let spacing = match times {
+        [first, .., last] => (last - first) / (times.len() - 1) as f64,
+        _ => 1.0 / FPS,
+    };
+    let delay_ms = (1000.0 * spacing).round() as u32;
     let err = |e: &dyn std::fmt::Display| format!("cannot write `{}`: {e}", path.display());
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
     let figure = Figure::of(model);

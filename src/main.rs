@@ -391,8 +391,7 @@ fn run_simulate<S: System<N = Dyn>>(
             sys.poses(&Vector::<Dyn>::from_column_slice(q), &mut frame);
             poses.push(frame);
         }
-        let delay_ms = (1000.0 * frame_interval).round() as u32;
-        animate::write_gif(model, &frame_times, &poses, delay_ms, path)?;
+        animate::write_gif(model, &frame_times, &poses, path)?;
     }
     for m in &summary.moved {
         println!(

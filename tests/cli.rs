@@ -314,3 +314,32 @@ fn urdf_models_are_read_wherever_toml_is() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_sparsely_recorded_animation_still_plays_in_real_time() {
+    let dir = std::env::temp_dir().join(format!("tree-mech-anim-every-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let gif = dir.join("p.gif");
+    // Δt = 0.01 recorded every 10th step: a picture each 0.1 s, shown for 100 ms.
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/double-pendulum.toml",
+        "--duration",
+        "1",
+        "--every",
+        "10",
+        "--animate",
+        gif.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let bytes = std::fs::read(&gif).unwrap();
+    let mut decoder = gif::DecodeOptions::new()
+        .read_info(std::io::Cursor::new(&bytes))
+        .unwrap();
+    let mut frames = 0;
+    while let Some(frame) = decoder.read_next_frame().unwrap() {
+        assert_eq!(frame.delay, 10, "100 ms a picture");
+        frames += 1;
+    }
+    assert_eq!(frames, 11);
+}
