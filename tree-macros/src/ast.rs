@@ -259,32 +259,18 @@ impl Parse for InlineFrame {
             let lookahead = body.lookahead1();
             if lookahead.peek(kw::mass) {
                 let kw: kw::mass = body.parse()?;
-                if frame.mass.is_some() {
-                    return Err(syn::Error::new(kw.span, "mass is given twice"));
-                }
-                body.parse::<Token![=]>()?;
-                frame.mass = Some(parse_number(&body)?);
-                body.parse::<Token![;]>()?;
+                setting_once(&mut frame.mass, kw.span, "mass", &body, parse_number)?;
             } else if lookahead.peek(kw::inertia) {
                 let kw: kw::inertia = body.parse()?;
-                if frame.inertia.is_some() {
-                    return Err(syn::Error::new(kw.span, "inertia is given twice"));
-                }
-                body.parse::<Token![=]>()?;
-                let content;
-                let bracket = bracketed!(content in body);
-                let items = content.parse_terminated(parse_number, Token![,])?;
-                frame.inertia =
-                    Some((items.iter().map(|n| n.value).collect(), bracket.span.join()));
-                body.parse::<Token![;]>()?;
+                setting_once(&mut frame.inertia, kw.span, "inertia", &body, |input| {
+                    let content;
+                    let bracket = bracketed!(content in input);
+                    let items = content.parse_terminated(parse_number, Token![,])?;
+                    Ok((items.iter().map(|n| n.value).collect(), bracket.span.join()))
+                })?;
             } else if lookahead.peek(kw::com) {
                 let kw: kw::com = body.parse()?;
-                if frame.com.is_some() {
-                    return Err(syn::Error::new(kw.span, "com is given twice"));
-                }
-                body.parse::<Token![=]>()?;
-                frame.com = Some(parse_vector3(&body)?);
-                body.parse::<Token![;]>()?;
+                setting_once(&mut frame.com, kw.span, "com", &body, parse_vector3)?;
             } else if lookahead.peek(kw::frame) {
                 frame.children.push(body.parse()?);
             } else {
@@ -293,6 +279,24 @@ impl Parse for InlineFrame {
         }
         Ok(frame)
     }
+}
+
+/// `= value;` after a frame setting's keyword (at `keyword`), stored in `slot`; a second one
+/// is an error at it.
+fn setting_once<T>(
+    slot: &mut Option<T>,
+    keyword: Span,
+    name: &str,
+    input: ParseStream,
+    value: impl FnOnce(ParseStream) -> syn::Result<T>,
+) -> syn::Result<()> {
+    if slot.is_some() {
+        return Err(syn::Error::new(keyword, format!("{name} is given twice")));
+    }
+    input.parse::<Token![=]>()?;
+    *slot = Some(value(input)?);
+    input.parse::<Token![;]>()?;
+    Ok(())
 }
 
 impl Parse for InlineVariable {
