@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{assert_close, interpreted, Rng};
+use common::{assert_close, interpreted, simulate_from_start, Rng};
 use nalgebra::Dyn;
 use tree_mech::integrate::{run, simulate, Method, SimOptions, Tolerance, ViSettings};
 use tree_mech::model::{self, Model};
@@ -164,20 +164,8 @@ fn compiled_elements_equal_interpreted() {
 #[test]
 fn compiled_constrained_trajectory_equals_interpreted() {
     let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 2.0);
-    let mut generated = StringPendulum;
-    let (q0, dq0) = generated.initial_state();
-    let a = simulate(
-        &mut generated,
-        &q0,
-        &dq0,
-        &options,
-        &mut NoForce,
-        &mut |_| {},
-    )
-    .unwrap();
-    let mut interp = interpreted(&StringPendulum::model());
-    let (q0, dq0) = interp.initial_state();
-    let b = simulate(&mut interp, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
+    let a = simulate_from_start(&mut StringPendulum, &options);
+    let b = simulate_from_start(&mut interpreted(&StringPendulum::model()), &options);
     for k in 0..a.len() {
         for i in 0..3 {
             assert!((a.q(k)[i] - b.q(k)[i]).abs() < 1e-9);

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::interpreted;
+use common::{interpreted, simulate_from_start};
 use tree_mech::integrate::{simulate, Forcing, Method, SimOptions, Tolerance, ViSettings};
 use tree_mech::model::{self, n_link_pendulum, Model};
 use tree_mech::{NoForce, System, Trajectory};
@@ -15,10 +15,10 @@ fn model(text: &str) -> Model {
 }
 
 fn run(model: &Model, method: Method, dt: f64, duration: f64) -> Trajectory {
-    let mut sys = interpreted(model);
-    let (q0, dq0) = sys.initial_state();
-    let options = SimOptions::new(method, dt, duration);
-    simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap()
+    simulate_from_start(
+        &mut interpreted(model),
+        &SimOptions::new(method, dt, duration),
+    )
 }
 
 fn vi(forcing: Forcing) -> Method {

@@ -3,11 +3,11 @@
 
 mod common;
 
-use common::{interpreted, load, Rng};
+use common::{interpreted, load, simulate_from_start, Rng};
 use nalgebra::Const;
-use tree_mech::integrate::{simulate, Method, SimOptions, ViSettings};
+use tree_mech::integrate::{Method, SimOptions, ViSettings};
 use tree_mech::runtime::Vector;
-use tree_mech::{tree_model, ConstraintTerms, NoForce, Order, System, Trajectory};
+use tree_mech::{tree_model, ConstraintTerms, Order, System, Trajectory};
 
 tree_model!(struct Marionette from "models/marionette.toml");
 
@@ -93,20 +93,8 @@ fn compiled_marionette_equals_interpreted_on_every_output() {
 
 fn ten_seconds(method: Method) -> (Trajectory, Trajectory) {
     let options = SimOptions::new(method, 0.01, 10.0);
-    let mut generated = Marionette;
-    let (q0, dq0) = generated.initial_state();
-    let a = simulate(
-        &mut generated,
-        &q0,
-        &dq0,
-        &options,
-        &mut NoForce,
-        &mut |_| {},
-    )
-    .unwrap();
-    let mut interp = interpreted(&Marionette::model());
-    let (q0, dq0) = interp.initial_state();
-    let b = simulate(&mut interp, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
+    let a = simulate_from_start(&mut Marionette, &options);
+    let b = simulate_from_start(&mut interpreted(&Marionette::model()), &options);
     (a, b)
 }
 

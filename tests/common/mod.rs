@@ -4,9 +4,11 @@
 
 use std::path::PathBuf;
 
-use nalgebra::Dyn;
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dyn};
+use tree_mech::integrate::{simulate, SimOptions};
 use tree_mech::model::{self, Model};
 use tree_mech::runtime::{TreeSystem, Vector};
+use tree_mech::{NoForce, System, Trajectory};
 
 /// Every model file in `models/`.
 pub fn model_files() -> Vec<PathBuf> {
@@ -60,4 +62,13 @@ pub fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
         "{what}: {a} vs {b} (difference {:e})",
         (a - b).abs()
     );
+}
+
+/// Simulates `sys` from its model's initial state, with no external force.
+pub fn simulate_from_start<S: System>(sys: &mut S, options: &SimOptions) -> Trajectory
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (q0, dq0) = sys.initial_state();
+    simulate(sys, &q0, &dq0, options, &mut NoForce, &mut |_| {}).unwrap()
 }
