@@ -108,8 +108,8 @@ enum Command {
         /// VI quadrature point α (½ is second order).
         #[arg(long, default_value_t = 0.5)]
         alpha: f64,
-        /// VI Newton tolerance.
-        #[arg(long, default_value_t = 1e-12)]
+        /// VI Newton tolerance: each residual row relative to its momentum scale.
+        #[arg(long, default_value = "1e-10")]
         newton_tol: f64,
         /// VI Newton Jacobian: re-evaluated every iteration (exact Newton) or once per step.
         #[arg(long, value_enum, default_value = "every-iteration")]
@@ -417,7 +417,7 @@ fn run_simulate<S: System<N = Dyn>>(
     };
     let subdivided = if summary.subdivided_steps > 0 {
         format!(
-            " {} steps needed subdividing (Newton failed at full length).",
+            " {} steps needed subdividing (at full length Newton failed or a joint turned more than a quarter turn).",
             summary.subdivided_steps
         )
     } else {

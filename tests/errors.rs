@@ -228,3 +228,41 @@ fn redundant_constraints_are_an_error_naming_one() {
         }
     }
 }
+
+#[test]
+fn a_step_that_turns_a_joint_more_than_a_quarter_turn_is_refused_then_subdivided() {
+    // 300 rad/s at Δt = 0.01: three radians a step, not resolved (and where Newton may land
+    // on a spurious root). Without subdivision the step is refused, naming the joint.
+    let mut model = load("pendulum.toml");
+    model.variables[0].dq0 = 300.0;
+    let mut sys = interpreted(&model);
+    let (q0, dq0) = sys.initial_state();
+    let options = |max_subdivisions| SimOptions {
+        method: Method::Vi(ViSettings {
+            max_subdivisions,
+            ..ViSettings::default()
+        }),
+        dt: 0.01,
+        duration: 0.1,
+        ..Default::default()
+    };
+    let err = simulate(&mut sys, &q0, &dq0, &options(0), &mut NoForce, &mut |_| {}).unwrap_err();
+    assert!(
+        matches!(err, SimError::StepTooCoarse { step: 0, .. }),
+        "{err}"
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains("`theta` turned") && msg.contains("quarter turn"),
+        "{msg}"
+    );
+    let traj = simulate(&mut sys, &q0, &dq0, &options(4), &mut NoForce, &mut |_| {}).unwrap();
+    assert!(
+        traj.subdivided_steps == 10,
+        "{} subdivided",
+        traj.subdivided_steps
+    );
+    // Subdivided, the spin is resolved: 0.1 s at ≈ 300 rad/s.
+    let turned = traj.last_q()[0] - q0[0];
+    assert!((turned - 30.0).abs() < 1.0, "turned {turned}");
+}

@@ -515,6 +515,10 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 Self::DAMPING[i]
             }
 
+            fn is_angle(&self, i: usize) -> bool {
+                Self::model_ref().is_angle(i)
+            }
+
             /// Read from the model (allocates): call it when setting up, not per step.
             fn motion(&self, i: usize) -> Option<::tree_mech::model::Motion> {
                 if Self::KINEMATIC[i] {

@@ -300,6 +300,13 @@ impl Model {
         (0..self.frames.len()).filter(|&k| used[k]).collect()
     }
 
+    /// Whether variable `i` drives a rotation (`rx ry rz`): an angle, in rad.
+    pub fn is_angle(&self, i: usize) -> bool {
+        self.variables[i]
+            .frame
+            .is_some_and(|f| self.frames[f].primitive.is_rotation())
+    }
+
     /// Index of the frame with this name.
     pub fn frame_index(&self, name: &str) -> Option<usize> {
         self.frames.iter().position(|f| f.name == name)

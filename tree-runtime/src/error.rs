@@ -56,8 +56,24 @@ pub enum SimError {
         t: f64,
         /// The iterations tried.
         iterations: usize,
-        /// The residual's norm at the end.
+        /// The largest residual row relative to its momentum scale at the end.
         residual: f64,
+        /// The largest `|h(q₂)|` at the end.
+        violation: f64,
+    },
+    /// A VI step turned a joint by more than a quarter turn ([`crate::integrate::MAX_TURN`]):
+    /// the step is too long for the motion.
+    StepTooCoarse {
+        /// The step that failed.
+        step: usize,
+        /// The simulated time at its start.
+        t: f64,
+        /// The length of the (sub)step tried.
+        dt: f64,
+        /// The angle that turned too far.
+        variable: String,
+        /// How far it turned, rad.
+        turn: f64,
     },
     /// A state or derivative stopped being finite.
     NonFinite {
@@ -106,9 +122,13 @@ impl fmt::Display for SimError {
                 f,
                 "step {step} (t = {t}): variational integrator Newton matrix is singular (at variable `{variable}`)"
             ),
-            SimError::NewtonFailed { step, t, iterations, residual } => write!(
+            SimError::NewtonFailed { step, t, iterations, residual, violation } => write!(
                 f,
-                "step {step} (t = {t}): Newton did not converge in {iterations} iterations (residual {residual:e})"
+                "step {step} (t = {t}): Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e})"
+            ),
+            SimError::StepTooCoarse { step, t, dt, variable, turn } => write!(
+                f,
+                "step {step} (t = {t}): `{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt"
             ),
             SimError::NonFinite { step, t, what } => {
                 write!(f, "step {step} (t = {t}): {what} is not finite")

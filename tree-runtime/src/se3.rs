@@ -384,10 +384,13 @@ impl<S: Scalar> LocalTransform<S> {
     /// taken about the parent origin in parent coordinates.
     #[inline(always)]
     pub fn moment_to_parent(&self, h: &[S; 3], m: f64) -> [S; 3] {
-        let mut r = self.point_to_parent(h);
-        if !self.kind.is_rotation() {
-            r[self.kind.axis()] += c::<S>(m - 1.0) * self.a;
+        if self.kind.is_rotation() {
+            return self.point_to_parent(h);
         }
+        // Added as `m·a`, not as the point's `a` then `(m − 1)·a`: that difference loses
+        // every digit of a light body's moment (m = 1e-12: `a − (1 − m)a`).
+        let mut r = *h;
+        r[self.kind.axis()] += c::<S>(m) * self.a;
         r
     }
 

@@ -251,6 +251,10 @@ where
     /// The prescribed motion of variable `i` when it is kinematic, `None` when it is dynamic.
     fn motion(&self, i: usize) -> Option<Motion>;
 
+    /// Whether variable `i` drives a rotation (an angle, in rad) rather than a translation
+    /// or a constraint's length. Read when setting up (the VI's quarter-turn guard, plots).
+    fn is_angle(&self, i: usize) -> bool;
+
     /// Whether variable `i` is kinematic (prescribed).
     fn is_kinematic(&self, i: usize) -> bool {
         self.motion(i).is_some()

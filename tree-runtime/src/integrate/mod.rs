@@ -11,7 +11,7 @@ mod vi;
 pub use projection::{project_initial_state, Moved};
 pub use rk4::Rk4;
 pub use rk45::{Rk45, Tolerance};
-pub use vi::{Forcing, JacobianUpdate, MidpointVi, ViSettings};
+pub use vi::{Forcing, JacobianUpdate, MidpointVi, ViSettings, MAX_TURN};
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 

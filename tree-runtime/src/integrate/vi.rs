@@ -24,6 +24,15 @@ use crate::error::SimError;
 use crate::linalg::{lu_factor_packed, lu_solve, lu_solve_packed, Pivots};
 use crate::system::{ConstraintTerms, Matrix, Order, Sparsity, System, Terms, Vector};
 
+/// A row's momentum scale is taken as at least this fraction of the largest row's: a row
+/// whose terms nearly vanish (a variable at rest, no force on it) is then held to the step's
+/// scale instead of to its own rounding noise. Relative, so the units still do not matter; a
+/// body 1000× lighter than the heaviest is still converged on its own scale.
+const FLOOR: f64 = 1e-3;
+
+/// The largest turn of an angle a step may take (rad): a quarter turn.
+pub const MAX_TURN: f64 = std::f64::consts::FRAC_PI_2;
+
 /// When the VI's Newton iteration re-evaluates its exact Jacobian (eq. (26)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum JacobianUpdate {
@@ -52,9 +61,11 @@ pub enum Forcing {
 pub struct ViSettings {
     /// Quadrature point `α ∈ [0, 1]`; `½` is the second-order midpoint rule.
     pub alpha: f64,
-    /// Newton stops when `‖residual‖∞ ≤ tolerance · max(1, ‖p_k‖∞)` and every `|h_r(q₂)|` is
-    /// below `constraint_tolerance`, or when an update is below the rounding of q (the
-    /// residual then sits at its floor).
+    /// Newton stops when every dynamic row of the residual is below `tolerance` relative to
+    /// that row's momentum scale (the sum of its terms' magnitudes, see
+    /// [`MidpointVi::relative_residual`]) and every `|h_r(q₂)|` is below
+    /// `constraint_tolerance`, or when an update is below the rounding of q (the residual then
+    /// sits at its floor). Relative, so a model in grams or in tonnes converges alike.
     pub tolerance: f64,
     /// Newton's tolerance on `max |h(q₂)|`.
     pub constraint_tolerance: f64,
@@ -72,7 +83,7 @@ impl Default for ViSettings {
     fn default() -> Self {
         ViSettings {
             alpha: 0.5,
-            tolerance: 1e-12,
+            tolerance: 1e-10,
             constraint_tolerance: 1e-12,
             max_iterations: 30,
             jacobian: JacobianUpdate::EveryIteration,
@@ -98,10 +109,15 @@ where
     dh1: DMatrix<f64>,
     /// Which variables are unknowns.
     pub split: Split,
+    /// The dynamic variables that are angles (the quarter-turn guard of [`Self::step`]).
+    angles: Vec<usize>,
     /// The constraint forces of the last step (see the module docs for trep's scaling).
     pub lambda: DVector<f64>,
     /// Dynamic rows of the residual (kinematic entries zero).
     residual: Vector<N>,
+    /// Each dynamic row's momentum scale: the sum of the magnitudes of the terms that make up
+    /// its residual (kinematic entries zero).
+    row_scale: Vector<N>,
     /// `∂r/∂q₂`, identity on the kinematic variables.
     jacobian: Matrix<N>,
     factors: Matrix<N>,
@@ -150,6 +166,7 @@ where
             dh1: DMatrix::zeros(m, n.value()),
             lambda: DVector::zeros(m),
             residual: z(),
+            row_scale: z(),
             jacobian: Matrix::zeros_generic(n, n),
             factors: Matrix::zeros_generic(n, n),
             pivots: Pivots::<N>::zeros_generic(n, nalgebra::U1),
@@ -168,6 +185,12 @@ where
             dt: 0.0,
             iterations: 0,
             subdivisions: 0,
+            angles: split
+                .dynamic
+                .iter()
+                .copied()
+                .filter(|&i| sys.is_angle(i))
+                .collect(),
             split,
         }
     }
@@ -251,14 +274,25 @@ where
         self.force.copy_from(&self.terms.force);
         force.add_force(t + a * dt, &self.q_alpha, &self.velocity, &mut self.force);
         let (split, t2) = (&self.split, &self.terms);
-        // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + f⁻ + Δt Dh(q1)ᵀλ on the dynamic rows.
+        // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + f⁻ + Δt Dh(q1)ᵀλ on the dynamic rows, and the sum
+        // of those terms' magnitudes (the row's momentum scale).
         for &i in &split.dynamic {
-            let mut x =
-                p1[i] + (1.0 - a) * dt * t2.dl_dq[i] - t2.dl_ddq[i] + left * dt * self.force[i];
+            let terms = [
+                p1[i],
+                (1.0 - a) * dt * t2.dl_dq[i],
+                -t2.dl_ddq[i],
+                left * dt * self.force[i],
+            ];
+            let (mut x, mut scale) = terms
+                .iter()
+                .fold((0.0, 0.0), |(x, s), &v| (x + v, s + v.abs()));
             for s in 0..split.rows {
-                x += dt * self.dh1[(s, i)] * self.lambda[s];
+                let v = dt * self.dh1[(s, i)] * self.lambda[s];
+                x += v;
+                scale += v.abs();
             }
             self.residual[i] = x;
+            self.row_scale[i] = scale;
         }
         if split.rows > 0 {
             sys.constraints(q2, &self.zero, Order::First, &mut self.constraint_terms);
@@ -489,7 +523,7 @@ where
         }
         match self.step_once(sys, force, motion, step, t, dt, q, p, q_next) {
             Err(SimError::NewtonFailed { .. } | SimError::SingularJacobian { .. })
-            | Err(SimError::NonFinite { .. })
+            | Err(SimError::NonFinite { .. } | SimError::StepTooCoarse { .. })
                 if can_split =>
             {
                 if self.split.rows > 0 {
@@ -530,11 +564,6 @@ where
         for &i in &self.split.kinematic {
             q_next[i] = motion.kinematic(i, t + dt)[0];
         }
-        let scale = self
-            .split
-            .dynamic
-            .iter()
-            .fold(1.0f64, |m, &i| m.max(p[i].abs()));
         let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep;
         let mut factored = false;
         let mut last_residual = f64::INFINITY;
@@ -542,8 +571,9 @@ where
         loop {
             let fresh = !(reuse && factored);
             self.residual(sys, force, t, dt, q, p, q_next, fresh);
-            let (mut residual, violation) = self.residual_norms();
-            if !residual.is_finite() || !violation.is_finite() {
+            let (residual, violation) = self.residual_norms();
+            let mut relative = self.relative_residual();
+            if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
                 self.iterations += iterations;
                 return Err(SimError::NonFinite {
                     step,
@@ -551,7 +581,7 @@ where
                     what: "discrete Euler–Lagrange residual".into(),
                 });
             }
-            if residual <= self.settings.tolerance * scale
+            if relative <= self.settings.tolerance
                 && violation <= self.settings.constraint_tolerance
             {
                 break;
@@ -562,22 +592,24 @@ where
                     step,
                     t,
                     iterations,
-                    residual: residual.max(violation),
+                    residual: relative,
+                    violation,
                 });
             }
             let mut refactor = fresh;
-            let combined = residual + violation;
+            // Relative residual and violation: both independent of the masses.
+            let combined = relative + violation;
             if !fresh && combined > 0.5 * last_residual {
                 // The reused Jacobian has stopped paying: evaluate it here.
                 self.residual(sys, force, t, dt, q, p, q_next, true);
-                residual = self.residual_norms().0;
+                relative = self.relative_residual();
                 refactor = true;
             }
             if refactor {
                 self.factor(sys, step, t)?;
                 factored = true;
             }
-            last_residual = residual + violation;
+            last_residual = relative + violation;
             iterations += 1;
             self.newton_update(sys, step, t)?;
             let mut largest: f64 = 0.0;
@@ -613,10 +645,54 @@ where
                 what: "configuration or momentum".into(),
             });
         }
+        // A joint turned by more than a quarter turn in one step is not resolved by the step
+        // (and at such steps Newton can land on a spurious root of the discrete equations,
+        // with an energy orders of magnitude off): refuse it, so the step is subdivided.
+        if let Some(&i) = self
+            .angles
+            .iter()
+            .find(|&&i| (q_next[i] - q[i]).abs() > MAX_TURN)
+        {
+            return Err(SimError::StepTooCoarse {
+                step,
+                t,
+                dt,
+                variable: sys.variable_name(i).to_string(),
+                turn: q_next[i] - q[i],
+            });
+        }
         p.copy_from(p2);
         self.last_velocity.copy_from(&self.velocity);
         std::mem::swap(q, q_next);
         Ok(())
+    }
+
+    /// The largest dynamic row of the last residual relative to its momentum scale: `max_i
+    /// |r_i| / s_i`, where `s_i = |p₁ᵢ| + |(1−α)Δt ∂L/∂qᵢ| + |∂L/∂q̇ᵢ| + |f⁻ᵢ| + Σ_r |Δt
+    /// Dh(q₁)ᵣᵢ λᵣ|` sums the magnitudes of the terms `r_i` adds up. Every term scales with the
+    /// masses, so this ratio does not (a row whose terms all vanish has `r_i = 0`: ratio 0). It
+    /// lies in `[0, 1]`; Newton stops below [`ViSettings::tolerance`]. (Each `s_i` counts as
+    /// at least a thousandth of the largest.)
+    pub fn relative_residual(&self) -> f64 {
+        let floor = FLOOR
+            * self
+                .split
+                .dynamic
+                .iter()
+                .fold(0.0f64, |m, &i| m.max(self.row_scale[i]));
+        let mut worst = 0.0f64;
+        for &i in &self.split.dynamic {
+            let r = self.residual[i].abs();
+            if r == 0.0 {
+                continue;
+            }
+            let x = r / self.row_scale[i].max(floor);
+            if x.is_nan() {
+                return x;
+            }
+            worst = worst.max(x);
+        }
+        worst
     }
 
     /// `(max |dynamic residual|, max |h(q₂)|)`.

@@ -104,6 +104,10 @@ impl System for TreeSystem {
         self.model.variables[i].damping
     }
 
+    fn is_angle(&self, i: usize) -> bool {
+        self.model.is_angle(i)
+    }
+
     fn motion(&self, i: usize) -> Option<Motion> {
         self.model.variables[i].motion.clone()
     }

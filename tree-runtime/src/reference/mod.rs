@@ -121,6 +121,10 @@ impl System for PaperSystem {
         self.model.variables[i].damping
     }
 
+    fn is_angle(&self, i: usize) -> bool {
+        self.model.is_angle(i)
+    }
+
     fn motion(&self, _: usize) -> Option<Motion> {
         None
     }
