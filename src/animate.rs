@@ -5,6 +5,8 @@
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+
+use crate::output::{drawing_error, OutputFile, Sentence};
 use plotters::style::{register_font, FontStyle};
 use tree_mech::model::{ConstraintKind, Joint, Model, SpringKind};
 use tree_mech::runtime::Pose;
@@ -173,14 +175,20 @@ pub fn write_gif(
     model: &Model,
     times: &[f64],
     frames: &[Vec<Pose>],
-    path: &std::path::Path,
+    out: &OutputFile,
 ) -> Result<(), String> {
     let spacing = match times {
         [first, .., last] => (last - first) / (times.len() - 1) as f64,
         _ => 1.0 / FPS,
     };
     let delay_ms = (1000.0 * spacing).round() as u32;
-    let err = |e: &dyn std::fmt::Display| format!("cannot write `{}`: {e}", path.display());
+    let err = |e: &dyn Sentence| {
+        format!(
+            "cannot write `{}`: {}",
+            out.path().display(),
+            drawing_error(e)
+        )
+    };
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
     let figure = Figure::of(model);
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
@@ -201,7 +209,7 @@ pub fn write_gif(
         hi[i] = hi[i].max(0.0);
     }
     let camera = Camera::framing(lo, hi);
-    let root = BitMapBackend::gif(path, SIZE, delay_ms.max(10))
+    let root = BitMapBackend::gif(out.temp(), SIZE, delay_ms.max(10))
         .map_err(|e| err(&e))?
         .into_drawing_area();
     for (t, poses) in times.iter().zip(frames) {
@@ -224,7 +232,7 @@ fn draw_frame(
     t: f64,
     poses: &[Pose],
 ) -> Result<(), String> {
-    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let e = drawing_error;
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let line = |a: [f64; 3], b: [f64; 3], style: ShapeStyle| -> Result<(), String> {
         if let (Some((pa, _)), Some((pb, _))) = (camera.project(a), camera.project(b)) {

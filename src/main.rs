@@ -1,9 +1,12 @@
 //! The `tree-mech` command line: simulate a model, evaluate it at a state, check it.
 
 mod animate;
+mod output;
 mod plot;
 
 use std::path::{Path, PathBuf};
+
+use output::OutputFile;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -115,11 +118,15 @@ enum Command {
         #[arg(long, value_enum, default_value = "every-iteration")]
         jacobian: JacobianArg,
         /// rk45 relative tolerance.
-        #[arg(long, default_value_t = 1e-8)]
+        #[arg(long, default_value = "1e-8")]
         rtol: f64,
         /// rk45 absolute tolerance.
-        #[arg(long, default_value_t = 1e-10)]
+        #[arg(long, default_value = "1e-10")]
         atol: f64,
+        /// rk45: the most steps the run may take; it stops with an error once the step size
+        /// it has reached would need more (a stiff model).
+        #[arg(long, default_value_t = tree_mech::integrate::DEFAULT_MAX_ADAPTIVE_STEPS)]
+        max_steps: usize,
         /// How the interpreted system evaluates: composite sweeps (fastest), the paper's
         /// per-mass sums with caching, or without caching (the paper's Fig. 3 comparison).
         #[arg(long, value_enum, default_value = "sweeps")]
@@ -184,6 +191,7 @@ fn main() -> ExitCode {
             jacobian,
             rtol,
             atol,
+            max_steps,
             evaluation,
         } => {
             let method = match integrator {
@@ -212,25 +220,22 @@ fn main() -> ExitCode {
                 let options = SimOptions {
                     every,
                     baumgarte,
+                    max_steps,
                     ..SimOptions::new(method, dt, duration)
                 };
-                let outputs = Outputs {
-                    csv: out.as_deref(),
-                    plot: plot.as_deref(),
-                    animate: animate.as_deref(),
-                };
+                let outputs = Outputs::check(&model, &out, &plot, &animate)?;
                 let model = model::from_file(&model, urdf).map_err(|e| e.to_string())?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
                         let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
-                        run_simulate(sys, &model, options, &outputs)
+                        run_simulate(sys, &model, options, outputs)
                     }
                     EvaluationArg::Cached => {
-                        run_simulate(paper(PaperEvaluation::Cached)?, &model, options, &outputs)
+                        run_simulate(paper(PaperEvaluation::Cached)?, &model, options, outputs)
                     }
                     EvaluationArg::Uncached => {
-                        run_simulate(paper(PaperEvaluation::Uncached)?, &model, options, &outputs)
+                        run_simulate(paper(PaperEvaluation::Uncached)?, &model, options, outputs)
                     }
                 }
             })
@@ -286,20 +291,56 @@ fn num(x: f64) -> String {
 const PLOT_SAMPLES: usize = 20_000;
 
 /// Where `simulate` writes what it produces.
-struct Outputs<'a> {
-    csv: Option<&'a Path>,
-    plot: Option<&'a Path>,
-    animate: Option<&'a Path>,
+struct Outputs {
+    csv: Option<OutputFile>,
+    plot: Option<OutputFile>,
+    animate: Option<OutputFile>,
 }
+
+impl Outputs {
+    /// Every output checked before the run: its directory and extension, and that no two
+    /// paths (the model's included) are one file.
+    fn check(
+        model: &Path,
+        csv: &Option<PathBuf>,
+        plot: &Option<PathBuf>,
+        animate: &Option<PathBuf>,
+    ) -> Result<Self, String> {
+        let mut taken: Vec<&Path> = vec![model];
+        let mut files = [None, None, None];
+        for (k, (path, what, ext)) in [
+            (csv, "out", None),
+            (plot, "plot", Some("png")),
+            (animate, "animate", Some("gif")),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if let Some(p) = path {
+                files[k] = Some(OutputFile::new(p, what, ext, &taken)?);
+                taken.push(p);
+            }
+        }
+        let [csv, plot, animate] = files;
+        Ok(Outputs { csv, plot, animate })
+    }
+}
+
+/// The largest CSV written without a note first, in bytes.
+const LARGE_OUTPUT: f64 = 1e9;
 
 fn run_simulate<S: System<N = Dyn>>(
     mut sys: S,
     model: &model::Model,
     options: SimOptions,
-    outputs: &Outputs,
+    outputs: Outputs,
 ) -> Result<(), String> {
     let name = model.name.as_str();
-    let (out, plot_path) = (outputs.csv, outputs.plot);
+    let Outputs {
+        csv: out,
+        plot: plot_path,
+        animate: animate_path,
+    } = outputs;
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
     bar.set_style(
@@ -315,17 +356,37 @@ fn run_simulate<S: System<N = Dyn>>(
     let constraints: Vec<String> = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
-    let mut csv = match out {
-        Some(path) => {
-            let file = std::fs::File::create(path)
-                .map_err(|e| format!("cannot write `{}`: {e}", path.display()))?;
+    let mut csv = match &out {
+        Some(file) => {
+            let shown = file.path().display();
+            let f = std::fs::File::create(file.temp())
+                .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
             Some(
-                CsvStream::new(std::io::BufWriter::new(file), &names, &constraints)
-                    .map_err(|e| format!("cannot write `{}`: {e}", path.display()))?,
+                CsvStream::new(std::io::BufWriter::new(f), &names, &constraints)
+                    .map_err(|e| format!("cannot write `{shown}`: {e}"))?,
             )
         }
         None => None,
     };
+    if let Some(file) = &out {
+        // Said up front: a fixed-step run's rows are known (an adaptive one's are bounded by
+        // its step budget).
+        let rows = match options.method {
+            Method::Rk45(_) => options.max_steps as f64,
+            _ => options.duration / options.dt / options.every as f64,
+        };
+        let columns =
+            2 + 2 * names.len() + constraints.len() + usize::from(!constraints.is_empty());
+        let bytes = rows * columns as f64 * 20.0;
+        if bytes > LARGE_OUTPUT {
+            eprintln!(
+                "note: `{}` may grow to about {:.1} GB ({:.2e} rows of {columns} numbers); --every K records every K-th step",
+                file.path().display(),
+                bytes / 1e9,
+                rows
+            );
+        }
+    }
     // The picture keeps at most PLOT_SAMPLES samples: every `thin`-th recorded one.
     let recorded = (options.duration / options.dt / options.every as f64).max(1.0);
     let thin = (recorded / PLOT_SAMPLES as f64).ceil().max(1.0) as usize;
@@ -349,11 +410,11 @@ fn run_simulate<S: System<N = Dyn>>(
                     SimError::InvalidInput(format!("cannot write the trajectory: {e}"))
                 })?;
             }
-            if plot_path.is_some() && k % thin == 0 {
+            if plot_path.is_some() && k.is_multiple_of(thin) {
                 picture.push(sample);
             }
             let next_frame = frame_times.len() as f64 * frame_interval;
-            if outputs.animate.is_some() && sample.t >= next_frame - 1e-9 * frame_interval {
+            if animate_path.is_some() && sample.t >= next_frame - 1e-9 * frame_interval {
                 frame_times.push(sample.t);
                 frame_q.push(sample.q.to_vec());
             }
@@ -381,10 +442,10 @@ fn run_simulate<S: System<N = Dyn>>(
         csv.finish()
             .map_err(|e| format!("cannot write the trajectory: {e}"))?;
     }
-    if let Some(p) = plot_path {
+    if let Some(p) = &plot_path {
         plot::plot(&picture, name, p)?;
     }
-    if let Some(path) = outputs.animate {
+    if let Some(path) = &animate_path {
         let mut poses = Vec::with_capacity(frame_q.len());
         for q in &frame_q {
             let mut frame = vec![tree_mech::runtime::Pose::IDENTITY; sys.frame_count()];
@@ -446,14 +507,22 @@ fn run_simulate<S: System<N = Dyn>>(
         num(e0),
         num(e_end),
         e_end - e0,
-        out.map(|p| format!(" Trajectory: {}.", p.display())).unwrap_or_default(),
-        plot_path.map(|p| format!(" Plot: {}.", p.display())).unwrap_or_default(),
-        outputs
-            .animate
-            .map(|p| format!(" Animation: {}.", p.display()))
-            .unwrap_or_default(),
+        shown(&out, "Trajectory"),
+        shown(&plot_path, "Plot"),
+        shown(&animate_path, "Animation"),
     );
+    // Every output complete: now they take their names.
+    for file in [out, plot_path, animate_path].into_iter().flatten() {
+        file.commit()?;
+    }
     Ok(())
+}
+
+/// ` Label: path.` for the summary.
+fn shown(file: &Option<OutputFile>, label: &str) -> String {
+    file.as_ref()
+        .map(|f| format!(" {label}: {}.", f.path().display()))
+        .unwrap_or_default()
 }
 
 /// Parses a comma-separated vector of exactly `n` numbers.
@@ -500,25 +569,43 @@ fn run_eval(
     let mut dynamics = Dynamics::new(&sys);
     let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-    let (qdd_json, lambda_json) = match dynamics.acceleration(
-        &mut sys,
-        &mut NoForce,
-        &mut motion,
-        0,
-        time,
-        &q,
-        &dq,
-        &mut qdd,
-    ) {
-        Ok(()) => (
-            json!(dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>()),
-            json!(dynamics.lambda.as_slice()),
-        ),
-        Err(e) => (json!({ "error": e.to_string() }), json!(null)),
-    };
+    dynamics
+        .acceleration(
+            &mut sys,
+            &mut NoForce,
+            &mut motion,
+            0,
+            time,
+            &q,
+            &dq,
+            &mut qdd,
+        )
+        .map_err(|e| format!("at this state, {e}"))?;
     let rows = sys.constraint_count();
     let mut c = ConstraintTerms::zeros(rows, n);
     sys.constraints(&q, &dq, Order::First, &mut c);
+    let energy = t.energy(&dq);
+    // Nothing non-finite is printed: the first output that overflowed is the error.
+    let outputs: [(&str, &[f64]); 10] = [
+        ("L", std::slice::from_ref(&t.l)),
+        ("the energy", std::slice::from_ref(&energy)),
+        ("dL_dq", t.dl_dq.as_slice()),
+        ("dL_ddq", t.dl_ddq.as_slice()),
+        ("M", t.mass.as_slice()),
+        ("d2L_ddqdq", t.d2l_ddq_dq.as_slice()),
+        ("d2L_dqdq", t.d2l_dq_dq.as_slice()),
+        ("qdd", qdd.as_slice()),
+        ("h", c.h.as_slice()),
+        ("dh_dq", c.dh.as_slice()),
+    ];
+    if let Some((name, _)) = outputs
+        .iter()
+        .find(|(_, v)| v.iter().any(|x| !x.is_finite()))
+    {
+        return Err(format!(
+            "at this state, {name} is not finite (it overflowed a floating-point number)"
+        ));
+    }
     let name_list =
         |list: &[usize]| -> Vec<String> { list.iter().map(|&i| names[i].clone()).collect() };
     let constraint_names: Vec<String> = (0..rows)
@@ -548,7 +635,7 @@ fn run_eval(
         "q": q.as_slice(),
         "dq": dq.as_slice(),
         "L": t.l,
-        "energy": t.energy(&dq),
+        "energy": energy,
         "dL_dq": t.dl_dq.as_slice(),
         "dL_ddq": t.dl_ddq.as_slice(),
         "M": matrix(&t.mass),
@@ -557,11 +644,11 @@ fn run_eval(
         "dynamic": name_list(&dynamic),
         "kinematic": name_list(&kinematic),
         "kinematic_motion": kinematic_motion,
-        "qdd": qdd_json,
+        "qdd": dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>(),
         "constraints": constraint_names,
         "h": c.h.as_slice(),
         "dh_dq": dh,
-        "lambda": lambda_json,
+        "lambda": dynamics.lambda.as_slice(),
         "poses": poses,
     });
     println!(

@@ -1,6 +1,8 @@
 //! The trajectory picture: every variable over time above, total energy below.
 
 use plotters::prelude::*;
+
+use crate::output::{drawing_error, OutputFile, Sentence};
 use plotters::style::{register_font, FontStyle};
 use tree_mech::Trajectory;
 
@@ -30,7 +32,7 @@ fn panel(
     t_end: f64,
     series: &[Series],
 ) -> Result<(), String> {
-    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let err = drawing_error;
     let (lo, hi) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 24))
@@ -72,12 +74,18 @@ fn panel(
 
 /// Writes a PNG of `traj` to `path`: every variable over time above, total energy below, and
 /// with constraints a third panel of the constraint forces λ.
-pub fn plot(traj: &Trajectory, title: &str, path: &std::path::Path) -> Result<(), String> {
-    let err = |e: &dyn std::fmt::Display| format!("cannot draw `{}`: {e}", path.display());
+pub fn plot(traj: &Trajectory, title: &str, out: &OutputFile) -> Result<(), String> {
+    let err = |e: &dyn Sentence| {
+        format!(
+            "cannot draw `{}`: {}",
+            out.path().display(),
+            drawing_error(e)
+        )
+    };
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
     let constrained = !traj.constraints.is_empty();
     let height = if constrained { 1220 } else { 900 };
-    let root = BitMapBackend::new(path, (1200, height)).into_drawing_area();
+    let root = BitMapBackend::new(out.temp(), (1200, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let (top, rest) = root.split_vertically(560);
     let (bottom, forces) = rest.split_vertically(340);

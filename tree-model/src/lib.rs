@@ -41,6 +41,7 @@ mod error;
 mod model;
 mod motion;
 mod primitive;
+mod source;
 mod spec;
 mod toml_format;
 mod urdf_format;
@@ -54,6 +55,7 @@ pub use model::{
 };
 pub use motion::{CubicSpline, Motion};
 pub use primitive::{Primitive, PrimitiveKind, Value};
+pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{
     ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
     VariableSpec,

@@ -96,6 +96,11 @@ impl CubicSpline {
                 curvature[i + 1] = (rhs[i] - upper[i] * next) / diag[i];
             }
         }
+        // Samples of huge values or tiny spacing: the slopes or curvatures overflow.
+        let slopes_finite = (1..n).all(|i| ((q[i] - q[i - 1]) / (t[i] - t[i - 1])).is_finite());
+        if !slopes_finite || curvature.iter().any(|c| !c.is_finite()) {
+            return None;
+        }
         Some(CubicSpline { t, q, curvature })
     }
 

@@ -10,6 +10,7 @@ use toml::Spanned;
 use crate::error::{FrameField, ModelError, Section, Site};
 use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind, Value};
+use crate::source::LineIndex;
 use crate::spec::{
     ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
     VariableSpec,
@@ -100,7 +101,8 @@ struct RawVariable {
     damping: Option<f64>,
     kinematic: Option<bool>,
     motion: Option<RawMotion>,
-    samples: Option<Vec<[f64; 2]>>,
+    /// Rows checked to be pairs below (serde would read the first two of a longer row).
+    samples: Option<Vec<Vec<f64>>>,
     limits: Option<[f64; 2]>,
 }
 
@@ -112,15 +114,15 @@ struct ElementLines {
 }
 
 impl ElementLines {
-    fn new(text: &str, whole: std::ops::Range<usize>) -> Self {
+    fn new(lines: &LineIndex, whole: std::ops::Range<usize>) -> Self {
         ElementLines {
-            whole: line_of(text, whole.start),
+            whole: lines.of(whole.start),
             fields: Vec::new(),
         }
     }
-    fn field<T>(&mut self, text: &str, name: &'static str, value: &Option<Spanned<T>>) {
+    fn field<T>(&mut self, lines: &LineIndex, name: &'static str, value: &Option<Spanned<T>>) {
         if let Some(v) = value {
-            self.fields.push((name, line_of(text, v.span().start)));
+            self.fields.push((name, lines.of(v.span().start)));
         }
     }
     fn line(&self, field: Option<&str>) -> usize {
@@ -128,15 +130,6 @@ impl ElementLines {
             .and_then(|f| self.fields.iter().find(|(n, _)| *n == f))
             .map_or(self.whole, |(_, l)| *l)
     }
-}
-
-/// 1-based line of a byte offset.
-fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
-        + 1
 }
 
 /// Lines of each frame's fields, for pointing problems at the source.
@@ -154,8 +147,10 @@ struct FrameLines {
 /// message; when the model has no `name`, it is taken from the file stem.
 pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, ModelError> {
     let src = source_name.map(str::to_string);
+    // One table of the text's newlines: every line below is a lookup in it.
+    let line_index = LineIndex::new(text);
     let raw: RawModel = toml::from_str(text).map_err(|e| {
-        let line = e.span().map(|s| line_of(text, s.start));
+        let line = e.span().map(|s| line_index.of(s.start));
         let msg = e.message().trim().to_string();
         ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
     })?;
@@ -163,7 +158,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
     let mut lines = Vec::new();
     let mut frames = Vec::new();
     for f in &raw.frame {
-        let at = |s: std::ops::Range<usize>| line_of(text, s.start);
+        let at = |s: std::ops::Range<usize>| line_index.of(s.start);
         let rf = f.get_ref();
         let mut primitives = Vec::new();
         let mut primitive_line = None;
@@ -203,11 +198,25 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         });
     }
     let mut variable_lines = BTreeMap::new();
+    for (name, v) in &raw.variables {
+        let rows = v.get_ref().samples.iter().flatten();
+        if let Some((k, row)) = rows.enumerate().find(|(_, r)| r.len() != 2) {
+            return Err(ModelError::single(
+                src.clone(),
+                format!(
+                    "variable `{name}`: sample {} has {} numbers; each sample is a pair [t, q]",
+                    k + 1,
+                    row.len()
+                ),
+                Some(line_index.of(v.span().start)),
+            ));
+        }
+    }
     let variables = raw
         .variables
         .iter()
         .map(|(name, v)| {
-            variable_lines.insert(name.clone(), line_of(text, v.span().start));
+            variable_lines.insert(name.clone(), line_index.of(v.span().start));
             let v = v.get_ref();
             VariableSpec {
                 name: name.clone(),
@@ -221,7 +230,10 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                     frequency: m.frequency,
                     phase: m.phase,
                 }),
-                samples: v.samples.clone(),
+                samples: v
+                    .samples
+                    .as_ref()
+                    .map(|rows| rows.iter().map(|r| [r[0], r[1]]).collect()),
                 limits: v.limits,
             }
         })
@@ -235,14 +247,14 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         .constraint
         .iter()
         .map(|c| {
-            let mut lines = ElementLines::new(text, c.span());
+            let mut lines = ElementLines::new(&line_index, c.span());
             let c = c.get_ref();
-            lines.field(text, "name", &c.name);
-            lines.field(text, "kind", &Some(c.kind.clone()));
-            lines.field(text, "frames", &Some(c.frames.clone()));
-            lines.field(text, "length", &c.length);
-            lines.field(text, "normal", &c.normal);
-            lines.field(text, "axes", &c.axes);
+            lines.field(&line_index, "name", &c.name);
+            lines.field(&line_index, "kind", &Some(c.kind.clone()));
+            lines.field(&line_index, "frames", &Some(c.frames.clone()));
+            lines.field(&line_index, "length", &c.length);
+            lines.field(&line_index, "normal", &c.normal);
+            lines.field(&line_index, "axes", &c.axes);
             constraint_lines.push(lines);
             ConstraintSpec {
                 name: c.name.as_ref().map(|n| n.get_ref().clone()),
@@ -259,12 +271,12 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         .spring
         .iter()
         .map(|s| {
-            let mut lines = ElementLines::new(text, s.span());
+            let mut lines = ElementLines::new(&line_index, s.span());
             let s = s.get_ref();
-            lines.field(text, "frames", &s.frames);
-            lines.field(text, "variable", &s.variable);
-            lines.field(text, "stiffness", &s.stiffness);
-            lines.field(text, "rest", &s.rest);
+            lines.field(&line_index, "frames", &s.frames);
+            lines.field(&line_index, "variable", &s.variable);
+            lines.field(&line_index, "stiffness", &s.stiffness);
+            lines.field(&line_index, "rest", &s.rest);
             spring_lines.push(lines);
             SpringSpec {
                 frames: s.frames.as_ref().map(|f| f.get_ref().clone()),
@@ -279,10 +291,10 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         .damper
         .iter()
         .map(|d| {
-            let mut lines = ElementLines::new(text, d.span());
+            let mut lines = ElementLines::new(&line_index, d.span());
             let d = d.get_ref();
-            lines.field(text, "frames", &Some(d.frames.clone()));
-            lines.field(text, "damping", &d.damping);
+            lines.field(&line_index, "frames", &Some(d.frames.clone()));
+            lines.field(&line_index, "damping", &d.damping);
             damper_lines.push(lines);
             DamperSpec {
                 frames: d.frames.get_ref().clone(),
@@ -347,8 +359,6 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
 pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Model, ModelError> {
     let path = path.as_ref();
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        ModelError::single(None, format!("cannot read model file `{shown}`: {e}"), None)
-    })?;
+    let text = crate::source::read_model_file(path)?;
     from_toml_str(&text, Some(&shown))
 }

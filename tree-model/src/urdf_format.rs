@@ -15,6 +15,7 @@ use std::path::Path;
 use crate::error::{FrameField, ModelError, Problem, Site};
 use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind, Value};
+use crate::source::{check_xml_shape, LineIndex};
 use crate::spec::{FrameSpec, ModelSpec, VariableSpec};
 use crate::validate::validate;
 
@@ -62,15 +63,14 @@ pub fn from_urdf_str(
     let src = source_name.map(str::to_string);
     let fail =
         |message: String, line: Option<usize>| ModelError::single(src.clone(), message, line);
+    // Line of a byte offset (roxmltree's own lookup rescans the text each time).
+    let lines = LineIndex::new(text);
+    let line_at = |offset: usize| lines.of(offset);
+    // Bounded before parsing: urdf-rs recurses per level (a stack overflow at ~15 000), and
+    // roxmltree checks an element's attributes for duplicates pairwise.
+    check_xml_shape(text, &lines).map_err(|(message, line)| fail(message, Some(line)))?;
     let document = roxmltree::Document::parse(text)
         .map_err(|e| fail(format!("XML error: {e}"), Some(e.pos().row as usize)))?;
-    // Line of a byte offset (roxmltree's own lookup rescans the text each time).
-    let newlines: Vec<usize> = text
-        .bytes()
-        .enumerate()
-        .filter_map(|(i, b)| (b == b'\n').then_some(i))
-        .collect();
-    let line_at = |offset: usize| newlines.partition_point(|&n| n < offset) + 1;
     let root = document.root_element();
     if root.tag_name().name() != "robot" {
         return Err(fail(
@@ -97,6 +97,7 @@ pub fn from_urdf_str(
         }
     }
     check_numbers(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
+    check_required(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
     let robot = urdf_rs::read_from_string(text).map_err(|e| fail(format!("URDF: {e}"), None))?;
     let joint_line = |name: &str| joint_lines.get(name).copied();
     let link_line = |name: &str| link_lines.get(name).copied();
@@ -164,6 +165,12 @@ pub fn from_urdf_str(
         }
         parent_joint[c] = Some(j);
         children[p].push(j);
+    }
+    if robot.links.is_empty() {
+        return Err(fail(
+            "URDF: <robot> has no <link>: a robot needs at least one".into(),
+            Some(line_at(root.range().start)),
+        ));
     }
     let roots: Vec<usize> = (0..robot.links.len())
         .filter(|&l| parent_joint[l].is_none())
@@ -527,6 +534,68 @@ fn check_numbers(
     Ok(())
 }
 
+/// What urdf-rs requires of an element, by tag and parent tag (`""`: any parent): its
+/// attributes, and the children it must have. urdf-rs says only "missing field `mass`" when
+/// one is absent; checked first, the message names the link or joint and the line.
+const REQUIRED: [(&str, &str, &[&str], &[&str]); 13] = [
+    ("link", "robot", &["name"], &[]),
+    ("joint", "robot", &["name", "type"], &["parent", "child"]),
+    ("material", "", &["name"], &[]),
+    ("inertial", "link", &[], &["mass", "inertia"]),
+    ("mass", "inertial", &["value"], &[]),
+    (
+        "inertia",
+        "inertial",
+        &["ixx", "ixy", "ixz", "iyy", "iyz", "izz"],
+        &[],
+    ),
+    ("visual", "link", &[], &["geometry"]),
+    ("collision", "link", &[], &["geometry"]),
+    ("parent", "joint", &["link"], &[]),
+    ("child", "joint", &["link"], &[]),
+    ("limit", "joint", &["velocity"], &[]),
+    ("mimic", "joint", &["joint"], &[]),
+    ("safety_controller", "joint", &["k_velocity"], &[]),
+];
+
+/// Every element of [`REQUIRED`] has its attributes and children, or an error naming the
+/// link or joint it belongs to, what is missing, and the line.
+fn check_required(
+    root: roxmltree::Node,
+    line_at: &dyn Fn(usize) -> usize,
+) -> Result<(), (String, usize)> {
+    for node in root.descendants().filter(|n| n.is_element()) {
+        let tag = node.tag_name().name();
+        let parent = node.parent_element().map(|p| p.tag_name().name());
+        let Some((_, _, attributes, children)) = REQUIRED
+            .iter()
+            .find(|(t, p, _, _)| *t == tag && (p.is_empty() || Some(*p) == parent))
+        else {
+            continue;
+        };
+        let owner = node
+            .ancestors()
+            .find(|a| matches!(a.tag_name().name(), "link" | "joint"))
+            .map(|a| {
+                format!(
+                    "{} `{}`: ",
+                    a.tag_name().name(),
+                    a.attribute("name").unwrap_or_default()
+                )
+            })
+            .unwrap_or_default();
+        let line = line_at(node.range().start);
+        if let Some(a) = attributes.iter().find(|a| node.attribute(**a).is_none()) {
+            return Err((format!("URDF: {owner}<{tag}> has no `{a}` attribute"), line));
+        }
+        let has = |c: &str| node.children().any(|n| n.tag_name().name() == c);
+        if let Some(c) = children.iter().find(|c| !has(c)) {
+            return Err((format!("URDF: {owner}<{tag}> has no <{c}>"), line));
+        }
+    }
+    Ok(())
+}
+
 /// URDF's `R = Rz(yaw) Ry(pitch) Rx(roll)` from `[roll, pitch, yaw]`.
 fn rpy_matrix([roll, pitch, yaw]: [f64; 3]) -> [[f64; 3]; 3] {
     let (sr, cr) = roll.sin_cos();
@@ -543,9 +612,7 @@ fn rpy_matrix([roll, pitch, yaw]: [f64; 3]) -> [[f64; 3]; 3] {
 pub fn from_urdf_file(path: impl AsRef<Path>, options: UrdfOptions) -> Result<Model, ModelError> {
     let path = path.as_ref();
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        ModelError::single(None, format!("cannot read model file `{shown}`: {e}"), None)
-    })?;
+    let text = crate::source::read_model_file(path)?;
     from_urdf_str(&text, Some(&shown), options)
 }
 

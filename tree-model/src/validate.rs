@@ -47,11 +47,14 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     // Frame names: unique, not "world".
     let mut index_of: HashMap<&str, usize> = HashMap::new();
     for (k, f) in spec.frames.iter().enumerate() {
-        if f.name.is_empty() || f.name == "world" {
+        if !name_ok(&f.name) || f.name == "world" {
             errs.frame(
                 k,
                 FrameField::Name,
-                format!("frame name `{}` is reserved or empty", f.name),
+                format!(
+                    "frame name `{}` is reserved, empty or holds a control character",
+                    f.name.escape_debug()
+                ),
             );
         } else if let Some(&first) = index_of.get(f.name.as_str()) {
             errs.frame(
@@ -130,6 +133,18 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                             );
                         }
                         Joint::Constant(*x)
+                    }
+                    Value::Variable(name) if !name_ok(name) => {
+                        errs.frame(
+                            k,
+                            FrameField::Primitive,
+                            format!(
+                                "frame `{}`: variable name `{}` is empty or holds a control character",
+                                f.name,
+                                name.escape_debug()
+                            ),
+                        );
+                        Joint::Constant(0.0)
                     }
                     Value::Variable(name) => match var_index.get(name.as_str()) {
                         Some(&i) => {
@@ -312,6 +327,20 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                             v.name
                         ),
                     );
+                } else {
+                    // q̈ peaks at a·(2πf)²: it must be a number, or every step overflows.
+                    let w = 2.0 * std::f64::consts::PI * sine[2];
+                    if !(sine[1] * w * w).is_finite()
+                        || !(sine[0].abs() + sine[1].abs()).is_finite()
+                    {
+                        errs.push(
+                            site(),
+                            format!(
+                                "variable `{}`: motion with amplitude {} and frequency {} has an acceleration a·(2πf)² that overflows",
+                                v.name, short(sine[1]), short(sine[2])
+                            ),
+                        );
+                    }
                 }
                 Some(Motion::Sine {
                     offset: sine[0],
@@ -326,7 +355,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                     errs.push(
                         site(),
                         format!(
-                            "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing",
+                            "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing (and slopes that do not overflow)",
                             v.name
                         ),
                     );
@@ -395,6 +424,12 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
                     ),
                 );
             }
+        }
+        if !model.total_mass().is_finite() {
+            errs.push(
+                Site::Model,
+                "the masses add up to more than a floating-point number holds (the total mass overflows)".into(),
+            );
         }
         let dynamic = model.dynamic().len();
         let rows = model.constraint_rows();
@@ -582,4 +617,10 @@ fn variable_moves_mass(model: &Model, i: usize) -> bool {
         }
     }
     false
+}
+
+/// A name is usable in every output (CSV headers, `check`, JSON keys): not empty, no control
+/// characters (a newline would split a CSV header).
+fn name_ok(name: &str) -> bool {
+    !name.is_empty() && !name.chars().any(char::is_control)
 }

@@ -93,6 +93,20 @@ pub enum SimError {
         /// The step size reached.
         dt: f64,
     },
+    /// An adaptive run would take more steps than its budget
+    /// ([`crate::integrate::SimOptions::max_steps`]): a stiff model.
+    StepBudget {
+        /// The steps taken.
+        step: usize,
+        /// The simulated time reached.
+        t: f64,
+        /// The step size reached.
+        dt: f64,
+        /// The steps the run would need at that step size.
+        needed: f64,
+        /// The budget.
+        max_steps: usize,
+    },
     /// Bad arguments (sizes, step, tolerances).
     InvalidInput(String),
     /// The model uses something this runtime does not do yet.
@@ -136,6 +150,10 @@ impl fmt::Display for SimError {
             SimError::StepSizeTooSmall { step, t, dt } => {
                 write!(f, "step {step} (t = {t}): adaptive step size {dt:e} is too small")
             }
+            SimError::StepBudget { step, t, dt, needed, max_steps } => write!(
+                f,
+                "step {step} (t = {t}): the adaptive step size fell to {dt:.3e} s, so the run would need about {needed:.2e} steps, more than its budget of {max_steps}: the model is stiff here; use --integrator vi (or rk4 with a small --dt), or raise --max-steps"
+            ),
             SimError::InvalidInput(m) | SimError::Unsupported(m) => f.write_str(m),
         }
     }

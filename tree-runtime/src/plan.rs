@@ -356,14 +356,16 @@ fn nearest_kept(model: &Model, kept: &[Option<usize>], k: usize) -> Option<usize
 pub const MAX_COLUMNS: usize = 5_000_000;
 
 /// How many Jacobian columns the sweeps keep for `model`: Σ over frames of the variables at
-/// or above each (an upper bound for the folded plan). O(frames), before anything is built.
-pub fn column_count(model: &Model) -> usize {
+/// or above each (an upper bound for the folded plan), and the most variables at or above
+/// any one frame (the tree's depth in variables). O(frames), before anything is built.
+pub fn column_count(model: &Model) -> (usize, usize) {
     let mut above = vec![0usize; model.frames.len()];
-    let mut total = 0usize;
+    let (mut total, mut deepest) = (0usize, 0usize);
     for (k, f) in model.frames.iter().enumerate() {
         let own = usize::from(matches!(f.joint, Joint::Variable(_)));
         above[k] = f.parent.map_or(0, |p| above[p]) + own;
         total = total.saturating_add(above[k]);
+        deepest = deepest.max(above[k]);
     }
-    total
+    (total, deepest)
 }

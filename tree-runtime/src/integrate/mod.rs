@@ -25,6 +25,9 @@ use crate::trajectory::{Sample, Trajectory};
 /// The most steps a fixed-step run may take.
 pub const MAX_STEPS: f64 = 1e9;
 
+/// The default step budget of an adaptive run ([`SimOptions::max_steps`]).
+pub const DEFAULT_MAX_ADAPTIVE_STEPS: usize = 1_000_000;
+
 /// Which integrator to run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Method {
@@ -49,6 +52,10 @@ pub struct SimOptions {
     pub every: usize,
     /// Stabilisation of the continuous methods' constraints.
     pub baumgarte: Baumgarte,
+    /// The most steps an adaptive (rk45) run may take: it stops with
+    /// [`SimError::StepBudget`] when it has taken them, or as soon as the step size it has
+    /// reached would need more (a stiff model). Fixed-step runs are bounded by [`MAX_STEPS`].
+    pub max_steps: usize,
 }
 
 impl SimOptions {
@@ -60,6 +67,7 @@ impl SimOptions {
             duration,
             every: 1,
             baumgarte: Baumgarte::default(),
+            max_steps: DEFAULT_MAX_ADAPTIVE_STEPS,
         }
     }
 }
@@ -95,9 +103,9 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
             o.dt
         )));
     }
-    if !(o.duration >= 0.0 && o.duration.is_finite()) {
+    if !(o.duration > 0.0 && o.duration.is_finite()) {
         return Err(SimError::InvalidInput(format!(
-            "duration must be non-negative, got {}",
+            "duration must be positive, got {} s",
             o.duration
         )));
     }
@@ -106,6 +114,16 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
             "record every K-th step needs K ≥ 1".into(),
         ));
     }
+    // Tolerances are positive numbers: zero, negative or NaN would switch a test off.
+    let positive = |x: f64, what: &str| {
+        if x > 0.0 && x.is_finite() {
+            Ok(())
+        } else {
+            Err(SimError::InvalidInput(format!(
+                "{what} must be a positive number, got {x}"
+            )))
+        }
+    };
     if let Method::Vi(s) = o.method {
         if !(0.0..=1.0).contains(&s.alpha) {
             return Err(SimError::InvalidInput(format!(
@@ -113,17 +131,32 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
                 s.alpha
             )));
         }
+        positive(s.tolerance, "the VI's Newton tolerance")?;
+        positive(s.constraint_tolerance, "the VI's constraint tolerance")?;
+        if s.max_iterations == 0 {
+            return Err(SimError::InvalidInput(
+                "the VI needs at least one Newton iteration a step".into(),
+            ));
+        }
     }
     if let Method::Rk45(t) = o.method {
-        if !(t.rtol > 0.0 || t.atol > 0.0) {
+        positive(t.rtol, "rk45's relative tolerance")?;
+        positive(t.atol, "rk45's absolute tolerance")?;
+        if o.max_steps == 0 {
             return Err(SimError::InvalidInput(
-                "rk45 needs a positive tolerance".into(),
+                "rk45's step budget must be at least one step".into(),
             ));
         }
     }
     let steps = (o.duration / o.dt).round();
     if steps > MAX_STEPS {
         return Err(SimError::TooManySteps { steps });
+    }
+    if steps < 1.0 && !matches!(o.method, Method::Rk45(_)) {
+        return Err(SimError::InvalidInput(format!(
+            "the duration {} s is shorter than one step of {} s: nothing would be simulated",
+            o.duration, o.dt
+        )));
     }
     Ok(steps as usize)
 }
@@ -218,6 +251,9 @@ where
             ..RunSummary::default()
         },
         observe,
+        constraints: (0..sys.constraint_count())
+            .map(|r| sys.constraint_name(r).to_string())
+            .collect(),
         terms: Terms::zeros(n),
         qdd: sys.zero_vector(),
     };
@@ -246,6 +282,9 @@ where
             let (mut t, mut dt, mut k) = (0.0, options.dt, 0);
             let t_end = options.duration;
             while t < t_end {
+                if k % 1000 == 999 || k >= options.max_steps {
+                    budget(k, t, t_end, dt, options.max_steps)?;
+                }
                 let h = rk.step(sys, force, motion, k, t, t_end, &mut dt, &mut q, &mut dq)?;
                 t = if t + h >= t_end * (1.0 - 1e-15) {
                     t_end
@@ -325,6 +364,8 @@ where
 {
     summary: RunSummary,
     observe: &'a mut dyn FnMut(&Sample) -> Result<(), SimError>,
+    /// Constraint names, for errors.
+    constraints: Vec<String>,
     terms: Terms<N>,
     qdd: Vector<N>,
 }
@@ -333,7 +374,28 @@ impl<N: Dim> Recorder<'_, N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
+    /// Hands `s` on — unless something in it is not finite, which ends the run with an error
+    /// naming it (a state can be finite while its energy overflows: q̇ = 1e200).
     fn record(&mut self, s: &Sample) -> Result<(), SimError> {
+        let what = if !s.energy.is_finite() {
+            Some(format!("the energy E = T + V ({})", s.energy))
+        } else if let Some(r) = s.lambda.iter().position(|l| !l.is_finite()) {
+            Some(format!(
+                "the force λ of constraint `{}`",
+                self.constraints[r]
+            ))
+        } else if !s.violation.is_finite() {
+            Some("the constraint violation".to_string())
+        } else {
+            None
+        };
+        if let Some(what) = what {
+            return Err(SimError::NonFinite {
+                step: s.step,
+                t: s.t,
+                what,
+            });
+        }
         self.summary.recorded += 1;
         self.summary.worst_violation = self.summary.worst_violation.max(s.violation);
         (self.observe)(s)
@@ -395,6 +457,22 @@ where
             violation,
         })
     }
+}
+
+/// An adaptive run's step budget: it fails once it has taken `max_steps`, or as soon as the
+/// step size `dt` it has reached at `t` would need more than `max_steps` to reach `t_end`.
+fn budget(k: usize, t: f64, t_end: f64, dt: f64, max_steps: usize) -> Result<(), SimError> {
+    let needed = k as f64 + (t_end - t) / dt;
+    if k >= max_steps || needed > max_steps as f64 {
+        return Err(SimError::StepBudget {
+            step: k,
+            t,
+            dt,
+            needed,
+            max_steps,
+        });
+    }
+    Ok(())
 }
 
 fn check_finite<N: Dim>(step: usize, t: f64, q: &Vector<N>, dq: &Vector<N>) -> Result<(), SimError>

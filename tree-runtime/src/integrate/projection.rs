@@ -78,9 +78,20 @@ where
         }
         y.copy_from(&c.h);
         if let Err((r, _)) = solve(&c, &mut gram, &mut y) {
-            return Err(SimError::Unsatisfiable {
-                constraint: sys.constraint_name(r).to_string(),
-                violation: c.h[r].abs(),
+            // A row no dynamic variable moves cannot be satisfied; rows that depend on
+            // each other (two planes facing each other, a string given twice) are redundant.
+            let moved = split.dynamic.iter().any(|&i| c.dh[(r, i)] != 0.0);
+            return Err(if moved {
+                SimError::SingularConstraints {
+                    step: 0,
+                    t: 0.0,
+                    constraint: sys.constraint_name(r).to_string(),
+                }
+            } else {
+                SimError::Unsatisfiable {
+                    constraint: sys.constraint_name(r).to_string(),
+                    violation: c.h[r].abs(),
+                }
             });
         }
         for &i in &split.dynamic {

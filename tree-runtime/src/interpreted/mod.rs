@@ -29,11 +29,12 @@ pub struct TreeSystem {
 impl TreeSystem {
     /// Builds the interpreted system for a validated model.
     pub fn new(model: &Model) -> Result<Self, SimError> {
-        let columns = crate::plan::column_count(model);
+        let (columns, deepest) = crate::plan::column_count(model);
         if columns > crate::plan::MAX_COLUMNS {
             return Err(SimError::InvalidInput(format!(
-                "model `{}` would need {columns} Jacobian columns (each frame's, for every variable above it); the interpreted system allocates at most {}: a chain about 3 000 variables deep",
+                "model `{}` would need {columns} Jacobian columns (each of its {} frames keeps one for every variable at or above it; its deepest frame has {deepest} variables above it); the interpreted system allocates at most {}",
                 model.name,
+                model.frames.len(),
                 crate::plan::MAX_COLUMNS
             )));
         }
