@@ -343,3 +343,154 @@ fn a_sparsely_recorded_animation_still_plays_in_real_time() {
     }
     assert_eq!(frames, 11);
 }
+
+/// A fresh scratch directory for one test.
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("tree-mech-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn outputs_never_overwrite_the_model_or_each_other_and_are_checked_before_the_run() {
+    let dir = scratch("paths");
+    let model = dir.join("m.toml");
+    std::fs::copy(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/models/pendulum.toml"),
+        &model,
+    )
+    .unwrap();
+    let original = std::fs::read(&model).unwrap();
+    let m = model.to_str().unwrap();
+    let at = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let dotted = format!("{}/./m.toml", dir.display());
+    let (png, csv, missing) = (at("x.png"), at("x.csv"), at("missing/x.png"));
+    let cases: [(Vec<&str>, &str); 6] = [
+        (vec!["--out", m], "is the same file as"),
+        (vec!["--out", &dotted], "is the same file as"),
+        (vec!["--out", &png, "--plot", &png], "is the same file as"),
+        (vec!["--plot", &csv], "the file name must end in .png"),
+        (vec!["--animate", &png], "the file name must end in .gif"),
+        (vec!["--plot", &missing], "does not exist"),
+    ];
+    for (args, expected) in cases {
+        let mut all = vec!["simulate", m, "--duration", "1"];
+        all.extend(args.iter().copied());
+        let (ok, stdout, stderr) = tree_mech(&all);
+        assert!(!ok && stdout.is_empty(), "{args:?}: {stdout}");
+        assert!(
+            stderr.starts_with("error: --") && stderr.contains(expected),
+            "{args:?}: {stderr}"
+        );
+        assert!(
+            !stderr.contains("Os {") && !stderr.contains("Error("),
+            "{stderr}"
+        );
+    }
+    assert_eq!(
+        std::fs::read(&model).unwrap(),
+        original,
+        "the model is untouched"
+    );
+    // Nothing half-written is left behind, and no temporary either.
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("m.toml")], "{left:?}");
+}
+
+#[test]
+fn a_failed_run_leaves_no_half_file_and_keeps_an_existing_one() {
+    let dir = scratch("failed");
+    let model = dir.join("spin.toml");
+    // Spun at 1e200 rad/s: step 0's energy overflows.
+    std::fs::write(
+        &model,
+        "[[frame]]\nname = \"j\"\nrx = \"q\"\n[[frame]]\nname = \"b\"\nparent = \"j\"\ntz = -1.0\nmass = 1.0\n[variables.q]\ndq0 = 1e200\n",
+    )
+    .unwrap();
+    let csv = dir.join("t.csv");
+    std::fs::write(&csv, "an earlier run\n").unwrap();
+    for integrator in ["rk4", "vi"] {
+        let (ok, _, stderr) = tree_mech(&[
+            "simulate",
+            model.to_str().unwrap(),
+            "--integrator",
+            integrator,
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert!(!ok && stderr.contains("is not finite"), "{stderr}");
+        assert_eq!(std::fs::read_to_string(&csv).unwrap(), "an earlier run\n");
+    }
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        2,
+        "no temporary left"
+    );
+    // eval and check: an error with a non-zero exit, never a JSON null.
+    let (ok, stdout, stderr) = tree_mech(&["eval", model.to_str().unwrap()]);
+    assert!(!ok && stdout.is_empty(), "{stdout}");
+    assert!(
+        stderr.contains("at this state, L is not finite"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn csv_headers_quote_names_with_commas() {
+    let dir = scratch("quote");
+    let model = dir.join("q.toml");
+    std::fs::write(
+        &model,
+        "[[frame]]\nname = \"j\"\nrx = \"x,y\"\n[[frame]]\nname = \"b\"\nparent = \"j\"\ntz = -1.0\nmass = 1.0\n[variables.\"x,y\"]\nq0 = 0.5\n",
+    )
+    .unwrap();
+    let csv = dir.join("t.csv");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        model.to_str().unwrap(),
+        "--duration",
+        "0.1",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header = text.lines().next().unwrap();
+    assert_eq!(header, "t,\"x,y\",\"dx,y\",energy");
+    // Every row has as many fields as the header names (4), and reads back as numbers.
+    for row in text.lines().skip(1) {
+        let fields: Vec<f64> = row.split(',').map(|f| f.parse().unwrap()).collect();
+        assert_eq!(fields.len(), 4, "{row}");
+    }
+}
+
+#[test]
+fn a_large_output_is_announced_before_the_run() {
+    let dir = scratch("large");
+    let csv = dir.join("t.csv");
+    // 10⁸ steps of a 1-variable model: some 8 GB of CSV. The run is refused at once by a
+    // bad option after the note, so nothing is written.
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--dt",
+        "1e-6",
+        "--duration",
+        "100",
+        "--alpha",
+        "2",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("note: ") && stderr.contains("GB"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("VI alpha must lie in [0, 1]"), "{stderr}");
+    assert!(!csv.exists());
+}

@@ -266,3 +266,132 @@ fn a_step_that_turns_a_joint_more_than_a_quarter_turn_is_refused_then_subdivided
     let turned = traj.last_q()[0] - q0[0];
     assert!((turned - 30.0).abs() < 1.0, "turned {turned}");
 }
+
+#[test]
+fn tolerances_must_be_positive_numbers_and_runs_at_least_one_step() {
+    let mut sys = interpreted(&load("pendulum.toml"));
+    let (q0, dq0) = sys.initial_state();
+    let vi = |tolerance| {
+        Method::Vi(ViSettings {
+            tolerance,
+            ..ViSettings::default()
+        })
+    };
+    let rk45 = |rtol, atol| Method::Rk45(Tolerance { rtol, atol });
+    for (method, expected) in [
+        (
+            vi(0.0),
+            "the VI's Newton tolerance must be a positive number, got 0",
+        ),
+        (
+            vi(-1.0),
+            "the VI's Newton tolerance must be a positive number, got -1",
+        ),
+        (
+            vi(f64::NAN),
+            "the VI's Newton tolerance must be a positive number, got NaN",
+        ),
+        (
+            rk45(-1.0, 1e-10),
+            "rk45's relative tolerance must be a positive number, got -1",
+        ),
+        (
+            rk45(f64::NAN, 1e-10),
+            "rk45's relative tolerance must be a positive number, got NaN",
+        ),
+        (
+            rk45(1e-8, -1.0),
+            "rk45's absolute tolerance must be a positive number, got -1",
+        ),
+    ] {
+        let options = SimOptions::new(method, 0.01, 1.0);
+        let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+        assert_eq!(err.to_string(), expected);
+    }
+    for method in [Method::Rk4, Method::Vi(ViSettings::default())] {
+        let options = SimOptions::new(method, 0.01, 0.004);
+        let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "the duration 0.004 s is shorter than one step of 0.01 s: nothing would be simulated"
+        );
+    }
+}
+
+#[test]
+fn a_stiff_adaptive_run_stops_at_its_step_budget_with_the_step_size_reached() {
+    // Damping 1e9 on a 1 kg pendulum: rk45 is stable only below Δt ≈ 2e-9 s, so 1 s needs
+    // some 10⁹ steps; the run stops within its first thousands of steps.
+    let mut model = load("pendulum.toml");
+    model.variables[0].damping = 1e9;
+    let mut sys = interpreted(&model);
+    let (q0, dq0) = sys.initial_state();
+    let options = SimOptions::new(Method::Rk45(Tolerance::default()), 0.01, 1.0);
+    let mut recorded = 0;
+    let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {
+        recorded += 1
+    })
+    .unwrap_err();
+    match &err {
+        SimError::StepBudget {
+            step,
+            dt,
+            needed,
+            max_steps,
+            ..
+        } => {
+            assert!(*step < 10_000, "stopped at step {step}");
+            assert!(*dt < 1e-8, "step size {dt}");
+            assert!(*needed > 1e8 && *max_steps == 1_000_000);
+        }
+        other => panic!("expected a step budget error, got {other}"),
+    }
+    assert!(recorded < 10_000);
+    assert!(err.to_string().contains("use --integrator vi"), "{err}");
+    // The VI takes it in its stride.
+    let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 1.0);
+    simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
+}
+
+#[test]
+fn an_energy_that_overflows_is_an_error_naming_it_and_the_step() {
+    // q̇ = 1e200 is a finite state whose kinetic energy is not.
+    let mut model = load("pendulum.toml");
+    model.variables[0].dq0 = 1e200;
+    for method in methods() {
+        let mut sys = interpreted(&model);
+        let (q0, dq0) = sys.initial_state();
+        let options = SimOptions::new(method, 0.01, 0.1);
+        let mut recorded = 0;
+        let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {
+            recorded += 1
+        })
+        .unwrap_err();
+        assert_eq!(recorded, 0, "{method:?}: nothing non-finite is handed out");
+        let msg = err.to_string();
+        assert!(
+            msg.starts_with("step 0 (t = 0): the energy E = T + V (")
+                && msg.ends_with(") is not finite"),
+            "{method:?}: {msg}"
+        );
+    }
+}
+
+#[test]
+fn opposite_planes_that_agree_are_redundant_not_unsatisfiable() {
+    // Two planes through the anchor with opposite normals hold the same x = 0.
+    let model = string_pendulum_with(
+        "[[constraint]]\nname = \"front\"\nkind = \"plane\"\nframes = [\"anchor\", \"bob\"]\nnormal = [1.0, 0.0, 0.0]\n\
+         [[constraint]]\nname = \"back\"\nkind = \"plane\"\nframes = [\"anchor\", \"bob\"]\nnormal = [-1.0, 0.0, 0.0]\n\
+         [variables.x]\nq0 = 0.1\n",
+    );
+    let mut sys = interpreted(&model);
+    let (q0, dq0) = sys.initial_state();
+    let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 0.1);
+    let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+    assert!(
+        matches!(&err, SimError::SingularConstraints { constraint, .. } if constraint == "back"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("redundant"), "{err}");
+}

@@ -4,8 +4,10 @@
 //! generated pathological ones (cycles, a link with two parents, 20 000-deep nesting).
 
 use proptest::prelude::*;
+use tree_mech::integrate::{run, Method, SimOptions, ViSettings};
 use tree_mech::model::{self, UrdfOptions};
-use tree_mech::{Order, System, TreeSystem};
+use tree_mech::runtime::ModelMotions;
+use tree_mech::{NoForce, Order, System, TreeSystem};
 
 fn seed(path: &str) -> String {
     std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path)).unwrap()
@@ -20,13 +22,35 @@ fn exercise(model: Result<model::Model, model::ModelError>) {
     let (q, dq) = sys.initial_state();
     let terms = sys.evaluate(&q, &dq, Order::Full);
     let _ = terms.l;
+    // A few steps: whatever a run hands out is finite (or the run is an error).
+    for method in [Method::Vi(ViSettings::default()), Method::Rk4] {
+        let options = SimOptions::new(method, 0.01, 0.03);
+        let mut motion = ModelMotions::of(&sys);
+        let _ = run(
+            &mut sys,
+            &q,
+            &dq,
+            &options,
+            &mut NoForce,
+            &mut motion,
+            &mut |s| {
+                let values = s.q.iter().chain(s.dq).chain(s.lambda);
+                assert!(values
+                    .chain([&s.energy, &s.violation])
+                    .all(|x| x.is_finite()));
+                Ok(())
+            },
+        );
+    }
 }
 
-const TOKENS: [&str; 14] = [
+const TOKENS: [&str; 21] = [
     "nan",
     "inf",
     "-1e308",
     "1e308",
+    "1e200",
+    "1e-300",
     "\"x\"",
     "[",
     "]]",
@@ -37,7 +61,32 @@ const TOKENS: [&str; 14] = [
     "/>",
     "\"></joint>",
     "<link name=\"a\"/>",
+    // Names with separators: a CSV header must survive them.
+    "\"x,y\"",
+    "\"a\\nb\"",
+    "\"\"",
+    // Deep XML (past the nesting limit) and an element heavy with attributes.
+    DEEP_XML,
+    MANY_ATTRIBUTES,
 ];
+
+const DEEP_XML: &str = concat!(
+    "<a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a>",
+    "<a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a>",
+    "<a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a>",
+    "<a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a><a>",
+    "<a><a><a><a><a>",
+);
+
+const MANY_ATTRIBUTES: &str = concat!(
+    "<x a0=\"1\" a1=\"1\" a2=\"1\" a3=\"1\" a4=\"1\" a5=\"1\" a6=\"1\" a7=\"1\" a8=\"1\" a9=\"1\" ",
+    "b0=\"1\" b1=\"1\" b2=\"1\" b3=\"1\" b4=\"1\" b5=\"1\" b6=\"1\" b7=\"1\" b8=\"1\" b9=\"1\" ",
+    "c0=\"1\" c1=\"1\" c2=\"1\" c3=\"1\" c4=\"1\" c5=\"1\" c6=\"1\" c7=\"1\" c8=\"1\" c9=\"1\" ",
+    "d0=\"1\" d1=\"1\" d2=\"1\" d3=\"1\" d4=\"1\" d5=\"1\" d6=\"1\" d7=\"1\" d8=\"1\" d9=\"1\" ",
+    "e0=\"1\" e1=\"1\" e2=\"1\" e3=\"1\" e4=\"1\" e5=\"1\" e6=\"1\" e7=\"1\" e8=\"1\" e9=\"1\" ",
+    "f0=\"1\" f1=\"1\" f2=\"1\" f3=\"1\" f4=\"1\" f5=\"1\" f6=\"1\" f7=\"1\" f8=\"1\" f9=\"1\" ",
+    "g0=\"1\" g1=\"1\" g2=\"1\" g3=\"1\" g4=\"1\"/>",
+);
 
 /// A mangled copy of `text`: cut at `cut`, `byte` written at `at`, `token` spliced at `splice`.
 fn mangle(text: &str, cut: usize, at: usize, byte: u8, splice: usize, token: &str) -> String {

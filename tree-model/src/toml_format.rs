@@ -102,7 +102,7 @@ struct RawVariable {
     kinematic: Option<bool>,
     motion: Option<RawMotion>,
     /// Rows checked to be pairs below (serde would read the first two of a longer row).
-    samples: Option<Vec<Vec<f64>>>,
+    samples: Option<Spanned<Vec<Vec<f64>>>>,
     limits: Option<[f64; 2]>,
 }
 
@@ -199,7 +199,10 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
     }
     let mut variable_lines = BTreeMap::new();
     for (name, v) in &raw.variables {
-        let rows = v.get_ref().samples.iter().flatten();
+        let Some(samples) = &v.get_ref().samples else {
+            continue;
+        };
+        let rows = samples.get_ref().iter();
         if let Some((k, row)) = rows.enumerate().find(|(_, r)| r.len() != 2) {
             return Err(ModelError::single(
                 src.clone(),
@@ -208,7 +211,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                     k + 1,
                     row.len()
                 ),
-                Some(line_index.of(v.span().start)),
+                Some(line_index.of(samples.span().start)),
             ));
         }
     }
@@ -233,7 +236,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                 samples: v
                     .samples
                     .as_ref()
-                    .map(|rows| rows.iter().map(|r| [r[0], r[1]]).collect()),
+                    .map(|rows| rows.get_ref().iter().map(|r| [r[0], r[1]]).collect()),
                 limits: v.limits,
             }
         })

@@ -195,3 +195,99 @@ fn from_file_reads_urdf_by_extension_and_refuses_a_floating_toml() {
         "{e}"
     );
 }
+
+#[test]
+fn deep_or_attribute_heavy_xml_is_refused_before_parsing() {
+    // urdf-rs recursed once per level and overflowed its stack at about 15 000.
+    let deep = format!(
+        "<robot name=\"r\">\n<link name=\"a\">\n{}{}</link></robot>",
+        "<x>".repeat(15_000),
+        "</x>".repeat(15_000)
+    );
+    let msg = error_of(&deep);
+    assert!(
+        msg.starts_with("r.urdf:3: XML nesting is deeper than the limit of 100"),
+        "{msg}"
+    );
+    // roxmltree compares an element's attributes pairwise: 200 000 took half a minute.
+    let attributes: String = (0..200_000).map(|k| format!(" a{k}=\"1\"")).collect();
+    let msg = error_of(&format!(
+        "<robot name=\"r\">\n<link name=\"a\"{attributes}/></robot>"
+    ));
+    assert!(
+        msg.starts_with("r.urdf:2: XML element has 200001 attributes, more than the limit of 64"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn what_urdf_rs_requires_is_named_with_its_element_and_line() {
+    let inertial = |body: &str| {
+        format!(
+            "<robot name=\"r\">\n<link name=\"base\"/>\n<link name=\"arm\"><inertial>{body}</inertial></link>\n\
+             <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/></joint></robot>"
+        )
+    };
+    let no_mass = inertial(r#"<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>"#);
+    assert_eq!(
+        error_of(&no_mass),
+        "r.urdf:3: URDF: link `arm`: <inertial> has no <mass>"
+    );
+    let no_izz = inertial(r#"<mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0"/>"#);
+    assert_eq!(
+        error_of(&no_izz),
+        "r.urdf:3: URDF: link `arm`: <inertia> has no `izz` attribute"
+    );
+    let no_child = arm(r#"<joint name="joint2" type="revolute"><parent link="upper"/></joint>"#);
+    assert!(
+        error_of(&no_child).ends_with("URDF: joint `joint2`: <joint> has no <child>"),
+        "{}",
+        error_of(&no_child)
+    );
+    let no_velocity = arm(
+        "<joint name=\"joint2\" type=\"revolute\"><parent link=\"upper\"/><child link=\"lower\"/>\n\
+         <limit effort=\"1\"/></joint>",
+    );
+    let msg = error_of(&no_velocity);
+    assert!(
+        msg.contains(":19: URDF: joint `joint2`: <limit> has no `velocity` attribute"),
+        "{msg}"
+    );
+    assert_eq!(
+        error_of("<robot name=\"empty\">\n</robot>"),
+        "r.urdf:1: URDF: <robot> has no <link>: a robot needs at least one"
+    );
+}
+
+#[test]
+fn reading_urdf_takes_time_linear_in_its_size() {
+    // A chain of n links; doubling n must not quadruple the time (3× allows for noise).
+    let chain = |n: usize| {
+        let mut s = String::from("<robot name=\"c\">\n<link name=\"l0\"/>\n");
+        for k in 1..=n {
+            s += &format!(
+                "<link name=\"l{k}\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link>\n\
+                 <joint name=\"j{k}\" type=\"revolute\"><parent link=\"l{}\"/><child link=\"l{k}\"/><origin xyz=\"0 0 1\"/><axis xyz=\"1 0 0\"/></joint>\n",
+                k - 1
+            );
+        }
+        s + "</robot>"
+    };
+    let time = |n: usize| {
+        let text = chain(n);
+        let start = std::time::Instant::now();
+        let model = from_urdf_str(&text, None, FIXED).unwrap();
+        assert_eq!(model.dof(), n);
+        start.elapsed().as_secs_f64()
+    };
+    let ratio = linear_ratio(time, 2_000);
+    assert!(ratio < 3.0, "doubling the chain took {ratio:.2}× the time");
+}
+
+/// The smallest of three ratios `time(2n) / time(n)` (the fastest repeat is the least noisy).
+pub fn linear_ratio(time: impl Fn(usize) -> f64, n: usize) -> f64 {
+    time(n); // warm up
+    (0..3)
+        .map(|_| time(2 * n) / time(n))
+        .fold(f64::INFINITY, f64::min)
+}
