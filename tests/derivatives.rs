@@ -180,6 +180,21 @@ fn poses_match_an_independent_composition() {
                 model.frames[f].name
             );
         }
+        // The model's own origins (used by validation) agree too.
+        for (f, (o, b)) in model
+            .origins(q.as_slice())
+            .iter()
+            .zip(reference_poses(&model, q.as_slice()))
+            .enumerate()
+        {
+            let d = (0..3).fold(0.0f64, |m, i| m.max((o[i] - b[(i, 3)]).abs()));
+            assert!(
+                d < 1e-13,
+                "{}: origin of `{}` off by {d:e}",
+                model.name,
+                model.frames[f].name
+            );
+        }
     }
 }
 

@@ -395,3 +395,21 @@ fn opposite_planes_that_agree_are_redundant_not_unsatisfiable() {
     );
     assert!(err.to_string().contains("redundant"), "{err}");
 }
+
+#[test]
+fn errors_print_as_sentences_also_through_debug() {
+    // `fn main() -> Result<(), Box<dyn Error>>` prints the error with `{:?}`.
+    let err =
+        tree_mech::model::from_toml_str("[[frame]]\nname = \"\"\n", Some("m.toml")).unwrap_err();
+    assert_eq!(format!("{err:?}"), err.to_string());
+    assert!(err.to_string().starts_with("m.toml:2: frame name"), "{err}");
+    let err = SimError::NonFinite {
+        step: 3,
+        t: 0.03,
+        what: "the energy E = T + V (inf)".into(),
+    };
+    assert_eq!(
+        format!("{err:?}"),
+        "step 3 (t = 0.03): the energy E = T + V (inf) is not finite"
+    );
+}

@@ -84,7 +84,7 @@ pub struct Problem {
 }
 
 /// Everything wrong with a model, collected before failing.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct ModelError {
     /// The file the model came from, if any.
     pub source_name: Option<String>,
@@ -122,6 +122,14 @@ impl fmt::Display for ModelError {
             }
         }
         Ok(())
+    }
+}
+
+/// The message itself, so `fn main() -> Result<(), Box<dyn Error>>` (which prints an
+/// error with `{:?}`) shows the sentence, not the struct.
+impl fmt::Debug for ModelError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(self, f)
     }
 }
 

@@ -307,6 +307,37 @@ impl Model {
             .is_some_and(|f| self.frames[f].primitive.is_rotation())
     }
 
+    /// Every frame's origin in world coordinates at configuration `q`, by composing the
+    /// primitives down the tree (for checks and pictures; the runtime has the fast path).
+    pub fn origins(&self, q: &[f64]) -> Vec<[f64; 3]> {
+        // (rotation, translation) of each frame in the world.
+        let mut poses: Vec<([[f64; 3]; 3], [f64; 3])> = Vec::with_capacity(self.frames.len());
+        let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        for f in &self.frames {
+            let (r, p) = f.parent.map_or((identity, [0.0; 3]), |k| poses[k]);
+            let x = match f.joint {
+                Joint::Constant(x) => x,
+                Joint::Variable(i) => q[i],
+            };
+            let axis = f.primitive.axis();
+            let pose = if f.primitive.is_rotation() {
+                // R_child = R · rot(axis, x): columns (a, b) of the plane turned by x.
+                let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+                let (s, c) = x.sin_cos();
+                let mut out = r;
+                for row in 0..3 {
+                    out[row][a] = c * r[row][a] + s * r[row][b];
+                    out[row][b] = -s * r[row][a] + c * r[row][b];
+                }
+                (out, p)
+            } else {
+                (r, [0, 1, 2].map(|row| p[row] + r[row][axis] * x))
+            };
+            poses.push(pose);
+        }
+        poses.into_iter().map(|(_, p)| p).collect()
+    }
+
     /// Index of the frame with this name.
     pub fn frame_index(&self, name: &str) -> Option<usize> {
         self.frames.iter().position(|f| f.name == name)

@@ -3,8 +3,8 @@
 
 use std::collections::HashMap;
 
-use crate::error::{FrameField, Problem, Site};
-use crate::model::{Frame, Joint, Mass, Model, Variable, DEFAULT_GRAVITY};
+use crate::error::{FrameField, Problem, Section, Site};
+use crate::model::{Frame, Joint, Mass, Model, SpringKind, Variable, DEFAULT_GRAVITY};
 use crate::motion::{CubicSpline, Motion};
 use crate::primitive::{PrimitiveKind, Value};
 use crate::spec::{FrameSpec, ModelSpec, ParameterSpec, VariableSpec};
@@ -400,6 +400,9 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
 
     if errs.0.is_empty() {
         let (constraints, springs, dampers) = elements;
+        // A spring with a rest length, or a damper, between frames that coincide at the
+        // start has no direction: its force is 0/0 at the first step.
+        let q0: Vec<f64> = variables.iter().map(|v| v.q0).collect();
         let model = Model {
             name: spec.name.clone(),
             gravity,
@@ -409,6 +412,39 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             springs,
             dampers,
         };
+        let origins = model.origins(&q0);
+        let apart = |[a, b]: [usize; 2]| {
+            let (pa, pb) = (origins[a], origins[b]);
+            let d = [0, 1, 2].map(|k| pa[k] - pb[k]);
+            let scale = pa.iter().chain(&pb).fold(0.0f64, |m, x| m.max(x.abs()));
+            d.iter()
+                .any(|x| x.abs() > 1e-12 * scale.max(f64::MIN_POSITIVE))
+        };
+        let name = |k: usize| model.frames[k].name.as_str();
+        for (index, s) in model.springs.iter().enumerate() {
+            if let SpringKind::Frames(fr) = s.kind {
+                if s.rest != 0.0 && !apart(fr) {
+                    errs.push(
+                        Site::Element { section: Section::Spring, index, field: Some("frames") },
+                        format!(
+                            "spring {}: frames `{}` and `{}` coincide at the initial configuration, where a spring of rest length {} has no direction; start them apart (or use rest = 0)",
+                            index + 1, name(fr[0]), name(fr[1]), s.rest
+                        ),
+                    );
+                }
+            }
+        }
+        for (index, d) in model.dampers.iter().enumerate() {
+            if !apart(d.frames) {
+                errs.push(
+                    Site::Element { section: Section::Damper, index, field: Some("frames") },
+                    format!(
+                        "damper {}: frames `{}` and `{}` coincide at the initial configuration, where a damper has no direction; start them apart",
+                        index + 1, name(d.frames[0]), name(d.frames[1])
+                    ),
+                );
+            }
+        }
         for (i, v) in model.variables.iter().enumerate() {
             if v.is_kinematic() {
                 continue;

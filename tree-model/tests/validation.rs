@@ -527,3 +527,36 @@ fn a_file_over_the_size_limit_is_refused_without_reading_it_whole() {
         "{err}"
     );
 }
+
+#[test]
+fn a_spring_or_damper_between_coinciding_frames_is_named_at_validation() {
+    // Two frames at the same point at the start: the force's direction is 0/0 (the run failed
+    // at step 0 with "acceleration q̈ is not finite").
+    let text = |element: &str| {
+        format!(
+            "[[frame]]\nname = \"a\"\ntx = \"x\"\nmass = 1.0\n[[frame]]\nname = \"b\"\nty = 0.0\n{element}"
+        )
+    };
+    let err = |t: &str| {
+        tree_model::from_toml_str(t, Some("m.toml"))
+            .unwrap_err()
+            .to_string()
+    };
+    assert_eq!(
+        err(&text("[[spring]]\nframes = [\"a\", \"b\"]\nstiffness = 10.0\nrest = 0.5\n")),
+        "m.toml:9: spring 1: frames `a` and `b` coincide at the initial configuration, where a spring of rest length 0.5 has no direction; start them apart (or use rest = 0)"
+    );
+    assert_eq!(
+        err(&text("[[damper]]\nframes = [\"a\", \"b\"]\ndamping = 1.0\n")),
+        "m.toml:9: damper 1: frames `a` and `b` coincide at the initial configuration, where a damper has no direction; start them apart"
+    );
+    // Zero rest length is smooth through d = 0; apart, both are fine.
+    assert!(tree_model::from_toml_str(
+        &text("[[spring]]\nframes = [\"a\", \"b\"]\nstiffness = 10.0\n"),
+        None
+    )
+    .is_ok());
+    let apart =
+        text("[[damper]]\nframes = [\"a\", \"b\"]\ndamping = 1.0\n[variables.x]\nq0 = 0.1\n");
+    assert!(tree_model::from_toml_str(&apart, None).is_ok());
+}

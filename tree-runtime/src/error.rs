@@ -3,7 +3,7 @@
 use std::fmt;
 
 /// A simulation or evaluation failure.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub enum SimError {
     /// `M(q)` is not positive definite (Cholesky failed at this variable's pivot).
     SingularMassMatrix {
@@ -156,6 +156,14 @@ impl fmt::Display for SimError {
             ),
             SimError::InvalidInput(m) | SimError::Unsupported(m) => f.write_str(m),
         }
+    }
+}
+
+/// The message itself, so `?` out of a user's `main` (which prints with `{:?}`) shows the
+/// sentence.
+impl fmt::Debug for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(self, f)
     }
 }
 
