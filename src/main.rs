@@ -38,6 +38,15 @@ struct Cli {
     /// tx ty tz rz ry rx) between the world and the root link.
     #[arg(long, global = true)]
     floating_base: bool,
+    /// Hold a variable still as a constant, at its q0 or at VALUE: `--lock NAME[=VALUE]`,
+    /// repeated or comma-separated (as Pinocchio's reduced model locks joints).
+    #[arg(
+        long,
+        global = true,
+        value_name = "NAME[=VALUE]",
+        value_delimiter = ','
+    )]
+    lock: Vec<String>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -170,8 +179,11 @@ fn default_sigpipe() {}
 fn main() -> ExitCode {
     default_sigpipe();
     let cli = Cli::parse();
-    let urdf = model::UrdfOptions {
-        floating_base: cli.floating_base,
+    let source = Source {
+        urdf: model::UrdfOptions {
+            floating_base: cli.floating_base,
+        },
+        locks: cli.lock,
     };
     let result = match cli.command {
         Command::Simulate {
@@ -224,7 +236,7 @@ fn main() -> ExitCode {
                     ..SimOptions::new(method, dt, duration)
                 };
                 let outputs = Outputs::check(&model, &out, &plot, &animate)?;
-                let model = model::from_file(&model, urdf).map_err(|e| e.to_string())?;
+                let model = source.model(&model)?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
@@ -240,8 +252,10 @@ fn main() -> ExitCode {
                 }
             })
         }
-        Command::Eval { model, q, dq, t } => run_eval(&model, urdf, q.as_deref(), dq.as_deref(), t),
-        Command::Check { model } => run_check(&model, urdf),
+        Command::Eval { model, q, dq, t } => {
+            run_eval(&model, &source, q.as_deref(), dq.as_deref(), t)
+        }
+        Command::Check { model } => run_check(&model, &source),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -252,9 +266,30 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path, urdf: model::UrdfOptions) -> Result<TreeSystem, String> {
-    let model = model::from_file(path, urdf).map_err(|e| e.to_string())?;
-    TreeSystem::new(&model).map_err(|e| e.to_string())
+/// How every command reads its model: the URDF options and the variables to lock.
+struct Source {
+    urdf: model::UrdfOptions,
+    locks: Vec<String>,
+}
+
+impl Source {
+    /// The model at `path`, with the locked variables held.
+    fn model(&self, path: &Path) -> Result<model::Model, String> {
+        let model = model::from_file(path, self.urdf).map_err(|e| e.to_string())?;
+        if self.locks.is_empty() {
+            return Ok(model);
+        }
+        let locks = self
+            .locks
+            .iter()
+            .map(|l| model::Lock::parse(l))
+            .collect::<Result<Vec<_>, _>>()?;
+        model.locked(&locks).map_err(|e| e.to_string())
+    }
+
+    fn system(&self, path: &Path) -> Result<TreeSystem, String> {
+        TreeSystem::new(&self.model(path)?).map_err(|e| e.to_string())
+    }
 }
 
 /// `a,b` for Baumgarte stabilisation.
@@ -276,6 +311,13 @@ fn parse_baumgarte(text: Option<&str>) -> Result<Baumgarte, String> {
         [a, b] => Ok(Baumgarte { a, b }),
         _ => Err(format!("--baumgarte: `{text}` is not two numbers a,b")),
     }
+}
+
+/// A sum without its rounding noise: 12 significant digits, written shortest
+/// (17.451901, not 17.451901000000003).
+fn tidy(x: f64) -> String {
+    let rounded: f64 = format!("{x:.11e}").parse().unwrap_or(x);
+    format!("{rounded}")
 }
 
 /// A number for the summary: plain when moderate, scientific when huge or tiny.
@@ -549,12 +591,12 @@ fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Ve
 
 fn run_eval(
     path: &Path,
-    urdf: model::UrdfOptions,
+    source: &Source,
     q: Option<&str>,
     dq: Option<&str>,
     time: f64,
 ) -> Result<(), String> {
-    let mut sys = load(path, urdf)?;
+    let mut sys = source.system(path)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
     let (q0, dq0) = sys.initial_state();
@@ -658,10 +700,13 @@ fn run_eval(
     Ok(())
 }
 
-fn run_check(path: &Path, urdf: model::UrdfOptions) -> Result<(), String> {
-    let model = model::from_file(path, urdf).map_err(|e| e.to_string())?;
+fn run_check(path: &Path, source: &Source) -> Result<(), String> {
+    let model = source.model(path)?;
     let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
     println!("model `{}`: valid", model.name);
+    if !source.locks.is_empty() {
+        println!("locked (held as constants): {}", source.locks.join(", "));
+    }
     println!(
         "gravity: [{}, {}, {}]",
         model.gravity[0], model.gravity[1], model.gravity[2]
@@ -744,7 +789,7 @@ fn run_check(path: &Path, urdf: model::UrdfOptions) -> Result<(), String> {
     println!(
         "{} masses, total mass {} kg:",
         masses.len(),
-        model.total_mass()
+        tidy(model.total_mass())
     );
     for f in masses {
         let m = f.mass.unwrap();

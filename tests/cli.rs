@@ -494,3 +494,37 @@ fn a_large_output_is_announced_before_the_run() {
     assert!(stderr.contains("VI alpha must lie in [0, 1]"), "{stderr}");
     assert!(!csv.exists());
 }
+
+#[test]
+fn lock_holds_joints_as_constants_in_every_command() {
+    let fingers = "panda_finger_joint1,panda_finger_joint2=0.02";
+    let (ok, stdout, stderr) = tree_mech(&["check", "models/panda.urdf", "--lock", fingers]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("31 frames, 7 variables:"), "{stdout}");
+    assert!(!stdout.contains("panda_finger_joint1 "), "{stdout}");
+    assert!(stdout
+        .contains("locked (held as constants): panda_finger_joint1, panda_finger_joint2=0.02"));
+    // The finger frame holds the locked value.
+    let (ok, stdout, stderr) = tree_mech(&["eval", "models/panda.urdf", "--lock", fingers]);
+    assert!(ok, "{stderr}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(json["variables"].as_array().unwrap().len(), 7);
+    let (ok, stdout, stderr) = tree_mech(&[
+        "simulate",
+        "models/panda.urdf",
+        "--lock",
+        fingers,
+        "--duration",
+        "0.5",
+    ]);
+    assert!(ok && stdout.contains("(7 variables)"), "{stdout}{stderr}");
+    for (lock, expected) in [
+        ("nope", "cannot lock `nope`: the model has no such variable"),
+        ("theta=x", "--lock `theta=x`: `x` is not a finite number"),
+        ("theta,theta", "`theta` is locked twice"),
+        ("theta", "every variable is locked"),
+    ] {
+        let (ok, _, stderr) = tree_mech(&["check", "models/pendulum.toml", "--lock", lock]);
+        assert!(!ok && stderr.contains(expected), "{lock}: {stderr}");
+    }
+}

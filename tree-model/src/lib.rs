@@ -38,6 +38,7 @@
 mod builder;
 mod elements;
 mod error;
+mod lock;
 mod model;
 mod motion;
 mod primitive;
@@ -49,6 +50,7 @@ mod validate;
 
 pub use builder::{n_link_pendulum, ModelBuilder};
 pub use error::{FrameField, ModelError, Problem, Section, Site};
+pub use lock::Lock;
 pub use model::{
     Constraint, ConstraintKind, Damper, Frame, Joint, Mass, Model, Parameter, Spring, SpringKind,
     Variable, DEFAULT_GRAVITY,

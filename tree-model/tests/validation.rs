@@ -560,3 +560,42 @@ fn a_spring_or_damper_between_coinciding_frames_is_named_at_validation() {
         text("[[damper]]\nframes = [\"a\", \"b\"]\ndamping = 1.0\n[variables.x]\nq0 = 0.1\n");
     assert!(tree_model::from_toml_str(&apart, None).is_ok());
 }
+
+#[test]
+fn locking_renumbers_variables_and_turns_lengths_and_springs_into_constants() {
+    use tree_model::{ConstraintKind, Joint, Lock, Parameter, SpringKind};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/models/elements.toml");
+    let model = tree_model::from_toml_file(path).unwrap();
+    let lock = |s: &str| Lock::parse(s).unwrap();
+    let held = model.locked(&[lock("bend=0.25"), lock("len")]).unwrap();
+    assert_eq!(held.dof(), model.dof() - 2);
+    let names: Vec<&str> = held.variables.iter().map(|v| v.name.as_str()).collect();
+    assert!(
+        !names.contains(&"bend") && !names.contains(&"len"),
+        "{names:?}"
+    );
+    // Every frame still drives the variable it drove, by name.
+    for (f, g) in model.frames.iter().zip(&held.frames) {
+        match (f.joint, g.joint) {
+            (Joint::Variable(i), Joint::Variable(j)) => {
+                assert_eq!(model.variables[i].name, held.variables[j].name)
+            }
+            (Joint::Variable(i), Joint::Constant(x)) => {
+                assert_eq!(model.variables[i].name, "bend");
+                assert_eq!(x, 0.25);
+            }
+            (a, b) => assert_eq!(a, b),
+        }
+    }
+    // The string's length is its q0 now; the spring on `bend` is gone.
+    let len_q0 = model.variables[model.variable_index("len").unwrap()].q0;
+    assert!(held.constraints.iter().any(|c| matches!(
+        c.kind,
+        ConstraintKind::Distance { length: Parameter::Constant(l) } if l == len_q0
+    )));
+    assert_eq!(held.springs.len(), model.springs.len() - 1);
+    assert!(held
+        .springs
+        .iter()
+        .all(|s| !matches!(s.kind, SpringKind::Variable(j) if held.variables[j].name == "bend")));
+}
