@@ -535,20 +535,37 @@ fn run_simulate<S: System<N = Dyn>>(
         )
     };
     let kinematic = (0..sys.dof()).any(|i| sys.is_kinematic(i));
-    let energy_note = if kinematic {
-        " (not conserved: kinematic inputs do work)"
+    let dissipated = summary.dissipated;
+    let balance = e_end - e0 + dissipated;
+    let energy = match (kinematic, dissipated != 0.0) {
+        (false, false) => format!("drift {balance:+.3e} J"),
+        (false, true) => format!(
+            "damping took out {} J, so ΔE + dissipated = {balance:+.3e} J is the integrator's error",
+            num(dissipated)
+        ),
+        (true, false) => format!(
+            "not conserved: kinematic inputs did {} J of work",
+            num(balance)
+        ),
+        (true, true) => format!(
+            "damping took out {} J; kinematic inputs did ΔE + dissipated = {} J of work",
+            num(dissipated),
+            num(balance)
+        ),
+    };
+    let variables = if sys.dof() == 1 {
+        "variable"
     } else {
-        ""
+        "variables"
     };
     println!(
-        "Simulated `{name}` ({} variables) for {t_end} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
-         Energy went from {} to {} J{energy_note} (drift {:+.3e} J).{constrained}{}{}{}",
+        "Simulated `{name}` ({} {variables}) for {t_end} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
+         Energy went from {} to {} J ({energy}).{constrained}{}{}{}",
         sys.dof(),
         summary.steps,
         wall.as_secs_f64(),
         num(e0),
         num(e_end),
-        e_end - e0,
         shown(&out, "Trajectory"),
         shown(&plot_path, "Plot"),
         shown(&animate_path, "Animation"),

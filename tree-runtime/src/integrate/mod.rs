@@ -92,6 +92,10 @@ pub struct RunSummary {
     pub subdivided_steps: usize,
     /// The largest `max |h|` over the recorded samples.
     pub worst_violation: f64,
+    /// The energy the model's own forces (damping, dampers) took out over the run, by each
+    /// integrator's own quadrature of `−∫ F·q̇ dt`: with no kinematic inputs,
+    /// `ΔE + dissipated` is the integrator's energy error.
+    pub dissipated: f64,
     /// What the projection of the initial state onto the constraints moved.
     pub moved: Vec<Moved>,
 }
@@ -194,6 +198,7 @@ where
     })?;
     traj.newton_iterations = summary.newton_iterations;
     traj.subdivided_steps = summary.subdivided_steps;
+    traj.dissipated = summary.dissipated;
     Ok(traj)
 }
 
@@ -267,6 +272,7 @@ where
             for k in 0..steps {
                 let t = k as f64 * options.dt;
                 rk.step(sys, force, motion, k, t, options.dt, &mut q, &mut dq)?;
+                rec.summary.dissipated += rk.dissipated;
                 let t = (k + 1) as f64 * options.dt;
                 check_finite(k + 1, t, &q, &dq)?;
                 if recorded(k + 1, k + 1 == steps) {
@@ -286,6 +292,7 @@ where
                     budget(k, t, t_end, dt, options.max_steps)?;
                 }
                 let h = rk.step(sys, force, motion, k, t, t_end, &mut dt, &mut q, &mut dq)?;
+                rec.summary.dissipated += rk.dissipated;
                 t = if t + h >= t_end * (1.0 - 1e-15) {
                     t_end
                 } else {
@@ -334,6 +341,7 @@ where
                     &mut q_next,
                 )?;
                 rec.summary.newton_iterations += vi.iterations;
+                rec.summary.dissipated += vi.dissipated;
                 rec.summary.subdivided_steps += (vi.subdivisions > 0) as usize;
                 if recorded(k + 1, k + 1 == steps) {
                     let t = (k + 1) as f64 * options.dt;

@@ -19,6 +19,9 @@ where
     kv: [Vector<N>; 4],
     q_stage: Vector<N>,
     v_stage: Vector<N>,
+    /// The energy the model's own forces (damping, dampers) took out over the last step:
+    /// `−∫ F·q̇ dt` by the step's own quadrature (RK4's weights on its stages' power).
+    pub dissipated: f64,
 }
 
 impl<N: Dim> Rk4<N>
@@ -35,6 +38,7 @@ where
             kv: [z(), z(), z(), z()],
             q_stage: z(),
             v_stage: z(),
+            dissipated: 0.0,
         }
     }
 
@@ -56,6 +60,8 @@ where
         P: Prescription,
     {
         const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
+        const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
+        self.dissipated = 0.0;
         for s in 0..4 {
             self.q_stage.copy_from(q);
             self.v_stage.copy_from(dq);
@@ -84,8 +90,10 @@ where
                 &self.v_stage,
                 &mut self.kv[s],
             )?;
+            let power = self.dynamics.terms.force.dot(&self.v_stage);
+            self.dissipated -= W[s] * dt / 6.0 * power;
         }
-        for (k, w) in [1.0, 2.0, 2.0, 1.0].into_iter().enumerate() {
+        for (k, w) in W.into_iter().enumerate() {
             q.axpy(w * dt / 6.0, &self.kq[k], 1.0);
             dq.axpy(w * dt / 6.0, &self.kv[k], 1.0);
         }

@@ -100,6 +100,11 @@ where
     pub evaluations: usize,
     /// Whether stage 0 of the next step is already in `kq[0]`, `kv[0]` (at `fsal_t`).
     fsal: Option<f64>,
+    /// The model forces' power `F·q̇` at each stage.
+    power: [f64; 7],
+    /// The energy the model's own forces took out over the last accepted step, `−∫ F·q̇ dt`
+    /// by the fifth-order weights.
+    pub dissipated: f64,
 }
 
 impl<N: Dim> Rk45<N>
@@ -120,6 +125,8 @@ where
             q_stage: z(),
             v_stage: z(),
             rejected: 0,
+            power: [0.0; 7],
+            dissipated: 0.0,
         }
     }
 
@@ -190,7 +197,7 @@ where
                     &self.v_stage,
                     &mut self.kv[s],
                 ) {
-                    Ok(()) => {}
+                    Ok(()) => self.power[s] = self.dynamics.terms.force.dot(&self.v_stage),
                     // A trial stage gone non-finite: reject the step and shrink it.
                     Err(SimError::NonFinite { .. }) if s > 0 => {
                         finite = false;
@@ -232,11 +239,13 @@ where
                 (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
             };
             if err <= 1.0 {
+                self.dissipated = -h * (0..7).map(|s| B5[s] * self.power[s]).sum::<f64>();
                 q.copy_from(&self.q_stage);
                 dq.copy_from(&self.v_stage);
                 // The last stage, at (t + h, the new state), starts the next step.
                 self.kq.swap(0, 6);
                 self.kv.swap(0, 6);
+                self.power[0] = self.power[6];
                 self.fsal = Some(t + h);
                 // A step shortened to land on t_end leaves the proposal as it was.
                 if h >= *dt {

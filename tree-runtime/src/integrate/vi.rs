@@ -147,6 +147,10 @@ where
     pub iterations: usize,
     /// Subdivisions the last step needed (0 when it went through whole).
     pub subdivisions: usize,
+    /// The energy the model's own forces (damping, dampers) took out over the last step:
+    /// the discrete work `−F(q_α, v)·(q₂ − q₁)` of the force the step applied, summed over
+    /// its sub-steps.
+    pub dissipated: f64,
 }
 
 impl<N: Dim> MidpointVi<N>
@@ -185,6 +189,7 @@ where
             dt: 0.0,
             iterations: 0,
             subdivisions: 0,
+            dissipated: 0.0,
             angles: split
                 .dynamic
                 .iter()
@@ -496,6 +501,7 @@ where
     {
         self.iterations = 0;
         self.subdivisions = 0;
+        self.dissipated = 0.0;
         self.advance(sys, force, motion, step, t, dt, q, p, q_next, 0)
     }
 
@@ -662,6 +668,8 @@ where
             });
         }
         p.copy_from(p2);
+        // F·(q₂ − q₁) = Δt F·v: the work of the model's forces over the step.
+        self.dissipated -= dt * self.terms.force.dot(&self.velocity);
         self.last_velocity.copy_from(&self.velocity);
         std::mem::swap(q, q_next);
         Ok(())
