@@ -168,70 +168,215 @@ impl Camera {
     }
 }
 
+/// Where the camera looks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CameraMode {
+    /// Fixed on the start's workspace: everything at the start, and the ball around the root
+    /// its masses can swing through (a swinging arm stays in view; a falling body leaves it).
+    #[default]
+    Fixed,
+    /// The same scale, following the root (the first rotating frame: a free body's torso).
+    Track,
+}
+
+/// The frame the camera centres on: the first rotating frame (past a floating base's
+/// translations), or the first frame.
+fn root_frame(model: &Model) -> usize {
+    model
+        .frames
+        .iter()
+        .position(|f| f.primitive.is_rotation())
+        .unwrap_or(0)
+}
+
 /// Writes the animation of the frame poses `frames` (one `Vec<Pose>` per picture, taken at
-/// the times `times`) of `model` to `path`, played in real time: each picture shows for the
+/// the times `times`) of `model` to `out`, played in real time: each picture shows for the
 /// mean spacing of `times` (the samples a run records need not fall on a 1/FPS grid).
+/// Pictures are drawn and compressed on every core, a fixed palette (the figure's colours,
+/// a colour cube and greys) instead of a per-picture quantisation; `progress` hears of each
+/// picture written.
 pub fn write_gif(
     model: &Model,
     times: &[f64],
     frames: &[Vec<Pose>],
     out: &OutputFile,
+    mode: CameraMode,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(), String> {
     let spacing = match times {
         [first, .., last] => (last - first) / (times.len() - 1) as f64,
         _ => 1.0 / FPS,
     };
-    let delay_ms = (1000.0 * spacing).round() as u32;
-    let err = |e: &dyn Sentence| {
-        format!(
-            "cannot write `{}`: {}",
-            out.path().display(),
-            drawing_error(e)
-        )
-    };
+    let delay = ((100.0 * spacing).round() as u16).max(1);
+    let err =
+        |e: &dyn Sentence| format!("cannot write `{}`: {}", out.path().display(), e.sentence());
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
     let figure = Figure::of(model);
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for pose in frames.iter().flatten() {
+    let Some(start) = frames.first() else {
+        return Ok(());
+    };
+    // The start's workspace: every frame at the start, and the ball around the root with
+    // its farthest mass on the rim.
+    let root = root_frame(model);
+    let centre = start[root].p;
+    let finite = |p: &&Pose| p.p.iter().all(|x| x.is_finite());
+    let reach = figure
+        .masses
+        .iter()
+        .map(|&(k, _)| &start[k])
+        .filter(finite)
+        .map(|p| dot(sub(p.p, centre), sub(p.p, centre)).sqrt())
+        .fold(1e-3, f64::max);
+    let (mut lo0, mut hi0) = (centre.map(|x| x - reach), centre.map(|x| x + reach));
+    for p in start.iter().filter(finite) {
         for i in 0..3 {
-            if pose.p[i].is_finite() {
-                lo[i] = lo[i].min(pose.p[i]);
-                hi[i] = hi[i].max(pose.p[i]);
+            lo0[i] = lo0[i].min(p.p[i]);
+            hi0[i] = hi0[i].max(p.p[i]);
+        }
+    }
+    let floor = lo0[2];
+    let file = std::fs::File::create(out.temp()).map_err(|e| err(&e.to_string()))?;
+    let mut encoder = gif::Encoder::new(
+        std::io::BufWriter::new(file),
+        SIZE.0 as u16,
+        SIZE.1 as u16,
+        &palette(),
+    )
+    .map_err(|e| err(&e.to_string()))?;
+    encoder
+        .set_repeat(gif::Repeat::Infinite)
+        .map_err(|e| err(&e.to_string()))?;
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, 8);
+    let picture = |k: usize| -> Result<gif::Frame<'static>, String> {
+        let shift = match mode {
+            CameraMode::Fixed => [0.0; 3],
+            CameraMode::Track => sub(frames[k][root].p, centre),
+        };
+        let (lo, hi) = (
+            [0, 1, 2].map(|i| lo0[i] + shift[i]),
+            [0, 1, 2].map(|i| hi0[i] + shift[i]),
+        );
+        let camera = Camera::framing(lo, hi);
+        let mut rgb = vec![255u8; 3 * (SIZE.0 * SIZE.1) as usize];
+        {
+            let area = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
+            let scene = Scene {
+                figure: &figure,
+                camera: &camera,
+                lo,
+                hi,
+                floor,
+                model,
+            };
+            draw_frame(&area, &scene, times[k], &frames[k])?;
+            area.present().map_err(|e| drawing_error(&e))?;
+        }
+        let indices: Vec<u8> = rgb
+            .chunks_exact(3)
+            .map(|p| palette_index([p[0], p[1], p[2]]))
+            .collect();
+        let mut frame =
+            gif::Frame::from_indexed_pixels(SIZE.0 as u16, SIZE.1 as u16, &indices, None);
+        frame.delay = delay;
+        frame.make_lzw_pre_encoded();
+        Ok(frame)
+    };
+    // A batch of pictures at a time, split over the threads, written in order.
+    let batch = 4 * threads;
+    for first in (0..frames.len()).step_by(batch) {
+        let last = (first + batch).min(frames.len());
+        let mut done: Vec<Option<Result<gif::Frame<'static>, String>>> =
+            (first..last).map(|_| None).collect();
+        std::thread::scope(|s| {
+            for (t, slots) in done.chunks_mut(batch.div_ceil(threads)).enumerate() {
+                let picture = &picture;
+                let begin = first + t * batch.div_ceil(threads);
+                s.spawn(move || {
+                    for (j, slot) in slots.iter_mut().enumerate() {
+                        *slot = Some(picture(begin + j));
+                    }
+                });
+            }
+        });
+        for (j, frame) in done.into_iter().enumerate() {
+            let frame = frame.unwrap_or_else(|| Err("a picture was not drawn".into()))?;
+            encoder
+                .write_lzw_pre_encoded_frame(&frame)
+                .map_err(|e| err(&e.to_string()))?;
+            progress(first + j + 1, frames.len());
+        }
+    }
+    encoder
+        .into_inner()
+        .and_then(|mut w| std::io::Write::flush(&mut w))
+        .map_err(|e| err(&e.to_string()))?;
+    Ok(())
+}
+
+/// The GIF's one palette: the figure's own colours exactly, then a 6×6×6 colour cube and a
+/// ramp of greys for everything between (anti-aliased text).
+const NAMED: [RGBColor; 9] = [
+    WHITE, BLACK, STRING, SPRING, DAMPER, BONE, WOOD, ANCHOR, GRID,
+];
+const GREYS: usize = 256 - NAMED.len() - 216;
+
+fn palette() -> Vec<u8> {
+    let mut p = Vec::with_capacity(768);
+    for c in NAMED {
+        p.extend([c.0, c.1, c.2]);
+    }
+    for r in 0..6u8 {
+        for g in 0..6u8 {
+            for b in 0..6u8 {
+                p.extend([r * 51, g * 51, b * 51]);
             }
         }
     }
-    if !lo[0].is_finite() {
-        (lo, hi) = ([-1.0; 3], [1.0; 3]);
+    for k in 0..GREYS {
+        let v = (255 * k / (GREYS - 1)) as u8;
+        p.extend([v, v, v]);
     }
-    // The world origin (a pendulum's pivot) belongs in the picture too.
-    for i in 0..3 {
-        lo[i] = lo[i].min(0.0);
-        hi[i] = hi[i].max(0.0);
+    p
+}
+
+/// A pixel's palette entry: a figure colour exactly, a grey to the nearest grey, anything
+/// else to the nearest corner of the colour cube.
+fn palette_index(c: [u8; 3]) -> u8 {
+    if let Some(k) = NAMED.iter().position(|n| [n.0, n.1, n.2] == c) {
+        return k as u8;
     }
-    let camera = Camera::framing(lo, hi);
-    let root = BitMapBackend::gif(out.temp(), SIZE, delay_ms.max(10))
-        .map_err(|e| err(&e))?
-        .into_drawing_area();
-    for (t, poses) in times.iter().zip(frames) {
-        draw_frame(&root, &figure, &camera, lo, hi, model, *t, poses).map_err(|e| err(&e))?;
-        root.present().map_err(|e| err(&e))?;
+    if c[0] == c[1] && c[1] == c[2] {
+        let k = (c[0] as usize * (GREYS - 1) + 127) / 255;
+        return (NAMED.len() + 216 + k) as u8;
     }
-    Ok(())
+    let q = |x: u8| (x as usize + 25) / 51;
+    (NAMED.len() + 36 * q(c[0]) + 6 * q(c[1]) + q(c[2])) as u8
+}
+
+/// What every picture of one animation shares.
+struct Scene<'a> {
+    figure: &'a Figure,
+    camera: &'a Camera,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    /// The floor's height (world-fixed: the start's lowest point).
+    floor: f64,
+    model: &'a Model,
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
-#[allow(clippy::too_many_arguments)]
-fn draw_frame(
-    root: &Area,
-    figure: &Figure,
-    camera: &Camera,
-    lo: [f64; 3],
-    hi: [f64; 3],
-    model: &Model,
-    t: f64,
-    poses: &[Pose],
-) -> Result<(), String> {
+fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), String> {
+    let Scene {
+        figure,
+        camera,
+        lo,
+        hi,
+        floor,
+        model,
+    } = *scene;
     let e = drawing_error;
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let line = |a: [f64; 3], b: [f64; 3], style: ShapeStyle| -> Result<(), String> {
@@ -241,15 +386,19 @@ fn draw_frame(
         }
         Ok(())
     };
-    // Floor grid just below the lowest point, a quarter of the extent wider than the scene.
+    // A floor grid fixed in the world under the start's lowest point, its lines on
+    // multiples of a tenth of the view (so a tracking camera sees it slide by).
     let extent = (0..3).map(|i| hi[i] - lo[i]).fold(1e-3, f64::max);
-    let z = lo[2] - 0.02 * extent;
+    let cell = extent / 10.0;
+    let z = floor - 0.02 * extent;
     let (x0, x1) = (lo[0] - 0.25 * extent, hi[0] + 0.25 * extent);
     let (y0, y1) = (lo[1] - 0.25 * extent, hi[1] + 0.25 * extent);
-    for i in 0..=10 {
-        let s = i as f64 / 10.0;
-        let (x, y) = (x0 + s * (x1 - x0), y0 + s * (y1 - y0));
+    for i in (x0 / cell).ceil() as i64..=(x1 / cell).floor() as i64 {
+        let x = i as f64 * cell;
         line([x, y0, z], [x, y1, z], GRID.stroke_width(1))?;
+    }
+    for i in (y0 / cell).ceil() as i64..=(y1 / cell).floor() as i64 {
+        let y = i as f64 * cell;
         line([x0, y, z], [x1, y, z], GRID.stroke_width(1))?;
     }
     let origin = |k: Option<usize>| k.map_or([0.0; 3], |k| poses[k].p);

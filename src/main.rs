@@ -74,6 +74,14 @@ enum ForcingArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+enum CameraArg {
+    /// Fixed on the start's workspace.
+    Fixed,
+    /// Following the root at a fixed scale.
+    Track,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 enum EvaluationArg {
     Sweeps,
     Cached,
@@ -114,9 +122,14 @@ enum Command {
         /// PNG plot of the variables and the energy (and constraint forces, with constraints).
         #[arg(long)]
         plot: Option<PathBuf>,
-        /// GIF animation of the figure in perspective, 25 frames per simulated second.
+        /// GIF animation of the figure in perspective, 640×480, up to 25 frames per simulated
+        /// second (at most 500 frames), played in real time.
         #[arg(long)]
         animate: Option<PathBuf>,
+        /// The animation's camera: fixed on the start's workspace, or tracking the root (a
+        /// free body's torso) at the same scale.
+        #[arg(long, value_enum, default_value = "fixed")]
+        camera: CameraArg,
         /// VI quadrature point α (½ is second order).
         #[arg(long, default_value_t = 0.5)]
         alpha: f64,
@@ -198,6 +211,7 @@ fn main() -> ExitCode {
             baumgarte,
             plot,
             animate,
+            camera,
             alpha,
             newton_tol,
             jacobian,
@@ -235,7 +249,11 @@ fn main() -> ExitCode {
                     max_steps,
                     ..SimOptions::new(method, dt, duration)
                 };
-                let outputs = Outputs::check(&model, &out, &plot, &animate)?;
+                let mut outputs = Outputs::check(&model, &out, &plot, &animate)?;
+                outputs.camera = match camera {
+                    CameraArg::Fixed => animate::CameraMode::Fixed,
+                    CameraArg::Track => animate::CameraMode::Track,
+                };
                 let model = source.model(&model)?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
@@ -337,6 +355,8 @@ struct Outputs {
     csv: Option<OutputFile>,
     plot: Option<OutputFile>,
     animate: Option<OutputFile>,
+    /// The animation's camera.
+    camera: animate::CameraMode,
 }
 
 impl Outputs {
@@ -364,7 +384,12 @@ impl Outputs {
             }
         }
         let [csv, plot, animate] = files;
-        Ok(Outputs { csv, plot, animate })
+        Ok(Outputs {
+            csv,
+            plot,
+            animate,
+            camera: animate::CameraMode::default(),
+        })
     }
 }
 
@@ -382,6 +407,7 @@ fn run_simulate<S: System<N = Dyn>>(
         csv: out,
         plot: plot_path,
         animate: animate_path,
+        camera,
     } = outputs;
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
@@ -494,7 +520,18 @@ fn run_simulate<S: System<N = Dyn>>(
             sys.poses(&Vector::<Dyn>::from_column_slice(q), &mut frame);
             poses.push(frame);
         }
-        animate::write_gif(model, &frame_times, &poses, path)?;
+        let bar = ProgressBar::new(poses.len() as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} GIF frames  ({elapsed})")
+                .map_err(|e| e.to_string())?,
+        );
+        let encoding = Instant::now();
+        animate::write_gif(model, &frame_times, &poses, path, camera, &mut |k, _| {
+            if encoding.elapsed().as_millis() > 300 {
+                bar.set_position(k as u64);
+            }
+        })?;
+        bar.finish_and_clear();
     }
     for m in &summary.moved {
         println!(

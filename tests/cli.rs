@@ -528,3 +528,54 @@ fn lock_holds_joints_as_constants_in_every_command() {
         assert!(!ok && stderr.contains(expected), "{lock}: {stderr}");
     }
 }
+
+/// How many pixels of the masses' colour (palette entry 6, wood) each GIF frame has.
+fn wood_pixels(gif_bytes: &[u8]) -> Vec<usize> {
+    let mut options = gif::DecodeOptions::new();
+    options.set_color_output(gif::ColorOutput::Indexed);
+    let mut decoder = options.read_info(std::io::Cursor::new(gif_bytes)).unwrap();
+    let mut counts = Vec::new();
+    while let Some(frame) = decoder.read_next_frame().unwrap() {
+        counts.push(frame.buffer.iter().filter(|&&i| i == 6).count());
+    }
+    counts
+}
+
+#[test]
+fn the_camera_stays_on_the_start_or_tracks_the_root_at_a_fixed_scale() {
+    // The humanoid's free torso falls 20 m in two seconds: a fixed camera sees it dwindle
+    // towards the vertical's vanishing point, a tracking one keeps it the same size.
+    let dir = scratch("camera");
+    let gif = dir.join("h.gif");
+    let mut pixels = Vec::new();
+    for camera in ["fixed", "track"] {
+        let (ok, _, stderr) = tree_mech(&[
+            "simulate",
+            "models/humanoid.toml",
+            "--duration",
+            "2",
+            "--animate",
+            gif.to_str().unwrap(),
+            "--camera",
+            camera,
+        ]);
+        assert!(ok, "{stderr}");
+        pixels.push(wood_pixels(&std::fs::read(&gif).unwrap()));
+    }
+    let (fixed, track) = (&pixels[0], &pixels[1]);
+    assert_eq!(fixed.len(), 51);
+    assert!(
+        fixed[0] > 200,
+        "the figure is in view at the start: {fixed:?}"
+    );
+    assert_eq!(fixed[0], track[0]);
+    assert!(
+        *fixed.last().unwrap() < fixed[0] / 4,
+        "fallen far away: {fixed:?}"
+    );
+    let last = *track.last().unwrap() as f64;
+    assert!(
+        (last / track[0] as f64 - 1.0).abs() < 0.3,
+        "the same size followed: {track:?}"
+    );
+}
