@@ -511,7 +511,7 @@ fn run_simulate<S: System<N = Dyn>>(
             .map_err(|e| format!("cannot write the trajectory: {e}"))?;
     }
     if let Some(p) = &plot_path {
-        plot::plot(&picture, name, p)?;
+        plot::plot(&picture, model, p)?;
     }
     if let Some(path) = &animate_path {
         let mut poses = Vec::with_capacity(frame_q.len());

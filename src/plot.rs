@@ -1,13 +1,26 @@
-//! The trajectory picture: every variable over time above, total energy below.
+//! The trajectory picture: one panel per kind of variable — angles (rad), lengths (m), the
+//! prescribed (kinematic) ones — then the total energy and, with constraints, their forces λ.
+//! Every curve has a legend entry in a column beside its panel. Drawn at twice the size and
+//! averaged down, so lines and text are anti-aliased.
 
 use plotters::prelude::*;
+use plotters::style::{register_font, FontStyle};
+use tree_mech::model::Model;
+use tree_mech::Trajectory;
 
 use crate::output::{drawing_error, OutputFile, Sentence};
-use plotters::style::{register_font, FontStyle};
-use tree_mech::Trajectory;
 
 /// DejaVu Sans, bundled so plots need no system fonts (licence in `assets/`).
 pub static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
+/// Drawing scale: pictures are drawn this many times larger, then averaged down.
+const SCALE: u32 = 2;
+/// The picture's width in pixels (after averaging).
+const WIDTH: u32 = 1200;
+/// The legend column's width.
+const LEGEND: u32 = 230;
+/// One legend row's height.
+const ROW: u32 = 17;
 
 fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
@@ -23,114 +36,176 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 /// One named curve.
 type Series = (String, Vec<(f64, f64)>);
 
-/// Draws one panel: `series` over `0..t_end` with a caption and a legend (when there is more
-/// than one curve and not too many to read).
-fn panel(
-    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
-    caption: &str,
-    y_desc: &str,
-    t_end: f64,
-    series: &[Series],
-) -> Result<(), String> {
+/// One panel: a caption, the y axis's label, its curves.
+struct Panel {
+    caption: String,
+    y_desc: &'static str,
+    series: Vec<Series>,
+}
+
+impl Panel {
+    /// Its height before scaling: room for the chart, and for every legend row (in two
+    /// columns past 30 curves).
+    fn height(&self) -> u32 {
+        let rows = self
+            .series
+            .len()
+            .div_ceil(if self.series.len() > 30 { 2 } else { 1 });
+        (ROW * rows as u32 + 70).max(280)
+    }
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// Draws `panel` over `0..t_end`, its legend in a column at the right.
+fn draw_panel(area: &Area, panel: &Panel, t_end: f64) -> Result<(), String> {
     let err = drawing_error;
-    let (lo, hi) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
-    let mut chart = ChartBuilder::on(area)
-        .caption(caption, ("sans-serif", 24))
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(90)
+    let s = SCALE as i32;
+    let (chart_area, legend) = area.split_horizontally((WIDTH - LEGEND) * SCALE);
+    let (lo, hi) = range(panel.series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
+    let mut chart = ChartBuilder::on(&chart_area)
+        .caption(&panel.caption, ("sans-serif", 22 * s))
+        .margin(10 * s)
+        .x_label_area_size(36 * s)
+        .y_label_area_size(80 * s)
         .build_cartesian_2d(0.0..t_end, lo..hi)
         .map_err(|e| err(&e))?;
     chart
         .configure_mesh()
         .x_desc("t [s]")
-        .y_desc(y_desc)
+        .y_desc(panel.y_desc)
+        .label_style(("sans-serif", 13 * s))
+        .axis_desc_style(("sans-serif", 15 * s))
+        .light_line_style(RGBColor(235, 235, 235).stroke_width(SCALE))
+        .bold_line_style(RGBColor(215, 215, 215).stroke_width(SCALE))
         .draw()
         .map_err(|e| err(&e))?;
-    for (i, (name, points)) in series.iter().enumerate() {
+    let columns = if panel.series.len() > 30 { 2 } else { 1 };
+    let per_column = panel.series.len().div_ceil(columns).max(1);
+    let column_width = (LEGEND / columns as u32) as i32 * s;
+    for (i, (name, points)) in panel.series.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
         chart
             .draw_series(LineSeries::new(
                 points.iter().copied(),
-                color.stroke_width(2),
+                color.stroke_width(2 * SCALE),
             ))
-            .map_err(|e| err(&e))?
-            .label(name.clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
-            });
-    }
-    if (2..=24).contains(&series.len()) {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
+            .map_err(|e| err(&e))?;
+        let (c, r) = ((i / per_column) as i32, (i % per_column) as i32);
+        let (x, y) = (c * column_width + 4 * s, (44 + r * ROW as i32) * s);
+        legend
+            .draw(&PathElement::new(
+                vec![(x, y), (x + 16 * s, y)],
+                color.stroke_width(3 * SCALE),
+            ))
+            .map_err(|e| err(&e))?;
+        legend
+            .draw(&Text::new(
+                name.clone(),
+                (x + 22 * s, y - 7 * s),
+                ("sans-serif", 13 * s).into_font(),
+            ))
             .map_err(|e| err(&e))?;
     }
     Ok(())
 }
 
-/// Writes a PNG of `traj` to `path`: every variable over time above, total energy below, and
-/// with constraints a third panel of the constraint forces λ.
-pub fn plot(traj: &Trajectory, title: &str, out: &OutputFile) -> Result<(), String> {
-    let err = |e: &dyn Sentence| {
-        format!(
-            "cannot draw `{}`: {}",
-            out.path().display(),
-            drawing_error(e)
-        )
-    };
+/// Writes a PNG of `traj` (a run of `model`) to `out`.
+pub fn plot(traj: &Trajectory, model: &Model, out: &OutputFile) -> Result<(), String> {
+    let err =
+        |e: &dyn Sentence| format!("cannot draw `{}`: {}", out.path().display(), e.sentence());
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
-    let constrained = !traj.constraints.is_empty();
-    let height = if constrained { 1220 } else { 900 };
-    let root = BitMapBackend::new(out.temp(), (1200, height)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let (top, rest) = root.split_vertically(560);
-    let (bottom, forces) = rest.split_vertically(340);
-    let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
-    let variables: Vec<Series> = (0..traj.dof())
-        .map(|i| {
-            let points = (0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])).collect();
-            (traj.variables[i].clone(), points)
-        })
-        .collect();
-    let energy = vec![(
-        "energy".to_string(),
-        traj.t
-            .iter()
-            .copied()
-            .zip(traj.energy.iter().copied())
-            .collect(),
-    )];
-    panel(
-        &top,
-        &format!("{title}: configuration"),
-        "q",
-        t_end,
-        &variables,
-    )
-    .map_err(|e| err(&e))?;
-    panel(&bottom, "total energy", "E [J]", t_end, &energy).map_err(|e| err(&e))?;
-    if constrained {
-        let lambda: Vec<Series> = (0..traj.constraints.len())
-            .map(|r| {
-                let points = (0..traj.len())
-                    .map(|k| (traj.t[k], traj.lambda(k)[r]))
-                    .collect();
-                (traj.constraints[r].clone(), points)
-            })
-            .collect();
-        panel(
-            &forces,
-            "constraint forces (λ; a taut string has λ < 0)",
-            "λ",
-            t_end,
-            &lambda,
-        )
-        .map_err(|e| err(&e))?;
+    let title = &model.name;
+    let curve = |i: usize| {
+        let points = (0..traj.len()).map(|k| (traj.t[k], traj.q(k)[i])).collect();
+        (traj.variables[i].clone(), points)
+    };
+    let of_kind = |keep: &dyn Fn(usize) -> bool| -> Vec<Series> {
+        (0..traj.dof()).filter(|&i| keep(i)).map(curve).collect()
+    };
+    let kinematic = |i: usize| model.variables[i].is_kinematic();
+    let mut panels = vec![
+        Panel {
+            caption: format!("{title}: angles"),
+            y_desc: "q [rad]",
+            series: of_kind(&|i| !kinematic(i) && model.is_angle(i)),
+        },
+        Panel {
+            caption: format!("{title}: lengths"),
+            y_desc: "q [m]",
+            series: of_kind(&|i| !kinematic(i) && !model.is_angle(i)),
+        },
+        Panel {
+            caption: format!("{title}: prescribed (kinematic) variables"),
+            y_desc: "q [rad or m]",
+            series: of_kind(&kinematic),
+        },
+        Panel {
+            caption: "total energy".into(),
+            y_desc: "E [J]",
+            series: vec![(
+                "energy".into(),
+                traj.t
+                    .iter()
+                    .copied()
+                    .zip(traj.energy.iter().copied())
+                    .collect(),
+            )],
+        },
+    ];
+    if !traj.constraints.is_empty() {
+        panels.push(Panel {
+            caption: "constraint forces (λ; a taut string has λ < 0)".into(),
+            y_desc: "λ",
+            series: (0..traj.constraints.len())
+                .map(|r| {
+                    let points = (0..traj.len())
+                        .map(|k| (traj.t[k], traj.lambda(k)[r]))
+                        .collect();
+                    (traj.constraints[r].clone(), points)
+                })
+                .collect(),
+        });
     }
-    root.present().map_err(|e| err(&e))?;
+    panels.retain(|p| !p.series.is_empty());
+    let height: u32 = panels.iter().map(Panel::height).sum();
+    let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
+    let (w, h) = (WIDTH * SCALE, height * SCALE);
+    let mut big = vec![255u8; (3 * w * h) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut big, (w, h)).into_drawing_area();
+        let mut rest = root.clone();
+        for panel in &panels {
+            let (area, below) = rest.split_vertically(panel.height() * SCALE);
+            draw_panel(&area, panel, t_end).map_err(|e| err(&e))?;
+            rest = below;
+        }
+        root.present().map_err(|e| err(&e))?;
+    }
+    // Each output pixel the mean of its SCALE × SCALE block: anti-aliased lines and text.
+    let (w, h) = (WIDTH as usize, height as usize);
+    let n = SCALE as usize;
+    let mut small = vec![0u8; 3 * w * h];
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                let mut sum = 0u32;
+                for dy in 0..n {
+                    for dx in 0..n {
+                        sum += big[3 * ((y * n + dy) * w * n + x * n + dx) + c] as u32;
+                    }
+                }
+                small[3 * (y * w + x) + c] = (sum / (n * n) as u32) as u8;
+            }
+        }
+    }
+    let file = std::fs::File::create(out.temp()).map_err(|e| err(&e.to_string()))?;
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder
+        .write_header()
+        .and_then(|mut writer| writer.write_image_data(&small))
+        .map_err(|e| err(&e.to_string()))?;
     Ok(())
 }

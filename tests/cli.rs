@@ -223,10 +223,12 @@ fn simulate_animates_the_marionette_and_plots_its_constraint_forces() {
         frames += 1;
     }
     assert_eq!(frames, 11, "GIF frames");
-    // The plot grows a third panel (constraint forces) when the model has constraints.
+    // Five panels: angles (with 24 legend rows), lengths, kinematic, energy, forces.
     let png = std::fs::read(&png).unwrap();
+    let width = u32::from_be_bytes(png[16..20].try_into().unwrap());
     let height = u32::from_be_bytes(png[20..24].try_into().unwrap());
-    assert_eq!(height, 1220);
+    assert_eq!(width, 1200);
+    assert_eq!(height, (21 * 17 + 70) + 280 + (18 * 17 + 70) + 280 + 280);
 }
 
 #[test]
