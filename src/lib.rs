@@ -31,10 +31,11 @@
 // The expansion of `tree_model!` names `::tree_mech`; this lets it work inside this crate too.
 extern crate self as tree_mech;
 
-/// Compiles a model into a type implementing [`System`] (see the README).
+/// The model crate: model types, the TOML and URDF readers, the builder, validation.
+/// (`::tree_model`: the crate alone, not also the macro of the same name.)
+pub use ::tree_model as model;
+/// Compiles a model into a type implementing [`System`]: the whole syntax is on the macro.
 pub use tree_macros::tree_model;
-/// The model crate: model types, the TOML reader, the builder, validation.
-pub use tree_model as model;
 pub use tree_runtime as runtime;
 pub use tree_runtime::nalgebra;
 pub use tree_runtime::{

@@ -100,7 +100,7 @@ enum Command {
         /// Time step (the first step tried, for rk45).
         #[arg(long, default_value_t = 0.01)]
         dt: f64,
-        /// Simulated time in seconds.
+        /// Simulated time in seconds (at least one step).
         #[arg(long, default_value_t = 10.0)]
         duration: f64,
         /// CSV output, written while the run goes: `t,<var…>,d<var…>,energy`, then with
@@ -119,7 +119,8 @@ enum Command {
         /// Baumgarte stabilisation of the constraints for rk4/rk45: `a,b` in ḧ + 2aḣ + b²h = 0.
         #[arg(long, allow_hyphen_values = true)]
         baumgarte: Option<String>,
-        /// PNG plot of the variables and the energy (and constraint forces, with constraints).
+        /// PNG plot: the variables by kind (angles, lengths, prescribed), the energy and, with
+        /// constraints, their forces.
         #[arg(long)]
         plot: Option<PathBuf>,
         /// GIF animation of the figure in perspective, 640×480, up to 25 frames per simulated
@@ -156,6 +157,7 @@ enum Command {
     },
     /// Evaluate L, its derivatives, q̈ and every pose at a state; prints JSON.
     Eval {
+        /// Model file (TOML, or URDF by its .urdf extension).
         model: PathBuf,
         /// Configuration, comma-separated, in variable order (default: the model's q0).
         #[arg(long, allow_hyphen_values = true)]
@@ -168,7 +170,10 @@ enum Command {
         t: f64,
     },
     /// Validate a model and print a summary with the tree drawn as text.
-    Check { model: PathBuf },
+    Check {
+        /// Model file (TOML, or URDF by its .urdf extension).
+        model: PathBuf,
+    },
 }
 
 /// Lets a closed stdout (`tree-mech check … | head`) end the process quietly, as it does
