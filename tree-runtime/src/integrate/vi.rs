@@ -30,6 +30,10 @@ use crate::system::{ConstraintTerms, Matrix, Order, Sparsity, System, Terms, Vec
 /// body 1000× lighter than the heaviest is still converged on its own scale.
 const FLOOR: f64 = 1e-3;
 
+/// Below this relative residual (plus violation), the next exact Newton iterate is checked
+/// with first derivatives before its Jacobian is evaluated.
+const CHECK_FIRST_BELOW: f64 = 1e-3;
+
 /// The largest turn of an angle a step may take (rad): a quarter turn.
 pub const MAX_TURN: f64 = std::f64::consts::FRAC_PI_2;
 
@@ -576,7 +580,12 @@ where
         let mut iterations = 0;
         loop {
             let fresh = !(reuse && factored);
-            self.residual(sys, force, t, dt, q, p, q_next, fresh);
+            // After an exact Newton update from a residual within √tol, the new residual is
+            // (quadratically) within tol: check it with first derivatives alone, and
+            // evaluate the Jacobian only if the check fails (the last full evaluation of a
+            // step was otherwise thrown away).
+            let check_first = fresh && last_residual <= CHECK_FIRST_BELOW;
+            self.residual(sys, force, t, dt, q, p, q_next, fresh && !check_first);
             let (residual, violation) = self.residual_norms();
             let mut relative = self.relative_residual();
             if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
@@ -603,6 +612,10 @@ where
                 });
             }
             let mut refactor = fresh;
+            if check_first {
+                self.residual(sys, force, t, dt, q, p, q_next, true);
+                relative = self.relative_residual();
+            }
             // Relative residual and violation: both independent of the masses.
             let combined = relative + violation;
             if !fresh && combined > 0.5 * last_residual {
