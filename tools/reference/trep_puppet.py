@@ -1,7 +1,7 @@
 """trep 1.0.2's own Puppet (trep.puppets.Puppet with string constraints, 40 variables) as a
 tree-mech model, and trep's time for 1000 midpoint-VI steps of it.
 
-Run with trep's Python 2.7 (see README, "Checked against trep"):
+Run with trep's Python 2.7 (README, "Checked against trep"):
     v27/bin/python tools/reference/trep_puppet.py tools/reference/trep-puppet.toml
 writes the model (every frame, mass, damping and string of trep's Puppet, the strings'
 control points projected above their hooks, some joints bent so it moves) and prints
