@@ -2,10 +2,13 @@
 tree-mech model, and trep's time for 1000 midpoint-VI steps of it.
 
 Run with trep's Python 2.7 (README, "Checked against trep"):
-    v27/bin/python tools/reference/trep_puppet.py tools/reference/trep-puppet.toml
+    v27/bin/python tools/reference/trep_puppet.py tools/reference/trep-puppet.toml \
+        tests/fixtures/trep-puppet.json
 writes the model (every frame, mass, damping and string of trep's Puppet, the strings'
 control points projected above their hooks, some joints bent so it moves) and prints
-`trep_seconds <t>` for 1000 steps at dt = 0.01 from rest. trep is called, not copied.
+`trep_seconds <t>` for 1000 steps at dt = 0.01 from rest; with a second path, also trep's
+configuration every 10 of 100 steps from rest (the fixture tests/trep.rs reads). trep is
+called, not copied.
 """
 import math
 import sys
@@ -131,6 +134,27 @@ def trep_seconds(steps=1000, dt=0.01):
     return time.time() - start
 
 
+def fixture(path, steps=100, dt=0.01):
+    """trep's configuration every 10 steps from rest (p = 0), for tests/trep.rs."""
+    import json
+    import numpy
+    s = puppet()
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_state(0.0, s.q, numpy.zeros(s.nQd))
+    k = s.qk
+    samples = []
+    for n in range(1, steps + 1):
+        mvi.step(mvi.t2 + dt, k2=k)
+        if n % 10 == 0:
+            samples.append({'step': n, 't': mvi.t2, 'q': [float(x) for x in mvi.q2]})
+    json.dump({'source': 'trep 1.0.2 MidpointVI on trep.puppets.Puppet(string_constraints=True), '
+                         'tools/reference/trep_puppet.py',
+               'dt': dt, 'variables': [q.name for q in s.configs], 'samples': samples},
+              open(path, 'w'), indent=1)
+
+
 if __name__ == '__main__':
     write_toml(puppet(), sys.argv[1])
+    if len(sys.argv) > 2:
+        fixture(sys.argv[2])
     print('trep_seconds %.4f' % trep_seconds())
