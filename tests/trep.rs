@@ -10,7 +10,10 @@ use tree_mech::{model, tree_model, NoForce, System, TreeSystem};
 tree_model!(struct TrepPuppet from "tools/reference/trep-puppet.toml");
 
 fn fixture() -> serde_json::Value {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/trep-puppet.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/trep-puppet.json"
+    );
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
@@ -29,7 +32,11 @@ where
     assert_eq!(names.len(), 40);
     let index: Vec<usize> = names
         .iter()
-        .map(|n| (0..sys.dof()).find(|&i| sys.variable_name(i) == *n).unwrap())
+        .map(|n| {
+            (0..sys.dof())
+                .find(|&i| sys.variable_name(i) == *n)
+                .unwrap()
+        })
         .collect();
     let settings = ViSettings {
         forcing: Forcing::Left,
@@ -55,7 +62,10 @@ where
 
 #[test]
 fn the_puppet_moves_as_trep_moves_it_interpreted() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tools/reference/trep-puppet.toml");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tools/reference/trep-puppet.toml"
+    );
     let mut sys = TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap();
     check(&mut sys, "interpreted");
 }

@@ -3,11 +3,13 @@
 //! onto the constraints and hands every recorded step to an observer ([`simulate`] collects
 //! them into a [`Trajectory`]).
 
+mod discrete;
 mod projection;
 mod rk4;
 mod rk45;
 mod vi;
 
+pub use discrete::DiscreteLagrangian;
 pub use projection::{project_initial_state, Moved};
 pub use rk4::Rk4;
 pub use rk45::{Rk45, Tolerance};

@@ -19,6 +19,7 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dyn};
 
+use super::discrete::DiscreteLagrangian;
 use crate::dynamics::{prescribe, GeneralizedForce, Prescription, ReducedKkt, Split};
 use crate::error::SimError;
 use crate::linalg::{lu_factor_packed, lu_solve, lu_solve_packed, Pivots};
@@ -271,30 +272,20 @@ where
             Forcing::Split => 1.0 - a,
             Forcing::Left => 1.0,
         };
-        // q_α = q1 + α(q2 − q1), v = (q2 − q1)/Δt
-        self.velocity.copy_from(q2);
-        self.velocity -= q1;
-        self.velocity /= dt;
-        self.q_alpha.copy_from(q1);
-        self.q_alpha.axpy(a * dt, &self.velocity, 1.0);
+        let ld = DiscreteLagrangian { alpha: a, dt };
+        ld.point(q1, q2, &mut self.q_alpha, &mut self.velocity);
         self.dt = dt;
         let order = if jacobian { Order::Full } else { Order::First };
         sys.lagrangian(&self.q_alpha, &self.velocity, order, &mut self.terms);
         self.force.copy_from(&self.terms.force);
         force.add_force(t + a * dt, &self.q_alpha, &self.velocity, &mut self.force);
         let (split, t2) = (&self.split, &self.terms);
-        // p1 + (1−α)Δt ∂L/∂q − ∂L/∂q̇ + f⁻ + Δt Dh(q1)ᵀλ on the dynamic rows, and the sum
-        // of those terms' magnitudes (the row's momentum scale).
+        // p1 + D₁L_d + f⁻ + Δt Dh(q1)ᵀλ on the dynamic rows, and the sum of those terms'
+        // magnitudes (the row's momentum scale).
         for &i in &split.dynamic {
-            let terms = [
-                p1[i],
-                (1.0 - a) * dt * t2.dl_dq[i],
-                -t2.dl_ddq[i],
-                left * dt * self.force[i],
-            ];
-            let (mut x, mut scale) = terms
-                .iter()
-                .fold((0.0, 0.0), |(x, s), &v| (x + v, s + v.abs()));
+            let f = left * dt * self.force[i];
+            let mut x = p1[i] + ld.d1(t2, i) + f;
+            let mut scale = p1[i].abs() + ld.d1_scale(t2, i) + f.abs();
             for s in 0..split.rows {
                 let v = dt * self.dh1[(s, i)] * self.lambda[s];
                 x += v;
@@ -307,24 +298,12 @@ where
             sys.constraints(q2, &self.zero, Order::First, &mut self.constraint_terms);
         }
         if jacobian {
-            // D2 D1 L_d = (1−α)αΔt L_qq + (1−α) (L_q̇q)ᵀ − α L_q̇q − M/Δt,
-            // L_q̇q[i][j] = ∂²L/∂q̇_i∂q_j; plus ∂f⁻/∂q2 = wΔt(α ∂F/∂q + ∂F/∂q̇ /Δt).
+            // ∂r/∂q₂ = D₂D₁L_d (eq. (26)) + ∂f⁻/∂q₂, ∂f⁻/∂q₂ = wΔt(α ∂F/∂q + ∂F/∂q̇ /Δt).
             // Column-major slices: entry (i, j) is at j·n + i.
             let t = &self.terms;
             let n = q1.len();
-            let (lqq, lvq, mass) = (
-                t.d2l_dq_dq.as_slice(),
-                t.d2l_ddq_dq.as_slice(),
-                t.mass.as_slice(),
-            );
-            let (k_qq, k_vq) = ((1.0 - a) * a * dt, 1.0 - a);
             let jac = self.jacobian.as_mut_slice();
-            for j in 0..n {
-                for i in 0..n {
-                    let ij = j * n + i;
-                    jac[ij] = k_qq * lqq[ij] + k_vq * lvq[i * n + j] - a * lvq[ij] - mass[ij] / dt;
-                }
-            }
+            ld.d2d1(t, jac);
             let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
             match t.force_derivatives {
                 Sparsity::Zero => {}
@@ -647,16 +626,17 @@ where
             }
         }
         self.iterations += iterations;
-        // p_{k+1} = αΔt ∂L/∂q + ∂L/∂q̇ + f⁺   (eq. (24)), terms at the solution.
+        // p_{k+1} = D₂L_d + f⁺ (eq. (24)), terms at the solution.
         let a = self.settings.alpha;
+        let ld = DiscreteLagrangian { alpha: a, dt };
         let plus = match self.settings.forcing {
             Forcing::Split => a * dt,
             Forcing::Left => 0.0,
         };
         let p2 = &mut self.q_alpha;
-        p2.copy_from(&self.terms.dl_ddq);
-        p2.axpy(a * dt, &self.terms.dl_dq, 1.0);
-        p2.axpy(plus, &self.force, 1.0);
+        for i in 0..p2.len() {
+            p2[i] = ld.d2(&self.terms, i) + plus * self.force[i];
+        }
         if q_next.iter().chain(p2.iter()).any(|x| !x.is_finite()) {
             return Err(SimError::NonFinite {
                 step,

@@ -1,0 +1,132 @@
+//! The midpoint rule's discrete Lagrangian and its slot derivatives (paper eqs. (22)–(26),
+//! docs/derivations.md §7), from the continuous Lagrangian's terms at its quadrature point.
+//!
+//! `L_d(q₁, q₂) = Δt · L(q_α, v)` with `q_α = q₁ + α(q₂ − q₁)` and `v = (q₂ − q₁)/Δt`
+//! (eq. (22)). With `L_q = ∂L/∂q`, `L_q̇ = ∂L/∂q̇`, `L_qq = ∂²L/∂q²`, `L_q̇q[i][j] = ∂²L/∂q̇ᵢ∂qⱼ`
+//! and `M = ∂²L/∂q̇²`, all at `(q_α, v)`:
+//!
+//! * `D₁L_d = (1−α)Δt L_q − L_q̇` (eq. (23)), `D₂L_d = αΔt L_q + L_q̇` (eq. (24));
+//! * `D₂D₁L_d = (1−α)αΔt L_qq + (1−α) L_q̇qᵀ − α L_q̇q − M/Δt` (eq. (26)), and `D₁D₂L_d` its
+//!   transpose;
+//! * `D₁D₁L_d = (1−α)²Δt L_qq − (1−α)(L_q̇q + L_q̇qᵀ) + M/Δt`,
+//!   `D₂D₂L_d = α²Δt L_qq + α(L_q̇q + L_q̇qᵀ) + M/Δt`.
+//!
+//! The VI step is built from these: its residual `p₁ + D₁L_d + …`, its Newton matrix
+//! `D₂D₁L_d + …` and `p₂ = D₂L_d + …`; the step's derivatives need the others.
+
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
+
+use crate::system::{Terms, Vector};
+
+/// The discrete Lagrangian of one step: its quadrature point `α` and length `Δt`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DiscreteLagrangian {
+    /// Quadrature point `α ∈ [0, 1]`.
+    pub alpha: f64,
+    /// Step length `Δt`.
+    pub dt: f64,
+}
+
+impl DiscreteLagrangian {
+    /// Where `L` is evaluated: `q_α = q₁ + α(q₂ − q₁)` and `v = (q₂ − q₁)/Δt` (eq. (22)).
+    pub fn point<N: Dim>(
+        &self,
+        q1: &Vector<N>,
+        q2: &Vector<N>,
+        q_alpha: &mut Vector<N>,
+        v: &mut Vector<N>,
+    ) where
+        DefaultAllocator: Allocator<N>,
+    {
+        v.copy_from(q2);
+        *v -= q1;
+        *v /= self.dt;
+        q_alpha.copy_from(q1);
+        q_alpha.axpy(self.alpha * self.dt, v, 1.0);
+    }
+
+    /// `(D₁L_d)ᵢ = (1−α)Δt ∂L/∂qᵢ − ∂L/∂q̇ᵢ` (eq. (23)) from the terms at the point.
+    #[inline]
+    pub fn d1<N: Dim>(&self, t: &Terms<N>, i: usize) -> f64
+    where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        (1.0 - self.alpha) * self.dt * t.dl_dq[i] - t.dl_ddq[i]
+    }
+
+    /// `(1−α)Δt |∂L/∂qᵢ| + |∂L/∂q̇ᵢ|`: the size of `(D₁L_d)ᵢ`'s two terms before they
+    /// cancel (a residual row's momentum scale, docs/derivations.md §7).
+    #[inline]
+    pub fn d1_scale<N: Dim>(&self, t: &Terms<N>, i: usize) -> f64
+    where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        (1.0 - self.alpha) * self.dt * t.dl_dq[i].abs() + t.dl_ddq[i].abs()
+    }
+
+    /// `(D₂L_d)ᵢ = αΔt ∂L/∂qᵢ + ∂L/∂q̇ᵢ` (eq. (24)): the momentum the step ends with.
+    #[inline]
+    pub fn d2<N: Dim>(&self, t: &Terms<N>, i: usize) -> f64
+    where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        self.alpha * self.dt * t.dl_dq[i] + t.dl_ddq[i]
+    }
+
+    /// Fills `out` (column-major, n × n) with `D₂D₁L_d`: entry `(i, j) = ∂(D₁L_d)ᵢ/∂q₂ⱼ`
+    /// (eq. (26)). Needs the terms at `Order::Full`.
+    pub fn d2d1<N: Dim>(&self, t: &Terms<N>, out: &mut [f64])
+    where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        let (a, dt) = (self.alpha, self.dt);
+        self.combine(t, (1.0 - a) * a * dt, 1.0 - a, -a, -1.0 / dt, out);
+    }
+
+    /// Fills `out` with `D₁D₁L_d`: entry `(i, j) = ∂(D₁L_d)ᵢ/∂q₁ⱼ`.
+    pub fn d1d1<N: Dim>(&self, t: &Terms<N>, out: &mut [f64])
+    where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        let (b, dt) = (1.0 - self.alpha, self.dt);
+        self.combine(t, b * b * dt, -b, -b, 1.0 / dt, out);
+    }
+
+    /// Fills `out` with `D₂D₂L_d`: entry `(i, j) = ∂(D₂L_d)ᵢ/∂q₂ⱼ`.
+    pub fn d2d2<N: Dim>(&self, t: &Terms<N>, out: &mut [f64])
+    where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        let (a, dt) = (self.alpha, self.dt);
+        self.combine(t, a * a * dt, a, a, 1.0 / dt, out);
+    }
+
+    /// `out[i][j] = k_qq L_qq[i][j] + k_t L_q̇q[j][i] + k_vq L_q̇q[i][j] + k_m M[i][j]`, every
+    /// second slot derivative's shape.
+    #[inline]
+    fn combine<N: Dim>(
+        &self,
+        t: &Terms<N>,
+        k_qq: f64,
+        k_t: f64,
+        k_vq: f64,
+        k_m: f64,
+        out: &mut [f64],
+    ) where
+        DefaultAllocator: Allocator<N> + Allocator<N, N>,
+    {
+        let n = t.dl_dq.len();
+        let (lqq, lvq, mass) = (
+            t.d2l_dq_dq.as_slice(),
+            t.d2l_ddq_dq.as_slice(),
+            t.mass.as_slice(),
+        );
+        // Column-major: entry (i, j) at j·n + i.
+        for j in 0..n {
+            for i in 0..n {
+                let ij = j * n + i;
+                out[ij] = k_qq * lqq[ij] + k_t * lvq[i * n + j] + k_vq * lvq[ij] + k_m * mass[ij];
+            }
+        }
+    }
+}
