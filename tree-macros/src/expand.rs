@@ -6,9 +6,11 @@ use std::collections::HashMap;
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote};
 use tree_model::{ModelSpec, ParameterSpec, Value};
+use tree_runtime::kernel::{self, Kernel};
+use tree_runtime::outputs::{Index, Output, Sink};
 use tree_runtime::plan::TreePlan;
 use tree_runtime::se3::Pose;
-use tree_runtime::sweeps::{self, Output, Sink, Workspace};
+use tree_runtime::sweeps;
 use tree_runtime::Order;
 
 use crate::ast::{Input, Source};
@@ -42,20 +44,14 @@ impl Recorder {
         self.values
             .into_iter()
             .map(|(at, x)| {
-                let target = match at {
-                    Output::L => quote!(out.l),
-                    Output::DlDq(i) => quote!(out.dl_dq[#i]),
-                    Output::DlDdq(i) => quote!(out.dl_ddq[#i]),
-                    Output::Mass(i, j) => quote!(out.mass[(#i, #j)]),
-                    Output::D2lDdqDq(i, j) => quote!(out.d2l_ddq_dq[(#i, #j)]),
-                    Output::D2lDqDq(i, j) => quote!(out.d2l_dq_dq[(#i, #j)]),
-                    Output::Force(i) => quote!(out.force[#i]),
-                    Output::DforceDq(i, j) => quote!(out.dforce_dq[(#i, #j)]),
-                    Output::DforceDdq(i, j) => quote!(out.dforce_ddq[(#i, #j)]),
-                    Output::H(r) => quote!(out.h[#r]),
-                    Output::Dh(r, i) => quote!(out.dh[(#r, #i)]),
-                    Output::DhDot(r) => quote!(out.dh_dot[#r]),
-                    Output::D2h(r, i, j) => quote!(out.d2h[#r][(#i, #j)]),
+                // Where it lands: the one table of outputs and their storage.
+                let (field, index) = at.slot();
+                let field = proc_macro2::Ident::new(field.name(), proc_macro2::Span::call_site());
+                let target = match index {
+                    Index::Scalar => quote!(out.#field),
+                    Index::Entry(i) => quote!(out.#field[#i]),
+                    Index::Pair(i, j) => quote!(out.#field[(#i, #j)]),
+                    Index::Stacked(r, i, j) => quote!(out.#field[#r][(#i, #j)]),
                 };
                 (target, x)
             })
@@ -64,7 +60,7 @@ impl Recorder {
 }
 
 /// One of the runtime's evaluations over the tree (`sweeps::evaluate`, `sweeps::constraints`).
-type Evaluation = fn(&TreePlan, &mut Workspace<Term>, &[Term], &[Term], Order, &mut Recorder);
+type Evaluation = fn(&TreePlan, &mut Kernel<Term>, &[Term], &[Term], Order, &mut Recorder);
 
 /// `evaluation` up to `order`, traced.
 fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Program {
@@ -72,7 +68,7 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Program {
     let (nodes, outputs) = trace::record(|| {
         let q: Vec<Term> = (0..n).map(trace::q).collect();
         let dq: Vec<Term> = (0..n).map(trace::dq).collect();
-        let mut ws = Workspace::<Term>::new(plan);
+        let mut ws = Kernel::<Term>::new(plan);
         let mut out = Recorder::default();
         evaluation(plan, &mut ws, &q, &dq, order, &mut out);
         out.into_outputs()
@@ -375,8 +371,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         .collect();
 
     let terms_ty = quote!(::tree_mech::runtime::Terms<::tree_mech::runtime::nalgebra::Const<#n>>);
-    let lagrangian: Evaluation = sweeps::evaluate;
-    let constraints: Evaluation = sweeps::constraints;
+    let lagrangian: Evaluation = kernel::evaluate;
+    let constraints: Evaluation = kernel::constraints;
     let first = traced(&plan, Order::First, lagrangian).emit("__first", n, &terms_ty);
     let dynamics = traced(&plan, Order::Dynamics, lagrangian).emit("__dynamics", n, &terms_ty);
     let full = traced(&plan, Order::Full, lagrangian).emit("__full", n, &terms_ty);

@@ -16,12 +16,20 @@
 use tree_model::{ConstraintKind, Parameter, SpringKind};
 
 use crate::order::Order;
+use crate::outputs::{Output, Sink};
 use crate::plan::TreePlan;
 use crate::scalar::Scalar;
 use crate::se3::cross;
-use crate::sweeps::{Output, Sink, Workspace};
+use crate::sweeps::Workspace;
 
-/// Per-variable scratch for the elements (allocated once with the workspace).
+/// What the elements read — the outward sweep's kinematics, in the tree's workspace — and
+/// write: their own scratch, kept beside that workspace.
+struct At<'a, S: Scalar> {
+    tree: &'a Workspace<S>,
+    scratch: &'a mut Scratch<S>,
+}
+
+/// Per-variable scratch for the elements (allocated once, beside the tree's workspace).
 #[derive(Clone, Debug)]
 pub struct Scratch<S> {
     n: usize,
@@ -108,26 +116,26 @@ fn columns(plan: &TreePlan, f: usize) -> (usize, &[usize]) {
 }
 
 /// Starts an element on the pair `(a, b)`: returns `d = p_a − p_b` and fills `Dd`.
-fn pair<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, a: usize, b: usize) -> [S; 3] {
+fn pair<S: Scalar>(plan: &TreePlan, ws: &mut At<'_, S>, a: usize, b: usize) -> [S; 3] {
     ws.scratch.reset();
     for (f, sign) in [(a, 1.0), (b, -1.0)] {
         let (col, vars) = columns(plan, f);
         for (ia, &i) in vars.iter().enumerate() {
             ws.scratch.involve(i);
-            let j = ws.point_jac[col + ia];
+            let j = ws.tree.point_jac[col + ia];
             let s = S::constant(sign);
             for c in 0..3 {
                 ws.scratch.dd[i][c] += s * j[c];
             }
         }
     }
-    sub3(&ws.pose[a].p, &ws.pose[b].p)
+    sub3(&ws.tree.pose[a].p, &ws.tree.pose[b].p)
 }
 
 /// Adds `scale · c·∂²p_f/∂q∂q` (c a world vector) into the Hessian scratch.
 fn add_point_hessian<S: Scalar>(
     plan: &TreePlan,
-    ws: &mut Workspace<S>,
+    ws: &mut At<'_, S>,
     f: usize,
     c: &[S; 3],
     scale: S,
@@ -135,7 +143,10 @@ fn add_point_hessian<S: Scalar>(
     let (col, vars) = columns(plan, f);
     for ia in 0..vars.len() {
         for ib in ia..vars.len() {
-            let x = dot3(c, &cross(&ws.axis[col + ia], &ws.point_jac[col + ib]));
+            let x = dot3(
+                c,
+                &cross(&ws.tree.axis[col + ia], &ws.tree.point_jac[col + ib]),
+            );
             ws.scratch.add_hess_sym(vars[ia], vars[ib], scale * x);
         }
     }
@@ -144,7 +155,7 @@ fn add_point_hessian<S: Scalar>(
 /// Hessian of `s = d·d` into the scratch: `2 Dd_i·Dd_j + 2 d·∂²d/∂q_i∂q_j`.
 fn squared_distance_hessian<S: Scalar>(
     plan: &TreePlan,
-    ws: &mut Workspace<S>,
+    ws: &mut At<'_, S>,
     a: usize,
     b: usize,
     d: &[S; 3],
@@ -164,7 +175,7 @@ fn squared_distance_hessian<S: Scalar>(
 
 /// Emits the current element's value, gradient and Hessian as constraint row `r`.
 fn emit_row<S: Scalar>(
-    ws: &Workspace<S>,
+    ws: &At<'_, S>,
     r: usize,
     h: S,
     dq: &[S],
@@ -203,12 +214,14 @@ fn emit_row<S: Scalar>(
 /// * point: `h = e_k·d` for each listed world axis k.
 pub fn constraints<S: Scalar>(
     plan: &TreePlan,
-    ws: &mut Workspace<S>,
+    tree: &Workspace<S>,
+    scratch: &mut Scratch<S>,
     q: &[S],
     dq: &[S],
     order: Order,
     out: &mut impl Sink<S>,
 ) {
+    let ws = &mut At { tree, scratch };
     let second = order >= Order::Dynamics;
     let mut r = 0;
     for con in &plan.constraints {
@@ -242,7 +255,7 @@ pub fn constraints<S: Scalar>(
             ConstraintKind::Plane { normal } => {
                 let d = pair(plan, ws, a, b);
                 let e = [-d[0], -d[1], -d[2]];
-                let n = ws.pose[a].rotate(&normal.map(S::constant));
+                let n = ws.tree.pose[a].rotate(&normal.map(S::constant));
                 let n_cross_e = cross(&n, &e);
                 let (col, anc) = columns(plan, a);
                 let sc = &mut ws.scratch;
@@ -252,7 +265,7 @@ pub fn constraints<S: Scalar>(
                 }
                 // ∂n/∂q_i · e = (w_i × n)·e = w_i·(n × e).
                 for (ia, &i) in anc.iter().enumerate() {
-                    sc.grad[i] += dot3(&ws.axis[col + ia], &n_cross_e);
+                    sc.grad[i] += dot3(&ws.tree.axis[col + ia], &n_cross_e);
                 }
                 if second {
                     // n·∂²e = n·(∂²p_b − ∂²p_a).
@@ -260,11 +273,11 @@ pub fn constraints<S: Scalar>(
                     add_point_hessian(plan, ws, a, &n, S::constant(-1.0));
                     let (col, anc) = columns(plan, a);
                     for ia in 0..anc.len() {
-                        let w_a = ws.axis[col + ia];
+                        let w_a = ws.tree.axis[col + ia];
                         let dn = cross(&w_a, &n);
                         // ∂²n·e over pairs of frame a's variables.
                         for ib in ia..anc.len() {
-                            let x = dot3(&cross(&w_a, &cross(&ws.axis[col + ib], &n)), &e);
+                            let x = dot3(&cross(&w_a, &cross(&ws.tree.axis[col + ib], &n)), &e);
                             ws.scratch.add_hess_sym(anc[ia], anc[ib], x);
                         }
                         // ∂n_i·∂e_j + ∂n_j·∂e_i, with ∂e = −Dd.
@@ -307,11 +320,13 @@ pub fn constraints<S: Scalar>(
 /// `∂²V/∂q_i∂q_j = k[(r₀/r³)(d·Dd_i)(d·Dd_j) + ib(Dd_i·Dd_j + d·∂²d/∂q_i∂q_j)]`, `ib = 1 − r₀/r`.
 pub fn springs<S: Scalar>(
     plan: &TreePlan,
-    ws: &mut Workspace<S>,
+    tree: &Workspace<S>,
+    scratch: &mut Scratch<S>,
     q: &[S],
     order: Order,
     out: &mut impl Sink<S>,
 ) {
+    let ws = &mut At { tree, scratch };
     let full = order >= Order::Full;
     for spring in &plan.springs {
         let k = S::constant(spring.stiffness);
@@ -372,11 +387,13 @@ pub fn springs<S: Scalar>(
 /// `∂F/∂q = −c(∇r (∇²r q̇)ᵀ + ṙ ∇²r)` at `Order::Full` (for the VI's Newton Jacobian).
 pub fn forces<S: Scalar>(
     plan: &TreePlan,
-    ws: &mut Workspace<S>,
+    tree: &Workspace<S>,
+    scratch: &mut Scratch<S>,
     dq: &[S],
     order: Order,
     out: &mut impl Sink<S>,
 ) {
+    let ws = &mut At { tree, scratch };
     let full = order >= Order::Full;
     for (i, &c) in plan.damping.iter().enumerate() {
         if c != 0.0 {

@@ -1,11 +1,15 @@
 //! # tree-runtime
 //!
-//! Simulation of mechanical systems described as trees of frames (Johnson & Murphey): SE(3)
-//! primitives ([`se3`]), the tree as the recursions walk it ([`plan`]), the recursions
-//! themselves over any [`scalar`] ([`sweeps`]: evaluated here with `f64`, compiled by
-//! `tree_model!` with a tracing scalar), the [`System`] trait that interpreted and generated
-//! systems share, the interpreted [`TreeSystem`], continuous [`dynamics`], the integrators in
-//! [`integrate`] and the recorded [`Trajectory`].
+//! Simulation of mechanical systems described as trees of frames (Johnson & Murphey): the
+//! [`System`] trait that interpreted and generated systems share, its [`Terms`] and
+//! [`ConstraintTerms`], the interpreted [`TreeSystem`], continuous [`dynamics`], the
+//! integrators in [`integrate`], the recorded [`Trajectory`] and the errors ([`SimError`]).
+//!
+//! Beneath them, the kernel: SE(3) primitives (`se3`), the tree as the recursions walk it
+//! (`plan`), the recursions over any scalar (`sweeps`, `elements`, run together by `kernel`,
+//! their results named in `outputs`) — evaluated here with `f64`, compiled by `tree_model!`
+//! with a tracing scalar. The kernel is public for the macro's generated code and hidden from
+//! the documentation; it is not a stable interface.
 //!
 //! ```
 //! use tree_runtime::{integrate::{simulate, Method, SimOptions, ViSettings}, NoForce, System, TreeSystem};
@@ -22,12 +26,22 @@
 // arguments on purpose.
 #![allow(clippy::too_many_arguments)]
 
-// The recursions, over any scalar (what `tree_model!` needs).
+// The kernel: the recursions, over any scalar (what `tree_model!` needs), hidden from the
+// documented API. Bottom up: scalar, order, se3, plan, outputs, sweeps, elements, kernel.
+#[doc(hidden)]
 pub mod elements;
+#[doc(hidden)]
+pub mod kernel;
 pub mod order;
+#[doc(hidden)]
+pub mod outputs;
+#[doc(hidden)]
 pub mod plan;
+#[doc(hidden)]
 pub mod scalar;
+#[doc(hidden)]
 pub mod se3;
+#[doc(hidden)]
 pub mod sweeps;
 
 // Simulation (needs nalgebra).

@@ -13,65 +13,20 @@
 //! * `∂²L/∂q_i∂q_j = Zᵀ ∂v_f/∂q_i + W·[∂v_f/∂q_i, ξ_j] + ξ_j·(m^c δ, h × δ)`, `δ = γ_f × ω(J_a)`
 //!
 //! Each is the paper's per-mass sum (eqs. (15)–(18)) with the sum over the subtree taken once,
-//! inward, instead of once per mass. Springs, dampers and constraints ([`crate::elements`])
-//! then add their terms from the world point Jacobians of the frames they attach to.
+//! inward, instead of once per mass. Springs, dampers and constraints (`elements`) then add
+//! their terms from the world point Jacobians of the frames they attach to (`kernel` runs
+//! both).
 
 use tree_model::Joint;
 
-use crate::elements;
 use crate::order::Order;
+use crate::outputs::{Output, Sink};
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
 use crate::se3::{
     bracket_with_axis, component, cross, dot, inertia_times, zero6, LocalTransform, Pose,
     SpatialInertia, Twist, Wrench,
 };
-
-/// One scalar that an evaluation produces. Every evaluation adds its contributions into a
-/// [`Sink`] by these names, so a new term is one more contribution, not a new interface.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Output {
-    /// `L` (eq. (15)), springs' potentials included.
-    L,
-    /// `∂L/∂q_i` (eq. (16)).
-    DlDq(usize),
-    /// `∂L/∂q̇_i`.
-    DlDdq(usize),
-    /// `M_ij = ∂²L/∂q̇_i∂q̇_j` (eq. (18)).
-    Mass(usize, usize),
-    /// `∂²L/∂q̇_i∂q_j` (eq. (17)).
-    D2lDdqDq(usize, usize),
-    /// `∂²L/∂q_i∂q_j`.
-    D2lDqDq(usize, usize),
-    /// The model's own generalized force `F_i(q, q̇)` (damping, dampers).
-    Force(usize),
-    /// `∂F_i/∂q_j`.
-    DforceDq(usize, usize),
-    /// `∂F_i/∂q̇_j`.
-    DforceDdq(usize, usize),
-    /// Constraint row `h_r(q)`.
-    H(usize),
-    /// `∂h_r/∂q_i`.
-    Dh(usize, usize),
-    /// `q̇ᵀ (∂²h_r/∂q²) q̇`, the acceleration-level constraint's velocity term.
-    DhDot(usize),
-    /// `∂²h_r/∂q_i∂q_j`.
-    D2h(usize, usize, usize),
-}
-
-/// Where evaluations put what they produce: the interpreted system's matrices, or the
-/// compiler's record of which traced value lands in which output. Contributions add up;
-/// `set` is for an output written first and once (the tree's own terms, before springs and
-/// forces add to them), and may skip reading the old value.
-pub trait Sink<S> {
-    /// Adds `x` to the output `at`.
-    fn add(&mut self, at: Output, x: S);
-
-    /// Writes output `at`, which no other contribution touches (default: adds).
-    fn set(&mut self, at: Output, x: S) {
-        self.add(at, x)
-    }
-}
 
 /// Per-frame storage for one evaluation (allocated once, reused).
 #[derive(Clone, Debug)]
@@ -96,8 +51,6 @@ pub struct Workspace<S: Scalar> {
     pub point_jac: Vec<[S; 3]>,
     /// World axes `R_k (∂v_k/∂q̇_a)_ang` of the ancestor variables (attached frames only).
     pub axis: Vec<[S; 3]>,
-    /// Scratch for the elements, one entry per variable (or per pair of variables).
-    pub scratch: elements::Scratch<S>,
 }
 
 impl<S: Scalar> Workspace<S> {
@@ -119,7 +72,6 @@ impl<S: Scalar> Workspace<S> {
             moment: vec![[S::zero(); 3]; nf],
             point_jac: vec![[S::zero(); 3]; plan.columns],
             axis: vec![[S::zero(); 3]; plan.columns],
-            scratch: elements::Scratch::new(plan.dof()),
         }
     }
 }
@@ -278,8 +230,8 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
     l
 }
 
-/// All Lagrangian terms up to `order` at `(q, q̇)` by the two sweeps, springs' potentials
-/// included, and the model's own forces (damping, dampers) with their derivatives.
+/// The tree's own Lagrangian terms up to `order` at `(q, q̇)` by the two sweeps (the
+/// elements' follow in [`crate::kernel::evaluate`]).
 pub fn evaluate<S: Scalar>(
     plan: &TreePlan,
     ws: &mut Workspace<S>,
@@ -349,20 +301,4 @@ pub fn evaluate<S: Scalar>(
             }
         }
     }
-    elements::springs(plan, ws, q, order, out);
-    elements::forces(plan, ws, dq, order, out);
-}
-
-/// The constraints `h`, `Dh` and, from `Order::Dynamics` on, `q̇ᵀD²h q̇` (and at `Order::Full`
-/// all of `D²h`) at `(q, q̇)`.
-pub fn constraints<S: Scalar>(
-    plan: &TreePlan,
-    ws: &mut Workspace<S>,
-    q: &[S],
-    dq: &[S],
-    order: Order,
-    out: &mut impl Sink<S>,
-) {
-    forward(plan, ws, q, dq, false);
-    elements::constraints(plan, ws, q, dq, order, out);
 }

@@ -7,8 +7,8 @@ use nalgebra::{
 use tree_model::Motion;
 
 pub use crate::order::Order;
+use crate::outputs::{Field, Index, Output, Sink};
 use crate::se3::Pose;
-use crate::sweeps::{Output, Sink};
 
 /// A vector over the system's configuration variables.
 pub type Vector<N> = OVector<f64, N>;
@@ -114,41 +114,60 @@ where
 {
     #[inline(always)]
     fn add(&mut self, at: Output, x: f64) {
-        match at {
-            Output::L => self.l += x,
-            Output::DlDq(i) => self.dl_dq[i] += x,
-            Output::DlDdq(i) => self.dl_ddq[i] += x,
-            Output::Mass(i, j) => self.mass[(i, j)] += x,
-            Output::D2lDdqDq(i, j) => self.d2l_ddq_dq[(i, j)] += x,
-            Output::D2lDqDq(i, j) => self.d2l_dq_dq[(i, j)] += x,
-            Output::Force(i) => self.force[i] += x,
-            Output::DforceDq(i, j) => {
-                self.force_derivatives = Sparsity::Dense;
-                self.dforce_dq[(i, j)] += x
-            }
-            Output::DforceDdq(i, j) => {
-                let at = if i == j {
-                    Sparsity::Diagonal
-                } else {
-                    Sparsity::Dense
-                };
-                self.force_derivatives = self.force_derivatives.max(at);
-                self.dforce_ddq[(i, j)] += x
-            }
-            Output::H(_) | Output::Dh(..) | Output::DhDot(_) | Output::D2h(..) => {}
+        if let Some(entry) = self.entry(at) {
+            *entry += x;
         }
     }
 
     #[inline(always)]
     fn set(&mut self, at: Output, x: f64) {
-        match at {
-            Output::L => self.l = x,
-            Output::DlDq(i) => self.dl_dq[i] = x,
-            Output::DlDdq(i) => self.dl_ddq[i] = x,
-            Output::Mass(i, j) => self.mass[(i, j)] = x,
-            Output::D2lDdqDq(i, j) => self.d2l_ddq_dq[(i, j)] = x,
-            Output::D2lDqDq(i, j) => self.d2l_dq_dq[(i, j)] = x,
-            other => self.add(other, x),
+        if let Some(entry) = self.entry(at) {
+            *entry = x;
+        }
+    }
+}
+
+impl<N: Dim> Terms<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// Where output `at` is stored ([`Output::slot`]); `None` for the constraints' outputs.
+    /// Writing a force derivative widens [`Terms::force_derivatives`].
+    #[inline(always)]
+    fn entry(&mut self, at: Output) -> Option<&mut f64> {
+        fn matrix<N: Dim>(m: &mut Matrix<N>, index: Index) -> Option<&mut f64>
+        where
+            DefaultAllocator: Allocator<N, N>,
+        {
+            match index {
+                Index::Pair(i, j) => Some(&mut m[(i, j)]),
+                _ => None,
+            }
+        }
+        let (field, index) = at.slot();
+        match (field, index) {
+            (Field::L, _) => Some(&mut self.l),
+            (Field::DlDq, Index::Entry(i)) => Some(&mut self.dl_dq[i]),
+            (Field::DlDdq, Index::Entry(i)) => Some(&mut self.dl_ddq[i]),
+            (Field::Force, Index::Entry(i)) => Some(&mut self.force[i]),
+            (Field::Mass, index) => matrix(&mut self.mass, index),
+            (Field::D2lDdqDq, index) => matrix(&mut self.d2l_ddq_dq, index),
+            (Field::D2lDqDq, index) => matrix(&mut self.d2l_dq_dq, index),
+            (Field::DforceDq, index) => {
+                self.force_derivatives = Sparsity::Dense;
+                matrix(&mut self.dforce_dq, index)
+            }
+            (Field::DforceDdq, index) => {
+                let diagonal = matches!(index, Index::Pair(i, j) if i == j);
+                let at = if diagonal {
+                    Sparsity::Diagonal
+                } else {
+                    Sparsity::Dense
+                };
+                self.force_derivatives = self.force_derivatives.max(at);
+                matrix(&mut self.dforce_ddq, index)
+            }
+            _ => None,
         }
     }
 }
@@ -204,13 +223,14 @@ impl ConstraintTerms {
 impl Sink<f64> for ConstraintTerms {
     #[inline(always)]
     fn add(&mut self, at: Output, x: f64) {
-        match at {
-            Output::H(r) => self.h[r] += x,
-            Output::Dh(r, i) => self.dh[(r, i)] += x,
-            Output::DhDot(r) => self.dh_dot[r] += x,
-            Output::D2h(r, i, j) => self.d2h[r][(i, j)] += x,
-            _ => {}
-        }
+        let entry = match at.slot() {
+            (Field::H, Index::Entry(r)) => &mut self.h[r],
+            (Field::Dh, Index::Pair(r, i)) => &mut self.dh[(r, i)],
+            (Field::DhDot, Index::Entry(r)) => &mut self.dh_dot[r],
+            (Field::D2h, Index::Stacked(r, i, j)) => &mut self.d2h[r][(i, j)],
+            _ => return,
+        };
+        *entry += x;
     }
 }
 

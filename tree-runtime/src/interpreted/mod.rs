@@ -6,6 +6,7 @@ use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
 use crate::error::SimError;
+use crate::kernel::{self, Kernel};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
 use crate::sweeps::{self, Workspace};
@@ -20,7 +21,7 @@ pub struct TreeSystem {
     model: Model,
     /// Constant chains folded (as `tree_model!` compiles them).
     plan: TreePlan,
-    ws: Workspace<f64>,
+    kernel: Kernel<f64>,
     /// Every frame as modelled, for the poses.
     full_plan: TreePlan,
     constraint_names: Vec<String>,
@@ -41,7 +42,7 @@ impl TreeSystem {
         let plan = TreePlan::folded(model);
         Ok(TreeSystem {
             model: model.clone(),
-            ws: Workspace::new(&plan),
+            kernel: Kernel::new(&plan),
             plan,
             full_plan: TreePlan::new(model),
             constraint_names: model.constraint_row_names(),
@@ -133,9 +134,9 @@ impl System for TreeSystem {
         out: &mut ConstraintTerms,
     ) {
         out.clear(order);
-        sweeps::constraints(
+        kernel::constraints(
             &self.plan,
-            &mut self.ws,
+            &mut self.kernel,
             q.as_slice(),
             dq.as_slice(),
             order,
@@ -151,9 +152,9 @@ impl System for TreeSystem {
         out: &mut Terms<Dyn>,
     ) {
         out.clear(order);
-        sweeps::evaluate(
+        kernel::evaluate(
             &self.plan,
-            &mut self.ws,
+            &mut self.kernel,
             q.as_slice(),
             dq.as_slice(),
             order,

@@ -14,9 +14,10 @@ use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
 use crate::error::SimError;
+use crate::outputs::{Output, Sink};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
-use crate::sweeps::{self, Output, Sink, Workspace};
+use crate::sweeps::{self, Workspace};
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
 
 /// How the reference system evaluates the paper's sums.

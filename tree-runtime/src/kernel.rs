@@ -1,0 +1,61 @@
+//! One evaluation of a model: the tree's sweeps ([`crate::sweeps`]), then its springs,
+//! dampers and constraints ([`crate::elements`]) from the kinematics the sweeps leave. Both
+//! paths run these functions: the interpreted system over `f64`, `tree_model!` over its
+//! tracing scalar.
+
+use crate::elements::{self, Scratch};
+use crate::order::Order;
+use crate::outputs::Sink;
+use crate::plan::TreePlan;
+use crate::scalar::Scalar;
+use crate::sweeps::{self, Workspace};
+
+/// The storage one evaluation works in (allocated once, reused): the tree's workspace and,
+/// beside it, the elements' scratch.
+#[derive(Clone, Debug)]
+pub struct Kernel<S: Scalar> {
+    /// Per-frame values of the sweeps.
+    pub tree: Workspace<S>,
+    /// Per-variable scratch of the elements.
+    pub elements: Scratch<S>,
+}
+
+impl<S: Scalar> Kernel<S> {
+    /// Buffers sized for `plan`.
+    pub fn new(plan: &TreePlan) -> Self {
+        Kernel {
+            tree: Workspace::new(plan),
+            elements: Scratch::new(plan.dof()),
+        }
+    }
+}
+
+/// All Lagrangian terms up to `order` at `(q, q̇)` — the tree's by the two sweeps, then the
+/// springs' potentials — and the model's own forces (damping, dampers) with their
+/// derivatives.
+pub fn evaluate<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    dq: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    sweeps::evaluate(plan, &mut k.tree, q, dq, order, out);
+    elements::springs(plan, &k.tree, &mut k.elements, q, order, out);
+    elements::forces(plan, &k.tree, &mut k.elements, dq, order, out);
+}
+
+/// The constraints `h`, `Dh` and, from `Order::Dynamics` on, `q̇ᵀD²h q̇` (and at `Order::Full`
+/// all of `D²h`) at `(q, q̇)`.
+pub fn constraints<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    dq: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    sweeps::forward(plan, &mut k.tree, q, dq, false);
+    elements::constraints(plan, &k.tree, &mut k.elements, q, dq, order, out);
+}

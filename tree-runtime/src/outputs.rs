@@ -1,0 +1,136 @@
+//! What an evaluation produces, by name ([`Output`]), where it is stored ([`Output::slot`]: the
+//! one table the runtime's storage and the compiler's emission both read), and where an
+//! evaluation puts it ([`Sink`]).
+
+/// One scalar that an evaluation produces. Every evaluation adds its contributions into a
+/// [`Sink`] by these names, so a new term is one more contribution, not a new interface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Output {
+    /// `L` (eq. (15)), springs' potentials included.
+    L,
+    /// `∂L/∂q_i` (eq. (16)).
+    DlDq(usize),
+    /// `∂L/∂q̇_i`.
+    DlDdq(usize),
+    /// `M_ij = ∂²L/∂q̇_i∂q̇_j` (eq. (18)).
+    Mass(usize, usize),
+    /// `∂²L/∂q̇_i∂q_j` (eq. (17)).
+    D2lDdqDq(usize, usize),
+    /// `∂²L/∂q_i∂q_j`.
+    D2lDqDq(usize, usize),
+    /// The model's own generalized force `F_i(q, q̇)` (damping, dampers).
+    Force(usize),
+    /// `∂F_i/∂q_j`.
+    DforceDq(usize, usize),
+    /// `∂F_i/∂q̇_j`.
+    DforceDdq(usize, usize),
+    /// Constraint row `h_r(q)`.
+    H(usize),
+    /// `∂h_r/∂q_i`.
+    Dh(usize, usize),
+    /// `q̇ᵀ (∂²h_r/∂q²) q̇`, the acceleration-level constraint's velocity term.
+    DhDot(usize),
+    /// `∂²h_r/∂q_i∂q_j`.
+    D2h(usize, usize, usize),
+}
+
+/// Where evaluations put what they produce: the interpreted system's matrices, or the
+/// compiler's record of which traced value lands in which output. Contributions add up;
+/// `set` is for an output written first and once (the tree's own terms, before springs and
+/// forces add to them), and may skip reading the old value.
+pub trait Sink<S> {
+    /// Adds `x` to the output `at`.
+    fn add(&mut self, at: Output, x: S);
+
+    /// Writes output `at`, which no other contribution touches (default: adds).
+    fn set(&mut self, at: Output, x: S) {
+        self.add(at, x)
+    }
+}
+
+/// A field of `Terms` or `ConstraintTerms` that outputs are stored in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Field {
+    /// `Terms::l`.
+    L,
+    /// `Terms::dl_dq`.
+    DlDq,
+    /// `Terms::dl_ddq`.
+    DlDdq,
+    /// `Terms::mass`.
+    Mass,
+    /// `Terms::d2l_ddq_dq`.
+    D2lDdqDq,
+    /// `Terms::d2l_dq_dq`.
+    D2lDqDq,
+    /// `Terms::force`.
+    Force,
+    /// `Terms::dforce_dq`.
+    DforceDq,
+    /// `Terms::dforce_ddq`.
+    DforceDdq,
+    /// `ConstraintTerms::h`.
+    H,
+    /// `ConstraintTerms::dh`.
+    Dh,
+    /// `ConstraintTerms::dh_dot`.
+    DhDot,
+    /// `ConstraintTerms::d2h`.
+    D2h,
+}
+
+impl Field {
+    /// The field's name in its struct (what generated code writes to).
+    pub fn name(self) -> &'static str {
+        match self {
+            Field::L => "l",
+            Field::DlDq => "dl_dq",
+            Field::DlDdq => "dl_ddq",
+            Field::Mass => "mass",
+            Field::D2lDdqDq => "d2l_ddq_dq",
+            Field::D2lDqDq => "d2l_dq_dq",
+            Field::Force => "force",
+            Field::DforceDq => "dforce_dq",
+            Field::DforceDdq => "dforce_ddq",
+            Field::H => "h",
+            Field::Dh => "dh",
+            Field::DhDot => "dh_dot",
+            Field::D2h => "d2h",
+        }
+    }
+}
+
+/// Where in its field an output sits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Index {
+    /// The field is one number.
+    Scalar,
+    /// Entry `i` of a vector.
+    Entry(usize),
+    /// Entry `(i, j)` of a matrix.
+    Pair(usize, usize),
+    /// Entry `(i, j)` of matrix `r` of a list.
+    Stacked(usize, usize, usize),
+}
+
+impl Output {
+    /// The field and index this output is stored at.
+    pub fn slot(self) -> (Field, Index) {
+        use Index::{Entry, Pair, Scalar, Stacked};
+        match self {
+            Output::L => (Field::L, Scalar),
+            Output::DlDq(i) => (Field::DlDq, Entry(i)),
+            Output::DlDdq(i) => (Field::DlDdq, Entry(i)),
+            Output::Mass(i, j) => (Field::Mass, Pair(i, j)),
+            Output::D2lDdqDq(i, j) => (Field::D2lDdqDq, Pair(i, j)),
+            Output::D2lDqDq(i, j) => (Field::D2lDqDq, Pair(i, j)),
+            Output::Force(i) => (Field::Force, Entry(i)),
+            Output::DforceDq(i, j) => (Field::DforceDq, Pair(i, j)),
+            Output::DforceDdq(i, j) => (Field::DforceDdq, Pair(i, j)),
+            Output::H(r) => (Field::H, Entry(r)),
+            Output::Dh(r, i) => (Field::Dh, Pair(r, i)),
+            Output::DhDot(r) => (Field::DhDot, Entry(r)),
+            Output::D2h(r, i, j) => (Field::D2h, Stacked(r, i, j)),
+        }
+    }
+}
