@@ -9,7 +9,7 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use tree_mech::integrate::{MidpointVi, Rk4, ViSettings};
+use tree_mech::integrate::{MidpointVi, Rk4, StepContext, ViSettings};
 use tree_mech::model::{self, UrdfOptions};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::runtime::{Dynamics, ModelMotions, Vector};
@@ -57,18 +57,9 @@ where
     let mut motion = ModelMotions::of(&sys);
     let mut qdd = sys.zero_vector();
     let accel = time_ns(calls, || {
-        dynamics
-            .acceleration(
-                &mut sys,
-                &mut NoForce,
-                &mut motion,
-                0,
-                0.0,
-                &q,
-                &dq,
-                &mut qdd,
-            )
-            .unwrap();
+        let mut no_force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.0);
+        dynamics.acceleration(&mut cx, &q, &dq, &mut qdd).unwrap();
         black_box(qdd[0]);
     });
     let mut vi = MidpointVi::new(&sys, ViSettings::default());
@@ -79,12 +70,14 @@ where
         pk.copy_from(&p0);
         vi.last_velocity.copy_from(&dq);
         vi.step(
-            &mut sys,
-            &mut NoForce,
-            &mut motion,
-            0,
-            0.0,
-            0.001,
+            &mut StepContext {
+                sys: &mut sys,
+                force: &mut NoForce,
+                motion: &mut motion,
+                index: 0,
+                t: 0.0,
+                dt: 0.001,
+            },
             &mut qk,
             &mut pk,
             &mut next,
@@ -97,12 +90,14 @@ where
         qr.copy_from(&q);
         vr.copy_from(&dq);
         rk.step(
-            &mut sys,
-            &mut NoForce,
-            &mut motion,
-            0,
-            0.0,
-            0.001,
+            &mut StepContext {
+                sys: &mut sys,
+                force: &mut NoForce,
+                motion: &mut motion,
+                index: 0,
+                t: 0.0,
+                dt: 0.001,
+            },
             &mut qr,
             &mut vr,
         )

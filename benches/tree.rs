@@ -6,7 +6,7 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, ViSettings};
+use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, StepContext, ViSettings};
 use tree_mech::model;
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::runtime::ModelMotions;
@@ -71,18 +71,9 @@ where
                 || (q.clone(), p0.clone()),
                 |(qk, pk)| {
                     vi.last_velocity.copy_from(&dq);
-                    vi.step(
-                        &mut sys,
-                        &mut NoForce,
-                        &mut motion,
-                        0,
-                        0.0,
-                        0.01,
-                        qk,
-                        pk,
-                        &mut next,
-                    )
-                    .unwrap();
+                    let mut no_force = NoForce;
+                    let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.01);
+                    vi.step(&mut cx, qk, pk, &mut next).unwrap();
                 },
                 criterion::BatchSize::SmallInput,
             )
@@ -94,8 +85,9 @@ where
         b.iter_batched_ref(
             || (q.clone(), dq.clone()),
             |(qk, vk)| {
-                rk.step(&mut sys, &mut NoForce, &mut motion, 0, 0.0, 0.01, qk, vk)
-                    .unwrap()
+                let mut no_force = NoForce;
+                let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.01);
+                rk.step(&mut cx, qk, vk).unwrap()
             },
             criterion::BatchSize::SmallInput,
         )

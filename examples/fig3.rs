@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use plotters::prelude::*;
-use tree_mech::integrate::{JacobianUpdate, MidpointVi, ViSettings};
+use tree_mech::integrate::{JacobianUpdate, MidpointVi, StepContext, ViSettings};
 use tree_mech::model;
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{tree_model, NoForce, PaperEvaluation, PaperSystem, System, TreeSystem};
@@ -82,19 +82,11 @@ where
         let mut q = q0.clone();
         let mut p = vi.initial_momentum(sys, &q0, &dq0);
         let mut next = q0.clone();
+        let mut no_force = NoForce;
+        let mut cx = StepContext::new(sys, &mut no_force, &mut motion, 0.01);
         for k in 0..1000 {
-            vi.step(
-                sys,
-                &mut NoForce,
-                &mut motion,
-                k,
-                k as f64 * 0.01,
-                0.01,
-                &mut q,
-                &mut p,
-                &mut next,
-            )
-            .unwrap();
+            vi.step(cx.at(k, k as f64 * 0.01), &mut q, &mut p, &mut next)
+                .unwrap();
         }
         best = best.min(start.elapsed().as_secs_f64() * 1e3);
     }

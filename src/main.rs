@@ -14,7 +14,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tree_mech::integrate::{
-    run, Forcing, JacobianUpdate, Method, SimOptions, Tolerance, ViSettings,
+    run, Forcing, JacobianUpdate, Method, SimOptions, StepContext, Tolerance, ViSettings,
 };
 use tree_mech::model;
 use tree_mech::nalgebra::Dyn;
@@ -670,17 +670,10 @@ fn run_eval(
     let mut dynamics = Dynamics::new(&sys);
     let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+    let mut no_force = NoForce;
+    let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.0);
     dynamics
-        .acceleration(
-            &mut sys,
-            &mut NoForce,
-            &mut motion,
-            0,
-            time,
-            &q,
-            &dq,
-            &mut qdd,
-        )
+        .acceleration(cx.at(0, time), &q, &dq, &mut qdd)
         .map_err(|e| format!("at this state, {e}"))?;
     let rows = sys.constraint_count();
     let mut c = ConstraintTerms::zeros(rows, n);

@@ -4,7 +4,9 @@
 use std::alloc::{GlobalAlloc, Layout, System as SystemAlloc};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use tree_mech::integrate::{JacobianUpdate, MidpointVi, Rk4, Rk45, Tolerance, ViSettings};
+use tree_mech::integrate::{
+    JacobianUpdate, MidpointVi, Rk4, Rk45, StepContext, Tolerance, ViSettings,
+};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{
@@ -68,57 +70,16 @@ where
         }
         for k in 0..20 {
             let t = k as f64 * 0.01;
-            rk4.step(
-                &mut sys,
-                &mut NoForce,
-                &mut motion,
-                k,
-                t,
-                0.01,
-                &mut q,
-                &mut dq,
-            )
-            .unwrap();
-            let mut h = 0.01;
-            rk45.step(
-                &mut sys,
-                &mut NoForce,
-                &mut motion,
-                k,
-                t,
-                1.0,
-                &mut h,
-                &mut q,
-                &mut dq,
-            )
-            .unwrap();
-            vi.step(
-                &mut sys,
-                &mut NoForce,
-                &mut motion,
-                k,
-                t,
-                0.01,
-                &mut q2,
-                &mut p,
-                &mut next,
-            )
-            .unwrap_or_else(|e| panic!("{what}: {e}"));
-            vi_reuse
-                .step(
-                    &mut sys,
-                    &mut NoForce,
-                    &mut motion,
-                    k,
-                    t,
-                    0.01,
-                    &mut q3,
-                    &mut p2,
-                    &mut next,
-                )
-                .unwrap();
-            vi.velocity_and_energy(&mut sys, &mut motion, k, t, &q2, &p, &mut dq)
-                .unwrap();
+            let mut no_force = NoForce;
+            let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.01);
+            cx.at(k, t);
+            rk4.step(&mut cx, &mut q, &mut dq).unwrap();
+            rk45.step(&mut cx, 1.0, &mut q, &mut dq).unwrap();
+            cx.dt = 0.01;
+            vi.step(&mut cx, &mut q2, &mut p, &mut next)
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
+            vi_reuse.step(&mut cx, &mut q3, &mut p2, &mut next).unwrap();
+            vi.velocity_and_energy(&mut cx, &q2, &p, &mut dq).unwrap();
         }
     });
     assert_eq!(n, 0, "{what}: {n} allocations in the hot path");

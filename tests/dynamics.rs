@@ -5,7 +5,7 @@ mod common;
 
 use common::{interpreted, load, Rng};
 use nalgebra::Dyn;
-use tree_mech::integrate::{simulate, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::integrate::{simulate, Method, SimOptions, StepContext, Tolerance, ViSettings};
 use tree_mech::model::{ModelBuilder, PrimitiveKind};
 use tree_mech::runtime::{Dynamics, Vector};
 use tree_mech::{NoForce, System, Trajectory, TreeSystem};
@@ -119,18 +119,9 @@ fn double_pendulum_dynamics_match_the_textbook_equations() {
         let q = rng.vector(2, 3.0);
         let dq = rng.vector(2, 4.0);
         let mut qdd = Vector::<Dyn>::zeros(2);
-        dynamics
-            .acceleration(
-                &mut sys,
-                &mut NoForce,
-                &mut motion,
-                0,
-                0.0,
-                &q,
-                &dq,
-                &mut qdd,
-            )
-            .unwrap();
+        let mut no_force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.0);
+        dynamics.acceleration(&mut cx, &q, &dq, &mut qdd).unwrap();
         let expected = textbook_double_pendulum(q.as_slice(), dq.as_slice(), 9.81);
         for i in 0..2 {
             assert!(

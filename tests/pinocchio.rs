@@ -10,6 +10,7 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator};
 use serde_json::Value;
+use tree_mech::integrate::StepContext;
 use tree_mech::model::{self, UrdfOptions};
 use tree_mech::runtime::{Dynamics, ModelMotions, Pose, Vector};
 use tree_mech::{tree_model, Order, System, Terms, TreeSystem};
@@ -177,9 +178,8 @@ where
         let mut force = |_t: f64, _q: &Vector<S::N>, _dq: &Vector<S::N>, u: &mut Vector<S::N>| {
             *u += &u_ours;
         };
-        dynamics
-            .acceleration(&mut sys, &mut force, &mut motion, 0, 0.0, &q, &v, &mut qdd)
-            .unwrap();
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.0);
+        dynamics.acceleration(&mut cx, &q, &v, &mut qdd).unwrap();
         let ddq_pin = numbers(&state["ddq"]);
         for i in 0..n {
             close(qdd[perm[i]], ddq_pin[i], scale(&ddq_pin), &what("ABA q̈"));

@@ -6,7 +6,7 @@ mod common;
 use common::{interpreted, load, Rng};
 use nalgebra::Dyn;
 use tree_mech::integrate::{
-    simulate, Forcing, JacobianUpdate, Method, MidpointVi, SimOptions, ViSettings,
+    simulate, Forcing, JacobianUpdate, Method, MidpointVi, SimOptions, StepContext, ViSettings,
 };
 use tree_mech::model;
 use tree_mech::runtime::{Pose, Vector};
@@ -55,26 +55,30 @@ fn check_newton_matrix<S: System<N = Dyn>>(mut sys: S, name: &str, alpha: f64, f
             vi.lambda[s] = rng.uniform();
         }
         vi.prepare(&mut sys, &q1);
-        vi.residual(&mut sys, &mut NoForce, 0.0, dt, &q1, &p1, &q2, true);
+        let mut motion = |_: usize, _: f64| [0.0; 3];
+        let mut no_force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, dt);
+        vi.residual(&mut cx, &q1, &p1, &q2, true);
         let jacobian = vi.newton_matrix();
         assert_eq!(jacobian.nrows(), nd + m);
         let h = 1e-7;
         // Unknowns: the dynamic part of q2, then λ.
         for col in 0..nd + m {
-            let residual_at = |vi: &mut MidpointVi<Dyn>, sys: &mut _, step: f64| {
-                let mut q = q2.clone();
-                let saved = vi.lambda.clone();
-                if col < nd {
-                    q[dynamic[col]] += step;
-                } else {
-                    vi.lambda[col - nd] += step;
-                }
-                vi.residual(sys, &mut NoForce, 0.0, dt, &q1, &p1, &q, false);
-                vi.lambda = saved;
-                vi.residual_vector()
-            };
-            let fp = residual_at(&mut vi, &mut sys, h);
-            let fm = residual_at(&mut vi, &mut sys, -h);
+            let residual_at =
+                |vi: &mut MidpointVi<Dyn>, cx: &mut StepContext<_, _, _>, step: f64| {
+                    let mut q = q2.clone();
+                    let saved = vi.lambda.clone();
+                    if col < nd {
+                        q[dynamic[col]] += step;
+                    } else {
+                        vi.lambda[col - nd] += step;
+                    }
+                    vi.residual(cx, &q1, &p1, &q, false);
+                    vi.lambda = saved;
+                    vi.residual_vector()
+                };
+            let fp = residual_at(&mut vi, &mut cx, h);
+            let fm = residual_at(&mut vi, &mut cx, -h);
             for row in 0..nd + m {
                 let fd = (fp[row] - fm[row]) / (2.0 * h);
                 let scale = jacobian.amax();

@@ -6,6 +6,7 @@
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dyn};
 use tree_model::Motion;
 
+use crate::context::StepContext;
 use crate::error::SimError;
 use crate::linalg::{cholesky_solve, cholesky_substitute};
 use crate::system::{ConstraintTerms, Matrix, Order, System, Terms, Vector};
@@ -189,6 +190,7 @@ impl ReducedKkt {
     /// factor of `M_dd` and the Schur complement `Dh_d M_dd⁻¹ Dh_dᵀ` (docs/derivations.md §6).
     /// Without constraints `dh` and `gamma` are not read. Errors name the dynamic variable or
     /// the constraint at fault.
+    #[allow(clippy::too_many_arguments)] // the two blocks of the system and their right sides
     pub(crate) fn solve<S: System>(
         &mut self,
         sys: &S,
@@ -285,16 +287,12 @@ where
         }
     }
 
-    /// `q̈` at `(t, q, q̇)` into `qdd` (eq. (14)); the kinematic entries of `q`, `q̇` must hold
-    /// their prescription at `t`, and `qdd`'s kinematic entries are set from it. `step`
-    /// labels errors.
+    /// `q̈` at `(cx.t, q, q̇)` into `qdd` (eq. (14)); the kinematic entries of `q`, `q̇` must
+    /// hold their prescription at `cx.t`, and `qdd`'s kinematic entries are set from it.
+    /// `cx.index` labels errors.
     pub fn acceleration<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &Vector<N>,
         dq: &Vector<N>,
         qdd: &mut Vector<N>,
@@ -304,6 +302,8 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
+        let (sys, force, motion) = (&mut *cx.sys, &mut *cx.force, &mut *cx.motion);
+        let (step, t) = (cx.index, cx.t);
         sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
         // rhs = F + u + ∂L/∂q − (∂²L/∂q̇∂q) q̇
         self.rhs.copy_from(&self.terms.force);

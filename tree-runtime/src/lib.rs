@@ -22,9 +22,6 @@
 //! assert!(traj.max_energy_error() < 1e-2);
 //! ```
 #![warn(missing_docs)]
-// Integrator steps take the system, the force, the step's labels and the state as separate
-// arguments on purpose.
-#![allow(clippy::too_many_arguments)]
 
 // The kernel: the recursions, over any scalar (what `tree_model!` needs), hidden from the
 // documented API. Bottom up: scalar, order, se3, plan, outputs, sweeps, elements, kernel.
@@ -46,6 +43,8 @@ pub mod sweeps;
 
 // Simulation (needs nalgebra).
 #[cfg(feature = "simulate")]
+pub mod context;
+#[cfg(feature = "simulate")]
 pub mod dynamics;
 #[cfg(feature = "simulate")]
 pub mod error;
@@ -54,6 +53,7 @@ pub mod integrate;
 #[cfg(feature = "simulate")]
 pub mod interpreted;
 #[cfg(feature = "simulate")]
+#[doc(hidden)]
 pub mod linalg;
 #[cfg(feature = "simulate")]
 pub mod reference;

@@ -9,6 +9,7 @@ mod rk4;
 mod rk45;
 mod vi;
 
+pub use crate::context::StepContext;
 pub use discrete::DiscreteLagrangian;
 pub use projection::{project_initial_state, Moved};
 pub use rk4::Rk4;
@@ -263,108 +264,285 @@ where
             .collect(),
         terms: Terms::zeros(n),
         qdd: sys.zero_vector(),
+        dynamics,
+        every: options.every,
     };
-    let every = options.every;
-    let recorded = |k: usize, last: bool| k.is_multiple_of(every) || last;
+    let mut cx = StepContext::new(sys, force, motion, options.dt);
+    // One line per integrator: what it is driven as.
     match options.method {
         Method::Rk4 => {
-            let mut rk = Rk4::new(sys);
+            let mut rk = Rk4::new(cx.sys);
             rk.dynamics.baumgarte = options.baumgarte;
-            rec.continuous(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
-            for k in 0..steps {
-                let t = k as f64 * options.dt;
-                rk.step(sys, force, motion, k, t, options.dt, &mut q, &mut dq)?;
-                rec.summary.dissipated += rk.dissipated;
-                let t = (k + 1) as f64 * options.dt;
-                check_finite(k + 1, t, &q, &dq)?;
-                if recorded(k + 1, k + 1 == steps) {
-                    rec.continuous(sys, &mut dynamics, force, motion, k + 1, t, &q, &dq)?;
-                }
-            }
-            rec.summary.steps = steps;
+            drive(&mut Fixed(rk, steps), &mut cx, &mut rec, &mut q, &mut dq)
         }
         Method::Rk45(tol) => {
-            let mut rk = Rk45::new(sys, tol);
+            let mut rk = Rk45::new(cx.sys, tol);
             rk.dynamics.baumgarte = options.baumgarte;
-            rec.continuous(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
-            let (mut t, mut dt, mut k) = (0.0, options.dt, 0);
-            let t_end = options.duration;
-            while t < t_end {
-                if k % 1000 == 999 || k >= options.max_steps {
-                    budget(k, t, t_end, dt, options.max_steps)?;
-                }
-                let h = rk.step(sys, force, motion, k, t, t_end, &mut dt, &mut q, &mut dq)?;
-                rec.summary.dissipated += rk.dissipated;
-                t = if t + h >= t_end * (1.0 - 1e-15) {
-                    t_end
-                } else {
-                    t + h
-                };
-                k += 1;
-                check_finite(k, t, &q, &dq)?;
-                if recorded(k, t >= t_end) {
-                    rec.continuous(sys, &mut dynamics, force, motion, k, t, &q, &dq)?;
-                }
-            }
-            rec.summary.steps = k;
+            let adaptive = Adaptive(rk, options.duration, options.max_steps);
+            drive(&mut { adaptive }, &mut cx, &mut rec, &mut q, &mut dq)
         }
         Method::Vi(settings) => {
-            let mut vi = MidpointVi::new(sys, settings);
-            let mut p = vi.initial_momentum(sys, &q, &dq);
-            let mut q_next = q.clone();
-            // The start as the continuous equations see it, λ included.
-            let (energy, violation) =
-                rec.state(sys, &mut dynamics, force, motion, 0, 0.0, &q, &dq)?;
-            rec.record(&Sample {
-                step: 0,
-                t: 0.0,
-                q: q.as_slice(),
-                dq: dq.as_slice(),
-                p: Some(p.as_slice()),
-                energy,
-                lambda: dynamics.lambda.as_slice(),
-                violation,
-            })?;
-            if dynamics.split.rows > 0 {
-                let dh0 = &dynamics.constraint_terms.dh;
-                vi.start_constrained(dh0, &dynamics.lambda, options.dt, &mut p);
-            }
-            for k in 0..steps {
-                let t = k as f64 * options.dt;
-                vi.step(
-                    sys,
-                    force,
-                    motion,
-                    k,
-                    t,
-                    options.dt,
-                    &mut q,
-                    &mut p,
-                    &mut q_next,
-                )?;
-                rec.summary.newton_iterations += vi.iterations;
-                rec.summary.dissipated += vi.dissipated;
-                rec.summary.subdivided_steps += (vi.subdivisions > 0) as usize;
-                if recorded(k + 1, k + 1 == steps) {
-                    let t = (k + 1) as f64 * options.dt;
-                    let violation = vi.constraint_terms.violation();
-                    let energy = vi.velocity_and_energy(sys, motion, k + 1, t, &q, &p, &mut dq)?;
-                    rec.record(&Sample {
-                        step: k + 1,
-                        t,
-                        q: q.as_slice(),
-                        dq: dq.as_slice(),
-                        p: Some(p.as_slice()),
-                        energy,
-                        lambda: vi.lambda.as_slice(),
-                        violation,
-                    })?;
-                }
-            }
-            rec.summary.steps = steps;
+            let vi = MidpointVi::new(cx.sys, settings);
+            let p = cx.sys.zero_vector();
+            let variational = Variational {
+                vi,
+                steps,
+                p,
+                q_next: q.clone(),
+            };
+            drive(&mut { variational }, &mut cx, &mut rec, &mut q, &mut dq)
+        }
+    }?;
+    Ok(rec.summary)
+}
+
+/// An integrator as [`run`] drives it: it hands out its start, then steps, saying when it
+/// has reached the end, and hands out the state after the steps the run records.
+trait Driven<S: System, F, P>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    /// Hands out the start `(q, q̇)` and gets ready to step from it.
+    fn begin(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError>;
+
+    /// Step `cx.index` from `cx.t`: the time it reaches, and whether that ends the run.
+    fn advance(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(f64, bool), SimError>;
+
+    /// Hands out the state reached (`cx` is at the step just taken, `cx.t` its end).
+    fn sample(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError>;
+}
+
+/// Runs `it` from `(q, q̇)` to the end, handing out every recorded step.
+fn drive<S, F, P>(
+    it: &mut impl Driven<S, F, P>,
+    cx: &mut StepContext<S, F, P>,
+    rec: &mut Recorder<S::N>,
+    q: &mut Vector<S::N>,
+    dq: &mut Vector<S::N>,
+) -> Result<(), SimError>
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    it.begin(cx.at(0, 0.0), rec, q, dq)?;
+    let (mut k, mut t) = (0, 0.0);
+    loop {
+        let (reached, last) = it.advance(cx.at(k, t), rec, q, dq)?;
+        (k, t) = (k + 1, reached);
+        if k.is_multiple_of(rec.every) || last {
+            it.sample(cx.at(k, t), rec, q, dq)?;
+        }
+        if last {
+            rec.summary.steps = k;
+            return Ok(());
         }
     }
-    Ok(rec.summary)
+}
+
+/// RK4 for a fixed number of steps.
+struct Fixed<N: Dim>(Rk4<N>, usize)
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>;
+
+impl<S, F, P> Driven<S, F, P> for Fixed<S::N>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    fn begin(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError> {
+        rec.continuous(cx, q, dq)
+    }
+
+    fn advance(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(f64, bool), SimError> {
+        self.0.step(cx, q, dq)?;
+        rec.summary.dissipated += self.0.dissipated;
+        let k = cx.index + 1;
+        let t = k as f64 * cx.dt;
+        check_finite(k, t, q, dq)?;
+        Ok((t, k == self.1))
+    }
+
+    fn sample(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError> {
+        rec.continuous(cx, q, dq)
+    }
+}
+
+/// Dormand–Prince 5(4) to `t_end`, within a step budget.
+struct Adaptive<N: Dim>(Rk45<N>, f64, usize)
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>;
+
+impl<S, F, P> Driven<S, F, P> for Adaptive<S::N>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    fn begin(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError> {
+        rec.continuous(cx, q, dq)
+    }
+
+    fn advance(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(f64, bool), SimError> {
+        let (k, t, t_end) = (cx.index, cx.t, self.1);
+        if k % 1000 == 999 || k >= self.2 {
+            budget(k, t, t_end, cx.dt, self.2)?;
+        }
+        let h = self.0.step(cx, t_end, q, dq)?;
+        rec.summary.dissipated += self.0.dissipated;
+        let reached = if t + h >= t_end * (1.0 - 1e-15) {
+            t_end
+        } else {
+            t + h
+        };
+        check_finite(k + 1, reached, q, dq)?;
+        Ok((reached, reached >= t_end))
+    }
+
+    fn sample(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError> {
+        rec.continuous(cx, q, dq)
+    }
+}
+
+/// The midpoint VI for a fixed number of steps, on `(q, p)`; q̇ is made from p for samples.
+struct Variational<N: Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    vi: MidpointVi<N>,
+    steps: usize,
+    p: Vector<N>,
+    q_next: Vector<N>,
+}
+
+impl<S, F, P> Driven<S, F, P> for Variational<S::N>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    fn begin(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError> {
+        self.p = self.vi.initial_momentum(cx.sys, q, dq);
+        // The start as the continuous equations see it, λ included.
+        let (energy, violation) = rec.state(cx, q, dq)?;
+        let lambda = rec.dynamics.lambda.clone();
+        rec.record(&Sample {
+            step: 0,
+            t: 0.0,
+            q: q.as_slice(),
+            dq: dq.as_slice(),
+            p: Some(self.p.as_slice()),
+            energy,
+            lambda: lambda.as_slice(),
+            violation,
+        })?;
+        if rec.dynamics.split.rows > 0 {
+            let dh0 = &rec.dynamics.constraint_terms.dh;
+            self.vi
+                .start_constrained(dh0, &rec.dynamics.lambda, cx.dt, &mut self.p);
+        }
+        Ok(())
+    }
+
+    fn advance(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        _: &mut Vector<S::N>,
+    ) -> Result<(f64, bool), SimError> {
+        self.vi.step(cx, q, &mut self.p, &mut self.q_next)?;
+        rec.summary.newton_iterations += self.vi.iterations;
+        rec.summary.dissipated += self.vi.dissipated;
+        rec.summary.subdivided_steps += (self.vi.subdivisions > 0) as usize;
+        let k = cx.index + 1;
+        Ok((k as f64 * cx.dt, k == self.steps))
+    }
+
+    fn sample(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        rec: &mut Recorder<S::N>,
+        q: &mut Vector<S::N>,
+        dq: &mut Vector<S::N>,
+    ) -> Result<(), SimError> {
+        let (k, t) = (cx.index, cx.t);
+        let violation = self.vi.constraint_terms.violation();
+        let energy = self.vi.velocity_and_energy(cx, q, &self.p, dq)?;
+        rec.record(&Sample {
+            step: k,
+            t,
+            q: q.as_slice(),
+            dq: dq.as_slice(),
+            p: Some(self.p.as_slice()),
+            energy,
+            lambda: self.vi.lambda.as_slice(),
+            violation,
+        })
+    }
 }
 
 /// Hands samples to the caller's observer and keeps the run's summary.
@@ -378,6 +556,10 @@ where
     constraints: Vec<String>,
     terms: Terms<N>,
     qdd: Vector<N>,
+    /// The continuous equations, for the energy and λ of a recorded state.
+    dynamics: Dynamics<N>,
+    /// Record every `every`-th step.
+    every: usize,
 }
 
 impl<N: Dim> Recorder<'_, N>
@@ -411,16 +593,11 @@ where
         (self.observe)(s)
     }
 
-    /// Energy and constraint violation at `(q, q̇)`; with constraints the forces `λ` are left
-    /// in `dynamics.lambda` (from the continuous equations).
+    /// Energy and constraint violation at `(q, q̇)` at `cx.t`; with constraints the forces
+    /// `λ` are left in `self.dynamics.lambda` (from the continuous equations).
     fn state<S, F, P>(
         &mut self,
-        sys: &mut S,
-        dynamics: &mut Dynamics<N>,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &Vector<N>,
         dq: &Vector<N>,
     ) -> Result<(f64, f64), SimError>
@@ -429,24 +606,19 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        sys.lagrangian(q, dq, Order::First, &mut self.terms);
+        cx.sys.lagrangian(q, dq, Order::First, &mut self.terms);
         let energy = self.terms.energy(dq);
-        if dynamics.split.rows == 0 {
+        if self.dynamics.split.rows == 0 {
             return Ok((energy, 0.0));
         }
-        dynamics.acceleration(sys, force, motion, step, t, q, dq, &mut self.qdd)?;
-        Ok((energy, dynamics.constraint_terms.violation()))
+        self.dynamics.acceleration(cx, q, dq, &mut self.qdd)?;
+        Ok((energy, self.dynamics.constraint_terms.violation()))
     }
 
-    /// Records a continuous method's state.
+    /// Records a continuous method's state at `cx.t` (step `cx.index`).
     fn continuous<S, F, P>(
         &mut self,
-        sys: &mut S,
-        dynamics: &mut Dynamics<N>,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &Vector<N>,
         dq: &Vector<N>,
     ) -> Result<(), SimError>
@@ -455,17 +627,20 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        let (energy, violation) = self.state(sys, dynamics, force, motion, step, t, q, dq)?;
-        self.record(&Sample {
-            step,
-            t,
+        let (energy, violation) = self.state(cx, q, dq)?;
+        let lambda = std::mem::take(&mut self.dynamics.lambda);
+        let result = self.record(&Sample {
+            step: cx.index,
+            t: cx.t,
             q: q.as_slice(),
             dq: dq.as_slice(),
             p: None,
             energy,
-            lambda: dynamics.lambda.as_slice(),
+            lambda: lambda.as_slice(),
             violation,
-        })
+        });
+        self.dynamics.lambda = lambda;
+        result
     }
 }
 

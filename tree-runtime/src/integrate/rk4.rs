@@ -3,6 +3,7 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
+use crate::context::StepContext;
 use crate::dynamics::{prescribe, Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::system::{System, Vector};
@@ -42,15 +43,10 @@ where
         }
     }
 
-    /// Advances `(q, q̇)` from `t` by `dt`.
+    /// Advances `(q, q̇)` from `cx.t` by `cx.dt`.
     pub fn step<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
-        dt: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &mut Vector<N>,
         dq: &mut Vector<N>,
     ) -> Result<(), SimError>
@@ -59,6 +55,7 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
+        let (t, dt) = (cx.t, cx.dt);
         const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
         const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
         self.dissipated = 0.0;
@@ -73,23 +70,20 @@ where
             let kinematic = &self.dynamics.split.kinematic;
             prescribe(
                 kinematic,
-                motion,
+                cx.motion,
                 ts,
                 &mut self.q_stage,
                 &mut self.v_stage,
                 None,
             );
             self.kq[s].copy_from(&self.v_stage);
-            self.dynamics.acceleration(
-                sys,
-                force,
-                motion,
-                step,
-                ts,
-                &self.q_stage,
-                &self.v_stage,
-                &mut self.kv[s],
-            )?;
+            // The stage's acceleration, at the stage's time.
+            cx.t = ts;
+            let stage =
+                self.dynamics
+                    .acceleration(cx, &self.q_stage, &self.v_stage, &mut self.kv[s]);
+            cx.t = t;
+            stage?;
             let power = self.dynamics.terms.force.dot(&self.v_stage);
             self.dissipated -= W[s] * dt / 6.0 * power;
         }
@@ -97,7 +91,14 @@ where
             q.axpy(w * dt / 6.0, &self.kq[k], 1.0);
             dq.axpy(w * dt / 6.0, &self.kv[k], 1.0);
         }
-        prescribe(&self.dynamics.split.kinematic, motion, t + dt, q, dq, None);
+        prescribe(
+            &self.dynamics.split.kinematic,
+            cx.motion,
+            t + dt,
+            q,
+            dq,
+            None,
+        );
         Ok(())
     }
 }

@@ -5,6 +5,7 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
+use crate::context::StepContext;
 use crate::dynamics::{prescribe, Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::system::{System, Vector};
@@ -130,17 +131,13 @@ where
         }
     }
 
-    /// Takes one accepted step from `t`, trying `*dt` first and shrinking it as needed but
-    /// never past `t_end`. Returns the step taken; `*dt` becomes the proposal for the next.
+    /// Takes one accepted step from `cx.t`, trying `cx.dt` first and shrinking it as needed
+    /// but never past `t_end`. Returns the step taken; `cx.dt` becomes the proposal for the
+    /// next.
     pub fn step<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
+        cx: &mut StepContext<S, F, P>,
         t_end: f64,
-        dt: &mut f64,
         q: &mut Vector<N>,
         dq: &mut Vector<N>,
     ) -> Result<f64, SimError>
@@ -149,11 +146,12 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
+        let (step, t) = (cx.index, cx.t);
         // Whether the last rejection was for a non-finite stage (then that is the cause to
         // report if the step shrinks to nothing).
         let mut non_finite = false;
         loop {
-            let h = dt.min(t_end - t);
+            let h = cx.dt.min(t_end - t);
             if h.is_nan() || h <= 1e-14 * t.abs().max(1.0) {
                 if non_finite {
                     return Err(SimError::NonFinite {
@@ -179,7 +177,7 @@ where
                 let kinematic = &self.dynamics.split.kinematic;
                 prescribe(
                     kinematic,
-                    motion,
+                    cx.motion,
                     ts,
                     &mut self.q_stage,
                     &mut self.v_stage,
@@ -187,16 +185,13 @@ where
                 );
                 self.kq[s].copy_from(&self.v_stage);
                 self.evaluations += 1;
-                match self.dynamics.acceleration(
-                    sys,
-                    force,
-                    motion,
-                    step,
-                    ts,
-                    &self.q_stage,
-                    &self.v_stage,
-                    &mut self.kv[s],
-                ) {
+                // The stage's acceleration, at the stage's time.
+                cx.t = ts;
+                let stage =
+                    self.dynamics
+                        .acceleration(cx, &self.q_stage, &self.v_stage, &mut self.kv[s]);
+                cx.t = t;
+                match stage {
                     Ok(()) => self.power[s] = self.dynamics.terms.force.dot(&self.v_stage),
                     // A trial stage gone non-finite: reject the step and shrink it.
                     Err(SimError::NonFinite { .. }) if s > 0 => {
@@ -211,7 +206,7 @@ where
             non_finite = !finite;
             if !finite {
                 self.rejected += 1;
-                *dt = 0.2 * h;
+                cx.dt = 0.2 * h;
                 continue;
             }
             // Stage 7 was evaluated at the fifth-order solution: q_stage, v_stage hold it.
@@ -230,7 +225,7 @@ where
             if !err.is_finite() {
                 non_finite = true;
                 self.rejected += 1;
-                *dt = 0.2 * h;
+                cx.dt = 0.2 * h;
                 continue;
             }
             let factor = if err == 0.0 {
@@ -248,13 +243,13 @@ where
                 self.power[0] = self.power[6];
                 self.fsal = Some(t + h);
                 // A step shortened to land on t_end leaves the proposal as it was.
-                if h >= *dt {
-                    *dt *= factor;
+                if h >= cx.dt {
+                    cx.dt *= factor;
                 }
                 return Ok(h);
             }
             self.rejected += 1;
-            *dt = h * factor;
+            cx.dt = h * factor;
         }
     }
 }

@@ -20,6 +20,7 @@
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dyn};
 
 use super::discrete::DiscreteLagrangian;
+use crate::context::StepContext;
 use crate::dynamics::{prescribe, GeneralizedForce, Prescription, ReducedKkt, Split};
 use crate::error::SimError;
 use crate::linalg::{lu_factor_packed, lu_solve, lu_solve_packed, Pivots};
@@ -252,12 +253,9 @@ where
     /// blocks). `q₂`'s kinematic entries must hold their prescription; `λ` is
     /// [`Self::lambda`]; [`Self::prepare`] must have been called for `q₁`. Leaves `terms`
     /// evaluated at `(q_α, v)`.
-    pub fn residual<S, F>(
+    pub fn residual<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        t: f64,
-        dt: f64,
+        cx: &mut StepContext<S, F, P>,
         q1: &Vector<N>,
         p1: &Vector<N>,
         q2: &Vector<N>,
@@ -267,6 +265,7 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
+        let (sys, force, t, dt) = (&mut *cx.sys, &mut *cx.force, cx.t, cx.dt);
         let a = self.settings.alpha;
         let left = match self.settings.forcing {
             Forcing::Split => 1.0 - a,
@@ -462,17 +461,12 @@ where
         &self.jacobian
     }
 
-    /// Advances `(q_k, p_k)` to `(q_{k+1}, p_{k+1})` in place. When Newton fails the step is
-    /// retried as two half steps, recursively up to `max_subdivisions` deep. `step` labels
-    /// errors.
+    /// Advances `(q_k, p_k)` from `cx.t` by `cx.dt` to `(q_{k+1}, p_{k+1})` in place. When
+    /// Newton fails the step is retried as two half steps, recursively up to
+    /// `max_subdivisions` deep. `cx.index` labels errors.
     pub fn step<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
-        dt: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &mut Vector<N>,
         p: &mut Vector<N>,
         q_next: &mut Vector<N>,
@@ -485,17 +479,17 @@ where
         self.iterations = 0;
         self.subdivisions = 0;
         self.dissipated = 0.0;
-        self.advance(sys, force, motion, step, t, dt, q, p, q_next, 0)
+        let (t, dt) = (cx.t, cx.dt);
+        let result = self.advance(cx, q, p, q_next, 0);
+        (cx.t, cx.dt) = (t, dt);
+        result
     }
 
+    /// The step from `cx.t` of length `cx.dt`, split in halves on failure (moving `cx.t`
+    /// and `cx.dt` for the halves).
     fn advance<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
-        dt: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &mut Vector<N>,
         p: &mut Vector<N>,
         q_next: &mut Vector<N>,
@@ -510,7 +504,7 @@ where
         if can_split && self.split.rows > 0 {
             self.saved_lambda[depth].copy_from(&self.lambda);
         }
-        match self.step_once(sys, force, motion, step, t, dt, q, p, q_next) {
+        match self.step_once(cx, q, p, q_next) {
             Err(SimError::NewtonFailed { .. } | SimError::SingularJacobian { .. })
             | Err(SimError::NonFinite { .. } | SimError::StepTooCoarse { .. })
                 if can_split =>
@@ -519,9 +513,11 @@ where
                     self.lambda.copy_from(&self.saved_lambda[depth]);
                 }
                 self.subdivisions += 1;
-                let h = 0.5 * dt;
-                self.advance(sys, force, motion, step, t, h, q, p, q_next, depth + 1)?;
-                self.advance(sys, force, motion, step, t + h, h, q, p, q_next, depth + 1)
+                let (t, h) = (cx.t, 0.5 * cx.dt);
+                cx.dt = h;
+                self.advance(cx, q, p, q_next, depth + 1)?;
+                cx.t = t + h;
+                self.advance(cx, q, p, q_next, depth + 1)
             }
             other => other,
         }
@@ -531,12 +527,7 @@ where
     /// left as they were.
     fn step_once<S, F, P>(
         &mut self,
-        sys: &mut S,
-        force: &mut F,
-        motion: &mut P,
-        step: usize,
-        t: f64,
-        dt: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &mut Vector<N>,
         p: &mut Vector<N>,
         q_next: &mut Vector<N>,
@@ -546,12 +537,13 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        self.prepare(sys, q);
+        let (step, t, dt) = (cx.index, cx.t, cx.dt);
+        self.prepare(cx.sys, q);
         // Predict q_{k+1} = q_k + Δt v_last; kinematic entries from their prescription.
         q_next.copy_from(q);
         q_next.axpy(dt, &self.last_velocity, 1.0);
         for &i in &self.split.kinematic {
-            q_next[i] = motion.kinematic(i, t + dt)[0];
+            q_next[i] = cx.motion.kinematic(i, t + dt)[0];
         }
         let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep;
         let mut factored = false;
@@ -564,7 +556,7 @@ where
             // evaluate the Jacobian only if the check fails (the last full evaluation of a
             // step was otherwise thrown away).
             let check_first = fresh && last_residual <= CHECK_FIRST_BELOW;
-            self.residual(sys, force, t, dt, q, p, q_next, fresh && !check_first);
+            self.residual(cx, q, p, q_next, fresh && !check_first);
             let (residual, violation) = self.residual_norms();
             let mut relative = self.relative_residual();
             if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
@@ -592,24 +584,24 @@ where
             }
             let mut refactor = fresh;
             if check_first {
-                self.residual(sys, force, t, dt, q, p, q_next, true);
+                self.residual(cx, q, p, q_next, true);
                 relative = self.relative_residual();
             }
             // Relative residual and violation: both independent of the masses.
             let combined = relative + violation;
             if !fresh && combined > 0.5 * last_residual {
                 // The reused Jacobian has stopped paying: evaluate it here.
-                self.residual(sys, force, t, dt, q, p, q_next, true);
+                self.residual(cx, q, p, q_next, true);
                 relative = self.relative_residual();
                 refactor = true;
             }
             if refactor {
-                self.factor(sys, step, t)?;
+                self.factor(cx.sys, step, t)?;
                 factored = true;
             }
             last_residual = relative + violation;
             iterations += 1;
-            self.newton_update(sys, step, t)?;
+            self.newton_update(cx.sys, step, t)?;
             let mut largest: f64 = 0.0;
             for &i in &self.split.dynamic {
                 q_next[i] += self.residual[i];
@@ -621,7 +613,7 @@ where
             // An update lost in the last bits of q: the residual is at its rounding floor
             // (≈ ε‖M‖‖q‖/Δt), which a large, stiff model can hold above the tolerance.
             if largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
-                self.residual(sys, force, t, dt, q, p, q_next, false);
+                self.residual(cx, q, p, q_next, false);
                 break;
             }
         }
@@ -656,7 +648,7 @@ where
                 step,
                 t,
                 dt,
-                variable: sys.variable_name(i).to_string(),
+                variable: cx.sys.variable_name(i).to_string(),
                 turn: q_next[i] - q[i],
             });
         }
@@ -706,16 +698,13 @@ where
         (self.residual.amax(), violation)
     }
 
-    /// The continuous velocity and energy at `(q, p)` and time `t`: kinematic `q̇` from the
+    /// The continuous velocity and energy at `(q, p)` and time `cx.t`: kinematic `q̇` from the
     /// prescription, dynamic `q̇ = M_dd⁻¹(p_d − M_dk q̇_k)` (the Legendre transform), made
     /// consistent with the constraints (`Dh q̇ = 0`, projected in the `M_dd` metric); returns
     /// `E = ½ q̇ᵀM q̇ + V(q)`. Not conserved while kinematic inputs move.
-    pub fn velocity_and_energy<S, P>(
+    pub fn velocity_and_energy<S, F, P>(
         &mut self,
-        sys: &mut S,
-        motion: &mut P,
-        step: usize,
-        t: f64,
+        cx: &mut StepContext<S, F, P>,
         q: &Vector<N>,
         p: &Vector<N>,
         dq: &mut Vector<N>,
@@ -724,6 +713,7 @@ where
         S: System<N = N>,
         P: Prescription,
     {
+        let (sys, motion, step, t) = (&mut *cx.sys, &mut *cx.motion, cx.index, cx.t);
         sys.lagrangian(q, &self.zero, Order::Dynamics, &mut self.terms);
         self.q_alpha.copy_from(q);
         prescribe(
