@@ -329,6 +329,17 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
         let (frames, damping) = (strings(&d.frames), opt(d.damping));
         quote!(#m::DamperSpec { frames: #frames, damping: #damping })
     });
+    let inputs = spec.inputs.iter().map(|u| {
+        let (name, variable) = (string(&u.name), opt_string(u.variable.as_deref()));
+        let limits = match u.limits {
+            Some(l) => {
+                let [lo, hi] = l.map(constant);
+                quote!(Some([#lo, #hi]))
+            }
+            None => quote!(None),
+        };
+        quote!(#m::InputSpec { name: #name, variable: #variable, limits: #limits })
+    });
     let name = string(&spec.name);
     let gravity = opt3(spec.gravity);
     quote!(#m::ModelSpec {
@@ -339,6 +350,7 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
         constraints: ::std::vec![#(#constraints),*],
         springs: ::std::vec![#(#springs),*],
         dampers: ::std::vec![#(#dampers),*],
+        inputs: ::std::vec![#(#inputs),*],
     })
 }
 

@@ -59,6 +59,8 @@ pub enum Section {
     Spring,
     /// `[[damper]]`
     Damper,
+    /// `[[input]]`
+    Input,
 }
 
 impl Section {
@@ -68,6 +70,7 @@ impl Section {
             Section::Constraint => "constraint",
             Section::Spring => "spring",
             Section::Damper => "damper",
+            Section::Input => "input",
         }
     }
 }

@@ -52,15 +52,15 @@ pub use builder::{n_link_pendulum, ModelBuilder};
 pub use error::{FrameField, ModelError, Problem, Section, Site};
 pub use lock::Lock;
 pub use model::{
-    Constraint, ConstraintKind, Damper, Frame, Joint, Mass, Model, Parameter, Spring, SpringKind,
-    Variable, DEFAULT_GRAVITY,
+    Constraint, ConstraintKind, Damper, Frame, Input, Joint, Mass, Model, Parameter, Spring,
+    SpringKind, Variable, DEFAULT_GRAVITY,
 };
 pub use motion::{CubicSpline, Motion};
 pub use primitive::{Primitive, PrimitiveKind, Value};
 pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{
-    ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
-    VariableSpec,
+    ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,
+    SpringSpec, VariableSpec,
 };
 pub use toml_format::{from_toml_file, from_toml_str};
 pub use urdf_format::{from_file, from_urdf_file, from_urdf_str, UrdfOptions, FLOATING_BASE};

@@ -103,6 +103,14 @@ impl Model {
                 }
             }
         }
+        // An input on a locked variable has nothing left to push.
+        model.inputs.retain_mut(|u| match index[u.variable] {
+            Some(j) => {
+                u.variable = j;
+                true
+            }
+            None => false,
+        });
         model.springs.retain_mut(|s| match s.kind {
             SpringKind::Variable(i) => match index[i] {
                 Some(j) => {

@@ -219,6 +219,18 @@ pub struct Damper {
     pub damping: f64,
 }
 
+/// An input: a generalized force `u` on one dynamic variable (the model's `B u` has one
+/// column per input, a 1 in its variable's row).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Input {
+    /// Unique name.
+    pub name: String,
+    /// Index into [`Model::variables`] of the dynamic variable it acts on.
+    pub variable: usize,
+    /// `[lo, hi]` bounds, for controllers (a simulation applies what it is given).
+    pub limits: Option<[f64; 2]>,
+}
+
 /// A validated tree model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
@@ -236,6 +248,8 @@ pub struct Model {
     pub springs: Vec<Spring>,
     /// Dampers between frames: forces.
     pub dampers: Vec<Damper>,
+    /// Inputs `u`, in declaration order: generalized forces on dynamic variables.
+    pub inputs: Vec<Input>,
 }
 
 impl Model {

@@ -60,6 +60,8 @@ pub struct ModelSpec {
     pub springs: Vec<SpringSpec>,
     /// `[[damper]]` entries.
     pub dampers: Vec<DamperSpec>,
+    /// `[[input]]` entries.
+    pub inputs: Vec<InputSpec>,
 }
 
 impl ModelSpec {
@@ -73,6 +75,7 @@ impl ModelSpec {
             constraints: Vec::new(),
             springs: Vec::new(),
             dampers: Vec::new(),
+            inputs: Vec::new(),
         }
     }
 }
@@ -127,6 +130,17 @@ pub struct SpringSpec {
     pub stiffness: Option<f64>,
     /// Rest length or value (default 0).
     pub rest: Option<f64>,
+}
+
+/// An `[[input]]` as written: a generalized force on one dynamic variable.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InputSpec {
+    /// Unique name.
+    pub name: String,
+    /// The dynamic variable it is a generalized force on, by name.
+    pub variable: Option<String>,
+    /// `[lo, hi]` bounds (kept for controllers; a simulation applies what it is given).
+    pub limits: Option<[f64; 2]>,
 }
 
 /// A `[[damper]]` as written.

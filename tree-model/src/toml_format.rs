@@ -12,7 +12,8 @@ use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind, Value};
 use crate::source::LineIndex;
 use crate::spec::{
-    ConstraintSpec, DamperSpec, FrameSpec, ModelSpec, ParameterSpec, SineSpec, SpringSpec,
+    ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,
+    SpringSpec,
     VariableSpec,
 };
 use crate::validate::validate;
@@ -32,6 +33,16 @@ struct RawModel {
     spring: Vec<Spanned<RawSpring>>,
     #[serde(default)]
     damper: Vec<Spanned<RawDamper>>,
+    #[serde(default)]
+    input: Vec<Spanned<RawInput>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInput {
+    name: Spanned<String>,
+    variable: Option<Spanned<String>>,
+    limits: Option<Spanned<[f64; 2]>>,
 }
 
 #[derive(Deserialize)]
@@ -305,6 +316,24 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             }
         })
         .collect();
+    let mut input_lines = Vec::new();
+    let inputs = raw
+        .input
+        .iter()
+        .map(|u| {
+            let mut lines = ElementLines::new(&line_index, u.span());
+            let u = u.get_ref();
+            lines.field(&line_index, "name", &Some(u.name.clone()));
+            lines.field(&line_index, "variable", &u.variable);
+            lines.field(&line_index, "limits", &u.limits);
+            input_lines.push(lines);
+            InputSpec {
+                name: u.name.get_ref().clone(),
+                variable: u.variable.as_ref().map(|v| v.get_ref().clone()),
+                limits: u.limits.as_ref().map(|l| *l.get_ref()),
+            }
+        })
+        .collect();
     let name = raw.name.clone().unwrap_or_else(|| {
         source_name
             .and_then(|s| Path::new(s).file_stem())
@@ -318,6 +347,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         constraints,
         springs,
         dampers,
+        inputs,
     };
     validate(&spec).map_err(|mut problems| {
         for p in &mut problems {
@@ -333,6 +363,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
                         Section::Constraint => &constraint_lines,
                         Section::Spring => &spring_lines,
                         Section::Damper => &damper_lines,
+                        Section::Input => &input_lines,
                     };
                     Some(lines[*index].line(*field))
                 }

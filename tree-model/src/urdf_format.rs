@@ -16,7 +16,7 @@ use crate::error::{FrameField, ModelError, Problem, Site};
 use crate::model::Model;
 use crate::primitive::{Primitive, PrimitiveKind, Value};
 use crate::source::{check_xml_shape, LineIndex};
-use crate::spec::{FrameSpec, ModelSpec, VariableSpec};
+use crate::spec::{FrameSpec, InputSpec, ModelSpec, VariableSpec};
 use crate::validate::validate;
 
 /// How to read a URDF file.
@@ -373,6 +373,14 @@ pub fn from_urdf_str(
                     settings.limits = Some([l.lower, l.upper]);
                 }
             }
+            // Every joint is actuated: an input on its variable, named after it, with
+            // ±effort as its limits when the URDF gives an effort.
+            let effort = joint.limit.effort;
+            spec.inputs.push(InputSpec {
+                name: joint.name.clone(),
+                variable: Some(joint.name.clone()),
+                limits: (effort > 0.0).then_some([-effort, effort]),
+            });
             spec.variables.push(settings);
         }
         if chain.is_empty() {

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 
 use crate::error::{FrameField, Problem, Section, Site};
-use crate::model::{Frame, Joint, Mass, Model, SpringKind, Variable, DEFAULT_GRAVITY};
+use crate::model::{Frame, Input, Joint, Mass, Model, SpringKind, Variable, DEFAULT_GRAVITY};
 use crate::motion::{CubicSpline, Motion};
 use crate::primitive::{PrimitiveKind, Value};
 use crate::spec::{FrameSpec, ModelSpec, ParameterSpec, VariableSpec};
@@ -398,6 +398,8 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     let elements =
         crate::elements::validate_elements(spec, &index_of, &var_index, &variables, &mut errs.0);
 
+    let inputs = validate_inputs(spec, &var_index, &variables, &mut errs);
+
     if errs.0.is_empty() {
         let (constraints, springs, dampers) = elements;
         // A spring with a rest length, or a damper, between frames that coincide at the
@@ -411,6 +413,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             constraints,
             springs,
             dampers,
+            inputs,
         };
         let origins = model.origins(&q0);
         let apart = |[a, b]: [usize; 2]| {
@@ -659,4 +662,81 @@ fn variable_moves_mass(model: &Model, i: usize) -> bool {
 /// characters (a newline would split a CSV header).
 fn name_ok(name: &str) -> bool {
     !name.is_empty() && !name.chars().any(char::is_control)
+}
+
+/// The inputs: each a unique name on one dynamic variable (not two on one variable), with
+/// finite `lo ≤ hi` limits if any.
+fn validate_inputs(
+    spec: &ModelSpec,
+    var_index: &HashMap<&str, usize>,
+    variables: &[Variable],
+    errs: &mut Problems,
+) -> Vec<Input> {
+    let mut inputs: Vec<Input> = Vec::new();
+    let mut names: HashMap<&str, usize> = HashMap::new();
+    for (index, u) in spec.inputs.iter().enumerate() {
+        let site = |field| Site::Element {
+            section: Section::Input,
+            index,
+            field,
+        };
+        let what = format!("input `{}`", u.name);
+        if !name_ok(&u.name) {
+            errs.push(
+                site(Some("name")),
+                format!("input {}: its name is empty or holds a control character", index + 1),
+            );
+        } else if let Some(first) = names.insert(&u.name, index) {
+            errs.push(
+                site(Some("name")),
+                format!("{what} is declared twice (inputs {} and {})", first + 1, index + 1),
+            );
+        }
+        let variable = match u.variable.as_deref() {
+            None => {
+                errs.push(site(None), format!("{what}: `variable` is missing"));
+                None
+            }
+            Some(v) => match var_index.get(v) {
+                None => {
+                    errs.push(site(Some("variable")), format!("{what}: unknown variable `{v}`"));
+                    None
+                }
+                Some(&i) if variables[i].is_kinematic() => {
+                    errs.push(
+                        site(Some("variable")),
+                        format!("{what}: variable `{v}` is kinematic; an input is a force on a dynamic variable"),
+                    );
+                    None
+                }
+                Some(&i) => Some(i),
+            },
+        };
+        if let Some([lo, hi]) = u.limits {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                errs.push(
+                    site(Some("limits")),
+                    format!("{what}: limits [{lo}, {hi}] must be two finite numbers with lo ≤ hi"),
+                );
+            }
+        }
+        if let Some(i) = variable {
+            if let Some(other) = inputs.iter().find(|x| x.variable == i) {
+                errs.push(
+                    site(Some("variable")),
+                    format!(
+                        "{what}: variable `{}` already has input `{}`; one input per variable",
+                        variables[i].name, other.name
+                    ),
+                );
+            } else {
+                inputs.push(Input {
+                    name: u.name.clone(),
+                    variable: i,
+                    limits: u.limits,
+                });
+            }
+        }
+    }
+    inputs
 }
