@@ -17,6 +17,7 @@ mod kw {
     syn::custom_keyword!(constraint);
     syn::custom_keyword!(spring);
     syn::custom_keyword!(damper);
+    syn::custom_keyword!(input);
 }
 
 /// `tree_model!(pub struct Name from "file.toml")` or `tree_model! { pub struct Name; … }`.
@@ -50,10 +51,12 @@ pub enum ElementKind {
     Constraint,
     Spring,
     Damper,
+    Input,
 }
 
 /// `constraint NAME = KIND(a, b) { … }`, `spring(a, b) { … }` or `spring(var) { … }`,
-/// `damper(a, b) { … }`: what the TOML `[[constraint]]`, `[[spring]]`, `[[damper]]` tables say.
+/// `damper(a, b) { … }`, `input NAME = VARIABLE { … }`: what the TOML `[[constraint]]`,
+/// `[[spring]]`, `[[damper]]`, `[[input]]` tables say.
 pub struct InlineElement {
     pub element: ElementKind,
     /// The keyword (`constraint`, `spring`, `damper`): where whole-element errors point.
@@ -203,6 +206,7 @@ impl Parse for Input {
             } else if lookahead.peek(kw::constraint)
                 || lookahead.peek(kw::spring)
                 || lookahead.peek(kw::damper)
+                || lookahead.peek(kw::input)
             {
                 model.elements.push(input.parse()?);
             } else {
@@ -323,6 +327,26 @@ impl Parse for InlineElement {
         } else if lookahead.peek(kw::damper) {
             let k: kw::damper = input.parse()?;
             (ElementKind::Damper, k.span, None, None)
+        } else if lookahead.peek(kw::input) {
+            // `input NAME = VARIABLE { limits = [lo, hi]; }` or `input NAME = VARIABLE;`
+            let k: kw::input = input.parse()?;
+            let name: Ident = input.parse()?;
+            input.parse::<Token![=]>()?;
+            let variable: Ident = input.parse()?;
+            let settings = if input.peek(Token![;]) {
+                input.parse::<Token![;]>()?;
+                Vec::new()
+            } else {
+                parse_settings(input)?
+            };
+            return Ok(InlineElement {
+                element: ElementKind::Input,
+                keyword: k.span,
+                name: Some(name),
+                kind: None,
+                arguments: vec![variable],
+                settings,
+            });
         } else {
             return Err(lookahead.error());
         };

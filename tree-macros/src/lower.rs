@@ -7,7 +7,8 @@ use std::path::PathBuf;
 use proc_macro2::Span;
 use syn::LitStr;
 use tree_model::{
-    ConstraintSpec, DamperSpec, FrameField, FrameSpec, Model, ModelSpec, ParameterSpec, Primitive,
+    ConstraintSpec, DamperSpec, FrameField, FrameSpec, InputSpec, Model, ModelSpec, ParameterSpec,
+    Primitive,
     PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value, VariableSpec,
 };
 
@@ -312,6 +313,28 @@ fn element_spec(
             }
             spec.dampers.push(d);
             (Section::Damper, spans)
+        }
+        ElementKind::Input => {
+            let mut u = InputSpec {
+                name: e.name.as_ref().map(|n| n.to_string()).unwrap_or_default(),
+                variable: names.first().cloned(),
+                limits: None,
+            };
+            for (key, value) in &e.settings {
+                match (key.to_string().as_str(), value) {
+                    ("limits", Setting::Vector(v, span)) => {
+                        if v.len() == 2 {
+                            u.limits = Some([v[0].value, v[1].value]);
+                        } else {
+                            errors.push(*span, format!("expected two numbers [lo, hi], found {}", v.len()));
+                        }
+                    }
+                    ("limits", v) => errors.push(v.span(), "`limits` takes two numbers [lo, hi]"),
+                    _ => unknown(key, "input", "limits", errors),
+                }
+            }
+            spec.inputs.push(u);
+            (Section::Input, spans)
         }
     }
 }
