@@ -14,7 +14,8 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tree_mech::integrate::{
-    run, Forcing, JacobianUpdate, Method, SimOptions, StepContext, Tolerance, ViSettings,
+    run_with_inputs, Forcing, InputSchedule, JacobianUpdate, Method, SimOptions, StepContext,
+    Tolerance, ViSettings,
 };
 use tree_mech::model;
 use tree_mech::nalgebra::Dyn;
@@ -150,6 +151,13 @@ enum Command {
         /// it has reached would need more (a stiff model).
         #[arg(long, default_value_t = tree_mech::integrate::DEFAULT_MAX_ADAPTIVE_STEPS)]
         max_steps: usize,
+        /// Constant inputs `u`, comma-separated in the model's input order.
+        #[arg(long, allow_hyphen_values = true, conflicts_with = "inputs")]
+        u: Option<String>,
+        /// Inputs over time: a CSV with a column `t` and one per input (by name), each row in
+        /// force from its time to the next row's (held over every step that starts in it).
+        #[arg(long)]
+        inputs: Option<PathBuf>,
         /// How the interpreted system evaluates: composite sweeps (fastest), the paper's
         /// per-mass sums with caching, or without caching (the paper's Fig. 3 comparison).
         #[arg(long, value_enum, default_value = "sweeps")]
@@ -168,6 +176,9 @@ enum Command {
         /// Time at which the kinematic variables' accelerations are taken.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         t: f64,
+        /// Inputs `u`, comma-separated in the model's input order (default: zero).
+        #[arg(long, allow_hyphen_values = true)]
+        u: Option<String>,
     },
     /// Validate a model and print a summary with the tree drawn as text.
     Check {
@@ -223,6 +234,8 @@ fn main() -> ExitCode {
             rtol,
             atol,
             max_steps,
+            u,
+            inputs,
             evaluation,
         } => {
             let method = match integrator {
@@ -260,6 +273,7 @@ fn main() -> ExitCode {
                     CameraArg::Track => animate::CameraMode::Track,
                 };
                 let model = source.model(&model)?;
+                outputs.inputs = input_schedule(&model, u.as_deref(), inputs.as_deref())?;
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
@@ -275,9 +289,14 @@ fn main() -> ExitCode {
                 }
             })
         }
-        Command::Eval { model, q, dq, t } => {
-            run_eval(&model, &source, q.as_deref(), dq.as_deref(), t)
-        }
+        Command::Eval { model, q, dq, t, u } => run_eval(
+            &model,
+            &source,
+            q.as_deref(),
+            dq.as_deref(),
+            u.as_deref(),
+            t,
+        ),
         Command::Check { model } => run_check(&model, &source),
     };
     match result {
@@ -362,6 +381,8 @@ struct Outputs {
     animate: Option<OutputFile>,
     /// The animation's camera.
     camera: animate::CameraMode,
+    /// The inputs over the run.
+    inputs: InputSchedule,
 }
 
 impl Outputs {
@@ -394,6 +415,7 @@ impl Outputs {
             plot,
             animate,
             camera: animate::CameraMode::default(),
+            inputs: InputSchedule::default(),
         })
     }
 }
@@ -413,6 +435,7 @@ fn run_simulate<S: System<N = Dyn>>(
         plot: plot_path,
         animate: animate_path,
         camera,
+        inputs,
     } = outputs;
     let (q0, dq0) = sys.initial_state();
     let bar = ProgressBar::new(1000);
@@ -429,14 +452,22 @@ fn run_simulate<S: System<N = Dyn>>(
     let constraints: Vec<String> = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
+    let input_names: Vec<String> = (0..sys.input_count())
+        .map(|k| sys.input_name(k).to_string())
+        .collect();
     let mut csv = match &out {
         Some(file) => {
             let shown = file.path().display();
             let f = std::fs::File::create(file.temp())
                 .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
             Some(
-                CsvStream::new(std::io::BufWriter::new(f), &names, &constraints)
-                    .map_err(|e| format!("cannot write `{shown}`: {e}"))?,
+                CsvStream::with_inputs(
+                    std::io::BufWriter::new(f),
+                    &names,
+                    &constraints,
+                    &input_names,
+                )
+                .map_err(|e| format!("cannot write `{shown}`: {e}"))?,
             )
         }
         None => None,
@@ -470,13 +501,14 @@ fn run_simulate<S: System<N = Dyn>>(
     // long runs); poses are computed after the run.
     let frame_interval = (1.0 / animate::FPS).max(options.duration / animate::MAX_FRAMES as f64);
     let (mut frame_times, mut frame_q) = (Vec::new(), Vec::new());
-    let summary = run(
+    let summary = run_with_inputs(
         &mut sys,
         &q0,
         &dq0,
         &options,
         &mut NoForce,
         &mut motion,
+        &inputs,
         &mut |sample| {
             if let Some(csv) = csv.as_mut() {
                 csv.write(sample).map_err(|e| {
@@ -619,6 +651,78 @@ fn run_simulate<S: System<N = Dyn>>(
     Ok(())
 }
 
+/// The inputs of a run: none, constant (`--u`), or from a CSV file (`--inputs`) with a column
+/// `t` and one per input by name.
+fn input_schedule(
+    model: &model::Model,
+    u: Option<&str>,
+    file: Option<&Path>,
+) -> Result<InputSchedule, String> {
+    let names: Vec<String> = model.inputs.iter().map(|u| u.name.clone()).collect();
+    if (u.is_some() || file.is_some()) && names.is_empty() {
+        return Err(format!(
+            "model `{}` has no inputs: declare [[input]] entries (or use a URDF robot's joints)",
+            model.name
+        ));
+    }
+    if let Some(text) = u {
+        let values = parse_list(text, names.len(), "u", &names, "inputs")?;
+        return Ok(InputSchedule::constant(values));
+    }
+    let Some(path) = file else {
+        return Ok(InputSchedule::default());
+    };
+    let shown = path.display();
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read `{shown}`: {e}"))?;
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let Some((_, header)) = lines.next() else {
+        return Err(format!(
+            "`{shown}` is empty: expected a header `t,{}`",
+            names.join(",")
+        ));
+    };
+    let header: Vec<&str> = header
+        .split(',')
+        .map(|h| h.trim().trim_matches('"'))
+        .collect();
+    let column = |name: &str| header.iter().position(|h| *h == name);
+    let t_column = column("t").ok_or_else(|| format!("`{shown}`:1: no column `t`"))?;
+    let columns: Vec<usize> = names
+        .iter()
+        .map(|n| column(n).ok_or_else(|| format!("`{shown}`:1: no column for input `{n}`")))
+        .collect::<Result<_, _>>()?;
+    let mut rows = Vec::new();
+    for (i, line) in lines {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let number = |c: usize| -> Result<f64, String> {
+            fields
+                .get(c)
+                .and_then(|f| f.parse::<f64>().ok())
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    format!(
+                        "`{shown}`:{}: column {} is not a finite number",
+                        i + 1,
+                        c + 1
+                    )
+                })
+        };
+        let t = number(t_column)?;
+        let u = columns
+            .iter()
+            .map(|&c| number(c))
+            .collect::<Result<Vec<_>, _>>()?;
+        rows.push((t, u));
+    }
+    if rows.is_empty() {
+        return Err(format!("`{shown}` has a header but no rows"));
+    }
+    InputSchedule::from_rows(rows).map_err(|e| format!("`{shown}`: {e}"))
+}
+
 /// ` Label: path.` for the summary.
 fn shown(file: &Option<OutputFile>, label: &str) -> String {
     file.as_ref()
@@ -628,6 +732,18 @@ fn shown(file: &Option<OutputFile>, label: &str) -> String {
 
 /// Parses a comma-separated vector of exactly `n` numbers.
 fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Vector<Dyn>, String> {
+    parse_list(text, n, what, names, "variables").map(Vector::<Dyn>::from_vec)
+}
+
+/// Parses a comma-separated list of exactly `n` finite numbers for option `--{what}`, one per
+/// entry of `names` (the model's `kind`).
+fn parse_list(
+    text: &str,
+    n: usize,
+    what: &str,
+    names: &[String],
+    kind: &str,
+) -> Result<Vec<f64>, String> {
     let values: Vec<f64> = text
         .split(',')
         .map(|s| {
@@ -640,12 +756,12 @@ fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Ve
         .collect::<Result<_, _>>()?;
     if values.len() != n {
         return Err(format!(
-            "--{what} has {} values; the model has {n} variables ({})",
+            "--{what} has {} values; the model has {n} {kind} ({})",
             values.len(),
             names.join(", ")
         ));
     }
-    Ok(Vector::<Dyn>::from_vec(values))
+    Ok(values)
 }
 
 fn run_eval(
@@ -653,6 +769,7 @@ fn run_eval(
     source: &Source,
     q: Option<&str>,
     dq: Option<&str>,
+    u: Option<&str>,
     time: f64,
 ) -> Result<(), String> {
     let mut sys = source.system(path)?;
@@ -671,7 +788,20 @@ fn run_eval(
     let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
     let mut no_force = NoForce;
+    let u = match u {
+        Some(text) => {
+            let inputs: Vec<String> = (0..sys.input_count())
+                .map(|k| sys.input_name(k).to_string())
+                .collect();
+            parse_list(text, inputs.len(), "u", &inputs, "inputs")?
+        }
+        None => vec![0.0; sys.input_count()],
+    };
+    let input_names: Vec<String> = (0..sys.input_count())
+        .map(|k| sys.input_name(k).to_string())
+        .collect();
     let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.0);
+    cx.u = &u;
     dynamics
         .acceleration(cx.at(0, time), &q, &dq, &mut qdd)
         .map_err(|e| format!("at this state, {e}"))?;
@@ -743,6 +873,8 @@ fn run_eval(
         "h": c.h.as_slice(),
         "dh_dq": dh,
         "lambda": dynamics.lambda.as_slice(),
+        "inputs": input_names,
+        "u": u,
         "poses": poses,
     });
     println!(
@@ -817,6 +949,19 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
                 ),
             };
             println!("  {:<20} {what} between `{a}` and `{b}`", c.name);
+        }
+    }
+    if !model.inputs.is_empty() {
+        println!("{} inputs (generalized forces u):", model.inputs.len());
+        for u in &model.inputs {
+            let limits = u
+                .limits
+                .map(|[lo, hi]| format!("; limits [{lo}, {hi}] (not enforced)"))
+                .unwrap_or_default();
+            println!(
+                "  {:<20} on `{}`{limits}",
+                u.name, model.variables[u.variable].name
+            );
         }
     }
     for s in &model.springs {

@@ -581,3 +581,108 @@ fn the_camera_stays_on_the_start_or_tracks_the_root_at_a_fixed_scale() {
         "the same size followed: {track:?}"
     );
 }
+
+#[test]
+fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
+    let dir = scratch("inputs");
+    let csv = dir.join("t.csv");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/cart.toml",
+        "--duration",
+        "0.5",
+        "--u",
+        "2",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(
+        text.lines().next().unwrap(),
+        "t,x,theta,dx,dtheta,energy,u_push"
+    );
+    assert!(text.lines().skip(1).all(|l| l.ends_with(",2.0")), "{text}");
+    // From a file: −1 from 0.2 s on.
+    let schedule = dir.join("u.csv");
+    std::fs::write(&schedule, "t,push\n0,1\n0.2,-1\n").unwrap();
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/cart.toml",
+        "--duration",
+        "0.5",
+        "--inputs",
+        schedule.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let u: Vec<&str> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.rsplit(',').next().unwrap())
+        .collect();
+    assert_eq!(
+        (u[0], u[19], u[20], u[50]),
+        ("1.0", "1.0", "-1.0", "-1.0"),
+        "{u:?}"
+    );
+    // check lists the input; eval takes --u.
+    let (ok, stdout, _) = tree_mech(&["check", "tests/models/cart.toml"]);
+    assert!(
+        ok && stdout.contains("1 inputs (generalized forces u):")
+            && stdout.contains("push                 on `x`; limits [-10, 10]"),
+        "{stdout}"
+    );
+    let (ok, stdout, stderr) = tree_mech(&[
+        "eval",
+        "tests/models/cart.toml",
+        "--q",
+        "0,0",
+        "--dq",
+        "0,0",
+        "--u",
+        "1.2",
+    ]);
+    assert!(ok, "{stderr}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(json["inputs"][0], "push");
+    // A push on the cart at rest, the pendulum hanging: the bob (on a massless rod) swings
+    // back at first and takes none of it, so ẍ = F / m_cart, θ̈ = ẍ / ℓ (ry tilts it back).
+    let (xdd, thdd) = (
+        json["qdd"][0].as_f64().unwrap(),
+        json["qdd"][1].as_f64().unwrap(),
+    );
+    assert!((xdd - 1.2).abs() < 1e-12, "ẍ = {xdd}");
+    assert!((thdd - 1.2 / 0.5).abs() < 1e-12, "θ̈ = {thdd}");
+    for (args, expected) in [
+        (
+            vec!["--u", "1,2"],
+            "--u has 2 values; the model has 1 inputs (push)",
+        ),
+        (vec!["--u", "x"], "--u: `x` is not a finite number"),
+        (vec!["--inputs", "missing.csv"], "cannot read `missing.csv`"),
+    ] {
+        let mut all = vec!["simulate", "tests/models/cart.toml", "--duration", "0.1"];
+        all.extend(args.iter().copied());
+        let (ok, _, stderr) = tree_mech(&all);
+        assert!(!ok && stderr.contains(expected), "{args:?}: {stderr}");
+    }
+    std::fs::write(&schedule, "t,pull\n0,1\n").unwrap();
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/cart.toml",
+        "--inputs",
+        schedule.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && stderr.contains(":1: no column for input `push`"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = tree_mech(&["simulate", "models/pendulum.toml", "--u", "1"]);
+    assert!(
+        !ok && stderr.contains("model `pendulum` has no inputs"),
+        "{stderr}"
+    );
+}

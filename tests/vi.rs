@@ -122,6 +122,15 @@ impl System for Counting {
     fn is_angle(&self, i: usize) -> bool {
         self.inner.is_angle(i)
     }
+    fn input_count(&self) -> usize {
+        self.inner.input_count()
+    }
+    fn input_name(&self, k: usize) -> &str {
+        self.inner.input_name(k)
+    }
+    fn input_variable(&self, k: usize) -> usize {
+        self.inner.input_variable(k)
+    }
     fn motion(&self, i: usize) -> Option<tree_mech::model::Motion> {
         self.inner.motion(i)
     }

@@ -116,8 +116,10 @@ fn constant_name(prefix: &str, name: &str) -> String {
 }
 
 /// Associated items the expansion defines itself.
-const RESERVED: [&str; 9] = [
+const RESERVED: [&str; 11] = [
     "DOF",
+    "INPUTS",
+    "INPUT_VARIABLES",
     "VARIABLES",
     "FRAMES",
     "Q0",
@@ -407,6 +409,9 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         (&c_first.body, &c_dynamics.body, &c_full.body);
     let rows = plan.rows;
     let constraint_names = model.constraint_row_names();
+    let inputs = model.inputs.len();
+    let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
+    let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
     let (first_body, dynamics_body, full_body, poses_body) =
         (&first.body, &dynamics.body, &full.body, &poses.body);
     let statements = full.statements;
@@ -471,6 +476,10 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             pub const KINEMATIC: [bool; #n] = [#(#kinematic),*];
             /// Constraint equation names, in order.
             pub const CONSTRAINTS: [&'static str; #rows] = [#(#constraint_names),*];
+            /// Input names, in order (`u`; the generalized force is `B u`).
+            pub const INPUTS: [&'static str; #inputs] = [#(#input_names),*];
+            /// The variable each input pushes on.
+            pub const INPUT_VARIABLES: [usize; #inputs] = [#(#input_variables),*];
             /// Statements in one full (second-order) evaluation.
             pub const STATEMENTS: usize = #statements;
             #var_consts
@@ -525,6 +534,18 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             fn is_angle(&self, i: usize) -> bool {
                 Self::model_ref().is_angle(i)
+            }
+
+            fn input_count(&self) -> usize {
+                Self::INPUTS.len()
+            }
+
+            fn input_name(&self, k: usize) -> &str {
+                Self::INPUTS[k]
+            }
+
+            fn input_variable(&self, k: usize) -> usize {
+                Self::INPUT_VARIABLES[k]
             }
 
             /// Read from the model (allocates): call it when setting up, not per step.

@@ -8,8 +8,7 @@ use proc_macro2::Span;
 use syn::LitStr;
 use tree_model::{
     ConstraintSpec, DamperSpec, FrameField, FrameSpec, InputSpec, Model, ModelSpec, ParameterSpec,
-    Primitive,
-    PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value, VariableSpec,
+    Primitive, PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value, VariableSpec,
 };
 
 use crate::ast::{Argument, ElementKind, InlineElement, InlineFrame, InlineModel, Setting};
@@ -326,7 +325,10 @@ fn element_spec(
                         if v.len() == 2 {
                             u.limits = Some([v[0].value, v[1].value]);
                         } else {
-                            errors.push(*span, format!("expected two numbers [lo, hi], found {}", v.len()));
+                            errors.push(
+                                *span,
+                                format!("expected two numbers [lo, hi], found {}", v.len()),
+                            );
                         }
                     }
                     ("limits", v) => errors.push(v.span(), "`limits` takes two numbers [lo, hi]"),

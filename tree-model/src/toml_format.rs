@@ -13,8 +13,7 @@ use crate::primitive::{Primitive, PrimitiveKind, Value};
 use crate::source::LineIndex;
 use crate::spec::{
     ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,
-    SpringSpec,
-    VariableSpec,
+    SpringSpec, VariableSpec,
 };
 use crate::validate::validate;
 

@@ -684,12 +684,19 @@ fn validate_inputs(
         if !name_ok(&u.name) {
             errs.push(
                 site(Some("name")),
-                format!("input {}: its name is empty or holds a control character", index + 1),
+                format!(
+                    "input {}: its name is empty or holds a control character",
+                    index + 1
+                ),
             );
         } else if let Some(first) = names.insert(&u.name, index) {
             errs.push(
                 site(Some("name")),
-                format!("{what} is declared twice (inputs {} and {})", first + 1, index + 1),
+                format!(
+                    "{what} is declared twice (inputs {} and {})",
+                    first + 1,
+                    index + 1
+                ),
             );
         }
         let variable = match u.variable.as_deref() {
@@ -699,7 +706,10 @@ fn validate_inputs(
             }
             Some(v) => match var_index.get(v) {
                 None => {
-                    errs.push(site(Some("variable")), format!("{what}: unknown variable `{v}`"));
+                    errs.push(
+                        site(Some("variable")),
+                        format!("{what}: unknown variable `{v}`"),
+                    );
                     None
                 }
                 Some(&i) if variables[i].is_kinematic() => {

@@ -16,6 +16,23 @@ pub struct StepContext<'a, S, F, P> {
     pub t: f64,
     /// Its length (for rk45, the length to try first; the step leaves its next proposal).
     pub dt: f64,
+    /// The system's inputs over the step, one per [`crate::System::input_count`] (held
+    /// constant over it; empty: all zero). They push as `B u` beside `force`.
+    pub u: &'a [f64],
+}
+
+impl<'a, S: crate::System, F, P> StepContext<'a, S, F, P>
+where
+    nalgebra::DefaultAllocator:
+        nalgebra::allocator::Allocator<S::N> + nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    /// Adds the inputs' generalized force `B u` into `f`.
+    #[inline]
+    pub fn add_inputs(&self, f: &mut crate::Vector<S::N>) {
+        for (k, &x) in self.u.iter().enumerate() {
+            f[self.sys.input_variable(k)] += x;
+        }
+    }
 }
 
 impl<'a, S, F, P> StepContext<'a, S, F, P> {
@@ -28,6 +45,7 @@ impl<'a, S, F, P> StepContext<'a, S, F, P> {
             index: 0,
             t: 0.0,
             dt,
+            u: &[],
         }
     }
 

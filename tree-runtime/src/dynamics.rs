@@ -302,12 +302,13 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        let (sys, force, motion) = (&mut *cx.sys, &mut *cx.force, &mut *cx.motion);
-        let (step, t) = (cx.index, cx.t);
-        sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
-        // rhs = F + u + ∂L/∂q − (∂²L/∂q̇∂q) q̇
+        cx.sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
+        // rhs = F + u + B u_inputs + ∂L/∂q − (∂²L/∂q̇∂q) q̇
         self.rhs.copy_from(&self.terms.force);
-        force.add_force(t, q, dq, &mut self.rhs);
+        cx.force.add_force(cx.t, q, dq, &mut self.rhs);
+        cx.add_inputs(&mut self.rhs);
+        let (sys, motion) = (&mut *cx.sys, &mut *cx.motion);
+        let (step, t) = (cx.index, cx.t);
         self.rhs += &self.terms.dl_dq;
         self.rhs.gemv(-1.0, &self.terms.d2l_ddq_dq, dq, 1.0);
         if self.split.is_plain() {

@@ -286,6 +286,16 @@ where
     /// Name of constraint equation `r`.
     fn constraint_name(&self, r: usize) -> &str;
 
+    /// Number of inputs `u`: generalized forces on dynamic variables, `B u` with one column
+    /// of `B` per input.
+    fn input_count(&self) -> usize;
+
+    /// Name of input `k`.
+    fn input_name(&self, k: usize) -> &str;
+
+    /// The variable input `k` pushes on (the row of its column of `B`).
+    fn input_variable(&self, k: usize) -> usize;
+
     /// Evaluates the constraints up to `order` at `(q, q̇)` into `out` (sized
     /// `constraint_count() × dof()`).
     fn constraints(

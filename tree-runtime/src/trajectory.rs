@@ -22,6 +22,8 @@ pub struct Sample<'a> {
     pub lambda: &'a [f64],
     /// `max |h_r(q)|`.
     pub violation: f64,
+    /// The system's inputs in force from this sample on (empty without inputs).
+    pub u: &'a [f64],
 }
 
 /// One run's output, stored row by row in flat vectors (`dof` values a row).
@@ -148,6 +150,7 @@ impl Trajectory {
                 energy: self.energy[k],
                 lambda: self.lambda(k),
                 violation: self.violation[k],
+                u: &[],
             })?;
         }
         csv.finish()
@@ -159,11 +162,23 @@ impl Trajectory {
 pub struct CsvStream<W: Write> {
     out: W,
     constraints: bool,
+    /// Columns `u_<input>` at the end.
+    inputs: usize,
 }
 
 impl<W: Write> CsvStream<W> {
     /// Writes the header to `out`.
-    pub fn new(mut out: W, variables: &[String], constraints: &[String]) -> io::Result<Self> {
+    pub fn new(out: W, variables: &[String], constraints: &[String]) -> io::Result<Self> {
+        Self::with_inputs(out, variables, constraints, &[])
+    }
+
+    /// Writes the header to `out`, with a column `u_<name>` per input at the end.
+    pub fn with_inputs(
+        mut out: W,
+        variables: &[String],
+        constraints: &[String],
+        inputs: &[String],
+    ) -> io::Result<Self> {
         let mut header = vec!["t".to_string()];
         header.extend(variables.iter().cloned());
         header.extend(variables.iter().map(|v| format!("d{v}")));
@@ -172,11 +187,13 @@ impl<W: Write> CsvStream<W> {
         if !constraints.is_empty() {
             header.push("violation".into());
         }
+        header.extend(inputs.iter().map(|u| format!("u_{u}")));
         let header: Vec<String> = header.iter().map(|h| csv_field(h)).collect();
         writeln!(out, "{}", header.join(","))?;
         Ok(CsvStream {
             out,
             constraints: !constraints.is_empty(),
+            inputs: inputs.len(),
         })
     }
 
@@ -199,6 +216,10 @@ impl<W: Write> CsvStream<W> {
         if self.constraints {
             out.write_all(b",")?;
             out.write_all(buf.format(s.violation).as_bytes())?;
+        }
+        for k in 0..self.inputs {
+            out.write_all(b",")?;
+            out.write_all(buf.format(s.u.get(k).copied().unwrap_or(0.0)).as_bytes())?;
         }
         out.write_all(b"\n")
     }

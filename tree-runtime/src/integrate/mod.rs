@@ -223,7 +223,41 @@ where
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    let none = InputSchedule::default();
+    run_with_inputs(sys, q0, dq0, options, force, motion, &none, observe)
+}
+
+/// [`run`] with the system's inputs `u` given by `inputs` (held over each step; an empty
+/// schedule: all zero).
+#[allow(clippy::too_many_arguments)] // run's, and the inputs
+pub fn run_with_inputs<S, F, P>(
+    sys: &mut S,
+    q0: &Vector<S::N>,
+    dq0: &Vector<S::N>,
+    options: &SimOptions,
+    force: &mut F,
+    motion: &mut P,
+    inputs: &InputSchedule,
+    observe: &mut dyn FnMut(&Sample) -> Result<(), SimError>,
+) -> Result<RunSummary, SimError>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let steps = check_options(options)?;
+    if !inputs.is_empty() && inputs.width() != sys.input_count() {
+        return Err(SimError::InvalidInput(format!(
+            "{} input values given a step; the system has {} inputs ({})",
+            inputs.width(),
+            sys.input_count(),
+            (0..sys.input_count())
+                .map(|k| sys.input_name(k))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
     let n = sys.dim();
     if q0.len() != n.value() || dq0.len() != n.value() {
         return Err(SimError::InvalidInput(format!(
@@ -273,13 +307,27 @@ where
         Method::Rk4 => {
             let mut rk = Rk4::new(cx.sys);
             rk.dynamics.baumgarte = options.baumgarte;
-            drive(&mut Fixed(rk, steps), &mut cx, &mut rec, &mut q, &mut dq)
+            drive(
+                &mut Fixed(rk, steps),
+                &mut cx,
+                inputs,
+                &mut rec,
+                &mut q,
+                &mut dq,
+            )
         }
         Method::Rk45(tol) => {
             let mut rk = Rk45::new(cx.sys, tol);
             rk.dynamics.baumgarte = options.baumgarte;
             let adaptive = Adaptive(rk, options.duration, options.max_steps);
-            drive(&mut { adaptive }, &mut cx, &mut rec, &mut q, &mut dq)
+            drive(
+                &mut { adaptive },
+                &mut cx,
+                inputs,
+                &mut rec,
+                &mut q,
+                &mut dq,
+            )
         }
         Method::Vi(settings) => {
             let vi = MidpointVi::new(cx.sys, settings);
@@ -290,7 +338,14 @@ where
                 p,
                 q_next: q.clone(),
             };
-            drive(&mut { variational }, &mut cx, &mut rec, &mut q, &mut dq)
+            drive(
+                &mut { variational },
+                &mut cx,
+                inputs,
+                &mut rec,
+                &mut q,
+                &mut dq,
+            )
         }
     }?;
     Ok(rec.summary)
@@ -330,10 +385,12 @@ where
     ) -> Result<(), SimError>;
 }
 
-/// Runs `it` from `(q, q̇)` to the end, handing out every recorded step.
-fn drive<S, F, P>(
+/// Runs `it` from `(q, q̇)` to the end, handing out every recorded step; each step, and
+/// each sample, sees the inputs in force from its time on.
+fn drive<'a, S, F, P>(
     it: &mut impl Driven<S, F, P>,
-    cx: &mut StepContext<S, F, P>,
+    cx: &mut StepContext<'a, S, F, P>,
+    inputs: &'a InputSchedule,
     rec: &mut Recorder<S::N>,
     q: &mut Vector<S::N>,
     dq: &mut Vector<S::N>,
@@ -342,12 +399,15 @@ where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    cx.u = inputs.at(0.0);
     it.begin(cx.at(0, 0.0), rec, q, dq)?;
     let (mut k, mut t) = (0, 0.0);
     loop {
+        cx.u = inputs.at(t);
         let (reached, last) = it.advance(cx.at(k, t), rec, q, dq)?;
         (k, t) = (k + 1, reached);
         if k.is_multiple_of(rec.every) || last {
+            cx.u = inputs.at(t);
             it.sample(cx.at(k, t), rec, q, dq)?;
         }
         if last {
@@ -498,6 +558,7 @@ where
             energy,
             lambda: lambda.as_slice(),
             violation,
+            u: cx.u,
         })?;
         if rec.dynamics.split.rows > 0 {
             let dh0 = &rec.dynamics.constraint_terms.dh;
@@ -541,6 +602,7 @@ where
             energy,
             lambda: self.vi.lambda.as_slice(),
             violation,
+            u: cx.u,
         })
     }
 }
@@ -638,9 +700,80 @@ where
             energy,
             lambda: lambda.as_slice(),
             violation,
+            u: cx.u,
         });
         self.dynamics.lambda = lambda;
         result
+    }
+}
+
+/// The inputs `u` over a run, held constant over each step: rows `(t, u)` in time order,
+/// each in force from its time until the next row's (before the first row, the first row's).
+/// A constant `u` is one row; an empty schedule means no inputs (all zero).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InputSchedule {
+    times: Vec<f64>,
+    /// Row-major, `width` values a row.
+    values: Vec<f64>,
+    width: usize,
+}
+
+impl InputSchedule {
+    /// `u` for the whole run.
+    pub fn constant(u: Vec<f64>) -> Self {
+        InputSchedule {
+            times: vec![0.0],
+            width: u.len(),
+            values: u,
+        }
+    }
+
+    /// Rows `(t, u)`: times strictly increasing and finite, every `u` of one width and finite.
+    pub fn from_rows(rows: Vec<(f64, Vec<f64>)>) -> Result<Self, SimError> {
+        let width = rows.first().map_or(0, |r| r.1.len());
+        let mut schedule = InputSchedule {
+            width,
+            ..Self::default()
+        };
+        for (k, (t, u)) in rows.into_iter().enumerate() {
+            if !t.is_finite() || schedule.times.last().is_some_and(|&last| t <= last) {
+                return Err(SimError::InvalidInput(format!(
+                    "input row {}: time {t} must be finite and later than the row before",
+                    k + 1
+                )));
+            }
+            if u.len() != width || u.iter().any(|x| !x.is_finite()) {
+                return Err(SimError::InvalidInput(format!(
+                    "input row {}: {} values where the first row has {width}, all finite",
+                    k + 1,
+                    u.len()
+                )));
+            }
+            schedule.times.push(t);
+            schedule.values.extend(u);
+        }
+        Ok(schedule)
+    }
+
+    /// Whether there are no inputs.
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+
+    /// Values a row.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// The inputs in force at `t`: the last row whose time is at or before it (to rounding:
+    /// a row at 0.03 is in force for the step that starts at 3 × 0.01).
+    pub fn at(&self, t: f64) -> &[f64] {
+        if self.times.is_empty() {
+            return &[];
+        }
+        let slack = 1e-9 * t.abs().max(1e-300);
+        let k = self.times.partition_point(|&r| r <= t + slack).max(1) - 1;
+        &self.values[k * self.width..(k + 1) * self.width]
     }
 }
 

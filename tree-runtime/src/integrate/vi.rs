@@ -278,6 +278,10 @@ where
         sys.lagrangian(&self.q_alpha, &self.velocity, order, &mut self.terms);
         self.force.copy_from(&self.terms.force);
         force.add_force(t + a * dt, &self.q_alpha, &self.velocity, &mut self.force);
+        // The inputs, held over the step: B u.
+        for (k, &x) in cx.u.iter().enumerate() {
+            self.force[sys.input_variable(k)] += x;
+        }
         let (split, t2) = (&self.split, &self.terms);
         // p1 + D₁L_d + f⁻ + Δt Dh(q1)ᵀλ on the dynamic rows, and the sum of those terms'
         // magnitudes (the row's momentum scale).

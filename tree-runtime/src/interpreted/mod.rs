@@ -110,6 +110,18 @@ impl System for TreeSystem {
         self.model.is_angle(i)
     }
 
+    fn input_count(&self) -> usize {
+        self.model.inputs.len()
+    }
+
+    fn input_name(&self, k: usize) -> &str {
+        &self.model.inputs[k].name
+    }
+
+    fn input_variable(&self, k: usize) -> usize {
+        self.model.inputs[k].variable
+    }
+
     fn motion(&self, i: usize) -> Option<Motion> {
         self.model.variables[i].motion.clone()
     }

@@ -126,6 +126,18 @@ impl System for PaperSystem {
         self.model.is_angle(i)
     }
 
+    fn input_count(&self) -> usize {
+        self.model.inputs.len()
+    }
+
+    fn input_name(&self, k: usize) -> &str {
+        &self.model.inputs[k].name
+    }
+
+    fn input_variable(&self, k: usize) -> usize {
+        self.model.inputs[k].variable
+    }
+
     fn motion(&self, _: usize) -> Option<Motion> {
         None
     }
