@@ -748,3 +748,177 @@ where
         Ok(0.5 * dq.dot(&self.q_alpha) - self.terms.l)
     }
 }
+
+/// The first derivatives of one VI step as a map `(q₁, p₁, u₁, k₂) ↦ (q₂, p₂, λ)` (trep's
+/// `q2_dq1` …), from the implicit function theorem on the converged step: with the unknowns
+/// `z = (q₂_d, λ)` and the equations `R = (r_d, h(q₂)) = 0`, `dz/dx = −(∂R/∂z)⁻¹ ∂R/∂x`,
+/// `∂R/∂z` the Newton matrix. Rows: the dynamic variables (`q₂`, `p₂`) or the constraint
+/// equations (`λ`, this integrator's force-scaled multiplier: trep's `λ₁ = −Δt λ`); columns:
+/// all variables (`q₁`), the dynamic ones (`p₁`), the inputs (`u₁`), the kinematic ones
+/// (`k₂`, the kinematic part of `q₂`). docs/derivations.md §7.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepDerivatives {
+    /// `∂q₂/∂q₁`.
+    pub q2_dq1: DMatrix<f64>,
+    /// `∂q₂/∂p₁`.
+    pub q2_dp1: DMatrix<f64>,
+    /// `∂q₂/∂u₁`.
+    pub q2_du1: DMatrix<f64>,
+    /// `∂q₂/∂k₂`.
+    pub q2_dk2: DMatrix<f64>,
+    /// `∂p₂/∂q₁`.
+    pub p2_dq1: DMatrix<f64>,
+    /// `∂p₂/∂p₁`.
+    pub p2_dp1: DMatrix<f64>,
+    /// `∂p₂/∂u₁`.
+    pub p2_du1: DMatrix<f64>,
+    /// `∂p₂/∂k₂`.
+    pub p2_dk2: DMatrix<f64>,
+    /// `∂λ/∂q₁`.
+    pub lambda_dq1: DMatrix<f64>,
+    /// `∂λ/∂p₁`.
+    pub lambda_dp1: DMatrix<f64>,
+    /// `∂λ/∂u₁`.
+    pub lambda_du1: DMatrix<f64>,
+    /// `∂λ/∂k₂`.
+    pub lambda_dk2: DMatrix<f64>,
+}
+
+impl<N: Dim> MidpointVi<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// The derivatives of the step from `(q₁, p₁)` at `cx.t` over `cx.dt`, with inputs `cx.u`,
+    /// that converged to `q₂` with the multipliers [`Self::lambda`] (call it right after
+    /// [`Self::step`], with that step's `q₁`, `p₁` and result). Allocates its matrices.
+    pub fn derivatives<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q2: &Vector<N>,
+    ) -> Result<StepDerivatives, SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        let (a, dt) = (self.settings.alpha, cx.dt);
+        let n = q1.len();
+        let (dynamic, kinematic) = (self.split.dynamic.clone(), self.split.kinematic.clone());
+        let (nd, nk, m, nu) = (dynamic.len(), kinematic.len(), self.split.rows, cx.u.len());
+        // Terms, Dh(q₁), Dh(q₂) and the Newton matrix at the solution.
+        self.prepare(cx.sys, q1);
+        self.residual(cx, q1, p1, q2, true);
+        let newton = self.newton_matrix();
+        let ld = DiscreteLagrangian { alpha: a, dt };
+        let t = &self.terms;
+        let full = |f: &dyn Fn(&Terms<N>, &mut [f64])| {
+            let mut out = DMatrix::<f64>::zeros(n, n);
+            f(t, out.as_mut_slice());
+            out
+        };
+        let (d1d1, d2d1, d2d2) = (
+            full(&|t, o| ld.d1d1(t, o)),
+            full(&|t, o| ld.d2d1(t, o)),
+            full(&|t, o| ld.d2d2(t, o)),
+        );
+        let (left, plus) = match self.settings.forcing {
+            Forcing::Split => ((1.0 - a) * dt, a * dt),
+            Forcing::Left => (dt, 0.0),
+        };
+        // The force F(q_α, v) by each slot: ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt.
+        // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
+        let (mut fq, mut fv) = (DMatrix::<f64>::zeros(n, n), DMatrix::<f64>::zeros(n, n));
+        match t.force_derivatives {
+            Sparsity::Zero => {}
+            Sparsity::Diagonal => (0..n).for_each(|i| fv[(i, i)] = t.dforce_ddq[(i, i)]),
+            Sparsity::Dense => {
+                fq.copy_from_slice(t.dforce_dq.as_slice());
+                fv.copy_from_slice(t.dforce_ddq.as_slice());
+            }
+        }
+        let f_by_q1 = &fq * (1.0 - a) - &fv / dt;
+        let f_by_q2 = &fq * a + &fv / dt;
+        // λ·D²h(q₁): the multiplier term's dependence on q₁.
+        let mut lambda_d2h = DMatrix::<f64>::zeros(n, n);
+        if m > 0 {
+            let zero = Vector::<N>::zeros_generic(cx.sys.dim(), nalgebra::U1);
+            let mut c1 = ConstraintTerms::zeros(m, n);
+            cx.sys.constraints(q1, &zero, Order::Full, &mut c1);
+            for s in 0..m {
+                lambda_d2h += &c1.d2h[s] * (dt * self.lambda[s]);
+            }
+        }
+        // ∂R/∂x, one block of columns per input kind: rows dynamic residuals, then h(q₂).
+        let columns = n + nd + nu + nk;
+        let mut rhs = DMatrix::<f64>::zeros(nd + m, columns);
+        for (r, &i) in dynamic.iter().enumerate() {
+            for j in 0..n {
+                rhs[(r, j)] = d1d1[(i, j)] + left * f_by_q1[(i, j)] + lambda_d2h[(i, j)];
+            }
+            rhs[(r, n + r)] = 1.0;
+            for k in 0..nu {
+                if cx.sys.input_variable(k) == i {
+                    rhs[(r, n + nd + k)] = left;
+                }
+            }
+            for (c, &j) in kinematic.iter().enumerate() {
+                rhs[(r, n + nd + nu + c)] = d2d1[(i, j)] + left * f_by_q2[(i, j)];
+            }
+        }
+        for s in 0..m {
+            for (c, &j) in kinematic.iter().enumerate() {
+                rhs[(nd + s, n + nd + nu + c)] = self.constraint_terms.dh[(s, j)];
+            }
+        }
+        let lu = newton.lu();
+        let dz = -lu.solve(&rhs).ok_or_else(|| SimError::SingularJacobian {
+            step: cx.index,
+            t: cx.t,
+            variable: "the step's Newton matrix, for its derivatives".into(),
+        })?;
+        // dq₂ over all variables: the solve's dynamic rows; the identity on k₂'s own columns.
+        let mut dq2 = DMatrix::<f64>::zeros(n, columns);
+        for (r, &i) in dynamic.iter().enumerate() {
+            dq2.set_row(i, &dz.row(r));
+        }
+        for (c, &j) in kinematic.iter().enumerate() {
+            dq2[(j, n + nd + nu + c)] = 1.0;
+        }
+        // p₂ = D₂L_d + f⁺: by q₁ directly, by q₂ through dq₂, by u directly.
+        let by_q1 = d2d1.transpose() + &f_by_q1 * plus;
+        let by_q2 = &d2d2 + &f_by_q2 * plus;
+        let mut dp2 = &by_q2 * &dq2;
+        for i in 0..n {
+            for j in 0..n {
+                dp2[(i, j)] += by_q1[(i, j)];
+            }
+        }
+        for k in 0..nu {
+            dp2[(cx.sys.input_variable(k), n + nd + k)] += plus;
+        }
+        let rows = |mat: &DMatrix<f64>, which: &[usize], from: usize, width: usize| {
+            DMatrix::from_fn(which.len(), width, |r, c| mat[(which[r], from + c)])
+        };
+        let block =
+            |mat: &DMatrix<f64>, from_row: usize, count: usize, from: usize, width: usize| {
+                DMatrix::from_fn(count, width, |r, c| mat[(from_row + r, from + c)])
+            };
+        let offsets = [(0, n), (n, nd), (n + nd, nu), (n + nd + nu, nk)];
+        let [q1o, p1o, u1o, k2o] = offsets;
+        Ok(StepDerivatives {
+            q2_dq1: rows(&dq2, &dynamic, q1o.0, q1o.1),
+            q2_dp1: rows(&dq2, &dynamic, p1o.0, p1o.1),
+            q2_du1: rows(&dq2, &dynamic, u1o.0, u1o.1),
+            q2_dk2: rows(&dq2, &dynamic, k2o.0, k2o.1),
+            p2_dq1: rows(&dp2, &dynamic, q1o.0, q1o.1),
+            p2_dp1: rows(&dp2, &dynamic, p1o.0, p1o.1),
+            p2_du1: rows(&dp2, &dynamic, u1o.0, u1o.1),
+            p2_dk2: rows(&dp2, &dynamic, k2o.0, k2o.1),
+            lambda_dq1: block(&dz, nd, m, q1o.0, q1o.1),
+            lambda_dp1: block(&dz, nd, m, p1o.0, p1o.1),
+            lambda_du1: block(&dz, nd, m, u1o.0, u1o.1),
+            lambda_dk2: block(&dz, nd, m, k2o.0, k2o.1),
+        })
+    }
+}
