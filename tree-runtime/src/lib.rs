@@ -26,6 +26,8 @@
 // The kernel: the recursions, over any scalar (what `tree_model!` needs), hidden from the
 // documented API. Bottom up: scalar, order, se3, plan, outputs, sweeps, elements, kernel.
 #[doc(hidden)]
+pub mod dual;
+#[doc(hidden)]
 pub mod elements;
 #[doc(hidden)]
 pub mod kernel;
@@ -55,6 +57,8 @@ pub mod interpreted;
 #[cfg(feature = "simulate")]
 #[doc(hidden)]
 pub mod linalg;
+#[cfg(feature = "simulate")]
+pub mod linearize;
 #[cfg(feature = "simulate")]
 pub mod reference;
 #[cfg(feature = "simulate")]

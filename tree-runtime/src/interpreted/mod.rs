@@ -5,6 +5,7 @@
 use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
+use crate::dual::{Dual, DualOutputs};
 use crate::error::SimError;
 use crate::kernel::{self, Kernel};
 use crate::plan::TreePlan;
@@ -75,6 +76,30 @@ impl TreeSystem {
                 (ws.velocity[k], cols)
             })
             .collect()
+    }
+}
+
+impl TreeSystem {
+    /// Every Lagrangian, force and constraint output at `(q, q̇)` up to `order`, with its
+    /// exact derivative along the direction `(δq, δq̇)`: the same kernel over forward-mode
+    /// dual numbers. Allocates (for linearisations, not for steps).
+    pub fn directional(
+        &self,
+        q: &[f64],
+        dq: &[f64],
+        dir_q: &[f64],
+        dir_dq: &[f64],
+        order: Order,
+    ) -> DualOutputs {
+        let n = q.len();
+        let plan = &self.plan;
+        let mut kernel = Kernel::<Dual>::new(plan);
+        let qd: Vec<Dual> = (0..n).map(|i| Dual::new(q[i], dir_q[i])).collect();
+        let vd: Vec<Dual> = (0..n).map(|i| Dual::new(dq[i], dir_dq[i])).collect();
+        let mut out = DualOutputs::new(n, self.constraint_names.len());
+        kernel::evaluate(plan, &mut kernel, &qd, &vd, order, &mut out);
+        kernel::constraints(plan, &mut kernel, &qd, &vd, order, &mut out);
+        out
     }
 }
 

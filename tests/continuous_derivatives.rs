@@ -1,0 +1,117 @@
+//! The continuous linearisation (runtime::linearize) against central differences of the
+//! accelerations and constraint forces: with constraints, kinematic inputs, springs, dampers,
+//! damping and inputs.
+
+mod common;
+
+use nalgebra::Dyn;
+use tree_mech::integrate::{project_initial_state, StepContext};
+use tree_mech::model;
+use tree_mech::runtime::dynamics::Split;
+use tree_mech::runtime::linearize::continuous_derivatives;
+use tree_mech::runtime::{Dynamics, ModelMotions, Prescription, Vector};
+use tree_mech::{NoForce, System, TreeSystem};
+
+/// `(q̈_d, λ)` at `(q, q̇, u)`, t = 0.3.
+fn accelerations(
+    sys: &mut TreeSystem,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    u: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let mut dynamics = Dynamics::new(sys);
+    let mut motion = ModelMotions::of(sys);
+    let mut force = NoForce;
+    let mut qdd = Vector::<Dyn>::zeros(q.len());
+    let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
+    cx.u = u;
+    dynamics
+        .acceleration(cx.at(0, 0.3), q, dq, &mut qdd)
+        .unwrap();
+    let d = dynamics.split.dynamic.clone();
+    (
+        d.iter().map(|&i| qdd[i]).collect(),
+        dynamics.lambda.iter().copied().collect(),
+    )
+}
+
+#[test]
+fn continuous_derivatives_match_finite_differences() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut damped = common::load("humanoid.toml");
+    damped.variables[3].damping = 0.7;
+    for (name, model) in [
+        (
+            "elements",
+            model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap(),
+        ),
+        (
+            "cart",
+            model::from_toml_file(format!("{root}/tests/models/cart.toml")).unwrap(),
+        ),
+        (
+            "string pendulum",
+            model::from_toml_file(format!("{root}/tests/models/string-pendulum.toml")).unwrap(),
+        ),
+        ("humanoid", damped),
+    ] {
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let n = sys.dof();
+        let (mut q, dq0) = sys.initial_state();
+        let mut rng = common::Rng::new(5);
+        let mut dq = dq0 + rng.vector(n, 0.5);
+        let mut motion = ModelMotions::of(&sys);
+        let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+        for &k in &kinematic {
+            [q[k], dq[k], _] = motion.kinematic(k, 0.3);
+        }
+        let split = Split::of(&sys);
+        project_initial_state(&mut sys, &split, &mut q, &mut dq).unwrap();
+        let u: Vec<f64> = (0..sys.input_count())
+            .map(|k| 0.4 * (k + 1) as f64)
+            .collect();
+        let mut force = NoForce;
+        let mut motion = ModelMotions::of(&sys);
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.0);
+        cx.u = &u;
+        let d = continuous_derivatives(cx.at(0, 0.3), &q, &dq).unwrap();
+        let h = 1e-6;
+        let columns = [("q", n), ("dq", n), ("u", u.len())];
+        for (kind, count) in columns {
+            for j in 0..count {
+                let at = |sign: f64, sys: &mut TreeSystem| {
+                    let (mut q, mut dq, mut u) = (q.clone(), dq.clone(), u.clone());
+                    match kind {
+                        "q" => q[j] += sign * h,
+                        "dq" => dq[j] += sign * h,
+                        _ => u[j] += sign * h,
+                    }
+                    accelerations(sys, &q, &dq, &u)
+                };
+                let ((ap, lp), (am, lm)) = (at(1.0, &mut sys), at(-1.0, &mut sys));
+                let (eq, el) = match kind {
+                    "q" => (&d.qdd_dq, &d.lambda_dq),
+                    "dq" => (&d.qdd_ddq, &d.lambda_ddq),
+                    _ => (&d.qdd_du, &d.lambda_du),
+                };
+                let (sq, sl) = (eq.amax().max(1.0), el.amax().max(1.0));
+                for r in 0..ap.len() {
+                    let fd = (ap[r] - am[r]) / (2.0 * h);
+                    assert!(
+                        (fd - eq[(r, j)]).abs() < 1e-5 * sq,
+                        "{name}: q̈_d{kind}[{r}][{j}] = {} vs {fd}",
+                        eq[(r, j)]
+                    );
+                }
+                for r in 0..lp.len() {
+                    let fd = (lp[r] - lm[r]) / (2.0 * h);
+                    assert!(
+                        (fd - el[(r, j)]).abs() < 1e-5 * sl,
+                        "{name}: λ_d{kind}[{r}][{j}] = {} vs {fd}",
+                        el[(r, j)]
+                    );
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,152 @@
+//! The continuous linearisation: `∂q̈/∂q`, `∂q̈/∂q̇`, `∂q̈/∂u` and `∂λ/∂q`, `∂λ/∂q̇`, `∂λ/∂u` of
+//! the constrained dynamics (docs/derivations.md §6), exactly: every term of the equations is
+//! differentiated along each coordinate direction by the kernel over dual numbers, and the
+//! differentiated KKT system
+//!
+//! `M_dd δq̈_d − Dh_dᵀ δλ = δF + B δu + δL_q − δ(L_q̇q) q̇ − L_q̇q δq̇ − δM q̈ + δDh_dᵀ λ`,
+//! `Dh_d δq̈_d = −δDh q̈ − δ(q̇ᵀD²h q̇)`
+//!
+//! is solved for each direction (kinematic `q̈_k` are prescribed: they do not move). For the
+//! interpreted system; without Baumgarte stabilisation.
+
+use nalgebra::{DMatrix, DVector, Dyn};
+
+use crate::context::StepContext;
+use crate::dual::DualOutputs;
+use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
+use crate::error::SimError;
+use crate::interpreted::TreeSystem;
+use crate::outputs::Output;
+use crate::system::{Order, System, Vector};
+
+/// The accelerations and constraint forces at a state and their first derivatives. Rows: the
+/// dynamic variables (`q̈`) or the constraint equations (`λ`); columns: all variables (`q`,
+/// `q̇`) or the inputs (`u`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuousDerivatives {
+    /// The dynamic variables' `q̈`.
+    pub qdd: DVector<f64>,
+    /// The constraint forces `λ`.
+    pub lambda: DVector<f64>,
+    /// `∂q̈/∂q`.
+    pub qdd_dq: DMatrix<f64>,
+    /// `∂q̈/∂q̇`.
+    pub qdd_ddq: DMatrix<f64>,
+    /// `∂q̈/∂u`.
+    pub qdd_du: DMatrix<f64>,
+    /// `∂λ/∂q`.
+    pub lambda_dq: DMatrix<f64>,
+    /// `∂λ/∂q̇`.
+    pub lambda_ddq: DMatrix<f64>,
+    /// `∂λ/∂u`.
+    pub lambda_du: DMatrix<f64>,
+}
+
+/// The linearisation of `sys`'s dynamics at `(cx.t, q, q̇)` with inputs `cx.u` (the
+/// kinematic entries of `q`, `q̇` must hold their prescription at `cx.t`).
+pub fn continuous_derivatives<F, P>(
+    cx: &mut StepContext<TreeSystem, F, P>,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+) -> Result<ContinuousDerivatives, SimError>
+where
+    F: GeneralizedForce<Dyn>,
+    P: Prescription,
+{
+    let n = q.len();
+    let mut dynamics = Dynamics::new(&*cx.sys);
+    let mut qdd = Vector::<Dyn>::zeros(n);
+    dynamics.acceleration(cx, q, dq, &mut qdd)?;
+    let lambda = dynamics.lambda.clone();
+    let (dynamic, m, nu) = (
+        dynamics.split.dynamic.clone(),
+        dynamics.split.rows,
+        cx.u.len(),
+    );
+    let nd = dynamic.len();
+    // The KKT matrix [[M_dd, −Dh_dᵀ], [Dh_d, 0]] at the state.
+    let mass = &dynamics.terms.mass;
+    let dh = &dynamics.constraint_terms.dh;
+    let kkt = DMatrix::from_fn(nd + m, nd + m, |r, c| match (r < nd, c < nd) {
+        (true, true) => mass[(dynamic[r], dynamic[c])],
+        (true, false) => -dh[(c - nd, dynamic[r])],
+        (false, true) => dh[(r - nd, dynamic[c])],
+        (false, false) => 0.0,
+    });
+    let lu = kkt.lu();
+    let lvq = &dynamics.terms.d2l_ddq_dq;
+    // The right side of the differentiated equations along one direction.
+    let rhs_along = |d: &DualOutputs, dir_dq: &[f64], du: Option<usize>, sys: &TreeSystem| {
+        let mut b = DVector::<f64>::zeros(nd + m);
+        for (r, &i) in dynamic.iter().enumerate() {
+            let mut x = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d;
+            for j in 0..n {
+                x -= d.get(Output::D2lDdqDq(i, j)).d * dq[j] + lvq[(i, j)] * dir_dq[j];
+                x -= d.get(Output::Mass(i, j)).d * qdd[j];
+            }
+            for s in 0..m {
+                x += d.get(Output::Dh(s, i)).d * lambda[s];
+            }
+            if let Some(k) = du {
+                if sys.input_variable(k) == i {
+                    x += 1.0;
+                }
+            }
+            b[r] = x;
+        }
+        for s in 0..m {
+            let mut x = -d.get(Output::DhDot(s)).d;
+            for j in 0..n {
+                x -= d.get(Output::Dh(s, j)).d * qdd[j];
+            }
+            b[nd + s] = x;
+        }
+        b
+    };
+    let mut out = ContinuousDerivatives {
+        qdd: DVector::from_iterator(nd, dynamic.iter().map(|&i| qdd[i])),
+        lambda: lambda.clone(),
+        qdd_dq: DMatrix::zeros(nd, n),
+        qdd_ddq: DMatrix::zeros(nd, n),
+        qdd_du: DMatrix::zeros(nd, nu),
+        lambda_dq: DMatrix::zeros(m, n),
+        lambda_ddq: DMatrix::zeros(m, n),
+        lambda_du: DMatrix::zeros(m, nu),
+    };
+    let singular = || SimError::SingularConstraints {
+        step: cx.index,
+        t: cx.t,
+        constraint: "(the linearisation's KKT system)".into(),
+    };
+    let zero = vec![0.0; n];
+    let (qs, vs) = (q.as_slice(), dq.as_slice());
+    for j in 0..(2 * n + nu) {
+        let mut e = vec![0.0; n];
+        let b = if j < 2 * n {
+            e[j % n] = 1.0;
+            let (dir_q, dir_dq) = if j < n { (&e, &zero) } else { (&zero, &e) };
+            let d = cx.sys.directional(qs, vs, dir_q, dir_dq, Order::Dynamics);
+            rhs_along(&d, dir_dq, None, cx.sys)
+        } else {
+            // An input moves only its own row of B u.
+            rhs_along(&DualOutputs::new(n, m), &zero, Some(j - 2 * n), cx.sys)
+        };
+        let x = lu.solve(&b).ok_or_else(singular)?;
+        let (qcol, lcol) = (x.rows(0, nd), x.rows(nd, m));
+        match j {
+            j if j < n => {
+                out.qdd_dq.set_column(j, &qcol);
+                out.lambda_dq.set_column(j, &lcol);
+            }
+            j if j < 2 * n => {
+                out.qdd_ddq.set_column(j - n, &qcol);
+                out.lambda_ddq.set_column(j - n, &lcol);
+            }
+            j => {
+                out.qdd_du.set_column(j - 2 * n, &qcol);
+                out.lambda_du.set_column(j - 2 * n, &lcol);
+            }
+        }
+    }
+    Ok(out)
+}
