@@ -1,6 +1,7 @@
 //! The `tree-mech` command line: simulate a model, evaluate it at a state, check it.
 
 mod animate;
+mod linearize;
 mod output;
 mod plot;
 
@@ -180,6 +181,37 @@ enum Command {
         #[arg(long, allow_hyphen_values = true)]
         u: Option<String>,
     },
+    /// Linearise the dynamics at a state (exact derivatives of q̈ and λ), and with --dt one
+    /// midpoint-VI step as a map; prints JSON.
+    #[command(allow_negative_numbers = true)]
+    Linearize {
+        /// Model file (TOML, or URDF by its .urdf extension).
+        model: PathBuf,
+        /// Configuration, comma-separated, in variable order (default: the model's q0).
+        #[arg(long, allow_hyphen_values = true)]
+        q: Option<String>,
+        /// Velocity, comma-separated (default: the model's dq0).
+        #[arg(long, allow_hyphen_values = true)]
+        dq: Option<String>,
+        /// Inputs, comma-separated in input order (default: zero).
+        #[arg(long, allow_hyphen_values = true)]
+        u: Option<String>,
+        /// Time (the kinematic variables' prescription is taken at it).
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        t: f64,
+        /// Also one VI step of this length from (t, q, p), and its derivatives.
+        #[arg(long)]
+        dt: Option<f64>,
+        /// The VI step's starting momenta of the dynamic variables (default ∂L/∂q̇ at q, q̇).
+        #[arg(long, allow_hyphen_values = true)]
+        p: Option<String>,
+        /// VI forcing: split (second order) or left (trep's).
+        #[arg(long, value_enum, default_value = "split")]
+        forcing: ForcingArg,
+        /// VI quadrature point α.
+        #[arg(long, default_value_t = 0.5)]
+        alpha: f64,
+    },
     /// Validate a model and print a summary with the tree drawn as text.
     Check {
         /// Model file (TOML, or URDF by its .urdf extension).
@@ -298,6 +330,33 @@ fn main() -> ExitCode {
             t,
         ),
         Command::Check { model } => run_check(&model, &source),
+        Command::Linearize {
+            model,
+            q,
+            dq,
+            u,
+            t,
+            dt,
+            p,
+            forcing,
+            alpha,
+        } => linearize::run(
+            &model,
+            &source,
+            linearize::Request {
+                q: q.as_deref(),
+                dq: dq.as_deref(),
+                u: u.as_deref(),
+                p: p.as_deref(),
+                t,
+                dt,
+                forcing: match forcing {
+                    ForcingArg::Split => Forcing::Split,
+                    ForcingArg::Left => Forcing::Left,
+                },
+                alpha,
+            },
+        ),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

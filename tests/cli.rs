@@ -686,3 +686,75 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
         "{stderr}"
     );
 }
+
+#[test]
+fn linearize_prints_the_exact_derivatives_and_one_vi_step_as_a_map() {
+    let (ok, stdout, stderr) = tree_mech(&[
+        "linearize",
+        "tests/models/cart.toml",
+        "--q",
+        "0,0.1",
+        "--dq",
+        "0,0",
+        "--u",
+        "1",
+        "--dt",
+        "0.01",
+    ]);
+    assert!(ok, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let shape = |v: &serde_json::Value| {
+        (
+            v.as_array().unwrap().len(),
+            v[0].as_array().map_or(0, |r| r.len()),
+        )
+    };
+    assert_eq!(shape(&j["qdd_dq"]), (2, 2));
+    assert_eq!(shape(&j["qdd_ddq"]), (2, 2));
+    assert_eq!(shape(&j["qdd_du"]), (2, 1));
+    for key in ["q2_dq1", "q2_dp1", "p2_dq1", "p2_dp1"] {
+        assert_eq!(shape(&j["vi"][key]), (2, 2), "{key}");
+    }
+    assert_eq!(shape(&j["vi"]["q2_du1"]), (2, 1));
+    // The step is simulate's first step from the same state and input.
+    let dir = scratch("linearize");
+    let csv = dir.join("t.csv");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/cart.toml",
+        "--duration",
+        "0.01",
+        "--u",
+        "1",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let last: Vec<f64> = text
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|x| x.parse().unwrap())
+        .collect();
+    for i in 0..2 {
+        let q2 = j["vi"]["q2"][i].as_f64().unwrap();
+        assert!(
+            (q2 - last[1 + i]).abs() < 1e-12,
+            "q2[{i}] {q2} vs simulate's {}",
+            last[1 + i]
+        );
+    }
+    // ∂q̈/∂u is M⁻¹'s column of the cart: M = [[M + m, m ℓ cos θ], [m ℓ cos θ, m ℓ²]] with
+    // M = 1, m = 0.2, ℓ = 0.5, θ = 0.1, so (M⁻¹)ₓₓ = m ℓ² / det.
+    let c = 0.1f64.cos();
+    let expected = 0.05 / (1.2 * 0.05 - (0.1 * c) * (0.1 * c));
+    let got = j["qdd_du"][0][0].as_f64().unwrap();
+    assert!((got - expected).abs() < 1e-12, "{got} vs {expected}");
+    let (ok, _, stderr) = tree_mech(&["linearize", "tests/models/cart.toml", "--dt", "-1"]);
+    assert!(
+        !ok && stderr.contains("--dt must be a positive number"),
+        "{stderr}"
+    );
+}
