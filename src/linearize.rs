@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use serde_json::{json, Value};
-use tree_mech::integrate::{Forcing, MidpointVi, StepContext, ViSettings};
+use tree_mech::integrate::{Forcing, MidpointVi, Rk4, StepContext, ViSettings};
 use tree_mech::nalgebra::{DMatrix, Dyn};
-use tree_mech::runtime::linearize::continuous_derivatives;
+use tree_mech::runtime::linearize::{continuous_derivatives, rk4_step_derivatives};
 use tree_mech::runtime::{ModelMotions, Prescription, Vector};
 use tree_mech::{NoForce, System};
 
@@ -22,6 +22,8 @@ pub struct Request<'a> {
     pub dt: Option<f64>,
     pub forcing: Forcing,
     pub alpha: f64,
+    /// Linearise an RK4 step instead of the VI's.
+    pub rk4: bool,
 }
 
 fn matrix(m: &DMatrix<f64>) -> Value {
@@ -86,7 +88,30 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
         "lambda_ddq": matrix(&d.lambda_ddq),
         "lambda_du": matrix(&d.lambda_du),
     });
-    if let Some(dt) = request.dt {
+    if let Some(dt) = request.dt.filter(|_| request.rk4) {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(format!("--dt must be a positive number, got {dt}"));
+        }
+        cx.dt = dt;
+        let (x2_dx1, x2_du1) =
+            rk4_step_derivatives(cx.at(0, t), &q, &dq).map_err(|e| format!("the RK4 step: {e}"))?;
+        let mut rk = Rk4::new(&*cx.sys);
+        let (mut q2, mut dq2) = (q.clone(), dq.clone());
+        rk.step(cx.at(0, t), &mut q2, &mut dq2)
+            .map_err(|e| format!("the RK4 step: {e}"))?;
+        let x2: Vec<f64> = dynamic
+            .iter()
+            .map(|&i| q2[i])
+            .chain(dynamic.iter().map(|&i| dq2[i]))
+            .collect();
+        out["rk4"] = json!({
+            "t2": t + dt,
+            "state": "the dynamic variables' q, then their q̇",
+            "x2": x2,
+            "x2_dx1": matrix(&x2_dx1),
+            "x2_du1": matrix(&x2_du1),
+        });
+    } else if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(format!("--dt must be a positive number, got {dt}"));
         }

@@ -76,6 +76,14 @@ enum ForcingArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+enum StepArg {
+    /// The midpoint variational integrator.
+    Vi,
+    /// Classical RK4.
+    Rk4,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 enum CameraArg {
     /// Fixed on the start's workspace.
     Fixed,
@@ -211,6 +219,9 @@ enum Command {
         /// VI quadrature point α.
         #[arg(long, default_value_t = 0.5)]
         alpha: f64,
+        /// The step to linearise with --dt: the VI (state (q, p)) or RK4 (state (q, q̇)).
+        #[arg(long, value_enum, default_value = "vi")]
+        integrator: StepArg,
     },
     /// Validate a model and print a summary with the tree drawn as text.
     Check {
@@ -340,6 +351,7 @@ fn main() -> ExitCode {
             p,
             forcing,
             alpha,
+            integrator,
         } => linearize::run(
             &model,
             &source,
@@ -355,6 +367,7 @@ fn main() -> ExitCode {
                     ForcingArg::Left => Forcing::Left,
                 },
                 alpha,
+                rk4: matches!(integrator, StepArg::Rk4),
             },
         ),
     };

@@ -757,4 +757,52 @@ fn linearize_prints_the_exact_derivatives_and_one_vi_step_as_a_map() {
         !ok && stderr.contains("--dt must be a positive number"),
         "{stderr}"
     );
+    // --integrator rk4: the RK4 step on (q, q̇), 4 × 4 for the cart, and simulate's RK4 step.
+    let (ok, stdout, stderr) = tree_mech(&[
+        "linearize",
+        "tests/models/cart.toml",
+        "--q",
+        "0,0.1",
+        "--dq",
+        "0,0",
+        "--u",
+        "1",
+        "--dt",
+        "0.01",
+        "--integrator",
+        "rk4",
+    ]);
+    assert!(ok, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(shape(&j["rk4"]["x2_dx1"]), (4, 4));
+    assert_eq!(shape(&j["rk4"]["x2_du1"]), (4, 1));
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/cart.toml",
+        "--integrator",
+        "rk4",
+        "--duration",
+        "0.01",
+        "--u",
+        "1",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let last: Vec<f64> = text
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|x| x.parse().unwrap())
+        .collect();
+    for i in 0..4 {
+        let x2 = j["rk4"]["x2"][i].as_f64().unwrap();
+        assert!(
+            (x2 - last[1 + i]).abs() < 1e-12,
+            "x2[{i}] {x2} vs simulate's {}",
+            last[1 + i]
+        );
+    }
 }

@@ -115,3 +115,73 @@ fn continuous_derivatives_match_finite_differences() {
         }
     }
 }
+
+#[test]
+fn the_rk4_step_map_derivatives_match_finite_differences() {
+    use tree_mech::integrate::Rk4;
+    use tree_mech::runtime::linearize::rk4_step_derivatives;
+    let root = env!("CARGO_MANIFEST_DIR");
+    for name in ["elements", "cart"] {
+        let model = model::from_toml_file(format!("{root}/tests/models/{name}.toml")).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let n = sys.dof();
+        let (mut q, mut dq) = sys.initial_state();
+        let split = Split::of(&sys);
+        project_initial_state(&mut sys, &split, &mut q, &mut dq).unwrap();
+        let dynamic = split.dynamic.clone();
+        let nd = dynamic.len();
+        let u: Vec<f64> = (0..sys.input_count()).map(|_| 0.7).collect();
+        let (h, t) = (0.02, 0.1);
+        let mut motion = ModelMotions::of(&sys);
+        for &k in &split.kinematic {
+            [q[k], dq[k], _] = motion.kinematic(k, t);
+        }
+        // One RK4 step from a perturbed dynamic state (or input): the new dynamic state.
+        let step = |sys: &mut TreeSystem, q: &Vector<Dyn>, dq: &Vector<Dyn>, u: &[f64]| {
+            let mut rk = Rk4::new(sys);
+            let (mut q, mut dq) = (q.clone(), dq.clone());
+            let mut motion = ModelMotions::of(sys);
+            let mut force = NoForce;
+            let mut cx = StepContext::new(sys, &mut force, &mut motion, h);
+            cx.u = u;
+            rk.step(cx.at(0, t), &mut q, &mut dq).unwrap();
+            dynamic
+                .iter()
+                .map(|&i| q[i])
+                .chain(dynamic.iter().map(|&i| dq[i]))
+                .collect::<Vec<_>>()
+        };
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, h);
+        cx.u = &u;
+        let (dx, du) = rk4_step_derivatives(cx.at(0, t), &q, &dq).unwrap();
+        let e = 1e-6;
+        for c in 0..2 * nd + u.len() {
+            let perturbed = |sign: f64, sys: &mut TreeSystem| {
+                let (mut q, mut dq, mut u) = (q.clone(), dq.clone(), u.clone());
+                if c < nd {
+                    q[dynamic[c]] += sign * e;
+                } else if c < 2 * nd {
+                    dq[dynamic[c - nd]] += sign * e;
+                } else {
+                    u[c - 2 * nd] += sign * e;
+                }
+                step(sys, &q, &dq, &u)
+            };
+            let (plus, minus) = (perturbed(1.0, &mut sys), perturbed(-1.0, &mut sys));
+            for r in 0..2 * nd {
+                let fd = (plus[r] - minus[r]) / (2.0 * e);
+                let exact = if c < 2 * nd {
+                    dx[(r, c)]
+                } else {
+                    du[(r, c - 2 * nd)]
+                };
+                assert!(
+                    (fd - exact).abs() < 1e-6 * dx.amax(),
+                    "{name}: x2_dx1[{r}][{c}] = {exact} vs {fd}"
+                );
+            }
+        }
+        let _ = n;
+    }
+}

@@ -150,3 +150,74 @@ where
     }
     Ok(out)
 }
+
+/// The derivatives of one RK4 step of length `cx.dt` from `(cx.t, q, q̇)` as a map on the
+/// dynamic variables' state `x = (q_d, q̇_d)`: `∂x₂/∂x₁` (2n_d × 2n_d) and `∂x₂/∂u₁`
+/// (2n_d × inputs), by the chain rule through the four stages,
+/// `K_s = A_s (I + c_s Δt K_{s−1})`, `A_s = ∂f/∂x` at stage s from
+/// [`continuous_derivatives`], and `∂x₂/∂x₁ = I + Δt/6 Σ w_s K_s` (docs/derivations.md §9).
+/// Kinematic variables follow their prescription at every stage.
+pub fn rk4_step_derivatives<F, P>(
+    cx: &mut StepContext<TreeSystem, F, P>,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+) -> Result<(DMatrix<f64>, DMatrix<f64>), SimError>
+where
+    F: GeneralizedForce<Dyn>,
+    P: Prescription,
+{
+    const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
+    const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
+    let n = q.len();
+    let dynamic: Vec<usize> = (0..n).filter(|&i| !cx.sys.is_kinematic(i)).collect();
+    let kinematic: Vec<usize> = (0..n).filter(|&i| cx.sys.is_kinematic(i)).collect();
+    let (nd, nu, h, t) = (dynamic.len(), cx.u.len(), cx.dt, cx.t);
+    let w = 2 * nd;
+    let (mut kx, mut ku) = (DMatrix::<f64>::zeros(w, w), DMatrix::<f64>::zeros(w, nu));
+    let (mut sum_x, mut sum_u) = (DMatrix::<f64>::zeros(w, w), DMatrix::<f64>::zeros(w, nu));
+    // The stage's rate k = (q̇, q̈) on the dynamic rows, over all variables.
+    let (mut kq, mut kv) = (Vector::<Dyn>::zeros(n), Vector::<Dyn>::zeros(n));
+    for s in 0..4 {
+        let (mut qs, mut vs) = (q.clone(), dq.clone());
+        if s > 0 {
+            qs.axpy(C[s] * h, &kq, 1.0);
+            vs.axpy(C[s] * h, &kv, 1.0);
+        }
+        let ts = t + C[s] * h;
+        for &k in &kinematic {
+            let [x, v, _] = cx.motion.kinematic(k, ts);
+            (qs[k], vs[k]) = (x, v);
+        }
+        cx.t = ts;
+        let d = continuous_derivatives(cx, &qs, &vs);
+        cx.t = t;
+        let d = d?;
+        // A_s on the dynamic state: rows (q̇_d, q̈_d), columns (q_d, q̇_d).
+        let mut a = DMatrix::<f64>::zeros(w, w);
+        for r in 0..nd {
+            a[(r, nd + r)] = 1.0;
+            for (c, &j) in dynamic.iter().enumerate() {
+                a[(nd + r, c)] = d.qdd_dq[(r, j)];
+                a[(nd + r, nd + c)] = d.qdd_ddq[(r, j)];
+            }
+        }
+        let mut b = DMatrix::<f64>::zeros(w, nu);
+        b.view_mut((nd, 0), (nd, nu)).copy_from(&d.qdd_du);
+        // K_s = A_s (I + c_s h K_{s−1}), and likewise for u with its direct term.
+        let ix = DMatrix::<f64>::identity(w, w) + &kx * (C[s] * h);
+        kx = &a * ix;
+        ku = &a * (&ku * (C[s] * h)) + b;
+        sum_x += &kx * (W[s] * h / 6.0);
+        sum_u += &ku * (W[s] * h / 6.0);
+        // This stage's rates for the next stage's state.
+        kq.copy_from(&vs);
+        kv.fill(0.0);
+        for (r, &i) in dynamic.iter().enumerate() {
+            kv[i] = d.qdd[r];
+        }
+        for &k in &kinematic {
+            kv[k] = cx.motion.kinematic(k, ts)[2];
+        }
+    }
+    Ok((DMatrix::<f64>::identity(w, w) + sum_x, sum_u))
+}
