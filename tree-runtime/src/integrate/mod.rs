@@ -353,18 +353,21 @@ where
 
 /// An integrator as [`run`] drives it: it hands out its start, then steps, saying when it
 /// has reached the end, and hands out the state after the steps the run records.
-trait Driven<S: System, F, P>
+trait Driven<S: System, F: GeneralizedForce<S::N>, P: Prescription>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    /// Hands out the start `(q, q̇)` and gets ready to step from it.
+    /// Hands out the start `(q, q̇)` and gets ready to step from it (default: a continuous
+    /// method's state as it stands).
     fn begin(
         &mut self,
         cx: &mut StepContext<S, F, P>,
         rec: &mut Recorder<S::N>,
         q: &mut Vector<S::N>,
         dq: &mut Vector<S::N>,
-    ) -> Result<(), SimError>;
+    ) -> Result<(), SimError> {
+        rec.continuous(cx, q, dq)
+    }
 
     /// Step `cx.index` from `cx.t`: the time it reaches, and whether that ends the run.
     fn advance(
@@ -375,19 +378,22 @@ where
         dq: &mut Vector<S::N>,
     ) -> Result<(f64, bool), SimError>;
 
-    /// Hands out the state reached (`cx` is at the step just taken, `cx.t` its end).
+    /// Hands out the state reached (`cx` is at the step just taken, `cx.t` its end;
+    /// default: a continuous method's `(q, q̇)`).
     fn sample(
         &mut self,
         cx: &mut StepContext<S, F, P>,
         rec: &mut Recorder<S::N>,
         q: &mut Vector<S::N>,
         dq: &mut Vector<S::N>,
-    ) -> Result<(), SimError>;
+    ) -> Result<(), SimError> {
+        rec.continuous(cx, q, dq)
+    }
 }
 
 /// Runs `it` from `(q, q̇)` to the end, handing out every recorded step; each step, and
 /// each sample, sees the inputs in force from its time on.
-fn drive<'a, S, F, P>(
+fn drive<'a, S, F: GeneralizedForce<S::N>, P: Prescription>(
     it: &mut impl Driven<S, F, P>,
     cx: &mut StepContext<'a, S, F, P>,
     inputs: &'a InputSchedule,
@@ -429,16 +435,6 @@ where
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    fn begin(
-        &mut self,
-        cx: &mut StepContext<S, F, P>,
-        rec: &mut Recorder<S::N>,
-        q: &mut Vector<S::N>,
-        dq: &mut Vector<S::N>,
-    ) -> Result<(), SimError> {
-        rec.continuous(cx, q, dq)
-    }
-
     fn advance(
         &mut self,
         cx: &mut StepContext<S, F, P>,
@@ -452,16 +448,6 @@ where
         let t = k as f64 * cx.dt;
         check_finite(k, t, q, dq)?;
         Ok((t, k == self.1))
-    }
-
-    fn sample(
-        &mut self,
-        cx: &mut StepContext<S, F, P>,
-        rec: &mut Recorder<S::N>,
-        q: &mut Vector<S::N>,
-        dq: &mut Vector<S::N>,
-    ) -> Result<(), SimError> {
-        rec.continuous(cx, q, dq)
     }
 }
 
@@ -477,16 +463,6 @@ where
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    fn begin(
-        &mut self,
-        cx: &mut StepContext<S, F, P>,
-        rec: &mut Recorder<S::N>,
-        q: &mut Vector<S::N>,
-        dq: &mut Vector<S::N>,
-    ) -> Result<(), SimError> {
-        rec.continuous(cx, q, dq)
-    }
-
     fn advance(
         &mut self,
         cx: &mut StepContext<S, F, P>,
@@ -507,16 +483,6 @@ where
         };
         check_finite(k + 1, reached, q, dq)?;
         Ok((reached, reached >= t_end))
-    }
-
-    fn sample(
-        &mut self,
-        cx: &mut StepContext<S, F, P>,
-        rec: &mut Recorder<S::N>,
-        q: &mut Vector<S::N>,
-        dq: &mut Vector<S::N>,
-    ) -> Result<(), SimError> {
-        rec.continuous(cx, q, dq)
     }
 }
 
