@@ -70,15 +70,7 @@ where
         pk.copy_from(&p0);
         vi.last_velocity.copy_from(&dq);
         vi.step(
-            &mut StepContext {
-                sys: &mut sys,
-                force: &mut NoForce,
-                motion: &mut motion,
-                index: 0,
-                t: 0.0,
-                dt: 0.001,
-                u: &[],
-            },
+            &mut StepContext::new(&mut sys, &mut NoForce, &mut motion, 0.001),
             &mut qk,
             &mut pk,
             &mut next,
@@ -91,15 +83,7 @@ where
         qr.copy_from(&q);
         vr.copy_from(&dq);
         rk.step(
-            &mut StepContext {
-                sys: &mut sys,
-                force: &mut NoForce,
-                motion: &mut motion,
-                index: 0,
-                t: 0.0,
-                dt: 0.001,
-                u: &[],
-            },
+            &mut StepContext::new(&mut sys, &mut NoForce, &mut motion, 0.001),
             &mut qr,
             &mut vr,
         )

@@ -88,10 +88,12 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
         "lambda_ddq": matrix(&d.lambda_ddq),
         "lambda_du": matrix(&d.lambda_du),
     });
-    if let Some(dt) = request.dt.filter(|_| request.rk4) {
+    if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(format!("--dt must be a positive number, got {dt}"));
         }
+    }
+    if let Some(dt) = request.dt.filter(|_| request.rk4) {
         cx.dt = dt;
         let (x2_dx1, x2_du1) =
             rk4_step_derivatives(cx.at(0, t), &q, &dq).map_err(|e| format!("the RK4 step: {e}"))?;
@@ -112,9 +114,6 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
             "x2_du1": matrix(&x2_du1),
         });
     } else if let Some(dt) = request.dt {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(format!("--dt must be a positive number, got {dt}"));
-        }
         if !(0.0..=1.0).contains(&request.alpha) {
             return Err(format!("--alpha must lie in [0, 1], got {}", request.alpha));
         }

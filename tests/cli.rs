@@ -687,6 +687,18 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
     );
 }
 
+/// The last CSV row of `simulate tests/models/cart.toml ARGS --out csv`, as numbers.
+fn last_row(csv: &std::path::Path, args: &[&str]) -> Vec<f64> {
+    let mut all = vec!["simulate", "tests/models/cart.toml"];
+    all.extend(args);
+    all.extend(["--out", csv.to_str().unwrap()]);
+    let (ok, _, stderr) = tree_mech(&all);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(csv).unwrap();
+    let row = text.lines().last().unwrap();
+    row.split(',').map(|x| x.parse().unwrap()).collect()
+}
+
 #[test]
 fn linearize_prints_the_exact_derivatives_and_one_vi_step_as_a_map() {
     let (ok, stdout, stderr) = tree_mech(&[
@@ -719,25 +731,7 @@ fn linearize_prints_the_exact_derivatives_and_one_vi_step_as_a_map() {
     // The step is simulate's first step from the same state and input.
     let dir = scratch("linearize");
     let csv = dir.join("t.csv");
-    let (ok, _, stderr) = tree_mech(&[
-        "simulate",
-        "tests/models/cart.toml",
-        "--duration",
-        "0.01",
-        "--u",
-        "1",
-        "--out",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(ok, "{stderr}");
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let last: Vec<f64> = text
-        .lines()
-        .last()
-        .unwrap()
-        .split(',')
-        .map(|x| x.parse().unwrap())
-        .collect();
+    let last = last_row(&csv, &["--duration", "0.01", "--u", "1"]);
     for i in 0..2 {
         let q2 = j["vi"]["q2"][i].as_f64().unwrap();
         assert!(
@@ -776,27 +770,10 @@ fn linearize_prints_the_exact_derivatives_and_one_vi_step_as_a_map() {
     let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(shape(&j["rk4"]["x2_dx1"]), (4, 4));
     assert_eq!(shape(&j["rk4"]["x2_du1"]), (4, 1));
-    let (ok, _, stderr) = tree_mech(&[
-        "simulate",
-        "tests/models/cart.toml",
-        "--integrator",
-        "rk4",
-        "--duration",
-        "0.01",
-        "--u",
-        "1",
-        "--out",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(ok, "{stderr}");
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let last: Vec<f64> = text
-        .lines()
-        .last()
-        .unwrap()
-        .split(',')
-        .map(|x| x.parse().unwrap())
-        .collect();
+    let last = last_row(
+        &csv,
+        &["--integrator", "rk4", "--duration", "0.01", "--u", "1"],
+    );
     for i in 0..4 {
         let x2 = j["rk4"]["x2"][i].as_f64().unwrap();
         assert!(
