@@ -124,7 +124,6 @@ fn the_rk4_step_map_derivatives_match_finite_differences() {
     for name in ["elements", "cart"] {
         let model = model::from_toml_file(format!("{root}/tests/models/{name}.toml")).unwrap();
         let mut sys = TreeSystem::new(&model).unwrap();
-        let n = sys.dof();
         let (mut q, mut dq) = sys.initial_state();
         let split = Split::of(&sys);
         project_initial_state(&mut sys, &split, &mut q, &mut dq).unwrap();
@@ -182,6 +181,5 @@ fn the_rk4_step_map_derivatives_match_finite_differences() {
                 );
             }
         }
-        let _ = n;
     }
 }
