@@ -166,6 +166,15 @@ impl System for Counting {
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
         self.inner.poses(q, out)
     }
+    fn evaluate_dual(
+        &mut self,
+        q: &[tree_mech::runtime::dual::Dual],
+        dq: &[tree_mech::runtime::dual::Dual],
+        order: Order,
+        out: &mut tree_mech::runtime::dual::DualOutputs,
+    ) {
+        self.inner.evaluate_dual(q, dq, order, out)
+    }
 }
 
 #[test]

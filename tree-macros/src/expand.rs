@@ -15,7 +15,7 @@ use tree_runtime::Order;
 
 use crate::ast::{Input, Source};
 use crate::lower;
-use crate::program::{constant, Program};
+use crate::program::{constant, Flavour, Program};
 use crate::trace::{self, Term};
 
 /// Collects what the recursions hand out, summing the contributions to each output, in the
@@ -38,13 +38,20 @@ impl Sink<Term> for Recorder {
     }
 }
 
-impl Recorder {
-    /// `(target expression, value)` for every output.
-    fn into_outputs(self) -> Vec<(TokenStream, Term)> {
-        self.values
-            .into_iter()
-            .map(|(at, x)| {
-                // Where it lands: the one table of outputs and their storage.
+/// A traced evaluation: the tape and the value that lands in each output.
+struct Traced {
+    nodes: Vec<trace::Node>,
+    outputs: Vec<(Output, Term)>,
+}
+
+impl Traced {
+    /// The program that assigns every output to its storage (`out.mass[(0, 1)] = …`, the
+    /// one table of outputs and their storage) — for [`Flavour::F64`].
+    fn assigning(&self) -> Program {
+        let outputs = self
+            .outputs
+            .iter()
+            .map(|&(at, x)| {
                 let (field, index) = at.slot();
                 let field = proc_macro2::Ident::new(field.name(), proc_macro2::Span::call_site());
                 let target = match index {
@@ -55,7 +62,30 @@ impl Recorder {
                 };
                 (target, x)
             })
-            .collect()
+            .collect();
+        Program {
+            nodes: self.nodes.clone(),
+            outputs,
+        }
+    }
+
+    /// The program that hands every output to a sink by name (`Output::Mass(0, 1)`) — for
+    /// [`Flavour::Generic`].
+    fn naming(&self) -> Program {
+        let outputs = self
+            .outputs
+            .iter()
+            .map(|&(at, x)| {
+                // An output's derived `Debug` is its constructor expression.
+                let path = format!("::tree_mech::runtime::outputs::Output::{at:?}");
+                let target: TokenStream = path.parse().expect("an output names a constructor");
+                (target, x)
+            })
+            .collect();
+        Program {
+            nodes: self.nodes.clone(),
+            outputs,
+        }
     }
 }
 
@@ -63,7 +93,7 @@ impl Recorder {
 type Evaluation = fn(&TreePlan, &mut Kernel<Term>, &[Term], &[Term], Order, &mut Recorder);
 
 /// `evaluation` up to `order`, traced.
-fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Program {
+fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
     let n = plan.dof();
     let (nodes, outputs) = trace::record(|| {
         let q: Vec<Term> = (0..n).map(trace::q).collect();
@@ -71,9 +101,9 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Program {
         let mut ws = Kernel::<Term>::new(plan);
         let mut out = Recorder::default();
         evaluation(plan, &mut ws, &q, &dq, order, &mut out);
-        out.into_outputs()
+        out.values
     });
-    Program { nodes, outputs }
+    Traced { nodes, outputs }
 }
 
 /// Every frame's pose, traced.
@@ -385,17 +415,38 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         .collect();
 
     let terms_ty = quote!(::tree_mech::runtime::Terms<::tree_mech::runtime::nalgebra::Const<#n>>);
+    let constraint_ty = quote!(::tree_mech::runtime::ConstraintTerms);
+    let dual_ty = quote!(::tree_mech::runtime::dual::Dual);
+    let (f64_terms, f64_constraints, generic) = (
+        Flavour::F64 { out_ty: &terms_ty },
+        Flavour::F64 { out_ty: &constraint_ty },
+        Flavour::Generic { scalar: &dual_ty },
+    );
     let lagrangian: Evaluation = kernel::evaluate;
     let constraints: Evaluation = kernel::constraints;
-    let first = traced(&plan, Order::First, lagrangian).emit("__first", n, &terms_ty);
-    let dynamics = traced(&plan, Order::Dynamics, lagrangian).emit("__dynamics", n, &terms_ty);
-    let full = traced(&plan, Order::Full, lagrangian).emit("__full", n, &terms_ty);
-    let poses = poses_program(&plan).emit("__poses", n, &quote!([::tree_mech::runtime::Pose]));
-    let constraint_ty = quote!(::tree_mech::runtime::ConstraintTerms);
-    let c_first = traced(&plan, Order::First, constraints).emit("__c_first", n, &constraint_ty);
-    let c_dynamics =
-        traced(&plan, Order::Dynamics, constraints).emit("__c_dynamics", n, &constraint_ty);
-    let c_full = traced(&plan, Order::Full, constraints).emit("__c_full", n, &constraint_ty);
+    // Every evaluation over f64; those the linearisations differentiate also generic (only
+    // instantiated, over dual numbers, where a program differentiates this model).
+    let [l_first, l_dynamics, l_full] =
+        [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, lagrangian));
+    let [c_first, c_dynamics, c_full] =
+        [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, constraints));
+    let first = l_first.assigning().emit("__first", n, f64_terms);
+    let dynamics = l_dynamics.assigning().emit("__dynamics", n, f64_terms);
+    let full = l_full.assigning().emit("__full", n, f64_terms);
+    let d_dynamics = l_dynamics.naming().emit("__d_dynamics", n, generic);
+    let d_full = l_full.naming().emit("__d_full", n, generic);
+    let poses = poses_program(&plan).emit(
+        "__poses",
+        n,
+        Flavour::F64 {
+            out_ty: &quote!([::tree_mech::runtime::Pose]),
+        },
+    );
+    let dc_dynamics = c_dynamics.naming().emit("__dc_dynamics", n, generic);
+    let dc_full = c_full.naming().emit("__dc_full", n, generic);
+    let c_first = c_first.assigning().emit("__c_first", n, f64_constraints);
+    let c_dynamics = c_dynamics.assigning().emit("__c_dynamics", n, f64_constraints);
+    let c_full = c_full.assigning().emit("__c_full", n, f64_constraints);
     let functions = [
         &first.functions,
         &dynamics.functions,
@@ -404,7 +455,17 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         &c_first.functions,
         &c_dynamics.functions,
         &c_full.functions,
+        &d_dynamics.functions,
+        &d_full.functions,
+        &dc_dynamics.functions,
+        &dc_full.functions,
     ];
+    let (d_dynamics_body, d_full_body, dc_dynamics_body, dc_full_body) = (
+        &d_dynamics.body,
+        &d_full.body,
+        &dc_dynamics.body,
+        &dc_full.body,
+    );
     let (c_first_body, c_dynamics_body, c_full_body) =
         (&c_first.body, &c_dynamics.body, &c_full.body);
     let rows = plan.rows;
@@ -612,6 +673,33 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 let q: &[f64; #n] = &q.data.0[0];
                 let dq = q;
                 #poses_body
+            }
+
+            #[inline]
+            fn evaluate_dual(
+                &mut self,
+                q: &[::tree_mech::runtime::dual::Dual],
+                dq: &[::tree_mech::runtime::dual::Dual],
+                order: ::tree_mech::runtime::Order,
+                out: &mut ::tree_mech::runtime::dual::DualOutputs,
+            ) {
+                out.clear();
+                let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
+                    match (q.try_into(), dq.try_into()) {
+                        (Ok(q), Ok(dq)) => (q, dq),
+                        _ => panic!("evaluate_dual takes one dual number per variable ({})", #n),
+                    };
+                match order {
+                    // First-order outputs are among the Dynamics evaluation's.
+                    ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
+                        { #d_dynamics_body }
+                        { #dc_dynamics_body }
+                    }
+                    ::tree_mech::runtime::Order::Full => {
+                        { #d_full_body }
+                        { #dc_full_body }
+                    }
+                }
             }
         }
     })

@@ -16,6 +16,18 @@ pub struct Program {
     pub outputs: Vec<(TokenStream, Term)>,
 }
 
+/// The number type a program is emitted over.
+#[derive(Clone, Copy)]
+pub enum Flavour<'a> {
+    /// `f64` throughout; outputs assigned to their targets (`out.mass[(0, 1)] = …`) in a
+    /// storage of type `out_ty`.
+    F64 { out_ty: &'a TokenStream },
+    /// Helpers generic over `S: Scalar`, outputs handed to a `Sink<S>`
+    /// (`out.add(Output::Mass(0, 1), …)`; the targets are `Output` expressions), called
+    /// from a body that instantiates `S` as `scalar`.
+    Generic { scalar: &'a TokenStream },
+}
+
 /// A constant as a token: `1.5f64`, `(-1.5f64)`.
 pub fn constant(c: f64) -> TokenStream {
     assert!(c.is_finite(), "validated models have finite constants");
@@ -31,8 +43,12 @@ fn var(v: u32) -> Ident {
     format_ident!("t{}", v)
 }
 
-fn term(t: Term) -> TokenStream {
+fn term(t: Term, generic: bool) -> TokenStream {
     match t {
+        Term::Const(c) if generic => {
+            let c = constant(c);
+            quote!(S::constant(#c))
+        }
         Term::Const(c) => constant(c),
         Term::Var(v) => {
             let id = var(v);
@@ -49,7 +65,8 @@ fn operands(node: &Node) -> Vec<Term> {
     }
 }
 
-fn expression(node: &Node) -> TokenStream {
+fn expression(node: &Node, generic: bool) -> TokenStream {
+    let term = |t| term(t, generic);
     match *node {
         Node::Q(i) => quote!(q[#i]),
         Node::Dq(i) => quote!(dq[#i]),
@@ -68,6 +85,22 @@ fn expression(node: &Node) -> TokenStream {
         Node::Neg(a) => {
             let a = term(a);
             quote!(-#a)
+        }
+        Node::Sin(a) if generic => {
+            let a = term(a);
+            quote!(S::sin_cos(#a).0)
+        }
+        Node::Cos(a) if generic => {
+            let a = term(a);
+            quote!(S::sin_cos(#a).1)
+        }
+        Node::Sqrt(a) if generic => {
+            let a = term(a);
+            quote!(S::sqrt(#a))
+        }
+        Node::Recip(a) if generic => {
+            let a = term(a);
+            quote!(S::recip(#a))
         }
         Node::Sin(a) => {
             let a = term(a);
@@ -99,9 +132,10 @@ pub struct Emitted {
 }
 
 impl Program {
-    /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)` with
-    /// `out: &mut #out_ty`.
-    pub fn emit(&self, prefix: &str, dof: usize, out_ty: &TokenStream) -> Emitted {
+    /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)`, over
+    /// `flavour`'s number type.
+    pub fn emit(&self, prefix: &str, dof: usize, flavour: Flavour) -> Emitted {
+        let generic = matches!(flavour, Flavour::Generic { .. });
         let n = self.nodes.len();
         // Liveness, backwards from the outputs.
         let mut live = vec![false; n];
@@ -151,15 +185,38 @@ impl Program {
         let mut outputs_by_chunk: Vec<Vec<TokenStream>> = vec![Vec::new(); chunks];
         for (target, t) in &self.outputs {
             let (c, value) = match t {
-                Term::Var(v) => (chunk_of[*v as usize], term(*t)),
-                Term::Const(_) => (0, term(*t)),
+                Term::Var(v) => (chunk_of[*v as usize], term(*t, generic)),
+                Term::Const(_) => (0, term(*t, generic)),
             };
-            outputs_by_chunk[c].push(quote!(#target = #value;));
+            outputs_by_chunk[c].push(if generic {
+                quote!(out.add(#target, #value);)
+            } else {
+                quote!(#target = #value;)
+            });
         }
         let inline = if chunks == 1 {
             quote!(#[inline(always)])
         } else {
             quote!(#[inline(never)])
+        };
+        let (ty, signature_of) = match flavour {
+            Flavour::F64 { out_ty } => (
+                quote!(f64),
+                Box::new(move |name: &Ident| {
+                    quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty))
+                }) as Box<dyn Fn(&Ident) -> TokenStream>,
+            ),
+            Flavour::Generic { .. } => (
+                quote!(S),
+                Box::new(move |name: &Ident| {
+                    quote!(fn #name<S: ::tree_mech::runtime::scalar::Scalar>(
+                        q: &[S; #dof],
+                        dq: &[S; #dof],
+                        s: &mut [S; #slots],
+                        out: &mut impl ::tree_mech::runtime::outputs::Sink<S>,
+                    ))
+                }) as Box<dyn Fn(&Ident) -> TokenStream>,
+            ),
         };
         let mut functions = TokenStream::new();
         let mut body = TokenStream::new();
@@ -168,12 +225,12 @@ impl Program {
             let mut stmts = TokenStream::new();
             for &v in &imports[c] {
                 let (id, s) = (var(v), slot[v as usize]);
-                stmts.extend(quote!(let #id: f64 = s[#s];));
+                stmts.extend(quote!(let #id: #ty = s[#s];));
             }
             for &i in kept.iter().filter(|&&i| chunk_of[i] == c) {
                 let id = var(i as u32);
-                let e = expression(&self.nodes[i]);
-                stmts.extend(quote!(let #id: f64 = #e;));
+                let e = expression(&self.nodes[i], generic);
+                stmts.extend(quote!(let #id: #ty = #e;));
                 if slot[i] != usize::MAX {
                     let s = slot[i];
                     stmts.extend(quote!(s[#s] = #id;));
@@ -182,18 +239,25 @@ impl Program {
             for o in &outputs_by_chunk[c] {
                 stmts.extend(o.clone());
             }
+            let signature = signature_of(&name);
             functions.extend(quote! {
                 #[doc(hidden)]
                 #inline
                 #[allow(unused_variables, clippy::all)]
-                fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty) {
+                #signature {
                     #stmts
                 }
             });
             body.extend(quote!(Self::#name(q, dq, &mut s, out);));
         }
+        let zero = match flavour {
+            Flavour::F64 { .. } => quote!(0.0f64),
+            Flavour::Generic { scalar } => {
+                quote!(<#scalar as ::tree_mech::runtime::scalar::Scalar>::zero())
+            }
+        };
         let body = quote! {
-            let mut s = [0.0f64; #slots];
+            let mut s = [#zero; #slots];
             #body
         };
         Emitted {

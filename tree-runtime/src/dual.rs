@@ -21,6 +21,11 @@ impl Dual {
     pub fn new(v: f64, d: f64) -> Self {
         Dual { v, d }
     }
+
+    /// `x + δx·ε`, entry by entry: a point seeded with a direction.
+    pub fn seed(x: &[f64], dx: &[f64]) -> Vec<Dual> {
+        x.iter().zip(dx).map(|(&v, &d)| Dual::new(v, d)).collect()
+    }
 }
 
 impl Add for Dual {
@@ -103,6 +108,7 @@ pub struct DualOutputs {
     fields: Vec<Vec<Dual>>,
 }
 
+/// Every field, in declaration order (so `field as usize` indexes it).
 const FIELDS: [Field; 13] = [
     Field::L,
     Field::DlDq,
@@ -148,6 +154,16 @@ impl DualOutputs {
         }
     }
 
+    /// Number of variables.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
+    /// Every entry of `field`, dense and row-major (`D2h` row after row).
+    pub fn field(&self, field: Field) -> &[Dual] {
+        &self.fields[field as usize]
+    }
+
     fn offset(&self, field: Field, index: Index) -> usize {
         let n = self.n;
         match (field, index) {
@@ -162,16 +178,14 @@ impl DualOutputs {
     /// Output `at`.
     pub fn get(&self, at: Output) -> Dual {
         let (field, index) = at.slot();
-        let k = FIELDS.iter().position(|&f| f == field).unwrap_or(0);
-        self.fields[k][self.offset(field, index)]
+        self.fields[field as usize][self.offset(field, index)]
     }
 }
 
 impl Sink<Dual> for DualOutputs {
     fn add(&mut self, at: Output, x: Dual) {
         let (field, index) = at.slot();
-        let k = FIELDS.iter().position(|&f| f == field).unwrap_or(0);
         let o = self.offset(field, index);
-        self.fields[k][o] += x;
+        self.fields[field as usize][o] += x;
     }
 }

@@ -6,16 +6,16 @@
 //! `M_dd δq̈_d − Dh_dᵀ δλ = δF + B δu + δL_q − δ(L_q̇q) q̇ − L_q̇q δq̇ − δM q̈ + δDh_dᵀ λ`,
 //! `Dh_d δq̈_d = −δDh q̈ − δ(q̇ᵀD²h q̇)`
 //!
-//! is solved for each direction (kinematic `q̈_k` are prescribed: they do not move). For the
-//! interpreted system; without Baumgarte stabilisation.
+//! is solved for each direction (kinematic `q̈_k` are prescribed: they do not move). For any
+//! [`System`] (generated ones evaluate their compiled dual program); without Baumgarte
+//! stabilisation.
 
-use nalgebra::{DMatrix, DVector, Dyn};
+use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
 use crate::context::StepContext;
-use crate::dual::DualOutputs;
+use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
-use crate::interpreted::TreeSystem;
 use crate::outputs::Output;
 use crate::system::{Order, System, Vector};
 
@@ -44,18 +44,20 @@ pub struct ContinuousDerivatives {
 
 /// The linearisation of `sys`'s dynamics at `(cx.t, q, q̇)` with inputs `cx.u` (the
 /// kinematic entries of `q`, `q̇` must hold their prescription at `cx.t`).
-pub fn continuous_derivatives<F, P>(
-    cx: &mut StepContext<TreeSystem, F, P>,
-    q: &Vector<Dyn>,
-    dq: &Vector<Dyn>,
+pub fn continuous_derivatives<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
 ) -> Result<ContinuousDerivatives, SimError>
 where
-    F: GeneralizedForce<Dyn>,
+    S: System,
+    F: GeneralizedForce<S::N>,
     P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let n = q.len();
     let mut dynamics = Dynamics::new(&*cx.sys);
-    let mut qdd = Vector::<Dyn>::zeros(n);
+    let mut qdd = Vector::<S::N>::zeros_generic(cx.sys.dim(), nalgebra::U1);
     dynamics.acceleration(cx, q, dq, &mut qdd)?;
     let lambda = dynamics.lambda.clone();
     let (dynamic, m, nu) = (
@@ -76,7 +78,7 @@ where
     let lu = kkt.lu();
     let lvq = &dynamics.terms.d2l_ddq_dq;
     // The right side of the differentiated equations along one direction.
-    let rhs_along = |d: &DualOutputs, dir_dq: &[f64], du: Option<usize>, sys: &TreeSystem| {
+    let rhs_along = |d: &DualOutputs, dir_dq: &[f64], du: Option<usize>, sys: &S| {
         let mut b = DVector::<f64>::zeros(nd + m);
         for (r, &i) in dynamic.iter().enumerate() {
             let mut x = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d;
@@ -119,17 +121,23 @@ where
         constraint: "(the linearisation's KKT system)".into(),
     };
     let zero = vec![0.0; n];
-    let (qs, vs) = (q.as_slice(), dq.as_slice());
+    let (mut qd, mut vd) = (Dual::seed(q.as_slice(), &zero), Dual::seed(dq.as_slice(), &zero));
+    let mut d = DualOutputs::new(n, m);
+    let mut e = vec![0.0; n];
     for j in 0..(2 * n + nu) {
-        let mut e = vec![0.0; n];
         let b = if j < 2 * n {
+            // Seed the one coordinate direction j.
+            e.fill(0.0);
             e[j % n] = 1.0;
-            let (dir_q, dir_dq) = if j < n { (&e, &zero) } else { (&zero, &e) };
-            let d = cx.sys.directional(qs, vs, dir_q, dir_dq, Order::Dynamics);
-            rhs_along(&d, dir_dq, None, cx.sys)
+            let (seeded, other) = if j < n { (&mut qd, &mut vd) } else { (&mut vd, &mut qd) };
+            seeded.iter_mut().zip(&e).for_each(|(x, &de)| x.d = de);
+            other.iter_mut().for_each(|x| x.d = 0.0);
+            cx.sys.evaluate_dual(&qd, &vd, Order::Dynamics, &mut d);
+            rhs_along(&d, if j < n { &zero } else { &e }, None, cx.sys)
         } else {
             // An input moves only its own row of B u.
-            rhs_along(&DualOutputs::new(n, m), &zero, Some(j - 2 * n), cx.sys)
+            d.clear();
+            rhs_along(&d, &zero, Some(j - 2 * n), cx.sys)
         };
         let x = lu.solve(&b).ok_or_else(singular)?;
         let (qcol, lcol) = (x.rows(0, nd), x.rows(nd, m));
@@ -157,14 +165,16 @@ where
 /// `K_s = A_s (I + c_s Δt K_{s−1})`, `A_s = ∂f/∂x` at stage s from
 /// [`continuous_derivatives`], and `∂x₂/∂x₁ = I + Δt/6 Σ w_s K_s` (docs/derivations.md §9).
 /// Kinematic variables follow their prescription at every stage.
-pub fn rk4_step_derivatives<F, P>(
-    cx: &mut StepContext<TreeSystem, F, P>,
-    q: &Vector<Dyn>,
-    dq: &Vector<Dyn>,
+pub fn rk4_step_derivatives<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
 ) -> Result<(DMatrix<f64>, DMatrix<f64>), SimError>
 where
-    F: GeneralizedForce<Dyn>,
+    S: System,
+    F: GeneralizedForce<S::N>,
     P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
     const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
@@ -176,7 +186,7 @@ where
     let (mut kx, mut ku) = (DMatrix::<f64>::zeros(w, w), DMatrix::<f64>::zeros(w, nu));
     let (mut sum_x, mut sum_u) = (DMatrix::<f64>::zeros(w, w), DMatrix::<f64>::zeros(w, nu));
     // The stage's rate k = (q̇, q̈) on the dynamic rows, over all variables.
-    let (mut kq, mut kv) = (Vector::<Dyn>::zeros(n), Vector::<Dyn>::zeros(n));
+    let (mut kq, mut kv) = (cx.sys.zero_vector(), cx.sys.zero_vector());
     for s in 0..4 {
         let (mut qs, mut vs) = (q.clone(), dq.clone());
         if s > 0 {

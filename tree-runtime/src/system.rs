@@ -7,6 +7,7 @@ use nalgebra::{
 use tree_model::Motion;
 
 pub use crate::order::Order;
+use crate::dual::{Dual, DualOutputs};
 use crate::outputs::{Field, Index, Output, Sink};
 use crate::se3::Pose;
 
@@ -319,6 +320,29 @@ where
     /// Every frame's pose in the world, `g_sk(q)` (eq. (1)); `out.len()` must be
     /// `frame_count()`.
     fn poses(&mut self, q: &Vector<Self::N>, out: &mut [Pose]);
+
+    /// Every Lagrangian, force and constraint output up to `order` at `(q, q̇)` over
+    /// forward-mode dual numbers: each value with its exact derivative along the direction
+    /// seeded in `q`, `dq` ([`Dual::seed`]) — the same evaluation as [`Self::lagrangian`] and
+    /// [`Self::constraints`] together, over another scalar (generated systems compile it
+    /// too). Clears `out` first; `out` is `DualOutputs::new(dof, constraint_count)`. What
+    /// the linearisations differentiate.
+    fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs);
+
+    /// [`Self::evaluate_dual`] at `(q, q̇)` along `(δq, δq̇)` into fresh storage (allocates).
+    fn directional(
+        &mut self,
+        q: &[f64],
+        dq: &[f64],
+        dir_q: &[f64],
+        dir_dq: &[f64],
+        order: Order,
+    ) -> DualOutputs {
+        let mut out = DualOutputs::new(self.dof(), self.constraint_count());
+        let (q, dq) = (Dual::seed(q, dir_q), Dual::seed(dq, dir_dq));
+        self.evaluate_dual(&q, &dq, order, &mut out);
+        out
+    }
 
     /// A zero vector of the right size.
     fn zero_vector(&self) -> Vector<Self::N> {

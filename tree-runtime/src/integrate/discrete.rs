@@ -16,7 +16,19 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
+use crate::scalar::Scalar;
 use crate::system::{Terms, Vector};
+
+/// Which second slot derivative of `L_d`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slots {
+    /// `D₁D₁L_d`.
+    D1D1,
+    /// `D₂D₁L_d` (eq. (26)); `D₁D₂L_d` is its transpose.
+    D2D1,
+    /// `D₂D₂L_d`.
+    D2D2,
+}
 
 /// The discrete Lagrangian of one step: its quadrature point `α` and length `Δt`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -73,14 +85,35 @@ impl DiscreteLagrangian {
         self.alpha * self.dt * t.dl_dq[i] + t.dl_ddq[i]
     }
 
+    /// The coefficients `(k_qq, k_t, k_vq, k_m)` of one second slot derivative: entry
+    /// `(i, j) = k_qq L_qq[i][j] + k_t L_q̇q[j][i] + k_vq L_q̇q[i][j] + k_m M[i][j]` (the
+    /// formulas of the module docs).
+    fn coefficients(&self, slots: Slots) -> [f64; 4] {
+        let (a, dt) = (self.alpha, self.dt);
+        let b = 1.0 - a;
+        match slots {
+            Slots::D1D1 => [b * b * dt, -b, -b, 1.0 / dt],
+            Slots::D2D1 => [b * a * dt, b, -a, -1.0 / dt],
+            Slots::D2D2 => [a * a * dt, a, a, 1.0 / dt],
+        }
+    }
+
+    /// Entry `(i, j)` of a second slot derivative from the continuous terms' entries
+    /// `L_qq[i][j]`, `L_q̇q[i][j]`, `L_q̇q[j][i]`, `M[i][j]`, over any scalar (the step's
+    /// second derivatives differentiate it over dual numbers).
+    #[inline]
+    pub fn second<T: Scalar>(&self, slots: Slots, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
+        let [k_qq, k_t, k_vq, k_m] = self.coefficients(slots).map(T::constant);
+        k_qq * lqq_ij + k_t * lvq_ji + k_vq * lvq_ij + k_m * m_ij
+    }
+
     /// Fills `out` (column-major, n × n) with `D₂D₁L_d`: entry `(i, j) = ∂(D₁L_d)ᵢ/∂q₂ⱼ`
     /// (eq. (26)). Needs the terms at `Order::Full`.
     pub fn d2d1<N: Dim>(&self, t: &Terms<N>, out: &mut [f64])
     where
         DefaultAllocator: Allocator<N> + Allocator<N, N>,
     {
-        let (a, dt) = (self.alpha, self.dt);
-        self.combine(t, (1.0 - a) * a * dt, 1.0 - a, -a, -1.0 / dt, out);
+        self.fill(Slots::D2D1, t, out);
     }
 
     /// Fills `out` with `D₁D₁L_d`: entry `(i, j) = ∂(D₁L_d)ᵢ/∂q₁ⱼ`.
@@ -88,8 +121,7 @@ impl DiscreteLagrangian {
     where
         DefaultAllocator: Allocator<N> + Allocator<N, N>,
     {
-        let (b, dt) = (1.0 - self.alpha, self.dt);
-        self.combine(t, b * b * dt, -b, -b, 1.0 / dt, out);
+        self.fill(Slots::D1D1, t, out);
     }
 
     /// Fills `out` with `D₂D₂L_d`: entry `(i, j) = ∂(D₂L_d)ᵢ/∂q₂ⱼ`.
@@ -97,22 +129,13 @@ impl DiscreteLagrangian {
     where
         DefaultAllocator: Allocator<N> + Allocator<N, N>,
     {
-        let (a, dt) = (self.alpha, self.dt);
-        self.combine(t, a * a * dt, a, a, 1.0 / dt, out);
+        self.fill(Slots::D2D2, t, out);
     }
 
-    /// `out[i][j] = k_qq L_qq[i][j] + k_t L_q̇q[j][i] + k_vq L_q̇q[i][j] + k_m M[i][j]`, every
-    /// second slot derivative's shape.
+    /// Fills `out` (column-major) with the second slot derivative `slots`.
     #[inline]
-    fn combine<N: Dim>(
-        &self,
-        t: &Terms<N>,
-        k_qq: f64,
-        k_t: f64,
-        k_vq: f64,
-        k_m: f64,
-        out: &mut [f64],
-    ) where
+    fn fill<N: Dim>(&self, slots: Slots, t: &Terms<N>, out: &mut [f64])
+    where
         DefaultAllocator: Allocator<N> + Allocator<N, N>,
     {
         let n = t.dl_dq.len();
@@ -125,7 +148,7 @@ impl DiscreteLagrangian {
         for j in 0..n {
             for i in 0..n {
                 let ij = j * n + i;
-                out[ij] = k_qq * lqq[ij] + k_t * lvq[i * n + j] + k_vq * lvq[ij] + k_m * mass[ij];
+                out[ij] = self.second(slots, lqq[ij], lvq[ij], lvq[i * n + j], mass[ij]);
             }
         }
     }

@@ -14,7 +14,10 @@ pub use discrete::DiscreteLagrangian;
 pub use projection::{project_initial_state, Moved};
 pub use rk4::Rk4;
 pub use rk45::{Rk45, Tolerance};
-pub use vi::{Forcing, JacobianUpdate, MidpointVi, StepDerivatives, ViSettings, MAX_TURN};
+pub use vi::{
+    Forcing, JacobianUpdate, MidpointVi, StepCovector, StepDerivatives, StepInput, StepOutput,
+    StepSecondDerivatives, ViSettings, MAX_TURN,
+};
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 

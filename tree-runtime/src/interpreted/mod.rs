@@ -23,6 +23,8 @@ pub struct TreeSystem {
     /// Constant chains folded (as `tree_model!` compiles them).
     plan: TreePlan,
     kernel: Kernel<f64>,
+    /// The same kernel over dual numbers, made on the first [`System::evaluate_dual`].
+    dual_kernel: Option<Kernel<Dual>>,
     /// Every frame as modelled, for the poses.
     full_plan: TreePlan,
     constraint_names: Vec<String>,
@@ -44,6 +46,7 @@ impl TreeSystem {
         Ok(TreeSystem {
             model: model.clone(),
             kernel: Kernel::new(&plan),
+            dual_kernel: None,
             plan,
             full_plan: TreePlan::new(model),
             constraint_names: model.constraint_row_names(),
@@ -76,30 +79,6 @@ impl TreeSystem {
                 (ws.velocity[k], cols)
             })
             .collect()
-    }
-}
-
-impl TreeSystem {
-    /// Every Lagrangian, force and constraint output at `(q, q̇)` up to `order`, with its
-    /// exact derivative along the direction `(δq, δq̇)`: the same kernel over forward-mode
-    /// dual numbers. Allocates (for linearisations, not for steps).
-    pub fn directional(
-        &self,
-        q: &[f64],
-        dq: &[f64],
-        dir_q: &[f64],
-        dir_dq: &[f64],
-        order: Order,
-    ) -> DualOutputs {
-        let n = q.len();
-        let plan = &self.plan;
-        let mut kernel = Kernel::<Dual>::new(plan);
-        let qd: Vec<Dual> = (0..n).map(|i| Dual::new(q[i], dir_q[i])).collect();
-        let vd: Vec<Dual> = (0..n).map(|i| Dual::new(dq[i], dir_dq[i])).collect();
-        let mut out = DualOutputs::new(n, self.constraint_names.len());
-        kernel::evaluate(plan, &mut kernel, &qd, &vd, order, &mut out);
-        kernel::constraints(plan, &mut kernel, &qd, &vd, order, &mut out);
-        out
     }
 }
 
@@ -201,5 +180,13 @@ impl System for TreeSystem {
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
         sweeps::poses(&self.full_plan, q.as_slice(), out);
+    }
+
+    fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
+        out.clear();
+        let plan = &self.plan;
+        let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
+        kernel::evaluate(plan, kernel, q, dq, order, out);
+        kernel::constraints(plan, kernel, q, dq, order, out);
     }
 }

@@ -13,7 +13,9 @@ mod uncached;
 use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
+use crate::dual::{Dual, DualOutputs};
 use crate::error::SimError;
+use crate::kernel::{self, Kernel};
 use crate::outputs::{Output, Sink};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
@@ -183,5 +185,14 @@ impl System for PaperSystem {
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
         sweeps::poses(&self.plan, q.as_slice(), out);
+    }
+
+    /// The paper's sums are written for `f64`; over dual numbers this is the composite
+    /// sweeps' kernel on the same plan (for these models, the tree's Lagrangian alone).
+    /// Allocates its kernel.
+    fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
+        out.clear();
+        let mut kernel = Kernel::<Dual>::new(&self.plan);
+        kernel::evaluate(&self.plan, &mut kernel, q, dq, order, out);
     }
 }
