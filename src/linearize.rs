@@ -4,7 +4,9 @@
 use std::path::Path;
 
 use serde_json::{json, Value};
-use tree_mech::integrate::{Forcing, MidpointVi, Rk4, StepContext, ViSettings};
+use tree_mech::integrate::{
+    Forcing, MidpointVi, Rk4, StepContext, StepInput, StepOutput, StepSecondDerivatives, ViSettings,
+};
 use tree_mech::nalgebra::{DMatrix, Dyn};
 use tree_mech::runtime::linearize::{continuous_derivatives, rk4_step_derivatives};
 use tree_mech::runtime::{ModelMotions, Prescription, Vector};
@@ -24,6 +26,8 @@ pub struct Request<'a> {
     pub alpha: f64,
     /// Linearise an RK4 step instead of the VI's.
     pub rk4: bool,
+    /// Add the VI step's second derivatives.
+    pub second_order: bool,
 }
 
 fn matrix(m: &DMatrix<f64>) -> Value {
@@ -32,7 +36,35 @@ fn matrix(m: &DMatrix<f64>) -> Value {
         .collect::<Vec<_>>())
 }
 
+/// trep's 30 second derivatives of the step under `vi`: `q2_dq1dp1` … as
+/// [output][input₁][input₂], each unordered pair of input blocks once (`dq1dp1`, not also
+/// `dp1dq1`), in x's order; `lambda1_…` in trep's scaling `−Δt λ`.
+fn second_order(vi: &mut Value, second: &StepSecondDerivatives, dt: f64) {
+    for of in StepOutput::ALL {
+        let (name, scale) = match of {
+            StepOutput::Q2 => ("q2", 1.0),
+            StepOutput::P2 => ("p2", 1.0),
+            StepOutput::Lambda => ("lambda1", -dt),
+        };
+        for (k, &a) in StepInput::ALL.iter().enumerate() {
+            for &b in &StepInput::ALL[k..] {
+                let rows: Vec<Value> = second
+                    .block(of, a, b)
+                    .iter()
+                    .map(|h| matrix(&(h * scale)))
+                    .collect();
+                vi[format!("{name}_d{}d{}", a.name(), b.name())] = Value::Array(rows);
+            }
+        }
+    }
+}
+
 pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String> {
+    if request.second_order && (request.rk4 || request.dt.is_none()) {
+        return Err(
+            "--second-order is for the VI step: give --dt (and not --integrator rk4)".into(),
+        );
+    }
     let mut sys = source.system(path)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
@@ -140,9 +172,17 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
         cx.dt = dt;
         vi.step(cx.at(0, t), &mut q2, &mut p2, &mut next)
             .map_err(|e| format!("the VI step: {e}"))?;
-        let s = vi
-            .derivatives(cx.at(0, t), &q, &p1, &q2)
-            .map_err(|e| format!("the VI step: {e}"))?;
+        let (s, second) = if request.second_order {
+            let (s, second) = vi
+                .second_derivatives(cx.at(0, t), &q, &p1, &q2)
+                .map_err(|e| format!("the VI step: {e}"))?;
+            (s, Some(second))
+        } else {
+            let s = vi
+                .derivatives(cx.at(0, t), &q, &p1, &q2)
+                .map_err(|e| format!("the VI step: {e}"))?;
+            (s, None)
+        };
         // trep's λ₁ is −Δt times this integrator's force-scaled λ.
         let trep = |m: &DMatrix<f64>| matrix(&(m * -dt));
         let lambda1: Vec<f64> = vi.lambda.iter().map(|l| -dt * l).collect();
@@ -160,6 +200,9 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
             "lambda1_dq1": trep(&s.lambda_dq1), "lambda1_dp1": trep(&s.lambda_dp1),
             "lambda1_du1": trep(&s.lambda_du1), "lambda1_dk2": trep(&s.lambda_dk2),
         });
+        if let Some(second) = second {
+            second_order(&mut out["vi"], &second, dt);
+        }
     }
     println!(
         "{}",

@@ -222,6 +222,10 @@ enum Command {
         /// The step to linearise with --dt: the VI (state (q, p)) or RK4 (state (q, q̇)).
         #[arg(long, value_enum, default_value = "vi")]
         integrator: StepArg,
+        /// With --dt (VI): also the step's 30 second derivatives, `q2_dq1dp1` … as
+        /// [output][input1][input2].
+        #[arg(long)]
+        second_order: bool,
     },
     /// Validate a model and print a summary with the tree drawn as text.
     Check {
@@ -352,6 +356,7 @@ fn main() -> ExitCode {
             forcing,
             alpha,
             integrator,
+            second_order,
         } => linearize::run(
             &model,
             &source,
@@ -368,6 +373,7 @@ fn main() -> ExitCode {
                 },
                 alpha,
                 rk4: matches!(integrator, StepArg::Rk4),
+                second_order,
             },
         ),
     };

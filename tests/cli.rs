@@ -783,3 +783,53 @@ fn linearize_prints_the_exact_derivatives_and_one_vi_step_as_a_map() {
         );
     }
 }
+
+#[test]
+fn linearize_second_order_prints_trep_s_thirty_second_derivatives() {
+    // The string pendulum: a constraint (λ rows) and dynamic variables.
+    let args = [
+        "linearize",
+        "tests/models/string-pendulum.toml",
+        "--dt",
+        "0.01",
+        "--second-order",
+    ];
+    let (ok, stdout, stderr) = tree_mech(&args);
+    assert!(ok, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let vi = j["vi"].as_object().unwrap();
+    let n = j["variables"].as_array().unwrap().len();
+    let nd = j["dynamic"].as_array().unwrap().len();
+    let m = j["constraints"].as_array().unwrap().len();
+    let blocks = ["q1", "p1", "u1", "k2"];
+    let mut count = 0;
+    for out in ["q2", "p2", "lambda1"] {
+        for (k, a) in blocks.iter().enumerate() {
+            for b in &blocks[k..] {
+                let key = format!("{out}_d{a}d{b}");
+                let t = vi.get(&key).unwrap_or_else(|| panic!("no {key}"));
+                let rows = if out == "lambda1" { m } else { nd };
+                assert_eq!(t.as_array().unwrap().len(), rows, "{key}");
+                count += 1;
+            }
+        }
+    }
+    assert_eq!(count, 30);
+    // ∂²q₂/∂q₁∂q₁ is n × n per row and symmetric, and not zero.
+    let h = &vi["q2_dq1dq1"][0];
+    assert_eq!(h.as_array().unwrap().len(), n);
+    let mut largest = 0.0f64;
+    for a in 0..n {
+        for b in 0..n {
+            let (x, y) = (h[a][b].as_f64().unwrap(), h[b][a].as_f64().unwrap());
+            assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
+            largest = largest.max(x.abs());
+        }
+    }
+    assert!(largest > 0.0);
+    let (ok, _, stderr) = tree_mech(&["linearize", "tests/models/cart.toml", "--second-order"]);
+    assert!(
+        !ok && stderr.contains("--second-order is for the VI step"),
+        "{stderr}"
+    );
+}

@@ -6,7 +6,10 @@
 mod common;
 
 use nalgebra::{DMatrix, Dyn};
-use tree_mech::integrate::{project_initial_state, Forcing, MidpointVi, StepContext, ViSettings};
+use tree_mech::integrate::{
+    project_initial_state, Forcing, MidpointVi, StepContext, StepCovector, StepDerivatives,
+    StepInput, StepOutput, StepSecondDerivatives, ViSettings,
+};
 use tree_mech::model::{self, Model};
 use tree_mech::runtime::{ModelMotions, Prescription, Vector};
 use tree_mech::{NoForce, System, TreeSystem};
@@ -231,4 +234,238 @@ fn compiled_and_interpreted_step_derivatives_agree() {
         assert!((x - y).amax() < 1e-12, "compiled {x} vs interpreted {y}");
         assert!(x.amax() > 0.0);
     }
+}
+
+/// Every first derivative of the step side by side over `x = (q₁, p₁, u₁, k₂)`: one
+/// `rows × x` matrix per output block.
+fn flat(d: &StepDerivatives) -> Vec<DMatrix<f64>> {
+    StepOutput::ALL
+        .iter()
+        .map(|&of| {
+            let blocks: Vec<&DMatrix<f64>> =
+                StepInput::ALL.iter().map(|&by| d.block(of, by)).collect();
+            let rows = blocks[0].nrows();
+            let width: usize = blocks.iter().map(|b| b.ncols()).sum();
+            let mut out = DMatrix::zeros(rows, width);
+            let mut c0 = 0;
+            for b in blocks {
+                out.view_mut((0, c0), (rows, b.ncols())).copy_from(b);
+                c0 += b.ncols();
+            }
+            out
+        })
+        .collect()
+}
+
+/// The step from `(q1, p1, u, dk)` and its first (and second) derivatives.
+fn step_and_derivatives(
+    sys: &mut TreeSystem,
+    settings: ViSettings,
+    x: (&Vector<Dyn>, &Vector<Dyn>, &[f64], &[f64]),
+    lambda0: &[f64],
+) -> (StepDerivatives, StepSecondDerivatives) {
+    let (q1, p1, u, dk) = x;
+    let (out, mut vi) = step(sys, settings, q1, p1, u, dk, lambda0);
+    let mut motion = ModelMotions::of(sys);
+    let mut force = NoForce;
+    let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.1);
+    cx.u = u;
+    vi.second_derivatives(&mut cx, q1, p1, &out.q2).unwrap()
+}
+
+/// The second derivatives against central differences of the exact first ones, their
+/// symmetry, and the contracted form against the full tensors.
+fn check_second(model: &Model, settings: ViSettings, what: &str) {
+    let mut sys = TreeSystem::new(model).unwrap();
+    let n = sys.dof();
+    let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
+    let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+    let (mut q1, dq1) = sys.initial_state();
+    let mut motion = ModelMotions::of(&sys);
+    for &k in &kinematic {
+        q1[k] = motion.kinematic(k, 0.0)[0];
+    }
+    let mut dq1 = dq1 * 0.3;
+    let split = tree_mech::runtime::dynamics::Split::of(&sys);
+    project_initial_state(&mut sys, &split, &mut q1, &mut dq1).unwrap();
+    let vi = MidpointVi::new(&sys, settings);
+    let mut vi0 = vi.clone();
+    let p1 = vi0.initial_momentum(&mut sys, &q1, &dq1);
+    let u: Vec<f64> = (0..sys.input_count()).map(|k| 0.5 + k as f64).collect();
+    let (nd, nu, nk) = (dynamic.len(), u.len(), kinematic.len());
+    let zero_dk = vec![0.0; nk];
+    let (base_first, base) =
+        step_and_derivatives(&mut sys, settings, (&q1, &p1, &u, &zero_dk), &[]);
+    let lambda0: Vec<f64> = {
+        let (out, _) = step(&mut sys, settings, &q1, &p1, &u, &zero_dk, &[]);
+        out.lambda
+    };
+    let tensors = [&base.q2, &base.p2, &base.lambda];
+    let x = n + nd + nu + nk;
+    let mut worst = 0.0f64;
+    let h = 1e-5;
+    for j in 0..x {
+        let run = |sign: f64, sys: &mut TreeSystem| {
+            let (mut q, mut p, mut uu, mut dk) =
+                (q1.clone(), p1.clone(), u.clone(), zero_dk.clone());
+            match j {
+                j if j < n => q[j] += sign * h,
+                j if j < n + nd => p[dynamic[j - n]] += sign * h,
+                j if j < n + nd + nu => uu[j - n - nd] += sign * h,
+                j => dk[j - n - nd - nu] += sign * h,
+            }
+            flat(&step_and_derivatives(sys, settings, (&q, &p, &uu, &dk), &lambda0).0)
+        };
+        let (plus, minus) = (run(1.0, &mut sys), run(-1.0, &mut sys));
+        for (o, exact) in tensors.iter().enumerate() {
+            for (r, hess) in exact.iter().enumerate() {
+                let scale = hess.amax().max(1.0);
+                for i in 0..x {
+                    let fd = (plus[o][(r, i)] - minus[o][(r, i)]) / (2.0 * h);
+                    let err = (fd - hess[(i, j)]).abs() / scale;
+                    worst = worst.max(err);
+                    assert!(
+                        err < 1e-7,
+                        "{what}: {:?} row {r}, ∂²/∂x{i}∂x{j} = {} vs finite difference {fd}",
+                        StepOutput::ALL[o],
+                        hess[(i, j)]
+                    );
+                }
+            }
+        }
+    }
+    // Symmetric, and not trivially zero.
+    let mut largest = 0.0f64;
+    for hess in tensors.iter().flat_map(|t| t.iter()) {
+        assert!(
+            (hess - hess.transpose()).amax() <= 1e-9 * hess.amax().max(1.0),
+            "{what}: asymmetric {hess}"
+        );
+        largest = largest.max(hess.amax());
+    }
+    assert!(largest > 1e-3, "{what}: second derivatives all ~0");
+    // The contracted form equals the tensors contracted.
+    let mut rng = common::Rng::new(11);
+    let w = StepCovector {
+        q2: nalgebra::DVector::from_column_slice(rng.vector(nd, 1.0).as_slice()),
+        p2: nalgebra::DVector::from_column_slice(rng.vector(nd, 1.0).as_slice()),
+        lambda: nalgebra::DVector::from_column_slice(rng.vector(base.lambda.len(), 1.0).as_slice()),
+    };
+    let mut expected = DMatrix::<f64>::zeros(x, x);
+    for (r, hess) in base.q2.iter().enumerate() {
+        expected += hess * w.q2[r];
+    }
+    for (r, hess) in base.p2.iter().enumerate() {
+        expected += hess * w.p2[r];
+    }
+    for (s, hess) in base.lambda.iter().enumerate() {
+        expected += hess * w.lambda[s];
+    }
+    let (out, mut vi) = step(&mut sys, settings, &q1, &p1, &u, &zero_dk, &[]);
+    let mut motion = ModelMotions::of(&sys);
+    let mut force = NoForce;
+    let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.1);
+    cx.u = &u;
+    let contracted = vi
+        .contracted_second_derivatives(&mut cx, &q1, &p1, &out.q2, &w)
+        .unwrap();
+    assert!(
+        (&contracted - &expected).amax() <= 1e-10 * expected.amax().max(1.0),
+        "{what}: contracted {contracted} vs {expected}"
+    );
+    assert_eq!(
+        flat(&base_first),
+        flat(&vi.derivatives(&mut cx, &q1, &p1, &out.q2).unwrap())
+    );
+    eprintln!("{what}: worst relative error {worst:.1e}");
+}
+
+#[test]
+fn vi_step_second_derivatives_match_finite_differences() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let elements = model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap();
+    let cart = model::from_toml_file(format!("{root}/tests/models/cart.toml")).unwrap();
+    let string =
+        model::from_toml_file(format!("{root}/tests/models/string-pendulum.toml")).unwrap();
+    let mut damped = common::load("double-pendulum.toml");
+    damped.variables[0].damping = 0.4;
+    for (model, name) in [
+        (&elements, "elements"),
+        (&cart, "cart"),
+        (&string, "string pendulum"),
+        (&damped, "damped double pendulum"),
+    ] {
+        for (alpha, forcing) in [
+            (0.5, Forcing::Split),
+            (0.5, Forcing::Left),
+            (0.3, Forcing::Split),
+        ] {
+            check_second(
+                model,
+                tight(alpha, forcing),
+                &format!("{name}, α {alpha}, {forcing:?}"),
+            );
+        }
+    }
+}
+
+tree_mech::tree_model!(struct Elements from "tests/models/elements.toml");
+
+/// The compiled dual program against the interpreted kernel: the VI step's second
+/// derivatives and the continuous linearisation, on a model with every element.
+#[test]
+fn compiled_and_interpreted_second_derivatives_agree() {
+    use tree_mech::runtime::linearize::continuous_derivatives;
+    let model = Elements::model();
+    let mut interpreted = TreeSystem::new(&model).unwrap();
+    let settings = tight(0.5, Forcing::Split);
+    let mut run = |compiled: bool| -> Vec<DMatrix<f64>> {
+        macro_rules! go {
+            ($sys:expr) => {{
+                let sys = $sys;
+                let n = sys.dof();
+                let (mut q1, dq1) = sys.initial_state();
+                let mut motion = ModelMotions::of(sys);
+                let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+                for &k in &kinematic {
+                    q1[k] = motion.kinematic(k, 0.0)[0];
+                }
+                let mut dq1 = dq1 * 0.3;
+                let split = tree_mech::runtime::dynamics::Split::of(sys);
+                project_initial_state(sys, &split, &mut q1, &mut dq1).unwrap();
+                let mut vi = MidpointVi::new(sys, settings);
+                let p1 = vi.initial_momentum(sys, &q1, &dq1);
+                let (mut q, mut p, mut next) = (q1.clone(), p1.clone(), q1.clone());
+                let mut force = NoForce;
+                let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.05);
+                vi.step(&mut cx, &mut q, &mut p, &mut next).unwrap();
+                let (_, second) = vi.second_derivatives(&mut cx, &q1, &p1, &q).unwrap();
+                let c = continuous_derivatives(cx.at(0, 0.0), &q1, &dq1).unwrap();
+                let mut out: Vec<DMatrix<f64>> = second
+                    .q2
+                    .iter()
+                    .chain(&second.p2)
+                    .chain(&second.lambda)
+                    .cloned()
+                    .collect();
+                out.extend([c.qdd_dq, c.qdd_ddq, c.lambda_dq, c.lambda_ddq]);
+                out
+            }};
+        }
+        if compiled {
+            go!(&mut Elements)
+        } else {
+            go!(&mut interpreted)
+        }
+    };
+    let (a, b) = (run(true), run(false));
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        let scale = y.amax().max(1.0);
+        assert!(
+            (x - y).amax() < 1e-12 * scale,
+            "compiled {x} vs interpreted {y}"
+        );
+    }
+    assert!(a.iter().any(|m| m.amax() > 1e-3));
 }

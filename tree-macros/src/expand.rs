@@ -419,7 +419,9 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let dual_ty = quote!(::tree_mech::runtime::dual::Dual);
     let (f64_terms, f64_constraints, generic) = (
         Flavour::F64 { out_ty: &terms_ty },
-        Flavour::F64 { out_ty: &constraint_ty },
+        Flavour::F64 {
+            out_ty: &constraint_ty,
+        },
         Flavour::Generic { scalar: &dual_ty },
     );
     let lagrangian: Evaluation = kernel::evaluate;
@@ -445,7 +447,9 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let dc_dynamics = c_dynamics.naming().emit("__dc_dynamics", n, generic);
     let dc_full = c_full.naming().emit("__dc_full", n, generic);
     let c_first = c_first.assigning().emit("__c_first", n, f64_constraints);
-    let c_dynamics = c_dynamics.assigning().emit("__c_dynamics", n, f64_constraints);
+    let c_dynamics = c_dynamics
+        .assigning()
+        .emit("__c_dynamics", n, f64_constraints);
     let c_full = c_full.assigning().emit("__c_full", n, f64_constraints);
     let functions = [
         &first.functions,

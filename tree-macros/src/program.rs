@@ -202,9 +202,9 @@ impl Program {
         let (ty, signature_of) = match flavour {
             Flavour::F64 { out_ty } => (
                 quote!(f64),
-                Box::new(move |name: &Ident| {
-                    quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty))
-                }) as Box<dyn Fn(&Ident) -> TokenStream>,
+                Box::new(
+                    move |name: &Ident| quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty)),
+                ) as Box<dyn Fn(&Ident) -> TokenStream>,
             ),
             Flavour::Generic { .. } => (
                 quote!(S),

@@ -121,7 +121,10 @@ where
         constraint: "(the linearisation's KKT system)".into(),
     };
     let zero = vec![0.0; n];
-    let (mut qd, mut vd) = (Dual::seed(q.as_slice(), &zero), Dual::seed(dq.as_slice(), &zero));
+    let (mut qd, mut vd) = (
+        Dual::seed(q.as_slice(), &zero),
+        Dual::seed(dq.as_slice(), &zero),
+    );
     let mut d = DualOutputs::new(n, m);
     let mut e = vec![0.0; n];
     for j in 0..(2 * n + nu) {
@@ -129,7 +132,11 @@ where
             // Seed the one coordinate direction j.
             e.fill(0.0);
             e[j % n] = 1.0;
-            let (seeded, other) = if j < n { (&mut qd, &mut vd) } else { (&mut vd, &mut qd) };
+            let (seeded, other) = if j < n {
+                (&mut qd, &mut vd)
+            } else {
+                (&mut vd, &mut qd)
+            };
             seeded.iter_mut().zip(&e).for_each(|(x, &de)| x.d = de);
             other.iter_mut().for_each(|x| x.d = 0.0);
             cx.sys.evaluate_dual(&qd, &vd, Order::Dynamics, &mut d);

@@ -6,8 +6,8 @@ use nalgebra::{
 };
 use tree_model::Motion;
 
-pub use crate::order::Order;
 use crate::dual::{Dual, DualOutputs};
+pub use crate::order::Order;
 use crate::outputs::{Field, Index, Output, Sink};
 use crate::se3::Pose;
 

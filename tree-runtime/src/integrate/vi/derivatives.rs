@@ -482,9 +482,8 @@ where
                 row_major(&|i, j| t.dforce_ddq[(i, j)]),
             ),
         };
-        let constraint_rows = |d: &DMatrix<f64>| {
-            (0..m * n).map(|k| d[(k / n, k % n)]).collect::<Vec<f64>>()
-        };
+        let constraint_rows =
+            |d: &DMatrix<f64>| (0..m * n).map(|k| d[(k / n, k % n)]).collect::<Vec<f64>>();
         let d2h1: Vec<f64> = (0..m * n * n)
             .map(|k| c1.d2h[k / (n * n)][((k / n) % n, k % n)])
             .collect();
@@ -644,12 +643,7 @@ impl DualJacobians {
             })
             .collect();
         let v: Vec<Dual> = (0..n)
-            .map(|i| {
-                Dual::new(
-                    (lin.q2[i] - lin.q1[i]) / dt,
-                    (dq2[i] - dq1[i]) / dt,
-                )
-            })
+            .map(|i| Dual::new((lin.q2[i] - lin.q1[i]) / dt, (dq2[i] - dq1[i]) / dt))
             .collect();
         sys.evaluate_dual(&q_alpha, &v, Order::Full, &mut self.at_alpha);
         let rest = vec![Dual::default(); n];
