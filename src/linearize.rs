@@ -5,14 +5,23 @@ use std::path::Path;
 
 use serde_json::{json, Value};
 use tree_mech::integrate::{
-    Forcing, MidpointVi, Rk4, StepContext, StepInput, StepOutput, StepSecondDerivatives, ViSettings,
+    Forcing, MidpointVi, StepContext, StepInput, StepOutput, StepSecondDerivatives, ViSettings,
 };
 use tree_mech::nalgebra::{DMatrix, Dyn};
-use tree_mech::runtime::linearize::{continuous_derivatives, rk4_step_derivatives};
+use tree_mech::runtime::linearize::{
+    continuous_derivatives, explicit_step_derivatives, DORMAND_PRINCE, RK4,
+};
 use tree_mech::runtime::{ModelMotions, Prescription, Vector};
 use tree_mech::{NoForce, System};
 
 use crate::{parse_list, parse_vector, Source};
+
+/// An explicit method whose step `linearize --dt` can take instead of the VI's.
+#[derive(Clone, Copy)]
+pub enum Explicit {
+    Rk4,
+    Rk45,
+}
 
 /// What to linearise, as the options gave it.
 pub struct Request<'a> {
@@ -24,8 +33,8 @@ pub struct Request<'a> {
     pub dt: Option<f64>,
     pub forcing: Forcing,
     pub alpha: f64,
-    /// Linearise an RK4 step instead of the VI's.
-    pub rk4: bool,
+    /// Linearise an explicit step instead of the VI's.
+    pub explicit: Option<Explicit>,
     /// Add the VI step's second derivatives.
     pub second_order: bool,
 }
@@ -60,9 +69,10 @@ fn second_order(vi: &mut Value, second: &StepSecondDerivatives, dt: f64) {
 }
 
 pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String> {
-    if request.second_order && (request.rk4 || request.dt.is_none()) {
+    if request.second_order && (request.explicit.is_some() || request.dt.is_none()) {
         return Err(
-            "--second-order is for the VI step: give --dt (and not --integrator rk4)".into(),
+            "--second-order is for the VI step: give --dt (and not --integrator rk4 or rk45)"
+                .into(),
         );
     }
     let mut sys = source.system(path)?;
@@ -125,25 +135,20 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
             return Err(format!("--dt must be a positive number, got {dt}"));
         }
     }
-    if let Some(dt) = request.dt.filter(|_| request.rk4) {
+    if let (Some(dt), Some(method)) = (request.dt, request.explicit) {
         cx.dt = dt;
-        let (x2_dx1, x2_du1) =
-            rk4_step_derivatives(cx.at(0, t), &q, &dq).map_err(|e| format!("the RK4 step: {e}"))?;
-        let mut rk = Rk4::new(&*cx.sys);
-        let (mut q2, mut dq2) = (q.clone(), dq.clone());
-        rk.step(cx.at(0, t), &mut q2, &mut dq2)
-            .map_err(|e| format!("the RK4 step: {e}"))?;
-        let x2: Vec<f64> = dynamic
-            .iter()
-            .map(|&i| q2[i])
-            .chain(dynamic.iter().map(|&i| dq2[i]))
-            .collect();
-        out["rk4"] = json!({
+        let (key, tableau, what) = match method {
+            Explicit::Rk4 => ("rk4", &RK4, "the RK4 step"),
+            Explicit::Rk45 => ("rk45", &DORMAND_PRINCE, "the Dormand–Prince step"),
+        };
+        let d = explicit_step_derivatives(cx.at(0, t), &q, &dq, tableau)
+            .map_err(|e| format!("{what}: {e}"))?;
+        out[key] = json!({
             "t2": t + dt,
             "state": "the dynamic variables' q, then their q̇",
-            "x2": x2,
-            "x2_dx1": matrix(&x2_dx1),
-            "x2_du1": matrix(&x2_du1),
+            "x2": d.x2.as_slice(),
+            "x2_dx1": matrix(&d.x2_dx1),
+            "x2_du1": matrix(&d.x2_du1),
         });
     } else if let Some(dt) = request.dt {
         if !(0.0..=1.0).contains(&request.alpha) {

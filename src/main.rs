@@ -81,6 +81,8 @@ enum StepArg {
     Vi,
     /// Classical RK4.
     Rk4,
+    /// One Dormand–Prince 5(4) step (rk45's) of length --dt.
+    Rk45,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -219,7 +221,8 @@ enum Command {
         /// VI quadrature point α.
         #[arg(long, default_value_t = 0.5)]
         alpha: f64,
-        /// The step to linearise with --dt: the VI (state (q, p)) or RK4 (state (q, q̇)).
+        /// The step to linearise with --dt: the VI (state (q, p)), or RK4 or rk45's
+        /// Dormand–Prince step (state (q, q̇)).
         #[arg(long, value_enum, default_value = "vi")]
         integrator: StepArg,
         /// With --dt (VI): also the step's 30 second derivatives, `q2_dq1dp1` … as
@@ -372,7 +375,11 @@ fn main() -> ExitCode {
                     ForcingArg::Left => Forcing::Left,
                 },
                 alpha,
-                rk4: matches!(integrator, StepArg::Rk4),
+                explicit: match integrator {
+                    StepArg::Vi => None,
+                    StepArg::Rk4 => Some(linearize::Explicit::Rk4),
+                    StepArg::Rk45 => Some(linearize::Explicit::Rk45),
+                },
                 second_order,
             },
         ),

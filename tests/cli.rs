@@ -827,6 +827,19 @@ fn linearize_second_order_prints_trep_s_thirty_second_derivatives() {
         }
     }
     assert!(largest > 0.0);
+    // rk45's Dormand–Prince step on (q, q̇).
+    let (ok, stdout, stderr) = tree_mech(&[
+        "linearize",
+        "tests/models/cart.toml",
+        "--dt",
+        "0.01",
+        "--integrator",
+        "rk45",
+    ]);
+    assert!(ok, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(j["rk45"]["x2_dx1"].as_array().unwrap().len(), 4);
+    assert_eq!(j["rk45"]["x2_du1"][0].as_array().unwrap().len(), 1);
     let (ok, _, stderr) = tree_mech(&["linearize", "tests/models/cart.toml", "--second-order"]);
     assert!(
         !ok && stderr.contains("--second-order is for the VI step"),

@@ -116,10 +116,12 @@ fn continuous_derivatives_match_finite_differences() {
     }
 }
 
+/// RK4's and Dormand–Prince's step maps: RK4's `x₂` is the integrator's own step, both
+/// derivatives against central differences of the step.
 #[test]
-fn the_rk4_step_map_derivatives_match_finite_differences() {
+fn explicit_step_map_derivatives_match_finite_differences() {
     use tree_mech::integrate::Rk4;
-    use tree_mech::runtime::linearize::rk4_step_derivatives;
+    use tree_mech::runtime::linearize::{explicit_step_derivatives, Tableau, DORMAND_PRINCE, RK4};
     let root = env!("CARGO_MANIFEST_DIR");
     for name in ["elements", "cart"] {
         let model = model::from_toml_file(format!("{root}/tests/models/{name}.toml")).unwrap();
@@ -135,51 +137,75 @@ fn the_rk4_step_map_derivatives_match_finite_differences() {
         for &k in &split.kinematic {
             [q[k], dq[k], _] = motion.kinematic(k, t);
         }
-        // One RK4 step from a perturbed dynamic state (or input): the new dynamic state.
-        let step = |sys: &mut TreeSystem, q: &Vector<Dyn>, dq: &Vector<Dyn>, u: &[f64]| {
-            let mut rk = Rk4::new(sys);
-            let (mut q, mut dq) = (q.clone(), dq.clone());
+        let derivatives = |sys: &mut TreeSystem,
+                           q: &Vector<Dyn>,
+                           dq: &Vector<Dyn>,
+                           u: &[f64],
+                           tableau: &Tableau| {
             let mut motion = ModelMotions::of(sys);
             let mut force = NoForce;
             let mut cx = StepContext::new(sys, &mut force, &mut motion, h);
             cx.u = u;
-            rk.step(cx.at(0, t), &mut q, &mut dq).unwrap();
-            dynamic
-                .iter()
-                .map(|&i| q[i])
-                .chain(dynamic.iter().map(|&i| dq[i]))
-                .collect::<Vec<_>>()
+            explicit_step_derivatives(cx.at(0, t), q, dq, tableau).unwrap()
         };
-        let mut force = NoForce;
-        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, h);
-        cx.u = &u;
-        let (dx, du) = rk4_step_derivatives(cx.at(0, t), &q, &dq).unwrap();
-        let e = 1e-6;
-        for c in 0..2 * nd + u.len() {
-            let perturbed = |sign: f64, sys: &mut TreeSystem| {
-                let (mut q, mut dq, mut u) = (q.clone(), dq.clone(), u.clone());
-                if c < nd {
-                    q[dynamic[c]] += sign * e;
-                } else if c < 2 * nd {
-                    dq[dynamic[c - nd]] += sign * e;
-                } else {
-                    u[c - 2 * nd] += sign * e;
-                }
-                step(sys, &q, &dq, &u)
-            };
-            let (plus, minus) = (perturbed(1.0, &mut sys), perturbed(-1.0, &mut sys));
-            for r in 0..2 * nd {
-                let fd = (plus[r] - minus[r]) / (2.0 * e);
-                let exact = if c < 2 * nd {
-                    dx[(r, c)]
-                } else {
-                    du[(r, c - 2 * nd)]
-                };
+        // RK4's x₂ is the integrator's step.
+        {
+            let mut rk = Rk4::new(&sys);
+            let (mut q2, mut dq2) = (q.clone(), dq.clone());
+            let mut motion = ModelMotions::of(&sys);
+            let mut force = NoForce;
+            let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, h);
+            cx.u = &u;
+            rk.step(cx.at(0, t), &mut q2, &mut dq2).unwrap();
+            let d = derivatives(&mut sys, &q, &dq, &u, &RK4);
+            for (r, &i) in dynamic.iter().enumerate() {
+                assert!((d.x2[r] - q2[i]).abs() < 1e-13, "{name}: RK4 x2[{r}]");
                 assert!(
-                    (fd - exact).abs() < 1e-6 * dx.amax(),
-                    "{name}: x2_dx1[{r}][{c}] = {exact} vs {fd}"
+                    (d.x2[nd + r] - dq2[i]).abs() < 1e-12,
+                    "{name}: RK4 x2[{}]",
+                    nd + r
                 );
             }
         }
+        for (method, tableau) in [("RK4", &RK4), ("Dormand–Prince", &DORMAND_PRINCE)] {
+            let d = derivatives(&mut sys, &q, &dq, &u, tableau);
+            let e = 1e-6;
+            for c in 0..2 * nd + u.len() {
+                let perturbed = |sign: f64, sys: &mut TreeSystem| {
+                    let (mut q, mut dq, mut u) = (q.clone(), dq.clone(), u.clone());
+                    if c < nd {
+                        q[dynamic[c]] += sign * e;
+                    } else if c < 2 * nd {
+                        dq[dynamic[c - nd]] += sign * e;
+                    } else {
+                        u[c - 2 * nd] += sign * e;
+                    }
+                    derivatives(sys, &q, &dq, &u, tableau).x2
+                };
+                let (plus, minus) = (perturbed(1.0, &mut sys), perturbed(-1.0, &mut sys));
+                for r in 0..2 * nd {
+                    let fd = (plus[r] - minus[r]) / (2.0 * e);
+                    let exact = if c < 2 * nd {
+                        d.x2_dx1[(r, c)]
+                    } else {
+                        d.x2_du1[(r, c - 2 * nd)]
+                    };
+                    assert!(
+                        (fd - exact).abs() < 1e-6 * d.x2_dx1.amax(),
+                        "{name}, {method}: x2_dx1[{r}][{c}] = {exact} vs {fd}"
+                    );
+                }
+            }
+        }
+        // The two methods' steps agree to their order, and differ.
+        let (a, b) = (
+            derivatives(&mut sys, &q, &dq, &u, &RK4),
+            derivatives(&mut sys, &q, &dq, &u, &DORMAND_PRINCE),
+        );
+        let gap = (&a.x2 - &b.x2).amax();
+        assert!(
+            gap > 0.0 && gap < 1e-6,
+            "{name}: RK4 vs Dormand–Prince {gap}"
+        );
     }
 }

@@ -166,41 +166,95 @@ where
     Ok(out)
 }
 
-/// The derivatives of one RK4 step of length `cx.dt` from `(cx.t, q, q̇)` as a map on the
-/// dynamic variables' state `x = (q_d, q̇_d)`: `∂x₂/∂x₁` (2n_d × 2n_d) and `∂x₂/∂u₁`
-/// (2n_d × inputs), by the chain rule through the four stages,
-/// `K_s = A_s (I + c_s Δt K_{s−1})`, `A_s = ∂f/∂x` at stage s from
-/// [`continuous_derivatives`], and `∂x₂/∂x₁ = I + Δt/6 Σ w_s K_s` (docs/derivations.md §9).
-/// Kinematic variables follow their prescription at every stage.
-pub fn rk4_step_derivatives<S, F, P>(
+/// An explicit Runge–Kutta method: stage times `c`, the strictly lower-triangular stage
+/// matrix `a` (row `s` uses its first `s` entries) and the weights `b`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tableau {
+    /// Stage times, as fractions of the step.
+    pub c: &'static [f64],
+    /// Stage coefficients (rows padded with zeros).
+    pub a: &'static [[f64; 6]],
+    /// The weights of the solution the step keeps.
+    pub b: &'static [f64],
+}
+
+/// The classical fourth-order Runge–Kutta method ([`crate::integrate::Rk4`]).
+pub const RK4: Tableau = Tableau {
+    c: &[0.0, 0.5, 0.5, 1.0],
+    a: &[
+        [0.0; 6],
+        [0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.5, 0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+    ],
+    b: &[1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
+};
+
+/// Dormand–Prince 5(4)'s fifth-order solution, the one [`crate::integrate::Rk45`] keeps (its
+/// seventh, first-same-as-last stage has weight zero): an adaptive step of the length it
+/// took, that length held fixed.
+pub const DORMAND_PRINCE: Tableau = Tableau {
+    c: &crate::integrate::rk45::C,
+    a: &crate::integrate::rk45::A,
+    b: &crate::integrate::rk45::B5,
+};
+
+/// One explicit step and its derivatives, on the dynamic variables' state
+/// `x = (q_d, q̇_d)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExplicitStepDerivatives {
+    /// `x₂`.
+    pub x2: DVector<f64>,
+    /// `∂x₂/∂x₁` (2n_d × 2n_d).
+    pub x2_dx1: DMatrix<f64>,
+    /// `∂x₂/∂u₁` (2n_d × inputs).
+    pub x2_du1: DMatrix<f64>,
+}
+
+/// One step of `tableau` of length `cx.dt` from `(cx.t, q, q̇)` and its derivatives as a map
+/// on the dynamic variables' state `x = (q_d, q̇_d)`, by the chain rule through the stages:
+/// with `X_s = x + Δt Σ_{r<s} a_sr K_r` and `K_s = f(X_s)`,
+/// `∂K_s/∂x = A_s (I + Δt Σ_{r<s} a_sr ∂K_r/∂x)` (and for `u` with `f`'s direct term
+/// `B_s`), `A_s = ∂f/∂x` at stage s from [`continuous_derivatives`], and
+/// `∂x₂/∂x₁ = I + Δt Σ b_s ∂K_s/∂x` (docs/derivations.md §9). Kinematic variables follow
+/// their prescription at every stage.
+pub fn explicit_step_derivatives<S, F, P>(
     cx: &mut StepContext<S, F, P>,
     q: &Vector<S::N>,
     dq: &Vector<S::N>,
-) -> Result<(DMatrix<f64>, DMatrix<f64>), SimError>
+    tableau: &Tableau,
+) -> Result<ExplicitStepDerivatives, SimError>
 where
     S: System,
     F: GeneralizedForce<S::N>,
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
-    const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
     let n = q.len();
     let dynamic: Vec<usize> = (0..n).filter(|&i| !cx.sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| cx.sys.is_kinematic(i)).collect();
     let (nd, nu, h, t) = (dynamic.len(), cx.u.len(), cx.dt, cx.t);
-    let w = 2 * nd;
-    let (mut kx, mut ku) = (DMatrix::<f64>::zeros(w, w), DMatrix::<f64>::zeros(w, nu));
-    let (mut sum_x, mut sum_u) = (DMatrix::<f64>::zeros(w, w), DMatrix::<f64>::zeros(w, nu));
-    // The stage's rate k = (q̇, q̈) on the dynamic rows, over all variables.
-    let (mut kq, mut kv) = (cx.sys.zero_vector(), cx.sys.zero_vector());
-    for s in 0..4 {
+    let (w, stages) = (2 * nd, tableau.b.len());
+    // Per stage: ∂K_s/∂x, ∂K_s/∂u and the rates K_s = (q̇, q̈) over all variables.
+    let mut kx: Vec<DMatrix<f64>> = Vec::with_capacity(stages);
+    let mut ku: Vec<DMatrix<f64>> = Vec::with_capacity(stages);
+    let mut rate_q: Vec<Vector<S::N>> = Vec::with_capacity(stages);
+    let mut rate_v: Vec<Vector<S::N>> = Vec::with_capacity(stages);
+    let (mut x2_dx1, mut x2_du1) = (DMatrix::<f64>::identity(w, w), DMatrix::<f64>::zeros(w, nu));
+    let (mut q2, mut dq2) = (q.clone(), dq.clone());
+    for s in 0..stages {
         let (mut qs, mut vs) = (q.clone(), dq.clone());
-        if s > 0 {
-            qs.axpy(C[s] * h, &kq, 1.0);
-            vs.axpy(C[s] * h, &kv, 1.0);
+        let (mut ix, mut iu) = (DMatrix::<f64>::identity(w, w), DMatrix::<f64>::zeros(w, nu));
+        for r in 0..s {
+            let a = tableau.a[s][r];
+            if a != 0.0 {
+                qs.axpy(a * h, &rate_q[r], 1.0);
+                vs.axpy(a * h, &rate_v[r], 1.0);
+                ix += &kx[r] * (a * h);
+                iu += &ku[r] * (a * h);
+            }
         }
-        let ts = t + C[s] * h;
+        let ts = t + tableau.c[s] * h;
         for &k in &kinematic {
             let [x, v, _] = cx.motion.kinematic(k, ts);
             (qs[k], vs[k]) = (x, v);
@@ -220,21 +274,29 @@ where
         }
         let mut b = DMatrix::<f64>::zeros(w, nu);
         b.view_mut((nd, 0), (nd, nu)).copy_from(&d.qdd_du);
-        // K_s = A_s (I + c_s h K_{s−1}), and likewise for u with its direct term.
-        let ix = DMatrix::<f64>::identity(w, w) + &kx * (C[s] * h);
-        kx = &a * ix;
-        ku = &a * (&ku * (C[s] * h)) + b;
-        sum_x += &kx * (W[s] * h / 6.0);
-        sum_u += &ku * (W[s] * h / 6.0);
-        // This stage's rates for the next stage's state.
-        kq.copy_from(&vs);
-        kv.fill(0.0);
+        kx.push(&a * ix);
+        ku.push(&a * iu + b);
+        x2_dx1 += &kx[s] * (tableau.b[s] * h);
+        x2_du1 += &ku[s] * (tableau.b[s] * h);
+        // This stage's rates.
+        let mut kv = cx.sys.zero_vector();
         for (r, &i) in dynamic.iter().enumerate() {
             kv[i] = d.qdd[r];
         }
         for &k in &kinematic {
             kv[k] = cx.motion.kinematic(k, ts)[2];
         }
+        q2.axpy(tableau.b[s] * h, &vs, 1.0);
+        dq2.axpy(tableau.b[s] * h, &kv, 1.0);
+        rate_q.push(vs);
+        rate_v.push(kv);
     }
-    Ok((DMatrix::<f64>::identity(w, w) + sum_x, sum_u))
+    let x2 = DVector::from_iterator(
+        w,
+        dynamic
+            .iter()
+            .map(|&i| q2[i])
+            .chain(dynamic.iter().map(|&i| dq2[i])),
+    );
+    Ok(ExplicitStepDerivatives { x2, x2_dx1, x2_du1 })
 }

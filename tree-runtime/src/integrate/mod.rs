@@ -6,7 +6,7 @@
 mod discrete;
 mod projection;
 mod rk4;
-mod rk45;
+pub(crate) mod rk45;
 mod vi;
 
 pub use crate::context::StepContext;

@@ -10,8 +10,8 @@ use crate::dynamics::{prescribe, Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::system::{System, Vector};
 
-const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
-const A: [[f64; 6]; 7] = [
+pub(crate) const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
+pub(crate) const A: [[f64; 6]; 7] = [
     [0.0; 6],
     [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
@@ -42,7 +42,7 @@ const A: [[f64; 6]; 7] = [
     ],
 ];
 /// Fifth-order weights (equal to the last row of `A`: first same as last).
-const B5: [f64; 7] = [
+pub(crate) const B5: [f64; 7] = [
     35.0 / 384.0,
     0.0,
     500.0 / 1113.0,

@@ -1,5 +1,5 @@
 //! One VI step as a map `x = (q₁, p₁, u₁, k₂) ↦ (q₂, p₂, λ)` and its exact first and second
-//! derivatives (docs/derivations.md §8), from the implicit function theorem on the converged
+//! derivatives (docs/derivations.md §9), from the implicit function theorem on the converged
 //! step.
 //!
 //! With `w = (q₁, q₂, p₁, u₁, λ)` every quantity the step touches, the step's equations
@@ -209,7 +209,7 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
 /// The step's first derivatives as blocks (trep's `q2_dq1` …). Rows: the dynamic variables
 /// (`q₂`, `p₂`) or the constraint equations (`λ`, this integrator's force-scaled multiplier:
 /// trep's `λ₁ = −Δt λ`); columns: all variables (`q₁`), the dynamic ones (`p₁`), the inputs
-/// (`u₁`), the kinematic ones (`k₂`, the kinematic part of `q₂`). docs/derivations.md §8.
+/// (`u₁`), the kinematic ones (`k₂`, the kinematic part of `q₂`). docs/derivations.md §9.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepDerivatives {
     /// `∂q₂/∂q₁`.
