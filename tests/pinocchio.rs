@@ -1,5 +1,6 @@
 //! Every shipped URDF against Pinocchio 4.1 (tests/fixtures/pinocchio-*.json, written by
-//! tools/reference/pinocchio_fixtures.py): mass matrix, generalized gravity, nonlinear
+//! tools/reference/pinocchio_fixtures.py), compiled and interpreted: computeABADerivatives'
+//! ∂q̈/∂q, ∂q̈/∂v, M⁻¹; mass matrix, generalized gravity, nonlinear
 //! effects, forward dynamics (ABA), inverse dynamics (RNEA), every link's pose, kinetic and
 //! potential energy, at seeded random states — interpreted and compiled, to 1e-9 relative.
 //!
@@ -12,6 +13,7 @@ use nalgebra::{allocator::Allocator, DefaultAllocator};
 use serde_json::Value;
 use tree_mech::integrate::StepContext;
 use tree_mech::model::{self, UrdfOptions};
+use tree_mech::runtime::linearize::continuous_derivatives;
 use tree_mech::runtime::{Dynamics, ModelMotions, Pose, Vector};
 use tree_mech::{tree_model, Order, System, Terms, TreeSystem};
 
@@ -184,6 +186,36 @@ where
         for i in 0..n {
             close(qdd[perm[i]], ddq_pin[i], scale(&ddq_pin), &what("ABA q̈"));
         }
+        // computeABADerivatives: ∂q̈/∂q, ∂q̈/∂v (ours also holds −M⁻¹c of the damping the
+        // fixed force above cancels only in value) and ∂q̈/∂τ = M⁻¹ on the actuated joints.
+        let u = vec![0.0; cx.sys.input_count()];
+        cx.u = &u;
+        let d = continuous_derivatives(&mut cx, &q, &v).unwrap();
+        let matrix = |key: &str| -> Vec<Vec<f64>> {
+            state[key].as_array().unwrap().iter().map(numbers).collect()
+        };
+        let (dq_pin, dv_pin, minv) = (matrix("ddq_dq"), matrix("ddq_dv"), matrix("minv"));
+        let (sq, sv, sm) = (
+            scale(&dq_pin.concat()),
+            scale(&dv_pin.concat()),
+            scale(&minv.concat()),
+        );
+        for i in 0..n {
+            for j in 0..n {
+                let (r, c) = (perm[i], perm[j]);
+                close(d.qdd_dq[(r, c)], dq_pin[i][j], sq, &what("∂q̈/∂q"));
+                let damped = dv_pin[i][j] - minv[i][j] * damping[c];
+                close(d.qdd_ddq[(r, c)], damped, sv, &what("∂q̈/∂v"));
+            }
+        }
+        for k in 0..u.len() {
+            let var = cx.sys.input_variable(k);
+            let j = perm.iter().position(|&p| p == var).unwrap();
+            for i in 0..n {
+                close(d.qdd_du[(perm[i], k)], minv[i][j], sm, &what("∂q̈/∂τ"));
+            }
+        }
+        assert!(sq > 1.0 && u.len() + if fx.floating_base { 6 } else { 0 } == n);
         let mut poses = vec![Pose::IDENTITY; frames.len()];
         sys.poses(&q, &mut poses);
         let mut compared = 0;

@@ -7,11 +7,18 @@ at seeded random states, for tests/pinocchio.rs (which reads them without Python
 
 For each state: q, v, tau, a (random), and from Pinocchio the mass matrix (CRBA), the
 generalized gravity, the nonlinear effects C(q,v)v + g, ABA's acceleration for tau, RNEA's
-torque for a, every link's pose (4×4, row-major) and the kinetic and potential energy.
+torque for a, every link's pose (4×4, row-major), the kinetic and potential energy, and
+computeABADerivatives' ∂q̈/∂q, ∂q̈/∂v and M⁻¹ (= ∂q̈/∂τ) at (q, v, tau).
 Vectors are in Pinocchio's joint order; `variables` names it (joint names), so the Rust
 side maps by name. The floating base is a composite joint PX PY PZ RZ RY RX, whose q and v
 are tree-mech's root_x … root_roll. Pinocchio's ABA ignores joint damping; so do these
 numbers.
+
+computeABADerivatives is wrong for composite joints in Pinocchio 4.1.0 (on solo12 its ∂q̈/∂v
+differs from central differences of its own ABA by 2.3, its ∂q̈/∂q by 570), so for the
+floating base the derivatives are taken on the same base built as six 1-DoF joints with
+massless links between them (`chain_base`), whose ABA equals the composite's to 1e-12 and
+whose derivatives agree with central differences of ABA.
 """
 import json
 import pathlib
@@ -38,6 +45,20 @@ def build(path, floating):
     return pin.buildModelFromUrdf(str(path))
 
 
+def chain_base(path):
+    """The floating base PX PY PZ RZ RY RX as six 1-DoF joints (massless links between
+    them), the robot appended at the last one: the same dynamics as `build(path, True)`."""
+    base = pin.Model()
+    parent = 0
+    for name, joint in (("root_x", pin.JointModelPX()), ("root_y", pin.JointModelPY()),
+                        ("root_z", pin.JointModelPZ()), ("root_yaw", pin.JointModelRZ()),
+                        ("root_pitch", pin.JointModelRY()), ("root_roll", pin.JointModelRX())):
+        parent = base.addJoint(parent, joint, pin.SE3.Identity(), name)
+    frame = base.addFrame(pin.Frame("root_end", parent, 0, pin.SE3.Identity(),
+                                    pin.FrameType.OP_FRAME))
+    return pin.appendModel(base, pin.buildModelFromUrdf(str(path)), frame, pin.SE3.Identity())
+
+
 def variables(model, floating):
     names = []
     for j in range(1, model.njoints):
@@ -55,6 +76,11 @@ def main():
     for label, rel, floating in MODELS:
         model = build(ROOT / rel, floating)
         data = model.createData()
+        # The model computeABADerivatives is right on (see the module docs).
+        smooth = chain_base(ROOT / rel) if floating else model
+        smooth_data = smooth.createData()
+        assert [smooth.names[j] for j in range(1, smooth.njoints)][6 if floating else 0:] == \
+            [model.names[j] for j in range(2 if floating else 1, model.njoints)]
         links = [f for f in model.frames if f.type == pin.FrameType.BODY]
         out = {
             "model": label,
@@ -77,6 +103,11 @@ def main():
             rnea = pin.rnea(model, data, q, v, a).copy()
             kinetic = pin.computeKineticEnergy(model, data, q, v)
             potential = pin.computePotentialEnergy(model, data, q)
+            pin.computeABADerivatives(smooth, smooth_data, q, v, tau)
+            ddq_dq, ddq_dv = smooth_data.ddq_dq.copy(), smooth_data.ddq_dv.copy()
+            minv = smooth_data.Minv.copy()
+            assert np.abs(pin.aba(smooth, smooth_data, q, v, tau) - ddq).max() <= 1e-9 * max(1.0, np.abs(ddq).max())
+            minv = np.triu(minv) + np.triu(minv, 1).T
             pin.framesForwardKinematics(model, data, q)
             poses = {f.name: data.oMf[model.getFrameId(f.name, pin.FrameType.BODY)].homogeneous.flatten().tolist()
                      for f in links}
@@ -84,6 +115,7 @@ def main():
                 "q": q.tolist(), "v": v.tolist(), "tau": tau.tolist(), "a": a.tolist(),
                 "M": M.tolist(), "g": g.tolist(), "nle": nle.tolist(), "ddq": ddq.tolist(),
                 "rnea": rnea.tolist(), "kinetic": kinetic, "potential": potential, "poses": poses,
+                "ddq_dq": ddq_dq.tolist(), "ddq_dv": ddq_dv.tolist(), "minv": minv.tolist(),
             })
         path = ROOT / "tests" / "fixtures" / f"pinocchio-{label}.json"
         path.write_text(json.dumps(out, indent=1) + "\n")
