@@ -3,15 +3,20 @@
 //! dynamics), a full second-order evaluation, one VI step and one RK4 step, compiled and
 //! interpreted; beside them Pinocchio's CRBA, RNEA (nonlinear effects), ABA and ABA
 //! derivatives from `target/pinocchio-timing.json` when `tools/reference/pinocchio_bench.sh`
-//! has written it. Same timing method on both sides: best of 5 batches, mean per call.
+//! has written it; then the derivatives: the continuous linearisation (∂q̈/∂(q, q̇, u)), one VI
+//! step with its first derivatives, and the step's contracted second derivatives, against
+//! Pinocchio's `computeABADerivatives`. Same timing method on both sides: best of 5 batches,
+//! mean per call.
 //! Run: `cargo bench --bench robots`.
 
 use std::hint::black_box;
 use std::time::Instant;
 
-use tree_mech::integrate::{MidpointVi, Rk4, StepContext, ViSettings};
+use tree_mech::integrate::{MidpointVi, Rk4, StepContext, StepCovector, ViSettings};
 use tree_mech::model::{self, UrdfOptions};
+use tree_mech::nalgebra::DVector;
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
+use tree_mech::runtime::linearize::continuous_derivatives;
 use tree_mech::runtime::{Dynamics, ModelMotions, Vector};
 use tree_mech::{tree_model, NoForce, Order, System, Terms, TreeSystem};
 
@@ -32,8 +37,9 @@ fn time_ns(calls: usize, mut f: impl FnMut()) -> f64 {
     best
 }
 
-/// `[M, q̈, full evaluation, VI step, RK4 step]` in ns, at the state Pinocchio is timed at.
-fn measure<S: System>(mut sys: S) -> [f64; 5]
+/// `[M, q̈, full evaluation, VI step, RK4 step, continuous derivatives, VI step + first
+/// derivatives, contracted second derivatives]` in ns, at the state Pinocchio is timed at.
+fn measure<S: System>(mut sys: S) -> [f64; 8]
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -89,7 +95,44 @@ where
         )
         .unwrap();
     });
-    [mass, accel, full, vi_step, rk4]
+    let u = vec![0.0; sys.input_count()];
+    let continuous = time_ns(calls / 10, || {
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.0);
+        cx.u = &u;
+        black_box(continuous_derivatives(&mut cx, &q, &dq).unwrap());
+    });
+    let mut first = tree_mech::integrate::StepDerivatives::empty();
+    let vi_first = time_ns(calls / 10, || {
+        qk.copy_from(&q);
+        pk.copy_from(&p0);
+        vi.last_velocity.copy_from(&dq);
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.001);
+        cx.u = &u;
+        vi.step(&mut cx, &mut qk, &mut pk, &mut next).unwrap();
+        vi.derivatives_into(&mut cx, &q, &p0, &qk, &mut first)
+            .unwrap();
+        black_box(first.q2_dq1[(0, 0)]);
+    });
+    let nd = (0..n).filter(|&i| !sys.is_kinematic(i)).count();
+    let w = StepCovector {
+        q2: DVector::from_element(nd, 1.0),
+        p2: DVector::from_element(nd, 0.5),
+        lambda: DVector::zeros(sys.constraint_count()),
+    };
+    let mut hessian = tree_mech::nalgebra::DMatrix::zeros(0, 0);
+    let contracted = time_ns(calls / 100, || {
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.001);
+        cx.u = &u;
+        vi.contracted_second_derivatives(&mut cx, &q, &p0, &qk, &w, &mut hessian)
+            .unwrap();
+        black_box(hessian[(0, 0)]);
+    });
+    [
+        mass, accel, full, vi_step, rk4, continuous, vi_first, contracted,
+    ]
 }
 
 fn interpreted(file: &str, floating_base: bool) -> TreeSystem {
@@ -137,7 +180,13 @@ fn main() {
     println!("| robot (dof) | | M | q̈ | full 2nd-order evaluation | VI step | RK4 step |");
     println!("|---|---|---:|---:|---:|---:|---:|");
     for (name, label, generated, interp) in &rows {
-        let f = |x: &[f64; 5]| x.map(|t| format!("{:.0} ns", t)).join(" | ");
+        let f = |x: &[f64; 8]| {
+            x[..5]
+                .iter()
+                .map(|t| format!("{t:.0} ns"))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        };
         println!("| {name} | tree-mech compiled | {} |", f(generated));
         println!("| | tree-mech interpreted | {} |", f(interp));
         if let Some([crba, nle, aba, abad]) = pinocchio(label) {
@@ -149,6 +198,32 @@ fn main() {
                 generated[0] / crba,
                 generated[1] / aba,
                 generated[2] / abad
+            );
+        }
+    }
+    println!();
+    println!("| robot (dof) | | ∂q̈/∂(q, q̇, u) | VI step + first derivatives | contracted second derivatives |");
+    println!("|---|---|---:|---:|---:|");
+    for (name, label, generated, interp) in &rows {
+        let f = |x: &[f64; 8]| {
+            x[5..]
+                .iter()
+                .map(|t| format!("{:.1} µs", t / 1e3))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        };
+        println!("| {name} | tree-mech compiled | {} |", f(generated));
+        println!("| | tree-mech interpreted | {} |", f(interp));
+        if let Some([_, _, _, abad]) = pinocchio(label) {
+            println!(
+                "| | Pinocchio computeABADerivatives | {:.1} µs | — | — |",
+                abad / 1e3
+            );
+            println!(
+                "| | compiled / Pinocchio | {:.2}× | {:.2}× | {:.1}× |",
+                generated[5] / abad,
+                generated[6] / abad,
+                generated[7] / abad
             );
         }
     }

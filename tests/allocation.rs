@@ -7,9 +7,10 @@ use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use tree_mech::integrate::{
-    JacobianUpdate, MidpointVi, Rk4, Rk45, StepContext, Tolerance, ViSettings,
+    JacobianUpdate, MidpointVi, Rk4, Rk45, StepContext, StepCovector, StepDerivatives, Tolerance,
+    ViSettings,
 };
-use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
+use tree_mech::nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{
     tree_model, ConstraintTerms, NoForce, Order, PaperEvaluation, PaperSystem, System, Terms,
@@ -52,7 +53,9 @@ fn allocations(f: impl FnOnce()) -> usize {
     ALLOCATIONS.load(Ordering::SeqCst) - before
 }
 
-fn check<S: System>(mut sys: S, what: &str)
+/// `derivatives`: also the VI step's derivatives (the paper's reference system evaluates
+/// over dual numbers with a fresh kernel, documented as allocating).
+fn check<S: System>(mut sys: S, what: &str, derivatives: bool)
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -94,22 +97,60 @@ where
         }
     });
     assert_eq!(n, 0, "{what}: {n} allocations in the hot path");
+    if !derivatives {
+        return;
+    }
+    // The step's derivatives and their contraction: nothing after the first call.
+    let (q1, p1) = (q2.clone(), p.clone());
+    let mut first = StepDerivatives::empty();
+    let w = StepCovector {
+        q2: DVector::from_element(vi.split.dynamic.len(), 1.0),
+        p2: DVector::from_element(vi.split.dynamic.len(), 0.5),
+        lambda: DVector::from_element(sys.constraint_count(), 0.2),
+    };
+    let mut hessian = DMatrix::zeros(0, 0);
+    let (mut qa, mut pa, mut na) = (q1.clone(), p1.clone(), q1.clone());
+    let mut derivatives = |sys: &mut S, vi: &mut MidpointVi<S::N>| {
+        let mut no_force = NoForce;
+        let mut cx = StepContext::new(sys, &mut no_force, &mut motion, 0.01);
+        qa.copy_from(&q1);
+        pa.copy_from(&p1);
+        vi.step(&mut cx, &mut qa, &mut pa, &mut na).unwrap();
+        let q2 = &qa;
+        vi.derivatives_into(&mut cx, &q1, &p1, q2, &mut first)
+            .unwrap();
+        vi.contracted_second_derivatives(&mut cx, &q1, &p1, q2, &w, &mut hessian)
+            .unwrap();
+    };
+    derivatives(&mut sys, &mut vi);
+    let n = allocations(|| {
+        for _ in 0..3 {
+            derivatives(&mut sys, &mut vi);
+        }
+    });
+    assert_eq!(n, 0, "{what}: {n} allocations in the step's derivatives");
 }
 
 #[test]
 fn evaluations_and_steps_allocate_nothing() {
-    check(Humanoid, "generated humanoid");
-    check(TreeSystem::new(&Humanoid::model()).unwrap(), "interpreted");
+    check(Humanoid, "generated humanoid", true);
+    check(
+        TreeSystem::new(&Humanoid::model()).unwrap(),
+        "interpreted",
+        true,
+    );
     for mode in [PaperEvaluation::Cached, PaperEvaluation::Uncached] {
         check(
             PaperSystem::new(&Humanoid::model(), mode).unwrap(),
             &format!("reference {mode:?}"),
+            false,
         );
     }
-    check(StringPendulum, "generated string pendulum");
+    check(StringPendulum, "generated string pendulum", true);
     check(
         TreeSystem::new(&StringPendulum::model()).unwrap(),
         "interpreted string pendulum",
+        true,
     );
     // The counter does count: a Vec allocates.
     assert!(allocations(|| drop(std::hint::black_box(vec![1u8; 16]))) > 0);

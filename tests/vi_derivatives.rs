@@ -366,8 +366,8 @@ fn check_second(model: &Model, settings: ViSettings, what: &str) {
     let mut force = NoForce;
     let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.1);
     cx.u = &u;
-    let contracted = vi
-        .contracted_second_derivatives(&mut cx, &q1, &p1, &out.q2, &w)
+    let mut contracted = DMatrix::zeros(0, 0);
+    vi.contracted_second_derivatives(&mut cx, &q1, &p1, &out.q2, &w, &mut contracted)
         .unwrap();
     assert!(
         (&contracted - &expected).amax() <= 1e-10 * expected.amax().max(1.0),

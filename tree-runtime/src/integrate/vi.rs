@@ -159,6 +159,8 @@ where
     pub iterations: usize,
     /// Subdivisions the last step needed (0 when it went through whole).
     pub subdivisions: usize,
+    /// The derivatives' workspace, made on their first call.
+    linearisation: Option<Box<derivatives::Linearisation>>,
     /// The energy the model's own forces (damping, dampers) took out over the last step:
     /// the discrete work `−F(q_α, v)·(q₂ − q₁)` of the force the step applied, summed over
     /// its sub-steps.
@@ -202,6 +204,7 @@ where
             iterations: 0,
             subdivisions: 0,
             dissipated: 0.0,
+            linearisation: None,
             angles: split
                 .dynamic
                 .iter()

@@ -22,7 +22,7 @@
 //! adds (a [`GeneralizedForce`]) are held fixed; the model's own (damping, dampers) and the
 //! inputs are differentiated.
 
-use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim};
+use nalgebra::{allocator::Allocator, DMatrix, DVector, DVectorView, DefaultAllocator, Dim};
 
 use super::{Forcing, MidpointVi};
 use crate::context::StepContext;
@@ -30,6 +30,7 @@ use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
+use crate::linalg::{lu_factor_packed, lu_solve_packed};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
 use crate::system::{ConstraintTerms, Order, Sparsity, System, Vector};
@@ -300,28 +301,15 @@ pub struct StepCovector {
     pub lambda: DVector<f64>,
 }
 
-/// The step linearised at its solution: the Jacobians, the tangent and the factor of `R_z`.
-struct Linearised {
-    shape: Shape,
-    /// `P` (n_d × w).
-    pjac: DMatrix<f64>,
-    /// `Δ = dw/dx` (w × x).
-    tangent: DMatrix<f64>,
-    /// `R_z`, rows × (n_d + m): `J`'s columns for `q₂_d`, then `λ`.
-    r_z: DMatrix<f64>,
-    /// The point: `q₁`, `q₂` (all variables) and `λ`.
-    q1: Vec<f64>,
-    q2: Vec<f64>,
-    lambda: Vec<f64>,
-}
-
 impl<N: Dim> MidpointVi<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     /// The first derivatives of the step from `(q₁, p₁)` at `cx.t` over `cx.dt`, with inputs
-    /// `cx.u`, that converged to `q₂` with the multipliers [`Self::lambda`] (call it right
-    /// after [`Self::step`], with that step's `q₁`, `p₁` and result). Allocates its matrices.
+    /// `cx.u` (missing ones zero; the `u₁` columns are every input of the model), that
+    /// converged to `q₂` with the multipliers [`Self::lambda`] (call it right after
+    /// [`Self::step`], with that step's `q₁`, `p₁` and result). Allocates the result; see
+    /// [`Self::derivatives_into`].
     pub fn derivatives<S, F, P>(
         &mut self,
         cx: &mut StepContext<S, F, P>,
@@ -333,13 +321,32 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
-        let lin = self.linearise(cx, q1, p1, q2)?;
-        Ok(lin.first())
+        let mut out = StepDerivatives::empty();
+        self.derivatives_into(cx, q1, p1, q2, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Self::derivatives`] into `out`: after the first call (which sizes the workspace and
+    /// `out`), nothing is allocated.
+    pub fn derivatives_into<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q2: &Vector<N>,
+        out: &mut StepDerivatives,
+    ) -> Result<(), SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        self.linearise(cx, q1, p1, q2)?.first_into(out);
+        Ok(())
     }
 
     /// The first and second derivatives of the step (see [`Self::derivatives`]): trep's 30
     /// second derivatives, from one evaluation over dual numbers per input direction.
-    /// Allocates.
+    /// Allocates the result.
     pub fn second_derivatives<S, F, P>(
         &mut self,
         cx: &mut StepContext<S, F, P>,
@@ -352,40 +359,53 @@ where
         F: GeneralizedForce<N>,
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
-        let sh = &lin.shape;
-        let (nd, m, x) = (sh.nd(), sh.m, sh.x());
-        let lu = lin.r_z.clone().lu();
+        let mut first = StepDerivatives::empty();
+        lin.first_into(&mut first);
+        let sh = lin.shape.clone();
+        let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
         let mut second = StepSecondDerivatives {
             shape: sh.clone(),
             q2: vec![DMatrix::zeros(x, x); nd],
             p2: vec![DMatrix::zeros(x, x); nd],
             lambda: vec![DMatrix::zeros(x, x); m],
         };
-        let p_z = DMatrix::from_fn(nd, nd, |r, c| lin.pjac[(r, sh.w_q2() + sh.dynamic[c])]);
-        let mut duals = DualJacobians::new(sh, cx.sys.dof(), cx.sys.constraint_count());
+        let mut duals = lin
+            .duals
+            .take()
+            .unwrap_or_else(|| DualJacobians::new(&sh, cx.sys));
+        let mut g = vec![0.0; rows];
         for j in 0..x {
-            let (dj, dp) = duals.along(cx.sys, &lin, j);
-            // G = D_jJ Δ, z_·j = −R_z⁻¹ G, p₂_·j = P_z z_·j + D_jP Δ.
-            let g = &dj * &lin.tangent;
-            let z = -lu.solve(&g).ok_or_else(|| singular(cx.index, cx.t))?;
-            let p = &p_z * z.rows(0, nd) + &dp * &lin.tangent;
+            duals.along(cx.sys, lin, j);
+            // For each i: G = D_jJ Δ_i, z_ij = −R_z⁻¹ G, p₂,ij = P_z z_ij + D_jP Δ_i.
             for i in 0..x {
+                let di = lin.tangent.column(i);
+                duals.times(di, &mut g);
+                lu_solve_packed(&lin.factor, rows, &lin.pivots, &mut g);
                 for r in 0..nd {
-                    second.q2[r][(i, j)] = z[(r, i)];
-                    second.p2[r][(i, j)] = p[(r, i)];
+                    second.q2[r][(i, j)] = -g[r];
                 }
                 for s in 0..m {
-                    second.lambda[s][(i, j)] = z[(nd + s, i)];
+                    second.lambda[s][(i, j)] = -g[nd + s];
+                }
+                for r in 0..nd {
+                    let prow = &lin.pjac[r * wl..(r + 1) * wl];
+                    let mut p = duals.p_times(r, di);
+                    for (c, &k) in sh.dynamic.iter().enumerate() {
+                        p -= prow[sh.w_q2() + k] * g[c];
+                    }
+                    second.p2[r][(i, j)] = p;
                 }
             }
         }
-        Ok((lin.first(), second))
+        lin.duals = Some(duals);
+        Ok((first, second))
     }
 
     /// `Σ_o w_o ∂²o/∂x∂x` over the step's outputs `o ∈ (q₂_d, p₂, λ)` for the covector `w`
-    /// (x × x, x = (q₁, p₁, u₁, k₂)), without forming the second-derivative tensors: one
-    /// transposed solve for the adjoint `μ`, then one dual evaluation per direction (the
-    /// module docs). What DDP needs. Allocates.
+    /// into `out` (x × x, x = (q₁, p₁, u₁, k₂); resized only when its shape differs), without
+    /// forming the second-derivative tensors: one transposed solve for the adjoint `μ`, then
+    /// one dual evaluation per direction (the module docs). What DDP needs; after the first
+    /// call nothing is allocated.
     pub fn contracted_second_derivatives<S, F, P>(
         &mut self,
         cx: &mut StepContext<S, F, P>,
@@ -393,50 +413,56 @@ where
         p1: &Vector<N>,
         q2: &Vector<N>,
         w: &StepCovector,
-    ) -> Result<DMatrix<f64>, SimError>
+        out: &mut DMatrix<f64>,
+    ) -> Result<(), SimError>
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
         let sh = &lin.shape;
-        let (nd, m, x) = (sh.nd(), sh.m, sh.x());
+        let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
         // μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p), w_z = (w_q, w_λ).
-        let mut rhs = DVector::<f64>::zeros(nd + m);
-        for c in 0..nd {
-            rhs[c] = w.q2[c];
+        let mu = &mut lin.column;
+        for (c, &k) in sh.dynamic.iter().enumerate() {
+            mu[c] = w.q2[c];
             for r in 0..nd {
-                rhs[c] += lin.pjac[(r, sh.w_q2() + sh.dynamic[c])] * w.p2[r];
+                mu[c] += lin.pjac[r * wl + sh.w_q2() + k] * w.p2[r];
             }
         }
         for s in 0..m {
-            rhs[nd + s] = w.lambda[s];
+            mu[nd + s] = w.lambda[s];
         }
-        let mu = -lin
-            .r_z
-            .transpose()
-            .lu()
-            .solve(&rhs)
-            .ok_or_else(|| singular(cx.index, cx.t))?;
-        let mut out = DMatrix::<f64>::zeros(x, x);
-        let mut duals = DualJacobians::new(sh, cx.sys.dof(), cx.sys.constraint_count());
+        lu_solve_packed(&lin.factor_t, rows, &lin.pivots_t, mu);
+        mu.iter_mut().for_each(|v| *v = -*v);
+        if out.shape() != (x, x) {
+            *out = DMatrix::zeros(x, x);
+        }
+        let mut duals = lin
+            .duals
+            .take()
+            .unwrap_or_else(|| DualJacobians::new(&lin.shape, cx.sys));
         for j in 0..x {
-            let (dj, dp) = duals.along(cx.sys, &lin, j);
+            duals.along(cx.sys, lin, j);
             // c_j = μᵀ D_jJ + w_pᵀ D_jP, then column j = Δᵀ c_j.
-            let c = dj.tr_mul(&mu) + dp.tr_mul(&w.p2);
-            out.set_column(j, &lin.tangent.tr_mul(&c));
+            duals.adjoint(&lin.column, w.p2.as_slice());
+            for i in 0..x {
+                out[(i, j)] = duals.dot_adjoint(lin.tangent.column(i));
+            }
         }
-        Ok(out)
+        lin.duals = Some(duals);
+        Ok(())
     }
 
-    /// The step's shape, `P` at the solution, the tangent and `R_z`.
+    /// Evaluates the step's terms at its solution into the workspace (made on the first
+    /// call) and solves for the tangent.
     fn linearise<S, F, P>(
         &mut self,
         cx: &mut StepContext<S, F, P>,
         q1: &Vector<N>,
         p1: &Vector<N>,
         q2: &Vector<N>,
-    ) -> Result<Linearised, SimError>
+    ) -> Result<&mut Linearisation, SimError>
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
@@ -447,72 +473,107 @@ where
             Forcing::Split => ((1.0 - a) * dt, a * dt),
             Forcing::Left => (dt, 0.0),
         };
-        let shape = Shape {
-            n,
-            dynamic: self.split.dynamic.clone(),
-            kinematic: self.split.kinematic.clone(),
-            m: self.split.rows,
-            inputs: (0..cx.u.len()).map(|k| cx.sys.input_variable(k)).collect(),
-            ld: DiscreteLagrangian { alpha: a, dt },
-            left,
-            plus,
-        };
-        let (nd, m, w, x) = (shape.nd(), shape.m, shape.w(), shape.x());
+        let ld = DiscreteLagrangian { alpha: a, dt };
+        let mut lin = self.linearisation.take().unwrap_or_else(|| {
+            Box::new(Linearisation::new(Shape {
+                n,
+                dynamic: self.split.dynamic.clone(),
+                kinematic: self.split.kinematic.clone(),
+                m: self.split.rows,
+                inputs: (0..cx.sys.input_count())
+                    .map(|k| cx.sys.input_variable(k))
+                    .collect(),
+                ld,
+                left,
+                plus,
+            }))
+        });
+        (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
+        let m = lin.shape.m;
         // Terms at the quadrature point, Dh(q₁), Dh(q₂) at the solution; D²h(q₁).
         self.prepare(cx.sys, q1);
         self.residual(cx, q1, p1, q2, true);
-        let mut c1 = ConstraintTerms::zeros(m, n);
         if m > 0 {
-            let zero = Vector::<N>::zeros_generic(cx.sys.dim(), nalgebra::U1);
-            cx.sys.constraints(q1, &zero, Order::Full, &mut c1);
+            cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
         }
         let t = &self.terms;
-        let row_major = |f: &dyn Fn(usize, usize) -> f64| {
-            (0..n * n).map(|ij| f(ij / n, ij % n)).collect::<Vec<f64>>()
-        };
-        // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
-        let (fq, fv) = match t.force_derivatives {
-            Sparsity::Zero => (vec![0.0; n * n], vec![0.0; n * n]),
-            Sparsity::Diagonal => (
-                vec![0.0; n * n],
-                row_major(&|i, j| if i == j { t.dforce_ddq[(i, i)] } else { 0.0 }),
-            ),
-            Sparsity::Dense => (
-                row_major(&|i, j| t.dforce_dq[(i, j)]),
-                row_major(&|i, j| t.dforce_ddq[(i, j)]),
-            ),
-        };
-        let constraint_rows =
-            |d: &DMatrix<f64>| (0..m * n).map(|k| d[(k / n, k % n)]).collect::<Vec<f64>>();
-        let d2h1: Vec<f64> = (0..m * n * n)
-            .map(|k| c1.d2h[k / (n * n)][((k / n) % n, k % n)])
-            .collect();
-        let lambda: Vec<f64> = self.lambda.iter().copied().collect();
-        let (lqq, lvq, mass) = (
-            row_major(&|i, j| t.d2l_dq_dq[(i, j)]),
-            row_major(&|i, j| t.d2l_ddq_dq[(i, j)]),
-            row_major(&|i, j| t.mass[(i, j)]),
-        );
-        let (dh1, dh2) = (
-            constraint_rows(&self.dh1),
-            constraint_rows(&self.constraint_terms.dh),
-        );
-        let terms = StepTerms {
-            lqq: &lqq,
-            lvq: &lvq,
-            mass: &mass,
-            fq: &fq,
-            fv: &fv,
-            dh1: &dh1,
-            d2h1: &d2h1,
-            dh2: &dh2,
-            lambda: &lambda,
-        };
-        let (mut jac, mut pjac) = (vec![0.0; (nd + m) * w], vec![0.0; nd * w]);
-        jacobians(&shape, &terms, &mut jac, &mut pjac);
-        let jac = DMatrix::from_row_slice(nd + m, w, &jac);
-        let pjac = DMatrix::from_row_slice(nd, w, &pjac);
-        // R_z: the columns of q₂_d and λ; R_x: those of q₁, p₁, u₁ and q₂_k.
+        for i in 0..n {
+            for j in 0..n {
+                let ij = i * n + j;
+                lin.lqq[ij] = t.d2l_dq_dq[(i, j)];
+                lin.lvq[ij] = t.d2l_ddq_dq[(i, j)];
+                lin.mass[ij] = t.mass[(i, j)];
+                // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
+                (lin.fq[ij], lin.fv[ij]) = match t.force_derivatives {
+                    Sparsity::Zero => (0.0, 0.0),
+                    Sparsity::Diagonal if i == j => (0.0, t.dforce_ddq[(i, i)]),
+                    Sparsity::Diagonal => (0.0, 0.0),
+                    Sparsity::Dense => (t.dforce_dq[(i, j)], t.dforce_ddq[(i, j)]),
+                };
+            }
+        }
+        for s in 0..m {
+            lin.lambda[s] = self.lambda[s];
+            for i in 0..n {
+                lin.dh1[s * n + i] = self.dh1[(s, i)];
+                lin.dh2[s * n + i] = self.constraint_terms.dh[(s, i)];
+                for j in 0..n {
+                    lin.d2h1[(s * n + i) * n + j] = lin.c1.d2h[s][(i, j)];
+                }
+            }
+        }
+        lin.q1.copy_from_slice(q1.as_slice());
+        lin.q2.copy_from_slice(q2.as_slice());
+        let lin = self.linearisation.insert(lin);
+        lin.solve(cx.index, cx.t)?;
+        Ok(lin)
+    }
+}
+
+/// The step linearised at its solution, and the buffers for it: sized on the first call,
+/// reused after (nothing allocated per step).
+#[derive(Clone, Debug)]
+pub(crate) struct Linearisation {
+    shape: Shape,
+    /// The continuous terms at the quadrature point, row-major n × n.
+    lqq: Vec<f64>,
+    lvq: Vec<f64>,
+    mass: Vec<f64>,
+    fq: Vec<f64>,
+    fv: Vec<f64>,
+    /// `Dh(q₁)`, `D²h(q₁)`, `Dh(q₂)` row-major, and λ.
+    dh1: Vec<f64>,
+    d2h1: Vec<f64>,
+    dh2: Vec<f64>,
+    lambda: Vec<f64>,
+    /// The constraints at `q₁` up to `D²h`.
+    c1: ConstraintTerms,
+    /// `J` (rows × w) and `P` (n_d × w), row-major.
+    jac: Vec<f64>,
+    pjac: Vec<f64>,
+    /// The columns of `w` that are the unknowns `z`, and those that are `x`.
+    z_columns: Vec<usize>,
+    x_columns: Vec<usize>,
+    /// `R_z`'s LU factor (column-major, packed) and its pivots; `R_zᵀ`'s likewise.
+    factor: Vec<f64>,
+    pivots: Vec<usize>,
+    factor_t: Vec<f64>,
+    pivots_t: Vec<usize>,
+    /// `Δ = dw/dx` (w × x) and `dp₂/dx = P Δ` (n_d × x).
+    tangent: DMatrix<f64>,
+    dp2: DMatrix<f64>,
+    column: Vec<f64>,
+    /// The point: `q₁`, `q₂` (all variables).
+    q1: Vec<f64>,
+    q2: Vec<f64>,
+    /// For the second derivatives, made on their first use.
+    duals: Option<DualJacobians>,
+}
+
+impl Linearisation {
+    fn new(shape: Shape) -> Self {
+        let (n, m, nd) = (shape.n, shape.m, shape.nd());
+        let (rows, w, x) = (shape.rows(), shape.w(), shape.x());
         let z_columns: Vec<usize> = (shape.dynamic.iter().map(|&i| shape.w_q2() + i))
             .chain((0..m).map(|s| shape.w_lambda() + s))
             .collect();
@@ -521,30 +582,142 @@ where
             .chain((0..shape.nu()).map(|k| shape.w_u1() + k))
             .chain(shape.kinematic.iter().map(|&k| shape.w_q2() + k))
             .collect();
-        let r_z = DMatrix::from_fn(nd + m, nd + m, |r, c| jac[(r, z_columns[c])]);
-        let r_x = DMatrix::from_fn(nd + m, x, |r, c| jac[(r, x_columns[c])]);
-        let dz = -r_z
-            .clone()
-            .lu()
-            .solve(&r_x)
-            .ok_or_else(|| singular(cx.index, cx.t))?;
-        // Δ: the identity on x's own coordinates, dz/dx on the unknowns.
-        let mut tangent = DMatrix::<f64>::zeros(w, x);
-        for (c, &col) in x_columns.iter().enumerate() {
-            tangent[(col, c)] = 1.0;
-        }
-        for (r, &col) in z_columns.iter().enumerate() {
-            tangent.set_row(col, &dz.row(r));
-        }
-        Ok(Linearised {
+        Linearisation {
+            lqq: vec![0.0; n * n],
+            lvq: vec![0.0; n * n],
+            mass: vec![0.0; n * n],
+            fq: vec![0.0; n * n],
+            fv: vec![0.0; n * n],
+            dh1: vec![0.0; m * n],
+            d2h1: vec![0.0; m * n * n],
+            dh2: vec![0.0; m * n],
+            lambda: vec![0.0; m],
+            c1: ConstraintTerms::zeros(m, n),
+            jac: vec![0.0; rows * w],
+            pjac: vec![0.0; nd * w],
+            z_columns,
+            x_columns,
+            factor: vec![0.0; rows * rows],
+            pivots: vec![0; rows],
+            factor_t: vec![0.0; rows * rows],
+            pivots_t: vec![0; rows],
+            tangent: DMatrix::zeros(w, x),
+            dp2: DMatrix::zeros(nd, x),
+            column: vec![0.0; rows],
+            q1: vec![0.0; n],
+            q2: vec![0.0; n],
+            duals: None,
             shape,
-            pjac,
-            tangent,
-            r_z,
-            q1: q1.iter().copied().collect(),
-            q2: q2.iter().copied().collect(),
-            lambda,
-        })
+        }
+    }
+
+    /// From the terms the step left (at its solution), the Jacobians, `R_z`'s factor, the
+    /// tangent `Δ` and `dp₂/dx` (docs/derivations.md §9).
+    fn solve(&mut self, step: usize, t: f64) -> Result<(), SimError> {
+        let sh = &self.shape;
+        let (rows, w, x, nd) = (sh.rows(), sh.w(), sh.x(), sh.nd());
+        let terms = StepTerms {
+            lqq: &self.lqq,
+            lvq: &self.lvq,
+            mass: &self.mass,
+            fq: &self.fq,
+            fv: &self.fv,
+            dh1: &self.dh1,
+            d2h1: &self.d2h1,
+            dh2: &self.dh2,
+            lambda: &self.lambda,
+        };
+        jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
+        // R_z and R_zᵀ, column-major, factored.
+        for (c, &zc) in self.z_columns.iter().enumerate() {
+            for r in 0..rows {
+                let v = self.jac[r * w + zc];
+                self.factor[c * rows + r] = v;
+                self.factor_t[r * rows + c] = v;
+            }
+        }
+        let singular = |_| singular(step, t);
+        lu_factor_packed(&mut self.factor, rows, &mut self.pivots).map_err(singular)?;
+        lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t).map_err(singular)?;
+        // Δ: the identity on x's own coordinates, dz/dx = −R_z⁻¹ R_x on the unknowns.
+        self.tangent.fill(0.0);
+        for (c, &xc) in self.x_columns.iter().enumerate() {
+            for r in 0..rows {
+                self.column[r] = -self.jac[r * w + xc];
+            }
+            lu_solve_packed(&self.factor, rows, &self.pivots, &mut self.column);
+            self.tangent[(xc, c)] = 1.0;
+            for (r, &zc) in self.z_columns.iter().enumerate() {
+                self.tangent[(zc, c)] = self.column[r];
+            }
+        }
+        // dp₂/dx = P Δ (P is zero on the p₁ and λ columns).
+        for r in 0..nd {
+            let prow = &self.pjac[r * w..(r + 1) * w];
+            for c in 0..x {
+                let col = self.tangent.column(c);
+                self.dp2[(r, c)] = (0..sh.w_p1())
+                    .chain(sh.w_u1()..sh.w_lambda())
+                    .map(|k| prow[k] * col[k])
+                    .sum();
+            }
+        }
+        Ok(())
+    }
+
+    /// The first-derivative blocks into `out` (resized only when its shape differs): `dq₂/dx`
+    /// from the tangent's `q₂` rows, `dλ/dx` from its `λ` rows, `dp₂/dx = P Δ`.
+    fn first_into(&self, out: &mut StepDerivatives) {
+        let sh = &self.shape;
+        let (nd, m) = (sh.nd(), sh.m);
+        use StepInput::*;
+        for b in [Q1, P1, U1, K2] {
+            let (c0, wc) = sh.x_block(b);
+            let fit = |mat: &mut DMatrix<f64>, rows: usize| {
+                if mat.shape() != (rows, wc) {
+                    *mat = DMatrix::zeros(rows, wc);
+                }
+            };
+            let (q2, p2, lambda) = match b {
+                Q1 => (&mut out.q2_dq1, &mut out.p2_dq1, &mut out.lambda_dq1),
+                P1 => (&mut out.q2_dp1, &mut out.p2_dp1, &mut out.lambda_dp1),
+                U1 => (&mut out.q2_du1, &mut out.p2_du1, &mut out.lambda_du1),
+                K2 => (&mut out.q2_dk2, &mut out.p2_dk2, &mut out.lambda_dk2),
+            };
+            fit(q2, nd);
+            fit(p2, nd);
+            fit(lambda, m);
+            for c in 0..wc {
+                for (r, &i) in sh.dynamic.iter().enumerate() {
+                    q2[(r, c)] = self.tangent[(sh.w_q2() + i, c0 + c)];
+                    p2[(r, c)] = self.dp2[(r, c0 + c)];
+                }
+                for s in 0..m {
+                    lambda[(s, c)] = self.tangent[(sh.w_lambda() + s, c0 + c)];
+                }
+            }
+        }
+    }
+}
+
+impl StepDerivatives {
+    /// Empty blocks (sized by the first [`MidpointVi::derivatives_into`]).
+    pub fn empty() -> Self {
+        let z = || DMatrix::zeros(0, 0);
+        StepDerivatives {
+            q2_dq1: z(),
+            q2_dp1: z(),
+            q2_du1: z(),
+            q2_dk2: z(),
+            p2_dq1: z(),
+            p2_dp1: z(),
+            p2_du1: z(),
+            p2_dk2: z(),
+            lambda_dq1: z(),
+            lambda_dp1: z(),
+            lambda_du1: z(),
+            lambda_dk2: z(),
+        }
     }
 }
 
@@ -557,105 +730,76 @@ fn singular(step: usize, t: f64) -> SimError {
     }
 }
 
-impl Linearised {
-    /// The first-derivative blocks: `dq₂/dx` from the tangent's `q₂` rows, `dλ/dx` from its
-    /// `λ` rows, `dp₂/dx = P Δ`.
-    fn first(&self) -> StepDerivatives {
-        let sh = &self.shape;
-        let dp2 = &self.pjac * &self.tangent;
-        let q2 = |b| {
-            let (c0, wc) = sh.x_block(b);
-            DMatrix::from_fn(sh.nd(), wc, |r, c| {
-                self.tangent[(sh.w_q2() + sh.dynamic[r], c0 + c)]
-            })
-        };
-        let p2 = |b| {
-            let (c0, wc) = sh.x_block(b);
-            dp2.view((0, c0), (sh.nd(), wc)).into_owned()
-        };
-        let lambda = |b| {
-            let (c0, wc) = sh.x_block(b);
-            self.tangent
-                .view((sh.w_lambda(), c0), (sh.m, wc))
-                .into_owned()
-        };
-        use StepInput::*;
-        StepDerivatives {
-            q2_dq1: q2(Q1),
-            q2_dp1: q2(P1),
-            q2_du1: q2(U1),
-            q2_dk2: q2(K2),
-            p2_dq1: p2(Q1),
-            p2_dp1: p2(P1),
-            p2_du1: p2(U1),
-            p2_dk2: p2(K2),
-            lambda_dq1: lambda(Q1),
-            lambda_dp1: lambda(P1),
-            lambda_du1: lambda(U1),
-            lambda_dk2: lambda(K2),
-        }
-    }
-}
-
 /// Scratch for the Jacobians over dual numbers along one tangent direction.
+#[derive(Clone, Debug)]
 struct DualJacobians {
     /// At the quadrature point (Full), at `q₁` (constraints, Full), at `q₂` (constraints).
     at_alpha: DualOutputs,
     at_q1: DualOutputs,
     at_q2: DualOutputs,
+    /// The seeded points and multipliers.
+    q_alpha: Vec<Dual>,
+    v: Vec<Dual>,
+    q1: Vec<Dual>,
+    q2: Vec<Dual>,
+    rest: Vec<Dual>,
+    lambda: Vec<Dual>,
+    /// `J`, `P` over duals (row-major): their `.d` are `D_j J`, `D_j P`.
     jac: Vec<Dual>,
     pjac: Vec<Dual>,
+    /// `c_j = μᵀ D_jJ + w_pᵀ D_jP` (length w).
+    adjoint: Vec<f64>,
 }
 
 impl DualJacobians {
-    fn new(sh: &Shape, n: usize, m: usize) -> Self {
+    fn new<S: System>(sh: &Shape, sys: &S) -> Self
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        let (n, m) = (sys.dof(), sys.constraint_count());
+        let zeros = |k| vec![Dual::default(); k];
         DualJacobians {
             at_alpha: DualOutputs::new(n, m),
             at_q1: DualOutputs::new(n, m),
             at_q2: DualOutputs::new(n, m),
-            jac: vec![Dual::default(); sh.rows() * sh.w()],
-            pjac: vec![Dual::default(); sh.nd() * sh.w()],
+            q_alpha: zeros(n),
+            v: zeros(n),
+            q1: zeros(n),
+            q2: zeros(n),
+            rest: zeros(n),
+            lambda: zeros(m),
+            jac: zeros(sh.rows() * sh.w()),
+            pjac: zeros(sh.nd() * sh.w()),
+            adjoint: vec![0.0; sh.w()],
         }
     }
 
-    /// `(D_j J, D_j P)`: the Jacobians' derivatives along the tangent's column `j`.
-    fn along<S: System>(
-        &mut self,
-        sys: &mut S,
-        lin: &Linearised,
-        j: usize,
-    ) -> (DMatrix<f64>, DMatrix<f64>)
+    /// The Jacobians over duals along the tangent's column `j` (`D_j J`, `D_j P` in `.d`):
+    /// the quadrature point moves by `δq_α = (1−α)δq₁ + αδq₂`, `δv = (δq₂ − δq₁)/Δt`.
+    fn along<S: System>(&mut self, sys: &mut S, lin: &Linearisation, j: usize)
     where
         DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
     {
         let sh = &lin.shape;
-        let (n, m, w) = (sh.n, sh.m, sh.w());
+        let (n, m) = (sh.n, sh.m);
         let (a, dt) = (sh.ld.alpha, sh.ld.dt);
         let dir = lin.tangent.column(j);
-        let (dq1, dq2) = (dir.rows(0, n), dir.rows(sh.w_q2(), n));
-        // The quadrature point and its motion along the direction.
-        let q_alpha: Vec<Dual> = (0..n)
-            .map(|i| {
-                Dual::new(
-                    lin.q1[i] + a * (lin.q2[i] - lin.q1[i]),
-                    (1.0 - a) * dq1[i] + a * dq2[i],
-                )
-            })
-            .collect();
-        let v: Vec<Dual> = (0..n)
-            .map(|i| Dual::new((lin.q2[i] - lin.q1[i]) / dt, (dq2[i] - dq1[i]) / dt))
-            .collect();
-        sys.evaluate_dual(&q_alpha, &v, Order::Full, &mut self.at_alpha);
-        let rest = vec![Dual::default(); n];
-        if m > 0 {
-            let q1: Vec<Dual> = (0..n).map(|i| Dual::new(lin.q1[i], dq1[i])).collect();
-            let q2: Vec<Dual> = (0..n).map(|i| Dual::new(lin.q2[i], dq2[i])).collect();
-            sys.evaluate_dual(&q1, &rest, Order::Full, &mut self.at_q1);
-            sys.evaluate_dual(&q2, &rest, Order::First, &mut self.at_q2);
+        for i in 0..n {
+            let (d1, d2) = (dir[i], dir[sh.w_q2() + i]);
+            let (x1, x2) = (lin.q1[i], lin.q2[i]);
+            self.q_alpha[i] = Dual::new(x1 + a * (x2 - x1), (1.0 - a) * d1 + a * d2);
+            self.v[i] = Dual::new((x2 - x1) / dt, (d2 - d1) / dt);
+            self.q1[i] = Dual::new(x1, d1);
+            self.q2[i] = Dual::new(x2, d2);
         }
-        let lambda: Vec<Dual> = (0..m)
-            .map(|s| Dual::new(lin.lambda[s], dir[sh.w_lambda() + s]))
-            .collect();
+        sys.evaluate_dual(&self.q_alpha, &self.v, Order::Full, &mut self.at_alpha);
+        if m > 0 {
+            sys.evaluate_dual(&self.q1, &self.rest, Order::Full, &mut self.at_q1);
+            sys.evaluate_dual(&self.q2, &self.rest, Order::First, &mut self.at_q2);
+        }
+        for s in 0..m {
+            self.lambda[s] = Dual::new(lin.lambda[s], dir[sh.w_lambda() + s]);
+        }
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
         let terms = StepTerms {
             lqq: t.field(Field::D2lDqDq),
@@ -666,12 +810,55 @@ impl DualJacobians {
             dh1: c1.field(Field::Dh),
             d2h1: c1.field(Field::D2h),
             dh2: c2.field(Field::Dh),
-            lambda: &lambda,
+            lambda: &self.lambda,
         };
         jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
-        (
-            DMatrix::from_fn(sh.rows(), w, |r, c| self.jac[r * w + c].d),
-            DMatrix::from_fn(sh.nd(), w, |r, c| self.pjac[r * w + c].d),
-        )
+    }
+
+    /// `out = (D_j J) δ`.
+    fn times(&self, delta: DVectorView<f64>, out: &mut [f64]) {
+        let w = delta.len();
+        for (r, o) in out.iter_mut().enumerate() {
+            *o = self.jac[r * w..(r + 1) * w]
+                .iter()
+                .zip(delta.iter())
+                .map(|(x, d)| x.d * d)
+                .sum();
+        }
+    }
+
+    /// `((D_j P) δ)_r`.
+    fn p_times(&self, r: usize, delta: DVectorView<f64>) -> f64 {
+        let w = delta.len();
+        self.pjac[r * w..(r + 1) * w]
+            .iter()
+            .zip(delta.iter())
+            .map(|(x, d)| x.d * d)
+            .sum()
+    }
+
+    /// `c_j = μᵀ D_jJ + w_pᵀ D_jP`.
+    fn adjoint(&mut self, mu: &[f64], wp: &[f64]) {
+        let w = self.adjoint.len();
+        self.adjoint.fill(0.0);
+        for (r, &m) in mu.iter().enumerate() {
+            for (c, x) in self.jac[r * w..(r + 1) * w].iter().enumerate() {
+                self.adjoint[c] += m * x.d;
+            }
+        }
+        for (r, &p) in wp.iter().enumerate() {
+            for (c, x) in self.pjac[r * w..(r + 1) * w].iter().enumerate() {
+                self.adjoint[c] += p * x.d;
+            }
+        }
+    }
+
+    /// `c_j · δ`.
+    fn dot_adjoint(&self, delta: DVectorView<f64>) -> f64 {
+        self.adjoint
+            .iter()
+            .zip(delta.iter())
+            .map(|(c, d)| c * d)
+            .sum()
     }
 }
