@@ -1,12 +1,16 @@
 //! The marionette (models/marionette.toml, 42 variables, six strings) and trep's own Puppet
 //! (tools/reference/trep-puppet.toml, 40 variables, six strings): 10 s at Δt = 0.01 with the
 //! VI and with RK4, compiled by `tree_model!` and interpreted, side by side in one run (best of
-//! 7 runs each). Prints a Markdown table. Run: `cargo bench --bench marionette`.
+//! 7 runs each). Then one VI step, the step with its first derivatives, and the contracted
+//! second derivatives, on both and on the N-link pendulum (interpreted) as N grows. Prints
+//! Markdown tables. Run: `cargo bench --bench marionette`.
 
 use std::time::Instant;
 
-use tree_mech::integrate::{run, Method, SimOptions, ViSettings};
-use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
+use tree_mech::integrate::{
+    run, Method, MidpointVi, SimOptions, StepContext, StepCovector, StepDerivatives, ViSettings,
+};
+use tree_mech::nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{tree_model, NoForce, System, TreeSystem};
 
@@ -45,6 +49,82 @@ fn main() {
     println!("|---|---:|---:|---:|---:|---:|---:|");
     rows("marionette", &mut Marionette, &Marionette::model());
     rows("trep's Puppet", &mut TrepPuppet, &TrepPuppet::model());
+    println!();
+    println!("| one VI step at the start (Δt = 0.01) | step [µs] | step + first derivatives [µs] | contracted second derivatives [µs] |");
+    println!("|---|---:|---:|---:|");
+    let row = |name: &str, [a, b, c]: [f64; 3]| println!("| {name} | {a:.1} | {b:.1} | {c:.1} |");
+    row("marionette, compiled", derivatives(&mut Marionette));
+    row(
+        "marionette, interpreted",
+        derivatives(&mut TreeSystem::new(&Marionette::model()).unwrap()),
+    );
+    row("trep's Puppet, compiled", derivatives(&mut TrepPuppet));
+    row(
+        "trep's Puppet, interpreted",
+        derivatives(&mut TreeSystem::new(&TrepPuppet::model()).unwrap()),
+    );
+    for n in [2, 4, 8, 16, 32] {
+        let model = tree_mech::model::n_link_pendulum(n);
+        row(
+            &format!("{n}-link pendulum, interpreted"),
+            derivatives(&mut TreeSystem::new(&model).unwrap()),
+        );
+    }
+}
+
+/// Best mean µs of `f` over 5 batches of `calls`.
+fn time_us(calls: usize, mut f: impl FnMut()) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..5 {
+        let start = Instant::now();
+        for _ in 0..calls {
+            f();
+        }
+        best = best.min(start.elapsed().as_secs_f64() * 1e6 / calls as f64);
+    }
+    best
+}
+
+/// `[step, step + first derivatives, contracted second derivatives]` in µs, from the
+/// model's start.
+fn derivatives<S: System>(sys: &mut S) -> [f64; 3]
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (q, dq) = sys.initial_state();
+    let mut vi = MidpointVi::new(sys, ViSettings::default());
+    let p = vi.initial_momentum(sys, &q, &dq);
+    let (mut q2, mut p2, mut next) = (q.clone(), p.clone(), q.clone());
+    let mut motion = ModelMotions::of(sys);
+    let mut first = StepDerivatives::empty();
+    let mut hessian = DMatrix::zeros(0, 0);
+    let nd = vi.split.dynamic.len();
+    let w = StepCovector {
+        q2: DVector::from_element(nd, 1.0),
+        p2: DVector::from_element(nd, 0.5),
+        lambda: DVector::from_element(sys.constraint_count(), 0.1),
+    };
+    let mut go = |sys: &mut S, with: u8| {
+        q2.copy_from(&q);
+        p2.copy_from(&p);
+        vi.last_velocity.copy_from(&dq);
+        let mut force = NoForce;
+        let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.01);
+        vi.step(&mut cx, &mut q2, &mut p2, &mut next)
+            .expect("the step converges");
+        if with >= 1 {
+            vi.derivatives_into(&mut cx, &q, &p, &q2, &mut first)
+                .expect("the step's derivatives");
+        }
+        if with >= 2 {
+            vi.contracted_second_derivatives(&mut cx, &q, &p, &q2, &w, &mut hessian)
+                .expect("the contraction");
+        }
+    };
+    let step = time_us(200, || go(sys, 0));
+    let with_first = time_us(200, || go(sys, 1));
+    let with_second = time_us(20, || go(sys, 2));
+    [step, with_first, with_second - with_first]
 }
 
 /// The VI and RK4 rows for one model, compiled (`sys`) and interpreted (from `model`).

@@ -160,10 +160,12 @@ impl DualOutputs {
     }
 
     /// Every entry of `field`, dense and row-major (`D2h` row after row).
+    #[inline]
     pub fn field(&self, field: Field) -> &[Dual] {
         &self.fields[field as usize]
     }
 
+    #[inline(always)]
     fn offset(&self, field: Field, index: Index) -> usize {
         let n = self.n;
         match (field, index) {
@@ -176,6 +178,7 @@ impl DualOutputs {
     }
 
     /// Output `at`.
+    #[inline]
     pub fn get(&self, at: Output) -> Dual {
         let (field, index) = at.slot();
         self.fields[field as usize][self.offset(field, index)]
@@ -183,6 +186,7 @@ impl DualOutputs {
 }
 
 impl Sink<Dual> for DualOutputs {
+    #[inline]
     fn add(&mut self, at: Output, x: Dual) {
         let (field, index) = at.slot();
         let o = self.offset(field, index);

@@ -115,6 +115,7 @@ pub enum Index {
 
 impl Output {
     /// The field and index this output is stored at.
+    #[inline(always)]
     pub fn slot(self) -> (Field, Index) {
         use Index::{Entry, Pair, Scalar, Stacked};
         match self {

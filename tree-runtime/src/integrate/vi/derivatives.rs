@@ -420,6 +420,7 @@ where
         F: GeneralizedForce<N>,
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
+        lin.factor_transposed(cx.index, cx.t)?;
         let sh = &lin.shape;
         let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
         // μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p), w_z = (w_q, w_λ).
@@ -559,6 +560,8 @@ pub(crate) struct Linearisation {
     pivots: Vec<usize>,
     factor_t: Vec<f64>,
     pivots_t: Vec<usize>,
+    /// Whether `factor_t` holds this linearisation's `R_zᵀ`.
+    transposed: bool,
     /// `Δ = dw/dx` (w × x) and `dp₂/dx = P Δ` (n_d × x).
     tangent: DMatrix<f64>,
     dp2: DMatrix<f64>,
@@ -601,6 +604,7 @@ impl Linearisation {
             pivots: vec![0; rows],
             factor_t: vec![0.0; rows * rows],
             pivots_t: vec![0; rows],
+            transposed: false,
             tangent: DMatrix::zeros(w, x),
             dp2: DMatrix::zeros(nd, x),
             column: vec![0.0; rows],
@@ -628,17 +632,15 @@ impl Linearisation {
             lambda: &self.lambda,
         };
         jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
-        // R_z and R_zᵀ, column-major, factored.
+        // R_z, column-major, factored (R_zᵀ only when a contraction asks for it).
         for (c, &zc) in self.z_columns.iter().enumerate() {
             for r in 0..rows {
-                let v = self.jac[r * w + zc];
-                self.factor[c * rows + r] = v;
-                self.factor_t[r * rows + c] = v;
+                self.factor[c * rows + r] = self.jac[r * w + zc];
             }
         }
-        let singular = |_| singular(step, t);
-        lu_factor_packed(&mut self.factor, rows, &mut self.pivots).map_err(singular)?;
-        lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t).map_err(singular)?;
+        self.transposed = false;
+        lu_factor_packed(&mut self.factor, rows, &mut self.pivots)
+            .map_err(|_| singular(step, t))?;
         // Δ: the identity on x's own coordinates, dz/dx = −R_z⁻¹ R_x on the unknowns.
         self.tangent.fill(0.0);
         for (c, &xc) in self.x_columns.iter().enumerate() {
@@ -651,17 +653,35 @@ impl Linearisation {
                 self.tangent[(zc, c)] = self.column[r];
             }
         }
-        // dp₂/dx = P Δ (P is zero on the p₁ and λ columns).
+        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z).
         for r in 0..nd {
             let prow = &self.pjac[r * w..(r + 1) * w];
-            for c in 0..x {
-                let col = self.tangent.column(c);
-                self.dp2[(r, c)] = (0..sh.w_p1())
-                    .chain(sh.w_u1()..sh.w_lambda())
-                    .map(|k| prow[k] * col[k])
-                    .sum();
+            for (c, &xc) in self.x_columns.iter().enumerate() {
+                let mut v = prow[xc];
+                for &zc in &self.z_columns[..nd] {
+                    v += prow[zc] * self.tangent[(zc, c)];
+                }
+                self.dp2[(r, c)] = v;
             }
         }
+        let _ = x;
+        Ok(())
+    }
+
+    /// `R_zᵀ`'s factor, for the adjoint of a contraction (made once per linearisation).
+    fn factor_transposed(&mut self, step: usize, t: f64) -> Result<(), SimError> {
+        if self.transposed {
+            return Ok(());
+        }
+        let (rows, w) = (self.shape.rows(), self.shape.w());
+        for (c, &zc) in self.z_columns.iter().enumerate() {
+            for r in 0..rows {
+                self.factor_t[r * rows + c] = self.jac[r * w + zc];
+            }
+        }
+        lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t)
+            .map_err(|_| singular(step, t))?;
+        self.transposed = true;
         Ok(())
     }
 
