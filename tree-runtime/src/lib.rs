@@ -47,6 +47,8 @@ pub mod sweeps;
 #[cfg(feature = "simulate")]
 pub mod context;
 #[cfg(feature = "simulate")]
+pub mod control;
+#[cfg(feature = "simulate")]
 pub mod dynamics;
 #[cfg(feature = "simulate")]
 pub mod error;

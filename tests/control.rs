@@ -1,0 +1,224 @@
+//! Optimal control (runtime::control): DARE against the scalar Riccati equation's root and
+//! its residual; iLQR on a linear-quadratic problem (a spring-mass pushed by an input, whose
+//! VI step is linear) converging in one iteration to the time-varying LQR; iLQR and DDP on
+//! the cart-pole with limits: cost never increasing, limits held, compiled ≡ interpreted.
+
+use tree_mech::integrate::{Forcing, ViSettings};
+use tree_mech::model;
+use tree_mech::nalgebra::{DMatrix, DVector};
+use tree_mech::runtime::control::{
+    dare, solve, tvlqr, IlqrSettings, QuadraticCost, Solver, ViDynamics,
+};
+use tree_mech::{tree_model, System, TreeSystem};
+
+tree_model!(struct Cart from "tests/models/cart.toml");
+
+#[test]
+fn dare_matches_the_scalar_riccati_root_and_solves_the_equation() {
+    let (a, b, q, r) = (1.1, 0.5, 2.0, 1.0);
+    let m = |x: f64| DMatrix::from_element(1, 1, x);
+    let lqr = dare(&m(a), &m(b), &m(q), &m(r)).unwrap();
+    // b²P² + (r − q b² − a² r) P − q r = 0, the positive root.
+    let (qa, qb, qc) = (b * b, r - q * b * b - a * a * r, -q * r);
+    let p = (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa);
+    assert!(
+        (lqr.p[(0, 0)] - p).abs() < 1e-10 * p,
+        "{} vs {p}",
+        lqr.p[(0, 0)]
+    );
+    let k = a * b * p / (r + b * b * p);
+    assert!((lqr.k[(0, 0)] - k).abs() < 1e-10 * k);
+    // A double integrator: the equation holds and the loop is stable.
+    let dt = 0.1;
+    let a = DMatrix::from_row_slice(2, 2, &[1.0, dt, 0.0, 1.0]);
+    let b = DMatrix::from_row_slice(2, 1, &[0.5 * dt * dt, dt]);
+    let (q, r) = (DMatrix::identity(2, 2), DMatrix::identity(1, 1) * 0.1);
+    let lqr = dare(&a, &b, &q, &r).unwrap();
+    let p = &lqr.p;
+    let s = &r + b.transpose() * p * &b;
+    let residual = &q + a.transpose() * p * &a
+        - a.transpose() * p * &b * s.try_inverse().unwrap() * b.transpose() * p * &a
+        - p;
+    assert!(residual.amax() < 1e-9 * p.amax(), "{residual}");
+    let closed = &a - &b * &lqr.k;
+    let radius = closed
+        .complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, f64::max);
+    assert!(radius < 1.0, "closed loop radius {radius}");
+    // Not stabilisable: an unstable mode the input cannot reach.
+    let a = DMatrix::from_row_slice(2, 2, &[2.0, 0.0, 0.0, 0.5]);
+    let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+    let err = dare(&a, &b, &q, &r).unwrap_err().to_string();
+    assert!(err.contains("cannot be stabilised"), "{err}");
+}
+
+const SPRING: &str = r#"
+name = "spring-mass"
+gravity = [0.0, 0.0, 0.0]
+[[frame]]
+name = "mass"
+tx = "x"
+mass = 2.0
+[variables.x]
+q0 = 1.0
+[[spring]]
+variable = "x"
+stiffness = 4.0
+rest = 0.0
+[[input]]
+name = "push"
+variable = "x"
+"#;
+
+#[test]
+fn ilqr_solves_a_linear_quadratic_problem_in_one_iteration_as_the_riccati_recursion() {
+    let m = model::from_toml_str(SPRING, None).unwrap();
+    let sys = TreeSystem::new(&m).unwrap();
+    let (dt, knots) = (0.05, 40);
+    let settings = ViSettings {
+        forcing: Forcing::Left,
+        tolerance: 1e-14,
+        ..ViSettings::default()
+    };
+    let mut dynamics = ViDynamics::new(sys, settings, dt, 0.0);
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0);
+    let cost = QuadraticCost {
+        dt,
+        x_ref: DVector::zeros(2),
+        x_weight: DVector::from_vec(vec![1.0, 0.5]),
+        u_ref: DVector::zeros(1),
+        u_weight: DVector::from_vec(vec![0.2]),
+        terminal_ref: DVector::zeros(2),
+        terminal_weight: DVector::from_vec(vec![10.0, 10.0]),
+    };
+    let options = IlqrSettings {
+        mu: 0.0,
+        ..IlqrSettings::default()
+    };
+    let u0 = vec![DVector::zeros(1); knots];
+    let sol = solve(&mut dynamics, &cost, &x0, u0, &options).unwrap();
+    assert!(sol.converged);
+    // The first accepted iteration reached the optimum: a full step, and nothing after.
+    assert_eq!(sol.history[0].step, 1.0);
+    let optimum = sol.history[0].cost;
+    assert!(
+        (sol.cost - optimum).abs() <= 1e-10 * optimum,
+        "{} vs {optimum}",
+        sol.cost
+    );
+    // The gains are the time-varying LQR's on the (constant) linear step.
+    let (mut a, mut b) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 1));
+    let mut x2 = [0.0; 2];
+    dynamics
+        .step(0, x0.as_slice(), &[0.0], &mut x2, Some((&mut a, &mut b)))
+        .unwrap();
+    let q = DMatrix::from_diagonal(&(&cost.x_weight * dt));
+    let r = DMatrix::from_diagonal(&(&cost.u_weight * dt));
+    let qf = DMatrix::from_diagonal(&cost.terminal_weight);
+    let reference = tvlqr(&vec![a; knots], &vec![b; knots], &q, &r, &qf).unwrap();
+    for (k, lqr) in reference.iter().enumerate() {
+        let ours = -&sol.gains[k];
+        assert!(
+            (&ours - &lqr.k).amax() < 1e-8 * lqr.k.amax().max(1.0),
+            "knot {k}: {ours} vs {}",
+            lqr.k
+        );
+    }
+    // The optimal controls obey u_k = −K_k x_k along the plan.
+    for k in 0..knots {
+        let u = -(&reference[k].k * &sol.x[k])[0];
+        assert!(
+            (u - sol.u[k][0]).abs() < 1e-8,
+            "knot {k}: {} vs {u}",
+            sol.u[k][0]
+        );
+    }
+}
+
+/// The cart pushed to x = 0.5, pendulum down, within [−2, 2] N.
+fn cart_problem<S: System>(sys: S, solver: Solver) -> tree_mech::runtime::control::Solution
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let (dt, knots) = (0.02, 60);
+    let mut dynamics = ViDynamics::new(sys, ViSettings::default(), dt, 0.0);
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0);
+    let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0]);
+    let cost = QuadraticCost {
+        dt,
+        x_ref: target.clone(),
+        x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1]),
+        u_ref: DVector::zeros(1),
+        u_weight: DVector::from_vec(vec![1e-3]),
+        terminal_ref: target,
+        terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0]),
+    };
+    let options = IlqrSettings {
+        solver,
+        limits: Some((DVector::from_vec(vec![-2.0]), DVector::from_vec(vec![2.0]))),
+        max_iterations: 60,
+        ..IlqrSettings::default()
+    };
+    let u0 = vec![DVector::zeros(1); knots];
+    solve(&mut dynamics, &cost, &x0, u0, &options).unwrap()
+}
+
+#[test]
+fn ilqr_and_ddp_lower_the_cost_every_iteration_within_the_limits() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/cart.toml");
+    let m = model::from_toml_file(path).unwrap();
+    for solver in [Solver::Ilqr, Solver::Ddp] {
+        let sol = cart_problem(TreeSystem::new(&m).unwrap(), solver);
+        let mut last = f64::INFINITY;
+        for it in &sol.history {
+            assert!(
+                it.cost <= last,
+                "{solver:?}: cost rose to {} from {last}",
+                it.cost
+            );
+            last = it.cost;
+        }
+        assert!(sol.history.len() > 1 && sol.history[0].cost > sol.cost);
+        let mut at_limit = 0;
+        for u in &sol.u {
+            assert!(
+                u[0].abs() <= 2.0 + 1e-12,
+                "{solver:?}: {} out of [−2, 2]",
+                u[0]
+            );
+            at_limit += (u[0].abs() > 2.0 - 1e-9) as usize;
+        }
+        assert!(
+            at_limit > 0,
+            "{solver:?}: the limits never bind, the test would not see them"
+        );
+        let end = sol.x.last().unwrap();
+        assert!(
+            (end[0] - 0.5).abs() < 0.05,
+            "{solver:?}: the cart ends at {}",
+            end[0]
+        );
+        eprintln!(
+            "{solver:?}: {} iterations, cost {:.6}, converged {}",
+            sol.history.len(),
+            sol.cost,
+            sol.converged
+        );
+    }
+}
+
+#[test]
+fn compiled_and_interpreted_iterates_agree() {
+    let a = cart_problem(Cart, Solver::Ilqr);
+    let b = cart_problem(TreeSystem::new(&Cart::model()).unwrap(), Solver::Ilqr);
+    assert_eq!(a.history.len(), b.history.len());
+    for (x, y) in a.u.iter().zip(&b.u) {
+        assert!((x - y).amax() < 1e-9, "{x} vs {y}");
+    }
+    assert!((a.cost - b.cost).abs() < 1e-9 * a.cost);
+}

@@ -1,0 +1,101 @@
+//! Costs: `Σ_{k<N} Δt ℓ(x_k, u_k) + ℓ_N(x_N)`, each term `½ w |r|²` with per-entry weights.
+//! A [`Cost`] gives the value and, when asked, its gradient and (Gauss–Newton) Hessian.
+
+use nalgebra::{DMatrix, DVector};
+
+/// `ℓ_x`, `ℓ_u`, `ℓ_xx`, `ℓ_uu`, `ℓ_ux` of one term.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Derivatives {
+    /// ℓ_x.
+    pub lx: DVector<f64>,
+    /// ℓ_u.
+    pub lu: DVector<f64>,
+    /// ℓ_xx.
+    pub lxx: DMatrix<f64>,
+    /// ℓ_uu.
+    pub luu: DMatrix<f64>,
+    /// ℓ_ux (controls × states).
+    pub lux: DMatrix<f64>,
+}
+
+impl Derivatives {
+    /// Zeros for `nx` states and `nu` controls.
+    pub fn zeros(nx: usize, nu: usize) -> Self {
+        Derivatives {
+            lx: DVector::zeros(nx),
+            lu: DVector::zeros(nu),
+            lxx: DMatrix::zeros(nx, nx),
+            luu: DMatrix::zeros(nu, nu),
+            lux: DMatrix::zeros(nu, nx),
+        }
+    }
+}
+
+/// A cost over a horizon: user costs implement this with their derivatives.
+pub trait Cost {
+    /// The running term at knot `k` (Δt included); with `d`, its derivatives (overwritten).
+    fn running(
+        &self,
+        k: usize,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        d: Option<&mut Derivatives>,
+    ) -> f64;
+
+    /// The terminal term; with `d`, `ℓ_x` and `ℓ_xx` (the control parts zero).
+    fn terminal(&self, x: &DVector<f64>, d: Option<&mut Derivatives>) -> f64;
+}
+
+/// `Δt Σ_k ½(x − x_ref)ᵀ W_x (x − x_ref) + ½(u − u_ref)ᵀ W_u (u − u_ref)` and
+/// `½(x − x_ref)ᵀ W_N (x − x_ref)` at the end, with diagonal weights; on the VI's state
+/// `x = (q_d, p_d)` and the inputs (`u_ref` for example the gravity compensation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct QuadraticCost {
+    /// The step length weighting the running terms.
+    pub dt: f64,
+    /// The running state reference.
+    pub x_ref: DVector<f64>,
+    /// Its per-entry weights.
+    pub x_weight: DVector<f64>,
+    /// The control reference.
+    pub u_ref: DVector<f64>,
+    /// Its per-entry weights.
+    pub u_weight: DVector<f64>,
+    /// The terminal state reference.
+    pub terminal_ref: DVector<f64>,
+    /// Its per-entry weights.
+    pub terminal_weight: DVector<f64>,
+}
+
+fn quadratic(r: &DVector<f64>, w: &DVector<f64>) -> f64 {
+    0.5 * r.iter().zip(w.iter()).map(|(r, w)| w * r * r).sum::<f64>()
+}
+
+impl Cost for QuadraticCost {
+    fn running(
+        &self,
+        _k: usize,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        d: Option<&mut Derivatives>,
+    ) -> f64 {
+        let (rx, ru) = (x - &self.x_ref, u - &self.u_ref);
+        if let Some(d) = d {
+            d.lx = rx.component_mul(&self.x_weight) * self.dt;
+            d.lu = ru.component_mul(&self.u_weight) * self.dt;
+            d.lxx = DMatrix::from_diagonal(&(&self.x_weight * self.dt));
+            d.luu = DMatrix::from_diagonal(&(&self.u_weight * self.dt));
+            d.lux.fill(0.0);
+        }
+        self.dt * (quadratic(&rx, &self.x_weight) + quadratic(&ru, &self.u_weight))
+    }
+
+    fn terminal(&self, x: &DVector<f64>, d: Option<&mut Derivatives>) -> f64 {
+        let r = x - &self.terminal_ref;
+        if let Some(d) = d {
+            d.lx = r.component_mul(&self.terminal_weight);
+            d.lxx = DMatrix::from_diagonal(&self.terminal_weight);
+        }
+        quadratic(&r, &self.terminal_weight)
+    }
+}
