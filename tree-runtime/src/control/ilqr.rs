@@ -233,6 +233,39 @@ where
     })
 }
 
+/// The total cost of the controls `u` from `x0` and its exact gradient with respect to every
+/// `u_k`, by the adjoint recursion `λ_N = ℓ_N,x`, `λ_k = ℓ_x + A_kᵀλ_{k+1}`,
+/// `∂J/∂u_k = ℓ_u + B_kᵀλ_{k+1}` on the rollout (docs/derivations.md §10).
+pub fn cost_gradient<S: System>(
+    dynamics: &mut ViDynamics<S>,
+    cost: &dyn Cost,
+    x0: &DVector<f64>,
+    u: &[DVector<f64>],
+) -> Result<(f64, Vec<DVector<f64>>), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
+    let mut knots = Knots {
+        a: vec![DMatrix::zeros(nx, nx); n],
+        b: vec![DMatrix::zeros(nx, nu); n],
+        k: Vec::new(),
+        gain: Vec::new(),
+    };
+    let mut x = vec![x0.clone(); n + 1];
+    let total = rollout(dynamics, cost, &mut x, u, Some(&mut knots))?;
+    let mut d = super::cost::Derivatives::zeros(nx, nu);
+    cost.terminal(&x[n], Some(&mut d));
+    let mut adjoint = d.lx.clone();
+    let mut gradient = vec![DVector::zeros(nu); n];
+    for k in (0..n).rev() {
+        cost.running(k, &x[k], &u[k], Some(&mut d));
+        gradient[k] = &d.lu + knots.b[k].tr_mul(&adjoint);
+        adjoint = &d.lx + knots.a[k].tr_mul(&adjoint);
+    }
+    Ok((total, gradient))
+}
+
 /// Rolls `u` out from `x[0]` (filling `x`), returns the total cost; with `knots`, also each
 /// step's `A`, `B`.
 fn rollout<S: System>(

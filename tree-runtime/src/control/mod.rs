@@ -10,6 +10,6 @@ pub mod lqr;
 pub mod vi_dynamics;
 
 pub use cost::{Cost, Derivatives, QuadraticCost};
-pub use ilqr::{solve, IlqrSettings, Iteration, Solution, Solver};
+pub use ilqr::{cost_gradient, solve, IlqrSettings, Iteration, Solution, Solver};
 pub use lqr::{dare, tvlqr, Lqr};
 pub use vi_dynamics::ViDynamics;
