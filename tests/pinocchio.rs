@@ -9,6 +9,9 @@
 //! potential energy leaves out bodies welded to the ground, so potentials are compared
 //! relative to the first state.
 
+mod common;
+
+use common::numbers;
 use nalgebra::{allocator::Allocator, DefaultAllocator};
 use serde_json::Value;
 use tree_mech::integrate::StepContext;
@@ -45,14 +48,6 @@ fn fixture(name: &str) -> Fixture {
             .collect(),
         states: v["states"].as_array().unwrap().clone(),
     }
-}
-
-fn numbers(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
 }
 
 /// `|a − b| ≤ tol · scale` with the scale of the quantity compared.

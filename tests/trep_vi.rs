@@ -10,6 +10,9 @@
 //! fixture's `h_dq` and our `Dh` at q₁. Both solvers converge to rounding here, and the two
 //! agree to ~1e-15 (asserted to 1e-12).
 
+mod common;
+
+use common::numbers;
 use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator};
 use serde_json::Value;
 use tree_mech::integrate::{Forcing, MidpointVi, StepContext, StepInput, StepOutput, ViSettings};
@@ -24,14 +27,6 @@ fn fixture() -> Value {
         "/tests/fixtures/trep-vi-derivatives.json"
     );
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn numbers(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
 }
 
 fn matrix(v: &Value) -> DMatrix<f64> {

@@ -161,32 +161,37 @@ fn tight(alpha: f64, forcing: Forcing) -> ViSettings {
     }
 }
 
-#[test]
-fn vi_step_derivatives_match_finite_differences() {
+/// Every model and setting the derivative checks run on: constraints, kinematic inputs,
+/// damping, dampers, springs and inputs; both forcings, α = ½ and α ≠ ½.
+fn cases() -> Vec<(Model, ViSettings, String)> {
     let root = env!("CARGO_MANIFEST_DIR");
-    let elements = model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap();
-    let cart = model::from_toml_file(format!("{root}/tests/models/cart.toml")).unwrap();
-    let string =
-        model::from_toml_file(format!("{root}/tests/models/string-pendulum.toml")).unwrap();
+    let file = |name: &str| model::from_toml_file(format!("{root}/tests/models/{name}")).unwrap();
     let mut damped = common::load("double-pendulum.toml");
     damped.variables[0].damping = 0.4;
-    for (model, name) in [
-        (&elements, "elements"),
-        (&cart, "cart"),
-        (&string, "string pendulum"),
-        (&damped, "damped double pendulum"),
-    ] {
+    let models = [
+        (file("elements.toml"), "elements"),
+        (file("cart.toml"), "cart"),
+        (file("string-pendulum.toml"), "string pendulum"),
+        (damped, "damped double pendulum"),
+    ];
+    let mut out = Vec::new();
+    for (model, name) in models {
         for (alpha, forcing) in [
             (0.5, Forcing::Split),
             (0.5, Forcing::Left),
             (0.3, Forcing::Split),
         ] {
-            check(
-                model,
-                tight(alpha, forcing),
-                &format!("{name}, α {alpha}, {forcing:?}"),
-            );
+            let what = format!("{name}, α {alpha}, {forcing:?}");
+            out.push((model.clone(), tight(alpha, forcing), what));
         }
+    }
+    out
+}
+
+#[test]
+fn vi_step_derivatives_match_finite_differences() {
+    for (model, settings, what) in cases() {
+        check(&model, settings, &what);
     }
 }
 
@@ -382,30 +387,8 @@ fn check_second(model: &Model, settings: ViSettings, what: &str) {
 
 #[test]
 fn vi_step_second_derivatives_match_finite_differences() {
-    let root = env!("CARGO_MANIFEST_DIR");
-    let elements = model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap();
-    let cart = model::from_toml_file(format!("{root}/tests/models/cart.toml")).unwrap();
-    let string =
-        model::from_toml_file(format!("{root}/tests/models/string-pendulum.toml")).unwrap();
-    let mut damped = common::load("double-pendulum.toml");
-    damped.variables[0].damping = 0.4;
-    for (model, name) in [
-        (&elements, "elements"),
-        (&cart, "cart"),
-        (&string, "string pendulum"),
-        (&damped, "damped double pendulum"),
-    ] {
-        for (alpha, forcing) in [
-            (0.5, Forcing::Split),
-            (0.5, Forcing::Left),
-            (0.3, Forcing::Split),
-        ] {
-            check_second(
-                model,
-                tight(alpha, forcing),
-                &format!("{name}, α {alpha}, {forcing:?}"),
-            );
-        }
+    for (model, settings, what) in cases() {
+        check_second(&model, settings, &what);
     }
 }
 

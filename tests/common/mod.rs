@@ -72,3 +72,12 @@ where
     let (q0, dq0) = sys.initial_state();
     simulate(sys, &q0, &dq0, options, &mut NoForce, &mut |_| {}).unwrap()
 }
+
+/// A JSON array of numbers (a fixture's vector).
+pub fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
