@@ -324,3 +324,62 @@ fn lqr_holds_the_cartpole_upright_from_a_push() {
         "without control the pole falls: {open}"
     );
 }
+
+/// Problems that do not fit the system are refused with a sentence, never a panic.
+#[test]
+fn mismatched_problems_are_refused_with_a_sentence() {
+    let m = model::from_toml_str(SPRING, None).unwrap();
+    let mut dynamics = ViDynamics::new(
+        TreeSystem::new(&m).unwrap(),
+        ViSettings::default(),
+        0.05,
+        0.0,
+    );
+    let good = QuadraticCost {
+        dt: 0.05,
+        x_ref: DVector::zeros(2),
+        x_weight: DVector::from_element(2, 1.0),
+        u_ref: DVector::zeros(1),
+        u_weight: DVector::from_element(1, 1.0),
+        terminal_ref: DVector::zeros(2),
+        terminal_weight: DVector::from_element(2, 1.0),
+    };
+    let x0 = DVector::zeros(2);
+    let u = vec![DVector::zeros(1); 5];
+    let settings = IlqrSettings::default();
+    let mut err =
+        |cost: &QuadraticCost, x0: &DVector<f64>, u: Vec<DVector<f64>>, s: &IlqrSettings| {
+            solve(&mut dynamics, cost, x0, u, s)
+                .unwrap_err()
+                .to_string()
+        };
+    let e = err(&good, &DVector::zeros(3), u.clone(), &settings);
+    assert!(e.contains("start state has 3 entries"), "{e}");
+    let e = err(&good, &x0, vec![], &settings);
+    assert!(e.contains("at least one knot"), "{e}");
+    let e = err(&good, &x0, vec![DVector::zeros(2); 3], &settings);
+    assert!(e.contains("knot 0 has 2 entries"), "{e}");
+    let mut bad = good.clone();
+    bad.u_weight = DVector::from_element(1, -1.0);
+    let e = err(&bad, &x0, u.clone(), &settings);
+    assert!(e.contains("non-negative"), "{e}");
+    let mut bad = good.clone();
+    bad.x_ref = DVector::zeros(4);
+    let e = err(&bad, &x0, u.clone(), &settings);
+    assert!(e.contains("x_ref has 4 entries"), "{e}");
+    let limited = IlqrSettings {
+        limits: Some((
+            DVector::from_element(1, 1.0),
+            DVector::from_element(1, -1.0),
+        )),
+        ..IlqrSettings::default()
+    };
+    let e = err(&good, &x0, u.clone(), &limited);
+    assert!(e.contains("lower must not exceed the upper"), "{e}");
+    let wrong = IlqrSettings {
+        limits: Some((DVector::zeros(2), DVector::zeros(2))),
+        ..IlqrSettings::default()
+    };
+    let e = err(&good, &x0, u, &wrong);
+    assert!(e.contains("problem has 1 controls"), "{e}");
+}

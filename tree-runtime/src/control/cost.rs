@@ -44,6 +44,13 @@ pub trait Cost {
 
     /// The terminal term; with `d`, `ℓ_x` and `ℓ_xx` (the control parts zero).
     fn terminal(&self, x: &DVector<f64>, d: Option<&mut Derivatives>) -> f64;
+
+    /// Whether the cost fits `nx` states and `nu` controls (checked before a solve); the
+    /// error is a sentence naming what does not fit.
+    fn check(&self, nx: usize, nu: usize) -> Result<(), String> {
+        let _ = (nx, nu);
+        Ok(())
+    }
 }
 
 /// `Δt Σ_k ½(x − x_ref)ᵀ W_x (x − x_ref) + ½(u − u_ref)ᵀ W_u (u − u_ref)` and
@@ -88,6 +95,38 @@ impl Cost for QuadraticCost {
             d.lux.fill(0.0);
         }
         self.dt * (quadratic(&rx, &self.x_weight) + quadratic(&ru, &self.u_weight))
+    }
+
+    fn check(&self, nx: usize, nu: usize) -> Result<(), String> {
+        let sizes = [
+            ("x_ref", self.x_ref.len(), nx),
+            ("x_weight", self.x_weight.len(), nx),
+            ("u_ref", self.u_ref.len(), nu),
+            ("u_weight", self.u_weight.len(), nu),
+            ("terminal_ref", self.terminal_ref.len(), nx),
+            ("terminal_weight", self.terminal_weight.len(), nx),
+        ];
+        for (name, got, want) in sizes {
+            if got != want {
+                return Err(format!(
+                    "the cost's {name} has {got} entries; the problem has {want}"
+                ));
+            }
+        }
+        let weights = self
+            .x_weight
+            .iter()
+            .chain(self.u_weight.iter())
+            .chain(self.terminal_weight.iter());
+        if let Some(w) = weights.copied().find(|w| !(w.is_finite() && *w >= 0.0)) {
+            return Err(format!(
+                "the cost's weights must be finite and non-negative; one is {w}"
+            ));
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(format!("the cost's dt must be positive, got {}", self.dt));
+        }
+        Ok(())
     }
 
     fn terminal(&self, x: &DVector<f64>, d: Option<&mut Derivatives>) -> f64 {

@@ -105,6 +105,16 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
+    check(nx, nu, cost, x0, &u)?;
+    if let Some((lo, hi)) = &settings.limits {
+        if lo.len() != nu || hi.len() != nu {
+            return Err(SimError::InvalidInput(format!(
+                "the limits have {} lower and {} upper bounds; the problem has {nu} controls",
+                lo.len(),
+                hi.len()
+            )));
+        }
+    }
     if let Some((lo, hi)) = &settings.limits {
         for (k, uk) in u.iter_mut().enumerate() {
             for c in 0..nu {
@@ -233,6 +243,37 @@ where
     })
 }
 
+/// Refuses a problem whose sizes do not fit the dynamics: `x0` of `nx` entries, at least one
+/// knot, every `u_k` of `nu`, and a cost that fits.
+fn check(
+    nx: usize,
+    nu: usize,
+    cost: &dyn Cost,
+    x0: &DVector<f64>,
+    u: &[DVector<f64>],
+) -> Result<(), SimError> {
+    let bad = |m: String| Err(SimError::InvalidInput(m));
+    if x0.len() != nx {
+        return bad(format!(
+            "the start state has {} entries; the system's state (q_d, p_d) has {nx}",
+            x0.len()
+        ));
+    }
+    if u.is_empty() {
+        return bad("the horizon needs at least one knot (one control)".into());
+    }
+    if let Some((k, uk)) = u.iter().enumerate().find(|(_, uk)| uk.len() != nu) {
+        return bad(format!(
+            "the control at knot {k} has {} entries; the system has {nu} inputs",
+            uk.len()
+        ));
+    }
+    if let Some(k) = u.iter().position(|uk| uk.iter().any(|v| !v.is_finite())) {
+        return bad(format!("the control at knot {k} is not finite"));
+    }
+    cost.check(nx, nu).or_else(bad)
+}
+
 /// The total cost of the controls `u` from `x0` and its exact gradient with respect to every
 /// `u_k`, by the adjoint recursion `λ_N = ℓ_N,x`, `λ_k = ℓ_x + A_kᵀλ_{k+1}`,
 /// `∂J/∂u_k = ℓ_u + B_kᵀλ_{k+1}` on the rollout (docs/derivations.md §10).
@@ -246,6 +287,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
+    check(nx, nu, cost, x0, u)?;
     let mut knots = Knots {
         a: vec![DMatrix::zeros(nx, nx); n],
         b: vec![DMatrix::zeros(nx, nu); n],

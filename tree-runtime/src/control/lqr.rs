@@ -51,7 +51,8 @@ pub fn dare(
     r: &DMatrix<f64>,
 ) -> Result<Lqr, SimError> {
     let n = a.nrows();
-    if a.shape() != (n, n) || b.nrows() != n || q.shape() != (n, n) {
+    let m = b.ncols();
+    if a.shape() != (n, n) || b.nrows() != n || q.shape() != (n, n) || r.shape() != (m, m) {
         return Err(SimError::InvalidInput(format!(
             "the LQR needs A n × n, B n × m, Q n × n and R m × m; got A {:?}, B {:?}, Q {:?}, R {:?}",
             a.shape(),
