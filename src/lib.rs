@@ -39,6 +39,6 @@ pub use tree_macros::tree_model;
 pub use tree_runtime as runtime;
 pub use tree_runtime::nalgebra;
 pub use tree_runtime::{
-    integrate, ConstraintTerms, GeneralizedForce, NoForce, Order, PaperEvaluation, PaperSystem,
-    SimError, System, Terms, Trajectory, TreeSystem,
+    control, integrate, ConstraintTerms, GeneralizedForce, NoForce, Order, PaperEvaluation,
+    PaperSystem, SimError, System, Terms, Trajectory, TreeSystem,
 };

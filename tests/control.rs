@@ -3,12 +3,12 @@
 //! VI step is linear) converging in one iteration to the time-varying LQR; iLQR and DDP on
 //! the cart-pole with limits: cost never increasing, limits held, compiled ≡ interpreted.
 
+use tree_mech::control::{
+    cost_gradient, dare, solve, tvlqr, IlqrSettings, QuadraticCost, Solver, ViDynamics,
+};
 use tree_mech::integrate::{Forcing, ViSettings};
 use tree_mech::model;
 use tree_mech::nalgebra::{DMatrix, DVector};
-use tree_mech::runtime::control::{
-    cost_gradient, dare, solve, tvlqr, IlqrSettings, QuadraticCost, Solver, ViDynamics,
-};
 use tree_mech::{tree_model, System, TreeSystem};
 
 tree_model!(struct Cart from "tests/models/cart.toml");

@@ -91,6 +91,13 @@ pub fn tvlqr(
     r: &DMatrix<f64>,
     q_final: &DMatrix<f64>,
 ) -> Result<Vec<Lqr>, SimError> {
+    if a.len() != b.len() {
+        return Err(SimError::InvalidInput(format!(
+            "the time-varying LQR needs one B per A; got {} A and {} B",
+            a.len(),
+            b.len()
+        )));
+    }
     let mut p = q_final.clone();
     let mut out = Vec::with_capacity(a.len());
     for (ak, bk) in a.iter().zip(b).rev() {
