@@ -380,6 +380,12 @@ fn mismatched_problems_are_refused_with_a_sentence() {
         limits: Some((DVector::zeros(2), DVector::zeros(2))),
         ..IlqrSettings::default()
     };
-    let e = err(&good, &x0, u, &wrong);
+    let e = err(&good, &x0, u.clone(), &wrong);
     assert!(e.contains("problem has 1 controls"), "{e}");
+    let loose = IlqrSettings {
+        cost_tolerance: f64::NAN,
+        ..IlqrSettings::default()
+    };
+    let e = err(&good, &x0, u, &loose);
+    assert!(e.contains("must be finite and non-negative"), "{e}");
 }

@@ -106,6 +106,16 @@ where
 {
     let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
     check(nx, nu, cost, x0, &u)?;
+    let settled = |x: f64| x.is_finite() && x >= 0.0;
+    if !(settled(settings.cost_tolerance)
+        && settled(settings.gradient_tolerance)
+        && settled(settings.mu))
+    {
+        return Err(SimError::InvalidInput(format!(
+            "the optimiser's cost tolerance ({}), gradient tolerance ({}) and regularisation ({}) must be finite and non-negative",
+            settings.cost_tolerance, settings.gradient_tolerance, settings.mu
+        )));
+    }
     if let Some((lo, hi)) = &settings.limits {
         if lo.len() != nu || hi.len() != nu {
             return Err(SimError::InvalidInput(format!(
@@ -116,7 +126,7 @@ where
         }
     }
     if let Some((lo, hi)) = &settings.limits {
-        for (k, uk) in u.iter_mut().enumerate() {
+        for uk in u.iter_mut() {
             for c in 0..nu {
                 if lo[c].is_nan() || hi[c].is_nan() || lo[c] > hi[c] {
                     return Err(SimError::InvalidInput(format!(
@@ -125,7 +135,6 @@ where
                     )));
                 }
                 uk[c] = uk[c].clamp(lo[c], hi[c]);
-                let _ = k; // every knot
             }
         }
     }

@@ -38,6 +38,26 @@ where
     covector: StepCovector,
 }
 
+/// `q` of state `x` at time `t`: the dynamic part from `x`, the kinematic part on the
+/// prescription.
+fn place<N: nalgebra::Dim>(
+    dynamic: &[usize],
+    kinematic: &[usize],
+    motion: &mut ModelMotions,
+    t: f64,
+    x: &[f64],
+    q: &mut Vector<N>,
+) where
+    DefaultAllocator: Allocator<N>,
+{
+    for (r, &i) in dynamic.iter().enumerate() {
+        q[i] = x[r];
+    }
+    for &i in kinematic {
+        q[i] = motion.kinematic(i, t)[0];
+    }
+}
+
 impl<S: System> ViDynamics<S>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -101,12 +121,7 @@ where
     /// the prescription at `t0 + k Δt`.
     pub fn configuration(&mut self, k: usize, x: &[f64], q: &mut Vector<S::N>) {
         let t = self.t0 + k as f64 * self.dt;
-        for (r, &i) in self.dynamic.iter().enumerate() {
-            q[i] = x[r];
-        }
-        for &i in &self.kinematic {
-            q[i] = self.motion.kinematic(i, t)[0];
-        }
+        place(&self.dynamic, &self.kinematic, &mut self.motion, t, x, q);
     }
 
     /// The inputs that hold configuration `q` at rest against gravity and springs (the
@@ -131,12 +146,14 @@ where
     ) -> Result<(), SimError> {
         let nd = self.dynamic.len();
         let t = self.t0 + k as f64 * self.dt;
-        for (r, &i) in self.dynamic.iter().enumerate() {
-            self.q1[i] = x[r];
-        }
-        for &i in &self.kinematic {
-            self.q1[i] = self.motion.kinematic(i, t)[0];
-        }
+        place(
+            &self.dynamic,
+            &self.kinematic,
+            &mut self.motion,
+            t,
+            x,
+            &mut self.q1,
+        );
         self.p1.fill(0.0);
         for (r, &i) in self.dynamic.iter().enumerate() {
             self.p1[i] = x[nd + r];

@@ -619,7 +619,7 @@ impl Linearisation {
     /// tangent `Δ` and `dp₂/dx` (docs/derivations.md §9).
     fn solve(&mut self, step: usize, t: f64) -> Result<(), SimError> {
         let sh = &self.shape;
-        let (rows, w, x, nd) = (sh.rows(), sh.w(), sh.x(), sh.nd());
+        let (rows, w, nd) = (sh.rows(), sh.w(), sh.nd());
         let terms = StepTerms {
             lqq: &self.lqq,
             lvq: &self.lvq,
@@ -664,7 +664,6 @@ impl Linearisation {
                 self.dp2[(r, c)] = v;
             }
         }
-        let _ = x;
         Ok(())
     }
 
