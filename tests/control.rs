@@ -4,7 +4,7 @@
 //! the cart-pole with limits: cost never increasing, limits held, compiled ≡ interpreted.
 
 use tree_mech::control::{
-    cost_gradient, dare, solve, tvlqr, IlqrSettings, QuadraticCost, Solver, ViDynamics,
+    cost_gradient, dare, solve, tvlqr, IlqrSettings, QuadraticCost, Solver, DiscreteSystem,
 };
 use tree_mech::integrate::{Forcing, ViSettings};
 use tree_mech::model;
@@ -82,24 +82,24 @@ fn ilqr_solves_a_linear_quadratic_problem_in_one_iteration_as_the_riccati_recurs
         tolerance: 1e-14,
         ..ViSettings::default()
     };
-    let mut dynamics = ViDynamics::new(sys, settings, dt, 0.0);
+    let mut dynamics = DiscreteSystem::new(sys, settings, dt, 0.0);
     let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0);
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
     let cost = QuadraticCost {
         dt,
-        x_ref: DVector::zeros(2),
-        x_weight: DVector::from_vec(vec![1.0, 0.5]),
+        x_ref: DVector::zeros(3),
+        x_weight: DVector::from_vec(vec![1.0, 0.5, 0.0]),
         u_ref: DVector::zeros(1),
         u_weight: DVector::from_vec(vec![0.2]),
-        terminal_ref: DVector::zeros(2),
-        terminal_weight: DVector::from_vec(vec![10.0, 10.0]),
+        terminal_ref: DVector::zeros(3),
+        terminal_weight: DVector::from_vec(vec![10.0, 10.0, 0.0]),
     };
     let options = IlqrSettings {
         mu: 0.0,
         ..IlqrSettings::default()
     };
     let u0 = vec![DVector::zeros(1); knots];
-    let sol = solve(&mut dynamics, &cost, &x0, u0, &options).unwrap();
+    let sol = solve(&mut dynamics, &mut cost.clone(), &x0, u0, &options).unwrap();
     assert!(sol.converged);
     // The first accepted iteration reached the optimum: a full step, and nothing after.
     assert_eq!(sol.history[0].step, 1.0);
@@ -110,8 +110,9 @@ fn ilqr_solves_a_linear_quadratic_problem_in_one_iteration_as_the_riccati_recurs
         sol.cost
     );
     // The gains are the time-varying LQR's on the (constant) linear step.
-    let (mut a, mut b) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 1));
-    let mut x2 = [0.0; 2];
+    // The state is (x, p, the previous push).
+    let (mut a, mut b) = (DMatrix::zeros(3, 3), DMatrix::zeros(3, 1));
+    let mut x2 = [0.0; 3];
     dynamics
         .step(0, x0.as_slice(), &[0.0], &mut x2, Some((&mut a, &mut b)))
         .unwrap();
@@ -145,18 +146,18 @@ where
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
 {
     let (dt, knots) = (0.02, 60);
-    let mut dynamics = ViDynamics::new(sys, ViSettings::default(), dt, 0.0);
+    let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0);
     let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0);
-    let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0]);
-    let cost = QuadraticCost {
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0, 0.0]);
+    let mut cost = QuadraticCost {
         dt,
         x_ref: target.clone(),
-        x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1]),
+        x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1, 0.0]),
         u_ref: DVector::zeros(1),
         u_weight: DVector::from_vec(vec![1e-3]),
         terminal_ref: target,
-        terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0]),
+        terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0, 0.0]),
     };
     let options = IlqrSettings {
         solver,
@@ -165,7 +166,7 @@ where
         ..IlqrSettings::default()
     };
     let u0 = vec![DVector::zeros(1); knots];
-    solve(&mut dynamics, &cost, &x0, u0, &options).unwrap()
+    solve(&mut dynamics, &mut cost, &x0, u0, &options).unwrap()
 }
 
 #[test]
@@ -235,29 +236,29 @@ fn the_cost_gradient_matches_finite_differences() {
         constraint_tolerance: 1e-14,
         ..ViSettings::default()
     };
-    let mut dynamics = ViDynamics::new(TreeSystem::new(&m).unwrap(), settings, dt, 0.0);
+    let mut dynamics = DiscreteSystem::new(TreeSystem::new(&m).unwrap(), settings, dt, 0.0);
     let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0);
-    let cost = QuadraticCost {
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let mut cost = QuadraticCost {
         dt,
-        x_ref: DVector::from_vec(vec![0.5, 0.3, 0.0, 0.0]),
-        x_weight: DVector::from_vec(vec![1.0, 2.0, 0.1, 0.1]),
+        x_ref: DVector::from_vec(vec![0.5, 0.3, 0.0, 0.0, 0.0]),
+        x_weight: DVector::from_vec(vec![1.0, 2.0, 0.1, 0.1, 0.5]),
         u_ref: DVector::from_vec(vec![0.2]),
         u_weight: DVector::from_vec(vec![1e-2]),
-        terminal_ref: DVector::zeros(4),
-        terminal_weight: DVector::from_vec(vec![10.0, 10.0, 1.0, 1.0]),
+        terminal_ref: DVector::zeros(5),
+        terminal_weight: DVector::from_vec(vec![10.0, 10.0, 1.0, 1.0, 0.0]),
     };
     let u: Vec<DVector<f64>> = (0..25)
         .map(|k| DVector::from_element(1, (0.3 * k as f64).sin()))
         .collect();
-    let (total, gradient) = cost_gradient(&mut dynamics, &cost, &x0, &u).unwrap();
+    let (total, gradient) = cost_gradient(&mut dynamics, &mut cost, &x0, &u).unwrap();
     let h = 1e-6;
     let mut largest = 0.0f64;
     for k in 0..u.len() {
         let mut shifted = |s: f64| {
             let mut v = u.clone();
             v[k][0] += s;
-            cost_gradient(&mut dynamics, &cost, &x0, &v).unwrap().0
+            cost_gradient(&mut dynamics, &mut cost, &x0, &v).unwrap().0
         };
         let fd = (shifted(h) - shifted(-h)) / (2.0 * h);
         assert!(
@@ -278,22 +279,23 @@ fn lqr_holds_the_cartpole_upright_from_a_push() {
     let m = model::from_toml_file(path).unwrap();
     let dt = 0.02;
     let mut dynamics =
-        ViDynamics::new(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt, 0.0);
-    let (mut a, mut b) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
-    let mut x2 = [0.0; 4];
+        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt, 0.0);
+    // The state is (q_d, p_d, the previous push).
+    let (mut a, mut b) = (DMatrix::zeros(5, 5), DMatrix::zeros(5, 1));
+    let mut x2 = [0.0; 5];
     dynamics
-        .step(0, &[0.0; 4], &[0.0], &mut x2, Some((&mut a, &mut b)))
+        .step(0, &[0.0; 5], &[0.0], &mut x2, Some((&mut a, &mut b)))
         .unwrap();
     assert!(
         x2.iter().all(|v| v.abs() < 1e-12),
         "upright is an equilibrium: {x2:?}"
     );
-    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 10.0, 0.1, 0.1]));
+    let q = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 10.0, 0.1, 0.1, 0.0]));
     let r = DMatrix::identity(1, 1) * 0.1;
     let lqr = dare(&a, &b, &q, &r).unwrap();
-    let run = |dynamics: &mut ViDynamics<TreeSystem>, closed: bool| {
-        let mut x = DVector::from_vec(vec![0.0, 0.2, 0.0, 0.0]);
-        let mut next = [0.0; 4];
+    let run = |dynamics: &mut DiscreteSystem<TreeSystem>, closed: bool| {
+        let mut x = DVector::from_vec(vec![0.0, 0.2, 0.0, 0.0, 0.0]);
+        let mut next = [0.0; 5];
         let mut largest_push = 0.0f64;
         for k in 0..400 {
             let u = if closed {
@@ -329,7 +331,7 @@ fn lqr_holds_the_cartpole_upright_from_a_push() {
 #[test]
 fn mismatched_problems_are_refused_with_a_sentence() {
     let m = model::from_toml_str(SPRING, None).unwrap();
-    let mut dynamics = ViDynamics::new(
+    let mut dynamics = DiscreteSystem::new(
         TreeSystem::new(&m).unwrap(),
         ViSettings::default(),
         0.05,
@@ -337,24 +339,24 @@ fn mismatched_problems_are_refused_with_a_sentence() {
     );
     let good = QuadraticCost {
         dt: 0.05,
-        x_ref: DVector::zeros(2),
-        x_weight: DVector::from_element(2, 1.0),
+        x_ref: DVector::zeros(3),
+        x_weight: DVector::from_element(3, 1.0),
         u_ref: DVector::zeros(1),
         u_weight: DVector::from_element(1, 1.0),
-        terminal_ref: DVector::zeros(2),
-        terminal_weight: DVector::from_element(2, 1.0),
+        terminal_ref: DVector::zeros(3),
+        terminal_weight: DVector::from_element(3, 1.0),
     };
-    let x0 = DVector::zeros(2);
+    let x0 = DVector::zeros(3);
     let u = vec![DVector::zeros(1); 5];
     let settings = IlqrSettings::default();
     let mut err =
         |cost: &QuadraticCost, x0: &DVector<f64>, u: Vec<DVector<f64>>, s: &IlqrSettings| {
-            solve(&mut dynamics, cost, x0, u, s)
+            solve(&mut dynamics, &mut cost.clone(), x0, u, s)
                 .unwrap_err()
                 .to_string()
         };
-    let e = err(&good, &DVector::zeros(3), u.clone(), &settings);
-    assert!(e.contains("start state has 3 entries"), "{e}");
+    let e = err(&good, &DVector::zeros(4), u.clone(), &settings);
+    assert!(e.contains("start state has 4 entries"), "{e}");
     let e = err(&good, &x0, vec![], &settings);
     assert!(e.contains("at least one knot"), "{e}");
     let e = err(&good, &x0, vec![DVector::zeros(2); 3], &settings);
@@ -364,9 +366,9 @@ fn mismatched_problems_are_refused_with_a_sentence() {
     let e = err(&bad, &x0, u.clone(), &settings);
     assert!(e.contains("non-negative"), "{e}");
     let mut bad = good.clone();
-    bad.x_ref = DVector::zeros(4);
+    bad.x_ref = DVector::zeros(5);
     let e = err(&bad, &x0, u.clone(), &settings);
-    assert!(e.contains("x_ref has 4 entries"), "{e}");
+    assert!(e.contains("x_ref has 5 entries"), "{e}");
     let limited = IlqrSettings {
         limits: Some((
             DVector::from_element(1, 1.0),

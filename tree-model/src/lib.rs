@@ -44,6 +44,7 @@ mod motion;
 mod primitive;
 mod source;
 mod spec;
+mod task;
 mod toml_format;
 mod urdf_format;
 mod validate;
@@ -57,6 +58,9 @@ pub use model::{
 };
 pub use motion::{CubicSpline, Motion};
 pub use primitive::{Primitive, PrimitiveKind, Value};
+pub use task::{
+    read_task, task_from_str, About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver,
+};
 pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{
     ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,

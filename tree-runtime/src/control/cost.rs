@@ -3,6 +3,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::discrete::Knot;
+
 /// `ℓ_x`, `ℓ_u`, `ℓ_xx`, `ℓ_uu`, `ℓ_ux` of one term.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Derivatives {
@@ -31,19 +33,36 @@ impl Derivatives {
     }
 }
 
-/// A cost over a horizon: user costs implement this with their derivatives.
+/// What a cost reads at a knot beyond the state: the knot's velocity (for the VI, from the
+/// momentum), the gravity compensation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Needs {
+    /// [`Knot::dq`] and [`Knot::dq_x`] beyond the state itself (always filled; this asks
+    /// that they be exact, which the VI pays a solve for).
+    pub velocity: bool,
+    /// [`Knot::gravity`] and [`Knot::gravity_x`].
+    pub gravity: bool,
+}
+
+/// A cost over a horizon: user costs implement this with their derivatives. Each term is
+/// written on a [`Knot`]: the state `x`, and `q`, `q̇` with their derivatives by `x`.
 pub trait Cost {
     /// The running term at knot `k` (Δt included); with `d`, its derivatives (overwritten).
     fn running(
-        &self,
+        &mut self,
         k: usize,
-        x: &DVector<f64>,
+        x: &Knot,
         u: &DVector<f64>,
         d: Option<&mut Derivatives>,
     ) -> f64;
 
     /// The terminal term; with `d`, `ℓ_x` and `ℓ_xx` (the control parts zero).
-    fn terminal(&self, x: &DVector<f64>, d: Option<&mut Derivatives>) -> f64;
+    fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64;
+
+    /// What the solver must compute at each knot for this cost.
+    fn needs(&self) -> Needs {
+        Needs::default()
+    }
 
     /// Whether the cost fits `nx` states and `nu` controls (checked before a solve); the
     /// error is a sentence naming what does not fit.
@@ -55,7 +74,7 @@ pub trait Cost {
 
 /// `Δt Σ_k ½(x − x_ref)ᵀ W_x (x − x_ref) + ½(u − u_ref)ᵀ W_u (u − u_ref)` and
 /// `½(x − x_ref)ᵀ W_N (x − x_ref)` at the end, with diagonal weights; on the VI's state
-/// `x = (q_d, p_d)` and the inputs (`u_ref` for example the gravity compensation).
+/// `x` (for example `(q_d, p_d)`) and the controls (`u_ref` for example the gravity compensation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct QuadraticCost {
     /// The step length weighting the running terms.
@@ -80,13 +99,13 @@ fn quadratic(r: &DVector<f64>, w: &DVector<f64>) -> f64 {
 
 impl Cost for QuadraticCost {
     fn running(
-        &self,
+        &mut self,
         _k: usize,
-        x: &DVector<f64>,
+        x: &Knot,
         u: &DVector<f64>,
         d: Option<&mut Derivatives>,
     ) -> f64 {
-        let (rx, ru) = (x - &self.x_ref, u - &self.u_ref);
+        let (rx, ru) = (&x.x - &self.x_ref, u - &self.u_ref);
         if let Some(d) = d {
             d.lx = rx.component_mul(&self.x_weight) * self.dt;
             d.lu = ru.component_mul(&self.u_weight) * self.dt;
@@ -129,8 +148,8 @@ impl Cost for QuadraticCost {
         Ok(())
     }
 
-    fn terminal(&self, x: &DVector<f64>, d: Option<&mut Derivatives>) -> f64 {
-        let r = x - &self.terminal_ref;
+    fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64 {
+        let r = &x.x - &self.terminal_ref;
         if let Some(d) = d {
             d.lx = r.component_mul(&self.terminal_weight);
             d.lxx = DMatrix::from_diagonal(&self.terminal_weight);

@@ -8,8 +8,8 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
-use super::cost::Cost;
-use super::vi_dynamics::ViDynamics;
+use super::cost::{Cost, Needs};
+use super::discrete::{DiscreteSystem, Knot};
 use crate::error::SimError;
 use crate::system::System;
 
@@ -85,21 +85,31 @@ pub struct Solution {
     pub history: Vec<Iteration>,
 }
 
-/// Per-knot buffers, allocated once per solve.
-struct Knots {
-    a: Vec<DMatrix<f64>>,
-    b: Vec<DMatrix<f64>>,
-    k: Vec<DVector<f64>>,
-    gain: Vec<DMatrix<f64>>,
+
+/// Optimises the controls of `dynamics` over `u.len()` steps from `x0`, starting from `u`.
+/// Returns the best trajectory found with its gains, converged or not; fails only when the
+/// first rollout does (the start cannot be simulated) or the problem does not fit.
+pub fn solve<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
+    x0: &DVector<f64>,
+    u: Vec<DVector<f64>>,
+    settings: &IlqrSettings,
+) -> Result<Solution, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    solve_with(dynamics, cost, x0, u, settings, &mut |_| {})
 }
 
-/// Optimises the controls of `dynamics` over `knots` steps from `x0`, starting from `u`.
-pub fn solve<S: System>(
-    dynamics: &mut ViDynamics<S>,
-    cost: &dyn Cost,
+/// [`solve`], calling `report` after every iteration (progress printing).
+pub fn solve_with<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
     x0: &DVector<f64>,
     mut u: Vec<DVector<f64>>,
     settings: &IlqrSettings,
+    report: &mut dyn FnMut(&Iteration),
 ) -> Result<Solution, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -116,6 +126,11 @@ where
             settings.cost_tolerance, settings.gradient_tolerance, settings.mu
         )));
     }
+    if settings.solver == Solver::Ddp && !dynamics.is_vi() {
+        return Err(SimError::InvalidInput(
+            "DDP needs the VI's second derivatives: use iLQR with RK4".into(),
+        ));
+    }
     if let Some((lo, hi)) = &settings.limits {
         if lo.len() != nu || hi.len() != nu {
             return Err(SimError::InvalidInput(format!(
@@ -124,89 +139,71 @@ where
                 hi.len()
             )));
         }
-    }
-    if let Some((lo, hi)) = &settings.limits {
+        for c in 0..nu {
+            if lo[c].is_nan() || hi[c].is_nan() || lo[c] > hi[c] {
+                return Err(SimError::InvalidInput(format!(
+                    "the limits of control {c} are [{}, {}]: the lower must not exceed the upper",
+                    lo[c], hi[c]
+                )));
+            }
+        }
         for uk in u.iter_mut() {
             for c in 0..nu {
-                if lo[c].is_nan() || hi[c].is_nan() || lo[c] > hi[c] {
-                    return Err(SimError::InvalidInput(format!(
-                        "the limits of control {c} are [{}, {}]: the lower must not exceed the upper",
-                        lo[c], hi[c]
-                    )));
-                }
                 uk[c] = uk[c].clamp(lo[c], hi[c]);
             }
         }
     }
-    let mut knots = Knots {
+    let mut work = Work {
         a: vec![DMatrix::zeros(nx, nx); n],
         b: vec![DMatrix::zeros(nx, nu); n],
         k: vec![DVector::zeros(nu); n],
         gain: vec![DMatrix::zeros(nu, nx); n],
+        knot: empty_knot(),
+        needs: cost.needs(),
     };
     let mut x = vec![x0.clone(); n + 1];
-    let mut total = rollout(dynamics, cost, &mut x, &u, Some(&mut knots))?;
+    let mut total = rollout(dynamics, cost, &mut x, &u, &mut work, true)?;
     let (mut x_new, mut u_new) = (x.clone(), u.clone());
     let mut mu = settings.mu;
     let mut history = Vec::new();
     let mut converged = false;
     for _ in 0..settings.max_iterations {
-        let backward = backward(dynamics, cost, &x, &u, &mut knots, mu, settings);
-        let gradient = match backward {
+        let gradient = match backward(dynamics, cost, &x, &u, &mut work, mu, settings) {
             Ok(g) => g,
-            Err(_) => {
+            Err(SimError::InvalidInput(m)) if m == NOT_PD => {
                 mu = (mu * 10.0).max(1e-6);
                 if mu > 1e10 {
                     break;
                 }
                 continue;
             }
+            Err(e) => return Err(e),
         };
         if gradient < settings.gradient_tolerance {
             converged = true;
-            history.push(Iteration {
+            let it = Iteration {
                 cost: total,
                 step: 0.0,
                 mu,
                 gradient,
-            });
+            };
+            report(&it);
+            history.push(it);
             break;
         }
         // Forward pass: the first step length that lowers the true cost.
         let mut accepted = 0.0;
         let mut alpha = 1.0;
+        let mut trial_total = total;
         while alpha > 1e-4 {
-            x_new[0].copy_from(x0);
-            let mut trial = 0.0;
-            let mut ok = true;
             for k in 0..n {
-                let dx = &x_new[k] - &x[k];
-                u_new[k] = &u[k] + &knots.k[k] * alpha + &knots.gain[k] * dx;
-                if let Some((lo, hi)) = &settings.limits {
-                    for c in 0..nu {
-                        u_new[k][c] = u_new[k][c].clamp(lo[c], hi[c]);
-                    }
-                }
-                trial += cost.running(k, &x_new[k], &u_new[k], None);
-                let (head, tail) = x_new.split_at_mut(k + 1);
-                if dynamics
-                    .step(
-                        k,
-                        head[k].as_slice(),
-                        u_new[k].as_slice(),
-                        tail[0].as_mut_slice(),
-                        None,
-                    )
-                    .is_err()
-                {
-                    ok = false;
-                    break;
-                }
+                u_new[k].copy_from(&(&u[k] + &work.k[k] * alpha));
             }
-            if ok {
-                trial += cost.terminal(&x_new[n], None);
+            x_new[0].copy_from(x0);
+            if let Ok(trial) = forward(dynamics, cost, &x, &mut x_new, &u, &mut u_new, &mut work, settings) {
                 if trial.is_finite() && trial < total {
                     accepted = alpha;
+                    trial_total = trial;
                     break;
                 }
             }
@@ -214,12 +211,14 @@ where
         }
         if accepted == 0.0 {
             mu = (mu * 10.0).max(1e-6);
-            history.push(Iteration {
+            let it = Iteration {
                 cost: total,
                 step: 0.0,
                 mu,
                 gradient,
-            });
+            };
+            report(&it);
+            history.push(it);
             if mu > 1e10 {
                 break;
             }
@@ -228,22 +227,25 @@ where
         std::mem::swap(&mut x, &mut x_new);
         std::mem::swap(&mut u, &mut u_new);
         let previous = total;
-        total = rollout(dynamics, cost, &mut x, &u, Some(&mut knots))?;
+        total = rollout(dynamics, cost, &mut x, &u, &mut work, true)?;
+        debug_assert!((total - trial_total).abs() <= 1e-9 * total.abs().max(1.0));
         mu = (mu * 0.1).max(1e-12);
-        history.push(Iteration {
+        let it = Iteration {
             cost: total,
             step: accepted,
             mu,
             gradient,
-        });
+        };
+        report(&it);
+        history.push(it);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             converged = true;
             break;
         }
     }
     Ok(Solution {
-        gains: knots.gain,
-        feedforward: knots.k,
+        gains: work.gain,
+        feedforward: work.k,
         x,
         u,
         cost: total,
@@ -251,6 +253,32 @@ where
         history,
     })
 }
+
+/// Per-knot buffers and the knot workspace, allocated once per solve.
+struct Work {
+    a: Vec<DMatrix<f64>>,
+    b: Vec<DMatrix<f64>>,
+    k: Vec<DVector<f64>>,
+    gain: Vec<DMatrix<f64>>,
+    knot: Knot,
+    needs: Needs,
+}
+
+fn empty_knot() -> Knot {
+    Knot {
+        x: DVector::zeros(0),
+        q: DVector::zeros(0),
+        dq: DVector::zeros(0),
+        q_x: DMatrix::zeros(0, 0),
+        dq_x: DMatrix::zeros(0, 0),
+        gravity: DVector::zeros(0),
+        gravity_x: DMatrix::zeros(0, 0),
+        previous: DVector::zeros(0),
+        previous_at: Vec::new(),
+    }
+}
+
+const NOT_PD: &str = "Q_uu is not positive definite";
 
 /// Refuses a problem whose sizes do not fit the dynamics: `x0` of `nx` entries, at least one
 /// knot, every `u_k` of `nu`, and a cost that fits.
@@ -264,7 +292,7 @@ fn check(
     let bad = |m: String| Err(SimError::InvalidInput(m));
     if x0.len() != nx {
         return bad(format!(
-            "the start state has {} entries; the system's state (q_d, p_d) has {nx}",
+            "the start state has {} entries; the system's state has {nx}",
             x0.len()
         ));
     }
@@ -273,7 +301,7 @@ fn check(
     }
     if let Some((k, uk)) = u.iter().enumerate().find(|(_, uk)| uk.len() != nu) {
         return bad(format!(
-            "the control at knot {k} has {} entries; the system has {nu} inputs",
+            "the control at knot {k} has {} entries; the system has {nu} controls",
             uk.len()
         ));
     }
@@ -287,8 +315,8 @@ fn check(
 /// `u_k`, by the adjoint recursion `λ_N = ℓ_N,x`, `λ_k = ℓ_x + A_kᵀλ_{k+1}`,
 /// `∂J/∂u_k = ℓ_u + B_kᵀλ_{k+1}` on the rollout (docs/derivations.md §10).
 pub fn cost_gradient<S: System>(
-    dynamics: &mut ViDynamics<S>,
-    cost: &dyn Cost,
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
     x0: &DVector<f64>,
     u: &[DVector<f64>],
 ) -> Result<(f64, Vec<DVector<f64>>), SimError>
@@ -297,67 +325,99 @@ where
 {
     let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
     check(nx, nu, cost, x0, u)?;
-    let mut knots = Knots {
+    let mut work = Work {
         a: vec![DMatrix::zeros(nx, nx); n],
         b: vec![DMatrix::zeros(nx, nu); n],
         k: Vec::new(),
         gain: Vec::new(),
+        knot: empty_knot(),
+        needs: cost.needs(),
     };
     let mut x = vec![x0.clone(); n + 1];
-    let total = rollout(dynamics, cost, &mut x, u, Some(&mut knots))?;
+    let total = rollout(dynamics, cost, &mut x, u, &mut work, true)?;
     let mut d = super::cost::Derivatives::zeros(nx, nu);
-    cost.terminal(&x[n], Some(&mut d));
+    dynamics.knot(n, x[n].as_slice(), &mut work.knot, true, work.needs)?;
+    cost.terminal(&work.knot, Some(&mut d));
     let mut adjoint = d.lx.clone();
     let mut gradient = vec![DVector::zeros(nu); n];
     for k in (0..n).rev() {
-        cost.running(k, &x[k], &u[k], Some(&mut d));
-        gradient[k] = &d.lu + knots.b[k].tr_mul(&adjoint);
-        adjoint = &d.lx + knots.a[k].tr_mul(&adjoint);
+        dynamics.knot(k, x[k].as_slice(), &mut work.knot, true, work.needs)?;
+        cost.running(k, &work.knot, &u[k], Some(&mut d));
+        gradient[k] = &d.lu + work.b[k].tr_mul(&adjoint);
+        adjoint = &d.lx + work.a[k].tr_mul(&adjoint);
     }
     Ok((total, gradient))
 }
 
-/// Rolls `u` out from `x[0]` (filling `x`), returns the total cost; with `knots`, also each
-/// step's `A`, `B`.
+/// Rolls `u` out from `x[0]` (filling `x`), returns the total cost; with `jacobians`, also
+/// each step's `A`, `B`.
 fn rollout<S: System>(
-    dynamics: &mut ViDynamics<S>,
-    cost: &dyn Cost,
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
     x: &mut [DVector<f64>],
     u: &[DVector<f64>],
-    knots: Option<&mut Knots>,
+    work: &mut Work,
+    jacobians: bool,
 ) -> Result<f64, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let n = u.len();
     let mut total = 0.0;
-    let mut knots = knots;
     for k in 0..n {
-        total += cost.running(k, &x[k], &u[k], None);
+        dynamics.knot(k, x[k].as_slice(), &mut work.knot, false, work.needs)?;
+        total += cost.running(k, &work.knot, &u[k], None);
         let (head, tail) = x.split_at_mut(k + 1);
-        let jac = knots.as_mut().map(|kn| {
-            let Knots { a, b, .. } = &mut **kn;
-            (&mut a[k], &mut b[k])
-        });
-        dynamics.step(
-            k,
-            head[k].as_slice(),
-            u[k].as_slice(),
-            tail[0].as_mut_slice(),
-            jac,
-        )?;
+        let jac = jacobians.then(|| (&mut work.a[k], &mut work.b[k]));
+        dynamics.step(k, head[k].as_slice(), u[k].as_slice(), tail[0].as_mut_slice(), jac)?;
     }
-    Ok(total + cost.terminal(&x[n], None))
+    dynamics.knot(n, x[n].as_slice(), &mut work.knot, false, work.needs)?;
+    Ok(total + cost.terminal(&work.knot, None))
 }
 
-/// The backward pass: fills the gains and feed-forward terms; returns `max |k|`, or an error
-/// when some `Q_uu` is not positive definite at this `μ`.
+/// The forward pass at one step length: `u_new = u + αk + K(x_new − x)` (already holding
+/// `u + αk`), clamped to the limits, rolled out into `x_new`; returns its total cost.
+#[allow(clippy::too_many_arguments)]
+fn forward<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
+    x: &[DVector<f64>],
+    x_new: &mut [DVector<f64>],
+    u: &[DVector<f64>],
+    u_new: &mut [DVector<f64>],
+    work: &mut Work,
+    settings: &IlqrSettings,
+) -> Result<f64, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let n = u.len();
+    let mut total = 0.0;
+    for k in 0..n {
+        let dx = &x_new[k] - &x[k];
+        u_new[k].gemv(1.0, &work.gain[k], &dx, 1.0);
+        if let Some((lo, hi)) = &settings.limits {
+            for c in 0..u_new[k].len() {
+                u_new[k][c] = u_new[k][c].clamp(lo[c], hi[c]);
+            }
+        }
+        dynamics.knot(k, x_new[k].as_slice(), &mut work.knot, false, work.needs)?;
+        total += cost.running(k, &work.knot, &u_new[k], None);
+        let (head, tail) = x_new.split_at_mut(k + 1);
+        dynamics.step(k, head[k].as_slice(), u_new[k].as_slice(), tail[0].as_mut_slice(), None)?;
+    }
+    dynamics.knot(n, x_new[n].as_slice(), &mut work.knot, false, work.needs)?;
+    Ok(total + cost.terminal(&work.knot, None))
+}
+
+/// The backward pass: fills the gains and feed-forward terms; returns `max |k|`, or the
+/// error [`NOT_PD`] when some `Q_uu` is not positive definite at this `μ`.
 fn backward<S: System>(
-    dynamics: &mut ViDynamics<S>,
-    cost: &dyn Cost,
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
     x: &[DVector<f64>],
     u: &[DVector<f64>],
-    knots: &mut Knots,
+    work: &mut Work,
     mu: f64,
     settings: &IlqrSettings,
 ) -> Result<f64, SimError>
@@ -367,7 +427,8 @@ where
     let n = u.len();
     let (nx, nu) = (dynamics.states(), dynamics.controls());
     let mut d = super::cost::Derivatives::zeros(nx, nu);
-    cost.terminal(&x[n], Some(&mut d));
+    dynamics.knot(n, x[n].as_slice(), &mut work.knot, true, work.needs)?;
+    cost.terminal(&work.knot, Some(&mut d));
     let (mut vx, mut vxx) = (d.lx.clone(), d.lxx.clone());
     let mut gradient = 0.0f64;
     let (mut hxx, mut huu, mut hux) = (
@@ -376,19 +437,18 @@ where
         DMatrix::zeros(nu, nx),
     );
     for k in (0..n).rev() {
-        cost.running(k, &x[k], &u[k], Some(&mut d));
-        let (a, b) = (&knots.a[k], &knots.b[k]);
+        dynamics.knot(k, x[k].as_slice(), &mut work.knot, true, work.needs)?;
+        cost.running(k, &work.knot, &u[k], Some(&mut d));
+        let (a, b) = (&work.a[k], &work.b[k]);
         let qx = &d.lx + a.tr_mul(&vx);
         let qu = &d.lu + b.tr_mul(&vx);
         let mut qxx = &d.lxx + a.tr_mul(&(&vxx * a));
         let mut quu = &d.luu + b.tr_mul(&(&vxx * b));
         let mut qux = &d.lux + b.tr_mul(&(&vxx * a));
         if settings.solver == Solver::Ddp {
-            // The rollout left the VI at the last step; redo step k for its second derivatives.
-            let mut x2 = DVector::zeros(nx);
-            dynamics.step(k, x[k].as_slice(), u[k].as_slice(), x2.as_mut_slice(), None)?;
             dynamics.contracted(
                 k,
+                x[k].as_slice(),
                 u[k].as_slice(),
                 vx.as_slice(),
                 &mut hxx,
@@ -406,8 +466,8 @@ where
         vx = &qx + gain.tr_mul(&(&quu * &kk)) + gain.tr_mul(&qu) + qux.tr_mul(&kk);
         let v = &qxx + gain.tr_mul(&(&quu * &gain)) + gain.tr_mul(&qux) + qux.tr_mul(&gain);
         vxx = (&v + v.transpose()) * 0.5;
-        knots.k[k] = kk;
-        knots.gain[k] = gain;
+        work.k[k] = kk;
+        work.gain[k] = gain;
     }
     Ok(gradient)
 }
@@ -423,7 +483,7 @@ fn control_qp(
     settings: &IlqrSettings,
 ) -> Result<(DVector<f64>, DMatrix<f64>), SimError> {
     let nu = g.len();
-    let not_pd = || SimError::InvalidInput("Q_uu is not positive definite".into());
+    let not_pd = || SimError::InvalidInput(NOT_PD.into());
     let Some((lo, hi)) = &settings.limits else {
         let chol = h.clone().cholesky().ok_or_else(not_pd)?;
         return Ok((-chol.solve(g), -chol.solve(qux)));

@@ -1,15 +1,20 @@
-//! Optimal control on the variational integrator (docs/derivations.md §10): the discrete
-//! LQR ([`lqr::dare`]) and time-varying LQR ([`lqr::tvlqr`]) on a linearisation, and iLQR /
-//! DDP with box limits ([`ilqr::solve`]) on [`ViDynamics`], the VI as `x_{k+1} = f(x_k, u_k)`
-//! on `x = (q_d, p_d)` with the model's inputs as controls. Costs are [`Cost`]s
-//! ([`QuadraticCost`] on the state and controls).
+//! Optimal control (docs/derivations.md §10): the discrete LQR ([`lqr::dare`]) and
+//! time-varying LQR ([`lqr::tvlqr`]) on a linearisation, and iLQR / DDP with box limits
+//! ([`ilqr::solve`]) on a [`DiscreteSystem`] — the VI (or RK4) as `x_{k+1} = f(x_k, u_k)`
+//! whose controls are inputs and kinematic variables. Costs are [`Cost`]s: a
+//! [`QuadraticCost`] on the state and controls, or the [`TaskCost`] of a task file (state,
+//! control, control-rate, frame and orientation terms).
 
 pub mod cost;
+pub mod discrete;
+pub mod frames;
 pub mod ilqr;
 pub mod lqr;
-pub mod vi_dynamics;
+pub mod task_cost;
 
-pub use cost::{Cost, Derivatives, QuadraticCost};
-pub use ilqr::{cost_gradient, solve, IlqrSettings, Iteration, Solution, Solver};
+pub use cost::{Cost, Derivatives, Needs, QuadraticCost};
+pub use discrete::{DiscreteSystem, Knot};
+pub use ilqr::{cost_gradient, solve, solve_with, IlqrSettings, Iteration, Solution, Solver};
 pub use lqr::{dare, tvlqr, Lqr};
-pub use vi_dynamics::ViDynamics;
+pub use task_cost::TaskCost;
+pub use tree_model::{About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver};

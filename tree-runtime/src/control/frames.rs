@@ -1,0 +1,101 @@
+//! Frames' world poses and their Jacobians by `q`, read off the model's tree (eq. (1) and
+//! its derivative): what `frame` and `orientation` cost terms are written on. Each variable
+//! drives one primitive, so column `j` of a frame's Jacobian is that primitive's unit twist
+//! seen from the world, when the frame hangs below it.
+
+use nalgebra::{DMatrix, Matrix3, Vector3};
+use tree_model::{Joint, Model};
+
+/// Every frame's world rotation and origin at `q`.
+pub fn world_poses(model: &Model, q: &[f64]) -> Vec<(Matrix3<f64>, Vector3<f64>)> {
+    let mut out: Vec<(Matrix3<f64>, Vector3<f64>)> = Vec::with_capacity(model.frames.len());
+    for f in &model.frames {
+        let (r, p) = f
+            .parent
+            .map_or((Matrix3::identity(), Vector3::zeros()), |k| out[k]);
+        let x = match f.joint {
+            Joint::Constant(x) => x,
+            Joint::Variable(i) => q[i],
+        };
+        let axis = f.primitive.axis();
+        out.push(if f.primitive.is_rotation() {
+            let turn = nalgebra::Rotation3::from_axis_angle(
+                &nalgebra::Unit::new_unchecked(Vector3::ith(axis, 1.0)),
+                x,
+            );
+            (r * turn.matrix(), p)
+        } else {
+            (r, p + r.column(axis) * x)
+        });
+    }
+    out
+}
+
+/// Frame `f`'s world position Jacobian `∂p_f/∂q` and angular Jacobian `J_ω` (world
+/// components: `ω = J_ω q̇`), each 3 × n, from the poses of [`world_poses`].
+pub fn frame_jacobians(
+    model: &Model,
+    poses: &[(Matrix3<f64>, Vector3<f64>)],
+    f: usize,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let n = model.variables.len();
+    let (mut jp, mut jw) = (DMatrix::zeros(3, n), DMatrix::zeros(3, n));
+    let pf = poses[f].1;
+    let mut a = Some(f);
+    while let Some(k) = a {
+        let frame = &model.frames[k];
+        if let Joint::Variable(j) = frame.joint {
+            let (r, p) = poses[k];
+            let e = r.column(frame.primitive.axis()).into_owned();
+            if frame.primitive.is_rotation() {
+                let v = e.cross(&(pf - p));
+                for row in 0..3 {
+                    jp[(row, j)] += v[row];
+                    jw[(row, j)] += e[row];
+                }
+            } else {
+                for row in 0..3 {
+                    jp[(row, j)] += e[row];
+                }
+            }
+        }
+        a = frame.parent;
+    }
+    (jp, jw)
+}
+
+/// `log(R)`: the rotation vector `φ` with `R = exp([φ]×)`, `|φ| ≤ π`.
+pub fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {
+    let cos = ((r.trace() - 1.0) * 0.5).clamp(-1.0, 1.0);
+    let theta = cos.acos();
+    let skew = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]);
+    if theta < 1e-6 {
+        // θ/(2 sin θ) = ½(1 + θ²/6 + …).
+        return skew * (0.5 * (1.0 + theta * theta / 6.0));
+    }
+    if std::f64::consts::PI - theta > 1e-6 {
+        return skew * (theta / (2.0 * theta.sin()));
+    }
+    // Near π: the axis from the largest diagonal entry of (R + I)/2 = a aᵀ.
+    let b = (r + Matrix3::identity()) * 0.5;
+    let i = (0..3)
+        .max_by(|&x, &y| b[(x, x)].total_cmp(&b[(y, y)]))
+        .unwrap_or(0);
+    let mut axis = b.column(i).into_owned() / b[(i, i)].max(1e-300).sqrt();
+    if axis.dot(&skew) < 0.0 {
+        axis = -axis;
+    }
+    axis.normalize() * theta
+}
+
+/// The inverse right Jacobian of SO(3) at `φ`: `d log(R exp([δ]×)) = J_r⁻¹(φ) δ`.
+pub fn right_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = phi.norm();
+    let k = phi.cross_matrix();
+    let c = if theta < 1e-6 {
+        1.0 / 12.0 + theta * theta / 720.0
+    } else {
+        1.0 / (theta * theta) - (1.0 + theta.cos()) / (2.0 * theta * theta.sin())
+    };
+    Matrix3::identity() + k * 0.5 + k * k * c
+}
