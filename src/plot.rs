@@ -34,13 +34,15 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 /// One named curve.
-type Series = (String, Vec<(f64, f64)>);
+pub type Series = (String, Vec<(f64, f64)>);
 
-/// One panel: a caption, the y axis's label, its curves.
-struct Panel {
-    caption: String,
-    y_desc: &'static str,
-    series: Vec<Series>,
+/// One panel: a caption, the y axis's label, its curves over time (or over `x` when it
+/// is given: its label and its end).
+pub struct Panel {
+    pub caption: String,
+    pub y_desc: &'static str,
+    pub series: Vec<Series>,
+    pub x: Option<(&'static str, f64)>,
 }
 
 impl Panel {
@@ -59,6 +61,7 @@ type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 
 /// Draws `panel` over `0..t_end`, its legend in a column at the right.
 fn draw_panel(area: &Area, panel: &Panel, t_end: f64) -> Result<(), String> {
+    let (x_desc, t_end) = panel.x.unwrap_or(("t [s]", t_end));
     let err = drawing_error;
     let s = SCALE as i32;
     let (chart_area, legend) = area.split_horizontally((WIDTH - LEGEND) * SCALE);
@@ -72,7 +75,7 @@ fn draw_panel(area: &Area, panel: &Panel, t_end: f64) -> Result<(), String> {
         .map_err(|e| err(&e))?;
     chart
         .configure_mesh()
-        .x_desc("t [s]")
+        .x_desc(x_desc)
         .y_desc(panel.y_desc)
         .label_style(("sans-serif", 13 * s))
         .axis_desc_style(("sans-serif", 15 * s))
@@ -112,6 +115,16 @@ fn draw_panel(area: &Area, panel: &Panel, t_end: f64) -> Result<(), String> {
 
 /// Writes a PNG of `traj` (a run of `model`) to `out`.
 pub fn plot(traj: &Trajectory, model: &Model, out: &OutputFile) -> Result<(), String> {
+    plot_with(traj, model, out, Vec::new())
+}
+
+/// [`plot`] with `extra` panels after the run's own.
+pub fn plot_with(
+    traj: &Trajectory,
+    model: &Model,
+    out: &OutputFile,
+    extra: Vec<Panel>,
+) -> Result<(), String> {
     let err =
         |e: &dyn Sentence| format!("cannot draw `{}`: {}", out.path().display(), e.sentence());
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
@@ -129,16 +142,19 @@ pub fn plot(traj: &Trajectory, model: &Model, out: &OutputFile) -> Result<(), St
             caption: format!("{title}: angles"),
             y_desc: "q [rad]",
             series: of_kind(&|i| !kinematic(i) && model.is_angle(i)),
+            x: None,
         },
         Panel {
             caption: format!("{title}: lengths"),
             y_desc: "q [m]",
             series: of_kind(&|i| !kinematic(i) && !model.is_angle(i)),
+            x: None,
         },
         Panel {
             caption: format!("{title}: prescribed (kinematic) variables"),
             y_desc: "q [rad or m]",
             series: of_kind(&kinematic),
+            x: None,
         },
         Panel {
             caption: "total energy".into(),
@@ -151,6 +167,7 @@ pub fn plot(traj: &Trajectory, model: &Model, out: &OutputFile) -> Result<(), St
                     .zip(traj.energy.iter().copied())
                     .collect(),
             )],
+            x: None,
         },
     ];
     if !traj.constraints.is_empty() {
@@ -165,8 +182,10 @@ pub fn plot(traj: &Trajectory, model: &Model, out: &OutputFile) -> Result<(), St
                     (traj.constraints[r].clone(), points)
                 })
                 .collect(),
+            x: None,
         });
     }
+    panels.extend(extra);
     panels.retain(|p| !p.series.is_empty());
     let height: u32 = panels.iter().map(Panel::height).sum();
     let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);

@@ -45,7 +45,7 @@ impl Default for IlqrSettings {
         IlqrSettings {
             solver: Solver::Ilqr,
             max_iterations: 100,
-            cost_tolerance: 1e-9,
+            cost_tolerance: 1e-6,
             gradient_tolerance: 1e-8,
             limits: None,
             mu: 1e-6,

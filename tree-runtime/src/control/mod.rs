@@ -11,10 +11,12 @@ pub mod frames;
 pub mod ilqr;
 pub mod lqr;
 pub mod task_cost;
+pub mod task_solve;
 
 pub use cost::{Cost, Derivatives, Needs, QuadraticCost};
 pub use discrete::{DiscreteSystem, Knot};
 pub use ilqr::{cost_gradient, solve, solve_with, IlqrSettings, Iteration, Solution, Solver};
 pub use lqr::{dare, tvlqr, Lqr};
 pub use task_cost::TaskCost;
+pub use task_solve::{solve_task, task_system, TaskOptions, TaskResult};
 pub use tree_model::{About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver};

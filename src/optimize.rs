@@ -1,0 +1,285 @@
+//! `tree-mech optimize TASK.toml`: solve a task file's optimal-control problem with iLQR or
+//! DDP, print each iteration and a summary, and write the optimal trajectory (CSV), a plot,
+//! an animation, a JSON summary and the feedback gains.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+use tree_mech::control::{solve_task, Iteration, TaskOptions, TaskResult, TaskSolver};
+use tree_mech::model::{self, Model, Task};
+use tree_mech::nalgebra::Dyn;
+use tree_mech::runtime::trajectory::{CsvStream, Sample};
+use tree_mech::runtime::{Pose, Vector};
+use tree_mech::{Order, System, Terms, Trajectory, TreeSystem};
+
+use crate::animate;
+use crate::output::OutputFile;
+use crate::plot::{plot_with, Panel};
+
+/// What `optimize` was asked for.
+pub struct Request {
+    pub task: PathBuf,
+    pub out: Option<PathBuf>,
+    pub plot: Option<PathBuf>,
+    pub animate: Option<PathBuf>,
+    pub json: Option<PathBuf>,
+    pub gains: Option<PathBuf>,
+    pub max_iterations: Option<usize>,
+    pub solver: Option<TaskSolver>,
+    pub quiet: bool,
+}
+
+/// Every output checked before the solve (directory, extension, no two the same, none the
+/// task or its model).
+struct Files {
+    out: Option<OutputFile>,
+    plot: Option<OutputFile>,
+    animate: Option<OutputFile>,
+    json: Option<OutputFile>,
+    gains: Option<OutputFile>,
+}
+
+fn check_files(r: &Request, model_path: &Path) -> Result<Files, String> {
+    let mut taken: Vec<&Path> = vec![&r.task, model_path];
+    let mut files: [Option<OutputFile>; 5] = Default::default();
+    for (k, (path, what, ext)) in [
+        (&r.out, "out", None),
+        (&r.plot, "plot", Some("png")),
+        (&r.animate, "animate", Some("gif")),
+        (&r.json, "json", Some("json")),
+        (&r.gains, "gains", Some("json")),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        if let Some(p) = path {
+            files[k] = Some(OutputFile::new(p, what, ext, &taken)?);
+            taken.push(p);
+        }
+    }
+    let [out, plot, animate, json, gains] = files;
+    Ok(Files {
+        out,
+        plot,
+        animate,
+        json,
+        gains,
+    })
+}
+
+pub fn run(r: Request) -> Result<(), String> {
+    if r.max_iterations == Some(0) {
+        return Err("--max-iterations must be at least 1".into());
+    }
+    let (task, model) = model::read_task(&r.task).map_err(|e| e.to_string())?;
+    let files = check_files(&r, &task.model_path)?;
+    let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
+    let options = TaskOptions {
+        solver: r.solver,
+        max_iterations: r.max_iterations,
+    };
+    if !r.quiet {
+        println!(
+            "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}",
+            "iter", "cost", "step", "μ", "max |k|"
+        );
+    }
+    let mut count = 0;
+    let mut print = |it: &Iteration| {
+        count += 1;
+        if !r.quiet {
+            println!(
+                "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}",
+                it.cost, it.step, it.mu, it.gradient
+            );
+        }
+    };
+    let result = solve_task(sys, &task, &model, &options, &mut print).map_err(|e| e.to_string())?;
+    write_outputs(&r.task, &task, &model, &result, files)
+}
+
+fn write_outputs(
+    path: &Path,
+    task: &Task,
+    model: &Model,
+    res: &TaskResult,
+    files: Files,
+) -> Result<(), String> {
+    let mut sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
+    let names: Vec<String> = model.variables.iter().map(|v| v.name.clone()).collect();
+    let constraints = model.constraint_row_names();
+    let controls: Vec<String> = (0..task.controls.len())
+        .map(|c| task.control_name(model, c).to_string())
+        .collect();
+    let sol = &res.solution;
+    let n = task.knots;
+    // The controls at each knot (the last knot repeats the last control).
+    let control_at = |k: usize| sol.u[k.min(n - 1)].as_slice();
+    let mut terms = Terms::zeros(Dyn(names.len()));
+    let mut energy = Vec::with_capacity(n + 1);
+    for k in 0..=n {
+        let (q, dq) = (
+            Vector::<Dyn>::from_column_slice(res.q[k].as_slice()),
+            Vector::<Dyn>::from_column_slice(res.dq[k].as_slice()),
+        );
+        sys.lagrangian(&q, &dq, Order::First, &mut terms);
+        energy.push(terms.energy(&dq));
+    }
+    let sample = |k: usize| Sample {
+        step: k,
+        t: res.t[k],
+        q: res.q[k].as_slice(),
+        dq: res.dq[k].as_slice(),
+        p: None,
+        energy: energy[k],
+        lambda: res.lambda[k].as_slice(),
+        violation: 0.0,
+        u: control_at(k),
+    };
+    if let Some(file) = &files.out {
+        let shown = file.path().display();
+        let w = std::fs::File::create(file.temp())
+            .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
+        let mut csv = CsvStream::with_inputs(
+            std::io::BufWriter::new(w),
+            &names,
+            &constraints,
+            &controls,
+        )
+        .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
+        for k in 0..=n {
+            csv.write(&sample(k))
+                .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
+        }
+        csv.finish()
+            .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
+    }
+    if let Some(file) = &files.plot {
+        let mut traj = Trajectory::new(names.clone(), constraints.clone(), n + 1);
+        for k in 0..=n {
+            traj.push(&sample(k));
+        }
+        let t_end = res.t[n];
+        let control_panel = Panel {
+            caption: "controls (inputs in N or N·m; kinematic controls in m or rad)".into(),
+            y_desc: "u",
+            series: controls
+                .iter()
+                .enumerate()
+                .map(|(c, name)| {
+                    let points = (0..n)
+                        .flat_map(|k| [(res.t[k], sol.u[k][c]), (res.t[k + 1], sol.u[k][c])])
+                        .collect();
+                    (name.clone(), points)
+                })
+                .collect(),
+            x: Some(("t [s]", t_end)),
+        };
+        let history = Panel {
+            caption: "total cost per iteration".into(),
+            y_desc: "log10 cost",
+            series: vec![(
+                "cost".into(),
+                sol.history
+                    .iter()
+                    .enumerate()
+                    .map(|(i, it)| ((i + 1) as f64, it.cost.max(f64::MIN_POSITIVE).log10()))
+                    .collect(),
+            )],
+            x: Some(("iteration", sol.history.len().max(1) as f64)),
+        };
+        plot_with(&traj, model, file, vec![control_panel, history])?;
+    }
+    if let Some(file) = &files.animate {
+        let mut poses = Vec::with_capacity(n + 1);
+        for k in 0..=n {
+            let mut frame = vec![Pose::IDENTITY; sys.frame_count()];
+            sys.poses(&Vector::<Dyn>::from_column_slice(res.q[k].as_slice()), &mut frame);
+            poses.push(frame);
+        }
+        animate::write_gif(
+            model,
+            &res.t,
+            &poses,
+            file,
+            animate::CameraMode::Fixed,
+            &mut |_, _| {},
+        )?;
+    }
+    // Every frame a cost term names, at the end.
+    let named: std::collections::BTreeSet<usize> = task
+        .running
+        .iter()
+        .chain(&task.terminal)
+        .filter_map(|t| t.frame())
+        .collect();
+    let origins = model.origins(res.q[n].as_slice());
+    let frames: serde_json::Map<String, serde_json::Value> = named
+        .iter()
+        .map(|&f| (model.frames[f].name.clone(), json!(origins[f])))
+        .collect();
+    let converged = sol.converged;
+    if let Some(file) = &files.json {
+        let summary = json!({
+            "converged": converged,
+            "iterations": sol.history.len(),
+            "cost": sol.cost,
+            "q_final": res.q[n].as_slice(),
+            "dq_final": res.dq[n].as_slice(),
+            "variables": names,
+            "controls": controls,
+            "frames": frames,
+            "solve_seconds": res.solve_seconds,
+        });
+        write_text(file, &format!("{summary:#}\n"))?;
+    }
+    if let Some(file) = &files.gains {
+        let gains = json!({
+            "note": "u = u_plan[k] + K[k] (x − x_plan[k]) near the plan; x = (q_d, p_d or q̇_d, the controls' memory)",
+            "controls": controls,
+            "u_plan": sol.u.iter().map(|u| u.as_slice().to_vec()).collect::<Vec<_>>(),
+            "x_plan": sol.x.iter().map(|x| x.as_slice().to_vec()).collect::<Vec<_>>(),
+            "K": sol.gains.iter().map(|g| (0..g.nrows()).map(|r| g.row(r).iter().copied().collect::<Vec<_>>()).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "feedforward": sol.feedforward.iter().map(|k| k.as_slice().to_vec()).collect::<Vec<_>>(),
+        });
+        write_text(file, &format!("{gains}\n"))?;
+    }
+    let place = frames
+        .iter()
+        .map(|(name, p)| format!(" `{name}` ends at {p}."))
+        .collect::<String>();
+    println!(
+        "{} `{}` ({} knots of {} s, {}) in {} iterations, {:.3} s: cost {:.6e}.{place}",
+        if converged {
+            "Solved"
+        } else {
+            "Did not converge on"
+        },
+        path.display(),
+        n,
+        task.dt,
+        match task.integrator {
+            model::TaskIntegrator::Vi => "VI",
+            model::TaskIntegrator::Rk4 => "RK4",
+        },
+        sol.history.len(),
+        res.solve_seconds,
+        sol.cost,
+    );
+    if !converged {
+        println!("The best trajectory found is written; raise --max-iterations to go on.");
+    }
+    for file in [files.out, files.plot, files.animate, files.json, files.gains]
+        .into_iter()
+        .flatten()
+    {
+        file.commit()?;
+    }
+    Ok(())
+}
+
+
+fn write_text(file: &OutputFile, text: &str) -> Result<(), String> {
+    std::fs::write(file.temp(), text)
+        .map_err(|e| format!("cannot write `{}`: {e}", file.path().display()))
+}

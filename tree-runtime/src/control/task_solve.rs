@@ -1,0 +1,167 @@
+//! Solving a [`Task`] (a task file) on a system: the discretisation it names, the start
+//! state, the initial guess (the start held at rest: gravity compensation on inputs,
+//! kinematic controls on their prescription), the limits, the solve, and the optimal
+//! trajectory read back knot by knot (`q`, `q̇`, the controls, `λ`).
+
+use std::time::Instant;
+
+use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
+use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
+
+use super::cost::Needs;
+use super::discrete::{DiscreteSystem, Knot};
+use super::ilqr::{solve_with, IlqrSettings, Iteration, Solution, Solver};
+use super::task_cost::TaskCost;
+use crate::dynamics::{ModelMotions, Prescription};
+use crate::error::SimError;
+use crate::integrate::ViSettings;
+use crate::system::System;
+
+/// A solved task: the solver's result and the trajectory at every knot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaskResult {
+    /// The optimiser's result (states, controls, gains, cost, history).
+    pub solution: Solution,
+    /// Knot times `t_0 … t_N`.
+    pub t: Vec<f64>,
+    /// Every variable's value at each knot.
+    pub q: Vec<DVector<f64>>,
+    /// Every variable's velocity at each knot (VI: consistent with the momentum).
+    pub dq: Vec<DVector<f64>>,
+    /// The constraint forces `λ` of the step leaving each knot (the last knot repeats the
+    /// last step's).
+    pub lambda: Vec<DVector<f64>>,
+    /// Wall time of the solve.
+    pub solve_seconds: f64,
+}
+
+/// Settings beyond the task file: what the CLI's options override.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TaskOptions {
+    /// The solver (default: the task's).
+    pub solver: Option<TaskSolver>,
+    /// The iteration limit (default: the task's, else 100).
+    pub max_iterations: Option<usize>,
+}
+
+/// The discretised system of `task` on `sys`.
+pub fn task_system<S: System>(sys: S, task: &Task) -> Result<DiscreteSystem<S>, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    match task.integrator {
+        TaskIntegrator::Vi => {
+            DiscreteSystem::vi(sys, ViSettings::default(), task.dt, 0.0, task.controls.clone())
+        }
+        TaskIntegrator::Rk4 => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()),
+    }
+}
+
+/// Solves `task` (read with `model`) on `sys` (that model, compiled or interpreted),
+/// calling `report` after every iteration.
+pub fn solve_task<S: System>(
+    sys: S,
+    task: &Task,
+    model: &Model,
+    options: &TaskOptions,
+    report: &mut dyn FnMut(&Iteration),
+) -> Result<TaskResult, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    if sys.dof() != model.variables.len() {
+        return Err(SimError::InvalidInput(format!(
+            "the system has {} variables but the task's model has {}",
+            sys.dof(),
+            model.variables.len()
+        )));
+    }
+    let mut dynamics = task_system(sys, task)?;
+    let (mut q0, mut dq0) = (dynamics.sys.zero_vector(), dynamics.sys.zero_vector());
+    for i in 0..q0.len() {
+        (q0[i], dq0[i]) = (task.q0[i], task.dq0[i]);
+    }
+    // The initial guess: hold the start (gravity compensation), kinematic controls on
+    // their prescription.
+    let hold = dynamics.gravity_compensation(&q0);
+    let nu = task.controls.len();
+    for (c, control) in task.controls.iter().enumerate() {
+        if let (Control::Input(_), Some([lo, hi])) = (control, task.limits[c]) {
+            if !(lo..=hi).contains(&hold[c]) {
+                let at = task.limit_lines[c].map_or(String::new(), |l| format!(" (line {l})"));
+                return Err(SimError::InvalidInput(format!(
+                    "the limits [{lo}, {hi}] of `{}`{at} exclude the {} that holds the start against gravity",
+                    task.control_name(model, c),
+                    hold[c]
+                )));
+            }
+        }
+    }
+    let mut motion = ModelMotions::of(&dynamics.sys);
+    let guess: Vec<DVector<f64>> = (0..task.knots)
+        .map(|k| {
+            DVector::from_fn(nu, |c, _| match task.controls[c] {
+                Control::Input(_) => hold[c],
+                Control::Kinematic(i) => motion.kinematic(i, (k + 1) as f64 * task.dt)[0],
+            })
+        })
+        .collect();
+    let x0 = dynamics.state_of(&q0, &dq0, hold.as_slice());
+    let bounded = task.limits.iter().any(Option::is_some);
+    let limits = bounded.then(|| {
+        (
+            DVector::from_fn(nu, |c, _| task.limits[c].map_or(f64::NEG_INFINITY, |l| l[0])),
+            DVector::from_fn(nu, |c, _| task.limits[c].map_or(f64::INFINITY, |l| l[1])),
+        )
+    });
+    let settings = IlqrSettings {
+        solver: match options.solver.unwrap_or(task.solver) {
+            TaskSolver::Ilqr => Solver::Ilqr,
+            TaskSolver::Ddp => Solver::Ddp,
+        },
+        max_iterations: options.max_iterations.or(task.max_iterations).unwrap_or(100),
+        limits,
+        ..IlqrSettings::default()
+    };
+    let mut cost = TaskCost::new(task, model);
+    let start = Instant::now();
+    let solution = solve_with(&mut dynamics, &mut cost, &x0, guess, &settings, report)?;
+    let solve_seconds = start.elapsed().as_secs_f64();
+    // Read the trajectory back: q, q̇ at every knot, λ of every step.
+    let mut knot = Knot {
+        x: DVector::zeros(0),
+        q: DVector::zeros(0),
+        dq: DVector::zeros(0),
+        q_x: nalgebra::DMatrix::zeros(0, 0),
+        dq_x: nalgebra::DMatrix::zeros(0, 0),
+        gravity: DVector::zeros(0),
+        gravity_x: nalgebra::DMatrix::zeros(0, 0),
+        previous: DVector::zeros(0),
+        previous_at: Vec::new(),
+    };
+    let needs = Needs {
+        velocity: true,
+        gravity: false,
+    };
+    let (mut q, mut dq, mut lambda) = (Vec::new(), Vec::new(), Vec::new());
+    let mut x2 = vec![0.0; dynamics.states()];
+    for k in 0..=task.knots {
+        let x = solution.x[k].as_slice();
+        dynamics.knot(k, x, &mut knot, false, needs)?;
+        q.push(knot.q.clone());
+        dq.push(knot.dq.clone());
+        if k < task.knots {
+            dynamics.step(k, x, solution.u[k].as_slice(), &mut x2, None)?;
+            lambda.push(DVector::from_column_slice(dynamics.multipliers()));
+        }
+    }
+    lambda.push(lambda.last().cloned().unwrap_or_default());
+    Ok(TaskResult {
+        t: (0..=task.knots).map(|k| k as f64 * task.dt).collect(),
+        q,
+        dq,
+        lambda,
+        solution,
+        solve_seconds,
+    })
+}
