@@ -140,13 +140,9 @@ fn write_outputs(
         let shown = file.path().display();
         let w = std::fs::File::create(file.temp())
             .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
-        let mut csv = CsvStream::with_inputs(
-            std::io::BufWriter::new(w),
-            &names,
-            &constraints,
-            &controls,
-        )
-        .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
+        let mut csv =
+            CsvStream::with_inputs(std::io::BufWriter::new(w), &names, &constraints, &controls)
+                .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
         for k in 0..=n {
             csv.write(&sample(k))
                 .map_err(|e| format!("cannot write `{shown}`: {e}"))?;
@@ -194,7 +190,10 @@ fn write_outputs(
         let mut poses = Vec::with_capacity(n + 1);
         for k in 0..=n {
             let mut frame = vec![Pose::IDENTITY; sys.frame_count()];
-            sys.poses(&Vector::<Dyn>::from_column_slice(res.q[k].as_slice()), &mut frame);
+            sys.poses(
+                &Vector::<Dyn>::from_column_slice(res.q[k].as_slice()),
+                &mut frame,
+            );
             poses.push(frame);
         }
         animate::write_gif(
@@ -269,15 +268,20 @@ fn write_outputs(
     if !converged {
         println!("The best trajectory found is written; raise --max-iterations to go on.");
     }
-    for file in [files.out, files.plot, files.animate, files.json, files.gains]
-        .into_iter()
-        .flatten()
+    for file in [
+        files.out,
+        files.plot,
+        files.animate,
+        files.json,
+        files.gains,
+    ]
+    .into_iter()
+    .flatten()
     {
         file.commit()?;
     }
     Ok(())
 }
-
 
 fn write_text(file: &OutputFile, text: &str) -> Result<(), String> {
     std::fs::write(file.temp(), text)

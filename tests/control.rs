@@ -4,7 +4,7 @@
 //! the cart-pole with limits: cost never increasing, limits held, compiled ≡ interpreted.
 
 use tree_mech::control::{
-    cost_gradient, dare, solve, tvlqr, IlqrSettings, QuadraticCost, Solver, DiscreteSystem,
+    cost_gradient, dare, solve, tvlqr, DiscreteSystem, IlqrSettings, QuadraticCost, Solver,
 };
 use tree_mech::integrate::{Forcing, ViSettings};
 use tree_mech::model;

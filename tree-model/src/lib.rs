@@ -58,13 +58,13 @@ pub use model::{
 };
 pub use motion::{CubicSpline, Motion};
 pub use primitive::{Primitive, PrimitiveKind, Value};
-pub use task::{
-    read_task, task_from_str, About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver,
-};
 pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{
     ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,
     SpringSpec, VariableSpec,
+};
+pub use task::{
+    read_task, task_from_str, About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver,
 };
 pub use toml_format::{from_toml_file, from_toml_str};
 pub use urdf_format::{from_file, from_urdf_file, from_urdf_str, UrdfOptions, FLOATING_BASE};

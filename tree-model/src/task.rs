@@ -267,7 +267,10 @@ fn per_name(
                 let Some(at) = names.iter().position(|n| n == name) else {
                     p.at(
                         span.clone(),
-                        format!("{what} names `{name}`, which is not one of {}", names.join(", ")),
+                        format!(
+                            "{what} names `{name}`, which is not one of {}",
+                            names.join(", ")
+                        ),
                     );
                     continue;
                 };
@@ -303,9 +306,18 @@ fn weights(
         p.at(whole, format!("the term needs `{what}`"));
         return vec![0.0; names.len()];
     };
-    let w = per_name(p, &format!("`{what}`"), value, names, &vec![0.0; names.len()]);
+    let w = per_name(
+        p,
+        &format!("`{what}`"),
+        value,
+        names,
+        &vec![0.0; names.len()],
+    );
     if let Some(x) = w.iter().find(|x| **x < 0.0) {
-        p.at(value.span(), format!("`{what}` must not be negative, got {x}"));
+        p.at(
+            value.span(),
+            format!("`{what}` must not be negative, got {x}"),
+        );
     }
     w
 }
@@ -606,7 +618,10 @@ fn resolve(
             if present && !allowed.contains(&field) {
                 p.at(
                     whole.clone(),
-                    format!("a `{kind}` term takes no `{field}` (it takes {})", allowed.join(", ")),
+                    format!(
+                        "a `{kind}` term takes no `{field}` (it takes {})",
+                        allowed.join(", ")
+                    ),
                 );
             }
         }
@@ -632,7 +647,13 @@ fn resolve(
             found
         };
         let axis_weight = |p: &mut Problems| -> [f64; 3] {
-            let w = weights(p, "weight", rc.weight.as_ref(), &["x", "y", "z"], whole.clone());
+            let w = weights(
+                p,
+                "weight",
+                rc.weight.as_ref(),
+                &["x", "y", "z"],
+                whole.clone(),
+            );
             [w[0], w[1], w[2]]
         };
         Some(match kind {
@@ -661,7 +682,10 @@ fn resolve(
                     whole.clone(),
                 );
                 if rc.q_weight.is_none() && rc.dq_weight.is_none() {
-                    p.at(whole, "a `state` term needs `q_weight` or `dq_weight`".into());
+                    p.at(
+                        whole,
+                        "a `state` term needs `q_weight` or `dq_weight`".into(),
+                    );
                 }
                 CostTerm::State {
                     q_ref,
@@ -720,7 +744,11 @@ fn resolve(
                 let frame = frame(p);
                 let weight = axis_weight(p);
                 let target = rc.rpy.as_ref().map(|r| rpy_matrix(*r.get_ref()));
-                if rc.rpy.as_ref().is_some_and(|r| r.get_ref().iter().any(|v| !v.is_finite())) {
+                if rc
+                    .rpy
+                    .as_ref()
+                    .is_some_and(|r| r.get_ref().iter().any(|v| !v.is_finite()))
+                {
                     p.at(whole, "`rpy` must be finite".into());
                 }
                 CostTerm::Orientation {

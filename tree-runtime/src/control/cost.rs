@@ -48,13 +48,8 @@ pub struct Needs {
 /// written on a [`Knot`]: the state `x`, and `q`, `q̇` with their derivatives by `x`.
 pub trait Cost {
     /// The running term at knot `k` (Δt included); with `d`, its derivatives (overwritten).
-    fn running(
-        &mut self,
-        k: usize,
-        x: &Knot,
-        u: &DVector<f64>,
-        d: Option<&mut Derivatives>,
-    ) -> f64;
+    fn running(&mut self, k: usize, x: &Knot, u: &DVector<f64>, d: Option<&mut Derivatives>)
+        -> f64;
 
     /// The terminal term; with `d`, `ℓ_x` and `ℓ_xx` (the control parts zero).
     fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64;

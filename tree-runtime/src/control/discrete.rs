@@ -132,9 +132,8 @@ where
     /// RK4 on `(q_d, q̇_d)` with the given controls (inputs only: a kinematic variable would
     /// need its velocity and acceleration between knots).
     pub fn rk4(sys: S, dt: f64, t0: f64, controls: Vec<Control>) -> Result<Self, SimError> {
-        if let Some(Control::Kinematic(i)) = controls
-            .iter()
-            .find(|c| matches!(c, Control::Kinematic(_)))
+        if let Some(Control::Kinematic(i)) =
+            controls.iter().find(|c| matches!(c, Control::Kinematic(_)))
         {
             return Err(SimError::InvalidInput(format!(
                 "kinematic control `{}` needs the VI: RK4 would need its velocity and acceleration between knots",
@@ -257,7 +256,12 @@ where
     /// The state of `(q, q̇)` at knot 0, the controls' memory from `previous` (their values
     /// "before" the start: the initial guess of inputs, the start value of kinematic ones,
     /// at rest).
-    pub fn state_of(&mut self, q: &Vector<S::N>, dq: &Vector<S::N>, previous: &[f64]) -> DVector<f64> {
+    pub fn state_of(
+        &mut self,
+        q: &Vector<S::N>,
+        dq: &Vector<S::N>,
+        previous: &[f64],
+    ) -> DVector<f64> {
         let nd = self.dynamic.len();
         let mut x = DVector::zeros(self.states());
         let v = match &mut self.method {
@@ -335,7 +339,12 @@ where
         needs: Needs,
     ) -> Result<(), SimError> {
         let gravity = needs.gravity;
-        let (n, nx, nu, nd) = (self.sys.dof(), self.states(), self.controls(), self.dynamic.len());
+        let (n, nx, nu, nd) = (
+            self.sys.dof(),
+            self.states(),
+            self.controls(),
+            self.dynamic.len(),
+        );
         if out.q.len() != n || out.x.len() != nx || out.gravity.len() != nu {
             *out = Knot {
                 x: DVector::zeros(nx),
@@ -380,7 +389,8 @@ where
             Method::Vi(_) if !needs.velocity => {}
             Method::Vi(_) => {
                 // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇.
-                self.sys.lagrangian(&q, &dq, Order::Dynamics, &mut self.terms);
+                self.sys
+                    .lagrangian(&q, &dq, Order::Dynamics, &mut self.terms);
                 let m = &self.terms.mass;
                 let mdd = DMatrix::from_fn(nd, nd, |r, c| m[(self.dynamic[r], self.dynamic[c])]);
                 let lu = mdd.lu();
@@ -398,7 +408,8 @@ where
                 }
                 if derivatives {
                     // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇.
-                    self.sys.lagrangian(&q, &dq, Order::Dynamics, &mut self.terms);
+                    self.sys
+                        .lagrangian(&q, &dq, Order::Dynamics, &mut self.terms);
                     let m = &self.terms.mass;
                     let mut rhs = DMatrix::zeros(nd, nx);
                     for (r, &i) in self.dynamic.iter().enumerate() {
@@ -427,7 +438,11 @@ where
         out.dq.as_mut_slice().copy_from_slice(dq.as_slice());
         if gravity {
             let zero = self.sys.zero_vector();
-            let order = if derivatives { Order::Full } else { Order::First };
+            let order = if derivatives {
+                Order::Full
+            } else {
+                Order::First
+            };
             self.sys.lagrangian(&q, &zero, order, &mut self.terms);
             out.gravity_x.fill(0.0);
             for (c, control) in self.controls.iter().enumerate() {
@@ -447,7 +462,12 @@ where
                 }
             }
         }
-        if !(out.dq.iter().chain(out.gravity.iter()).all(|v| v.is_finite())) {
+        if !(out
+            .dq
+            .iter()
+            .chain(out.gravity.iter())
+            .all(|v| v.is_finite()))
+        {
             return Err(SimError::InvalidInput(format!(
                 "the velocity or gravity compensation at knot {k} is not finite"
             )));
@@ -657,10 +677,13 @@ where
             if c < 2 * nd {
                 return Some(n + c - nd);
             }
-            self.controls.iter().enumerate().find_map(|(j, control)| match *control {
-                Control::Kinematic(i) if self.memory[j] == c => Some(i),
-                _ => None,
-            })
+            self.controls
+                .iter()
+                .enumerate()
+                .find_map(|(j, control)| match *control {
+                    Control::Kinematic(i) if self.memory[j] == c => Some(i),
+                    _ => None,
+                })
         };
         let control = |c: usize| -> usize {
             match self.controls[c] {

@@ -68,7 +68,11 @@ pub fn frame_jacobians(
 pub fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {
     let cos = ((r.trace() - 1.0) * 0.5).clamp(-1.0, 1.0);
     let theta = cos.acos();
-    let skew = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]);
+    let skew = Vector3::new(
+        r[(2, 1)] - r[(1, 2)],
+        r[(0, 2)] - r[(2, 0)],
+        r[(1, 0)] - r[(0, 1)],
+    );
     if theta < 1e-6 {
         // θ/(2 sin θ) = ½(1 + θ²/6 + …).
         return skew * (0.5 * (1.0 + theta * theta / 6.0));

@@ -85,7 +85,6 @@ pub struct Solution {
     pub history: Vec<Iteration>,
 }
 
-
 /// Optimises the controls of `dynamics` over `u.len()` steps from `x0`, starting from `u`.
 /// Returns the best trajectory found with its gains, converged or not; fails only when the
 /// first rollout does (the start cannot be simulated) or the problem does not fit.
@@ -200,7 +199,9 @@ where
                 u_new[k].copy_from(&(&u[k] + &work.k[k] * alpha));
             }
             x_new[0].copy_from(x0);
-            if let Ok(trial) = forward(dynamics, cost, &x, &mut x_new, &u, &mut u_new, &mut work, settings) {
+            if let Ok(trial) = forward(
+                dynamics, cost, &x, &mut x_new, &u, &mut u_new, &mut work, settings,
+            ) {
                 if trial.is_finite() && trial < total {
                     accepted = alpha;
                     trial_total = trial;
@@ -369,7 +370,13 @@ where
         total += cost.running(k, &work.knot, &u[k], None);
         let (head, tail) = x.split_at_mut(k + 1);
         let jac = jacobians.then(|| (&mut work.a[k], &mut work.b[k]));
-        dynamics.step(k, head[k].as_slice(), u[k].as_slice(), tail[0].as_mut_slice(), jac)?;
+        dynamics.step(
+            k,
+            head[k].as_slice(),
+            u[k].as_slice(),
+            tail[0].as_mut_slice(),
+            jac,
+        )?;
     }
     dynamics.knot(n, x[n].as_slice(), &mut work.knot, false, work.needs)?;
     Ok(total + cost.terminal(&work.knot, None))
@@ -404,7 +411,13 @@ where
         dynamics.knot(k, x_new[k].as_slice(), &mut work.knot, false, work.needs)?;
         total += cost.running(k, &work.knot, &u_new[k], None);
         let (head, tail) = x_new.split_at_mut(k + 1);
-        dynamics.step(k, head[k].as_slice(), u_new[k].as_slice(), tail[0].as_mut_slice(), None)?;
+        dynamics.step(
+            k,
+            head[k].as_slice(),
+            u_new[k].as_slice(),
+            tail[0].as_mut_slice(),
+            None,
+        )?;
     }
     dynamics.knot(n, x_new[n].as_slice(), &mut work.knot, false, work.needs)?;
     Ok(total + cost.terminal(&work.knot, None))

@@ -107,9 +107,8 @@ impl TaskCost {
                     weight,
                 } => Term::Orientation {
                     frame: *frame,
-                    target: target.map_or(start_poses[*frame].0, |r| {
-                        Matrix3::from_fn(|i, j| r[i][j])
-                    }),
+                    target: target
+                        .map_or(start_poses[*frame].0, |r| Matrix3::from_fn(|i, j| r[i][j])),
                     weight: DVector::from_column_slice(weight),
                 },
             }
@@ -291,8 +290,15 @@ impl Cost for TaskCost {
                 Term::State { weight, .. } => weight.rows(n, n).iter().any(|w| *w != 0.0),
                 _ => false,
             }),
-            gravity: all().any(|t| matches!(t, Term::Control { about: About::Gravity, .. }))
-                && self.controls.iter().any(|c| matches!(c, Control::Input(_))),
+            gravity: all().any(|t| {
+                matches!(
+                    t,
+                    Term::Control {
+                        about: About::Gravity,
+                        ..
+                    }
+                )
+            }) && self.controls.iter().any(|c| matches!(c, Control::Input(_))),
         }
     }
 

@@ -50,9 +50,13 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     match task.integrator {
-        TaskIntegrator::Vi => {
-            DiscreteSystem::vi(sys, ViSettings::default(), task.dt, 0.0, task.controls.clone())
-        }
+        TaskIntegrator::Vi => DiscreteSystem::vi(
+            sys,
+            ViSettings::default(),
+            task.dt,
+            0.0,
+            task.controls.clone(),
+        ),
         TaskIntegrator::Rk4 => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()),
     }
 }
@@ -110,7 +114,9 @@ where
     let bounded = task.limits.iter().any(Option::is_some);
     let limits = bounded.then(|| {
         (
-            DVector::from_fn(nu, |c, _| task.limits[c].map_or(f64::NEG_INFINITY, |l| l[0])),
+            DVector::from_fn(nu, |c, _| {
+                task.limits[c].map_or(f64::NEG_INFINITY, |l| l[0])
+            }),
             DVector::from_fn(nu, |c, _| task.limits[c].map_or(f64::INFINITY, |l| l[1])),
         )
     });
@@ -119,7 +125,10 @@ where
             TaskSolver::Ilqr => Solver::Ilqr,
             TaskSolver::Ddp => Solver::Ddp,
         },
-        max_iterations: options.max_iterations.or(task.max_iterations).unwrap_or(100),
+        max_iterations: options
+            .max_iterations
+            .or(task.max_iterations)
+            .unwrap_or(100),
         limits,
         ..IlqrSettings::default()
     };
