@@ -269,3 +269,30 @@ fn task_file_errors_name_the_problem_and_line() {
         "{err}"
     );
 }
+
+#[test]
+fn the_marionette_raises_its_hand_by_its_strings_alone_every_string_taut() {
+    let (task, m) = read("tasks/marionette-wave.toml");
+    assert_eq!(task.controls.len(), 18);
+    assert!(task
+        .controls
+        .iter()
+        .all(|c| matches!(c, Control::Kinematic(_))));
+    let sys = TreeSystem::new(&m).unwrap();
+    let res = solve_task(sys, &task, &m, &TaskOptions::default(), &mut |_| {}).unwrap();
+    let f = m.frame_index("right_hand").unwrap();
+    let start = m.origins(&task.q0)[f];
+    let end = m.origins(res.q[task.knots].as_slice())[f];
+    let target = [start[0], start[1], start[2] + 0.15];
+    let miss = (0..3)
+        .map(|i| (end[i] - target[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(miss < 0.01, "the hand misses its target by {miss} m");
+    for (k, lambda) in res.lambda.iter().enumerate() {
+        assert!(
+            lambda.iter().all(|l| *l < 0.0),
+            "a string went slack at knot {k}: λ = {lambda}"
+        );
+    }
+}
