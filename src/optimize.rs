@@ -105,7 +105,7 @@ fn write_outputs(
     res: &TaskResult,
     files: Files,
 ) -> Result<(), String> {
-    let mut sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
+    let mut sys = TreeSystem::new(model).map_err(|e| e.to_string())?;
     let names: Vec<String> = model.variables.iter().map(|v| v.name.clone()).collect();
     let constraints = model.constraint_row_names();
     let controls: Vec<String> = (0..task.controls.len())

@@ -151,7 +151,7 @@ where
         t0: f64,
         controls: Vec<Control>,
     ) -> Result<Self, SimError> {
-        if !(dt.is_finite() && dt > 0.0) || !t0.is_finite() {
+        if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
             return Err(SimError::InvalidInput(format!(
                 "the step must be positive and the start time finite, got dt = {dt}, t0 = {t0}"
             )));
