@@ -846,3 +846,77 @@ fn linearize_second_order_prints_trep_s_thirty_second_derivatives() {
         "{stderr}"
     );
 }
+
+#[test]
+fn optimize_solves_a_task_and_writes_every_output() {
+    let dir = scratch("optimize");
+    let (csv, png, gif, json, gains) = (
+        dir.join("s.csv"),
+        dir.join("s.png"),
+        dir.join("s.gif"),
+        dir.join("s.json"),
+        dir.join("g.json"),
+    );
+    let (ok, stdout, stderr) = tree_mech(&[
+        "optimize",
+        "tasks/cartpole-swingup.toml",
+        "--out",
+        csv.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+        "--animate",
+        gif.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--gains",
+        gains.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("iter") && stdout.contains("Solved"), "{stdout}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next().unwrap(), "t,x,theta,dx,dtheta,energy,u_push");
+    assert_eq!(lines.count(), 126);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(summary["converged"], true);
+    let theta = summary["q_final"][1].as_f64().unwrap();
+    assert!(theta.abs() < 0.02, "the pole ends at {theta}");
+    for key in ["iterations", "cost", "dq_final", "frames", "solve_seconds"] {
+        assert!(!summary[key].is_null(), "no `{key}` in {summary}");
+    }
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&gains).unwrap()).unwrap();
+    assert_eq!(g["K"].as_array().unwrap().len(), 125);
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    assert_eq!(&std::fs::read(&gif).unwrap()[..3], b"GIF");
+    // A frame term names its frame's final position; a bad task is one line with its line.
+    let (ok, _, stderr) = tree_mech(&[
+        "optimize",
+        "tasks/cartpole-swingup.toml",
+        "--plot",
+        dir.join("x.gif").to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("must end in .png"), "{stderr}");
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        format!(
+            "model = \"{}/models/cartpole.toml\"\ndt = 0.02\nknots = 10\n[[cost]]\nkind = \"frame\"\nframe = \"hat\"\ntarget = [0.0, 0.0, 0.0]\nweight = 1.0\n",
+            env!("CARGO_MANIFEST_DIR")
+        ),
+    )
+    .unwrap();
+    let (ok, _, stderr) = tree_mech(&["optimize", bad.to_str().unwrap()]);
+    assert!(
+        !ok && stderr.contains("bad.toml:6: frame `hat` is not in the model"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = tree_mech(&[
+        "optimize",
+        "tasks/cartpole-swingup.toml",
+        "--out",
+        "tasks/cartpole-swingup.toml",
+    ]);
+    assert!(!ok && stderr.contains("same file"), "{stderr}");
+}
