@@ -872,7 +872,10 @@ fn optimize_solves_a_task_and_writes_every_output() {
         gains.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("iter") && stdout.contains("Solved"), "{stdout}");
+    assert!(
+        stdout.contains("iter") && stdout.contains("Solved"),
+        "{stdout}"
+    );
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next().unwrap(), "t,x,theta,dx,dtheta,energy,u_push");
