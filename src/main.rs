@@ -101,14 +101,6 @@ enum EvaluationArg {
     Uncached,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum SolverArg {
-    /// Iterative LQR (Gauss–Newton on the dynamics).
-    Ilqr,
-    /// Differential dynamic programming (the VI's second derivatives).
-    Ddp,
-}
-
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a model and write its trajectory (CSV) and a picture (PNG).
@@ -240,35 +232,7 @@ enum Command {
         second_order: bool,
     },
     /// Solve an optimal-control task file (iLQR or DDP) and write the optimal trajectory.
-    Optimize {
-        /// Task file (TOML; its `model` is read relative to it).
-        task: PathBuf,
-        /// CSV of the optimal trajectory: t, q, q̇, energy, the controls (`u_<name>`), λ.
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// PNG: the variables, the controls and the cost per iteration.
-        #[arg(long)]
-        plot: Option<PathBuf>,
-        /// GIF of the optimal motion (one picture per knot).
-        #[arg(long)]
-        animate: Option<PathBuf>,
-        /// JSON summary: converged, iterations, cost, q_final, dq_final, frames,
-        /// solve_seconds.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// JSON of the feedback gains and feed-forward terms per knot.
-        #[arg(long)]
-        gains: Option<PathBuf>,
-        /// Iteration limit (default: the task's, else 100).
-        #[arg(long)]
-        max_iterations: Option<usize>,
-        /// Solver (default: the task's, else ilqr).
-        #[arg(long, value_enum)]
-        solver: Option<SolverArg>,
-        /// Print the summary only, not each iteration.
-        #[arg(long)]
-        quiet: bool,
-    },
+    Optimize(optimize::Request),
     /// Validate a model and print a summary with the tree drawn as text.
     Check {
         /// Model file (TOML, or URDF by its .urdf extension).
@@ -387,34 +351,11 @@ fn main() -> ExitCode {
             t,
         ),
         Command::Check { model } => run_check(&model, &source),
-        Command::Optimize {
-            task,
-            out,
-            plot,
-            animate,
-            json,
-            gains,
-            max_iterations,
-            solver,
-            quiet,
-        } => {
+        Command::Optimize(request) => {
             if source.urdf.floating_base || !source.locks.is_empty() {
                 Err("--floating-base and --lock do not apply to optimize: say `floating_base = true` in the task file, and lock joints in the model".into())
             } else {
-                optimize::run(optimize::Request {
-                    task,
-                    out,
-                    plot,
-                    animate,
-                    json,
-                    gains,
-                    max_iterations,
-                    solver: solver.map(|s| match s {
-                        SolverArg::Ilqr => tree_mech::control::TaskSolver::Ilqr,
-                        SolverArg::Ddp => tree_mech::control::TaskSolver::Ddp,
-                    }),
-                    quiet,
-                })
+                optimize::run(request)
             }
         }
         Command::Linearize {

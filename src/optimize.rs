@@ -16,17 +16,45 @@ use crate::animate;
 use crate::output::OutputFile;
 use crate::plot::{plot_with, Panel};
 
-/// What `optimize` was asked for.
+/// What `optimize` was asked for: its command-line arguments.
+#[derive(clap::Args)]
 pub struct Request {
-    pub task: PathBuf,
-    pub out: Option<PathBuf>,
-    pub plot: Option<PathBuf>,
-    pub animate: Option<PathBuf>,
-    pub json: Option<PathBuf>,
-    pub gains: Option<PathBuf>,
-    pub max_iterations: Option<usize>,
-    pub solver: Option<TaskSolver>,
-    pub quiet: bool,
+    /// Task file (TOML; its `model` is read relative to it).
+    task: PathBuf,
+    /// CSV of the optimal trajectory: t, q, q̇, energy, the controls (`u_<name>`), λ and
+    /// the violation.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// PNG: the variables, the controls and the cost per iteration.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// GIF of the optimal motion (one picture per knot).
+    #[arg(long)]
+    animate: Option<PathBuf>,
+    /// JSON summary: converged, iterations, cost, q_final, dq_final, frames,
+    /// solve_seconds.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// JSON of the feedback gains and feed-forward terms per knot.
+    #[arg(long)]
+    gains: Option<PathBuf>,
+    /// Iteration limit (default: the task's, else 100).
+    #[arg(long)]
+    max_iterations: Option<usize>,
+    /// Solver (default: the task's, else ilqr).
+    #[arg(long, value_enum)]
+    solver: Option<SolverArg>,
+    /// Print the summary only, not each iteration.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum SolverArg {
+    /// Iterative LQR (Gauss–Newton on the dynamics).
+    Ilqr,
+    /// Differential dynamic programming (the VI's second derivatives).
+    Ddp,
 }
 
 /// Every output checked before the solve (directory, extension, no two the same, none the
@@ -75,7 +103,10 @@ pub fn run(r: Request) -> Result<(), String> {
     let files = check_files(&r, &task.model_path)?;
     let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
     let options = TaskOptions {
-        solver: r.solver,
+        solver: r.solver.map(|s| match s {
+            SolverArg::Ilqr => TaskSolver::Ilqr,
+            SolverArg::Ddp => TaskSolver::Ddp,
+        }),
         max_iterations: r.max_iterations,
     };
     if !r.quiet {
@@ -133,7 +164,7 @@ fn write_outputs(
         p: None,
         energy: energy[k],
         lambda: res.lambda[k].as_slice(),
-        violation: 0.0,
+        violation: res.violation[k],
         u: control_at(k),
     };
     if let Some(file) = &files.out {

@@ -155,3 +155,34 @@ fn evaluations_and_steps_allocate_nothing() {
     // The counter does count: a Vec allocates.
     assert!(allocations(|| drop(std::hint::black_box(vec![1u8; 16]))) > 0);
 }
+
+/// The optimiser's rollout path: a `DiscreteSystem` VI step (an input and a kinematic
+/// control, a string constraint) and a knot without derivatives allocate nothing after the
+/// first.
+#[test]
+fn a_discrete_system_step_allocates_nothing() {
+    use tree_mech::control::{Control, DiscreteSystem, Knot, Needs};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/trep-vi.toml");
+    let m = tree_mech::model::from_toml_file(path).unwrap();
+    let hand = m.variable_index("hand_y").unwrap();
+    let controls = vec![Control::Input(0), Control::Kinematic(hand)];
+    let sys = TreeSystem::new(&m).unwrap();
+    let mut d = DiscreteSystem::vi(sys, ViSettings::default(), 0.01, 0.0, controls).unwrap();
+    let (q0, dq0) = d.sys.initial_state();
+    let x0 = d.state_of(&q0, &dq0, &[0.0, 0.0]);
+    let (mut x, mut x2) = (x0.as_slice().to_vec(), vec![0.0; x0.len()]);
+    let mut knot = Knot::empty();
+    let mut go = |x: &mut Vec<f64>, k: usize| {
+        d.knot(k, x, &mut knot, false, Needs::default()).unwrap();
+        let u = [0.3, 0.1 + 0.001 * k as f64];
+        d.step(k, x, &u, &mut x2, None).unwrap();
+        x.copy_from_slice(&x2);
+    };
+    go(&mut x, 0);
+    let n = allocations(|| {
+        for k in 1..20 {
+            go(&mut x, k);
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 19 discrete steps");
+}

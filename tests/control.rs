@@ -4,7 +4,7 @@
 //! the cart-pole with limits: cost never increasing, limits held, compiled ≡ interpreted.
 
 use tree_mech::control::{
-    cost_gradient, dare, solve, tvlqr, DiscreteSystem, IlqrSettings, QuadraticCost, Solver,
+    cost_gradient, dare, solve, tvlqr, Control, DiscreteSystem, IlqrSettings, QuadraticCost, Solver,
 };
 use tree_mech::integrate::{Forcing, ViSettings};
 use tree_mech::model;
@@ -82,7 +82,7 @@ fn ilqr_solves_a_linear_quadratic_problem_in_one_iteration_as_the_riccati_recurs
         tolerance: 1e-14,
         ..ViSettings::default()
     };
-    let mut dynamics = DiscreteSystem::new(sys, settings, dt, 0.0);
+    let mut dynamics = DiscreteSystem::new(sys, settings, dt, 0.0).unwrap();
     let (q0, dq0) = dynamics.sys.initial_state();
     let x0 = dynamics.state_of(&q0, &dq0, &[]);
     let cost = QuadraticCost {
@@ -146,7 +146,7 @@ where
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
 {
     let (dt, knots) = (0.02, 60);
-    let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0);
+    let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap();
     let (q0, dq0) = dynamics.sys.initial_state();
     let x0 = dynamics.state_of(&q0, &dq0, &[]);
     let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0, 0.0]);
@@ -236,7 +236,8 @@ fn the_cost_gradient_matches_finite_differences() {
         constraint_tolerance: 1e-14,
         ..ViSettings::default()
     };
-    let mut dynamics = DiscreteSystem::new(TreeSystem::new(&m).unwrap(), settings, dt, 0.0);
+    let mut dynamics =
+        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), settings, dt, 0.0).unwrap();
     let (q0, dq0) = dynamics.sys.initial_state();
     let x0 = dynamics.state_of(&q0, &dq0, &[]);
     let mut cost = QuadraticCost {
@@ -279,7 +280,7 @@ fn lqr_holds_the_cartpole_upright_from_a_push() {
     let m = model::from_toml_file(path).unwrap();
     let dt = 0.02;
     let mut dynamics =
-        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt, 0.0);
+        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt, 0.0).unwrap();
     // The state is (q_d, p_d, the previous push).
     let (mut a, mut b) = (DMatrix::zeros(5, 5), DMatrix::zeros(5, 1));
     let mut x2 = [0.0; 5];
@@ -331,12 +332,42 @@ fn lqr_holds_the_cartpole_upright_from_a_push() {
 #[test]
 fn mismatched_problems_are_refused_with_a_sentence() {
     let m = model::from_toml_str(SPRING, None).unwrap();
+    // Systems that cannot be built: a bad step, a control that is not one.
+    let sys = || TreeSystem::new(&m).unwrap();
+    let refused = |r: Result<DiscreteSystem<TreeSystem>, tree_mech::SimError>| match r {
+        Ok(_) => panic!("accepted"),
+        Err(e) => e.to_string(),
+    };
+    let e = refused(DiscreteSystem::new(sys(), ViSettings::default(), -0.1, 0.0));
+    assert!(
+        e.contains("step must be positive") && e.contains("-0.1"),
+        "{e}"
+    );
+    let e = refused(DiscreteSystem::vi(
+        sys(),
+        ViSettings::default(),
+        0.1,
+        0.0,
+        vec![Control::Kinematic(0)],
+    ));
+    assert!(
+        e.contains("control variable 0 (not kinematic) is not a control"),
+        "{e}"
+    );
+    let e = refused(DiscreteSystem::rk4(
+        sys(),
+        0.1,
+        0.0,
+        vec![Control::Input(3)],
+    ));
+    assert!(e.contains("control input 3 is not a control"), "{e}");
     let mut dynamics = DiscreteSystem::new(
         TreeSystem::new(&m).unwrap(),
         ViSettings::default(),
         0.05,
         0.0,
-    );
+    )
+    .unwrap();
     let good = QuadraticCost {
         dt: 0.05,
         x_ref: DVector::zeros(3),

@@ -12,7 +12,7 @@ use tree_mech::control::{
 use tree_mech::integrate::ViSettings;
 use tree_mech::model::{self, task_from_str};
 use tree_mech::nalgebra::{DMatrix, DVector};
-use tree_mech::{tree_model, TreeSystem};
+use tree_mech::{tree_model, System, TreeSystem};
 
 tree_model!(struct CartPole from "models/cartpole.toml");
 
@@ -166,7 +166,8 @@ fn the_cartpole_swings_up_and_lqr_holds_it_there() {
         ViSettings::default(),
         task.dt,
         0.0,
-    );
+    )
+    .unwrap();
     let (mut a, mut b) = (DMatrix::zeros(5, 5), DMatrix::zeros(5, 1));
     let mut x2 = [0.0; 5];
     dynamics
@@ -251,13 +252,7 @@ fn task_file_errors_name_the_problem_and_line() {
             "expected «{want}» in «{err}» for\n{text}"
         );
     }
-    // Limits that cannot hold the start against gravity: found when solving.
-    let text = format!(
-        "model = \"cart.toml\"\ndt = 0.02\nknots = 5\n{cost}[start]\nq = {{ theta = 1.0 }}\n"
-    );
-    let (task, m) = task_from_str(&text, Some("t.toml"), &base).unwrap();
-    let sys = TreeSystem::new(&m).unwrap();
-    assert!(solve_task(sys, &task, &m, &TaskOptions::default(), &mut |_| {}).is_ok());
+    // Limits that cannot hold the start against gravity (5.6 N·m): found when solving.
     let text = "model = \"trep-vi.toml\"\ndt = 0.02\nknots = 5\n[[cost]]\nkind = \"control\"\nweight = 1.0\n[limits]\ntorque = [10.0, 11.0]\n";
     let (task, m) = task_from_str(text, Some("t.toml"), &base).unwrap();
     let sys = TreeSystem::new(&m).unwrap();
@@ -294,5 +289,131 @@ fn the_marionette_raises_its_hand_by_its_strings_alone_every_string_taut() {
             lambda.iter().all(|l| *l < 0.0),
             "a string went slack at knot {k}: λ = {lambda}"
         );
+    }
+}
+
+/// DDP's contracted second derivatives of one discrete step, read onto `(x, u)` — with an
+/// input, a kinematic control (its memory columns) and a string constraint — against central
+/// differences of `Aᵀv` and `Bᵀv`.
+#[test]
+fn the_contracted_step_hessian_matches_differences_of_the_jacobians() {
+    let path = Path::new(ROOT).join("tests/models/trep-vi.toml");
+    let m = model::from_toml_file(path).unwrap();
+    let hand = m.variable_index("hand_y").unwrap();
+    let controls = vec![Control::Input(0), Control::Kinematic(hand)];
+    let tight = ViSettings {
+        tolerance: 1e-15,
+        constraint_tolerance: 1e-15,
+        ..ViSettings::default()
+    };
+    let mut d =
+        DiscreteSystem::vi(TreeSystem::new(&m).unwrap(), tight, 0.02, 0.0, controls).unwrap();
+    let (q0, dq0) = d.sys.initial_state();
+    // A knot after one step (the start is not on the string: its first step jumps).
+    let x0 = d.state_of(&q0, &dq0, &[0.2, 0.0]);
+    let mut x = vec![0.0; x0.len()];
+    d.step(0, x0.as_slice(), &[0.2, 0.12], &mut x, None)
+        .unwrap();
+    let (nx, nu) = (x.len(), 2);
+    let u = [0.4, 0.15];
+    let v: Vec<f64> = (0..nx).map(|i| 0.3 + 0.1 * i as f64).collect();
+    let (mut hxx, mut huu, mut hux) = (
+        DMatrix::zeros(nx, nx),
+        DMatrix::zeros(nu, nu),
+        DMatrix::zeros(nu, nx),
+    );
+    let mut x2 = vec![0.0; nx];
+    d.contracted(1, &x, &u, &v, &mut x2, &mut hxx, &mut huu, &mut hux)
+        .unwrap();
+    // Aᵀv and Bᵀv at (x, u).
+    let mut jv = |x: &[f64], u: &[f64]| {
+        let (mut a, mut b) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+        let mut x2 = vec![0.0; nx];
+        d.step(1, x, u, &mut x2, Some((&mut a, &mut b))).unwrap();
+        let v = DVector::from_column_slice(&v);
+        (a.tr_mul(&v), b.tr_mul(&v))
+    };
+    let h = 1e-6;
+    let scale = hxx.amax().max(huu.amax()).max(hux.amax());
+    let close = |fd: f64, ours: f64, what: &str| {
+        assert!(
+            (fd - ours).abs() < 1e-6 * scale,
+            "{what}: {ours} vs {fd} (scale {scale})"
+        );
+    };
+    for c in 0..nx {
+        let (mut xp, mut xm) = (x.clone(), x.clone());
+        xp[c] += h;
+        xm[c] -= h;
+        let ((ap, bp), (am, bm)) = (jv(&xp, &u), jv(&xm, &u));
+        for r in 0..nx {
+            close(
+                (ap[r] - am[r]) / (2.0 * h),
+                hxx[(r, c)],
+                &format!("hxx[{r}, {c}]"),
+            );
+        }
+        for a in 0..nu {
+            close(
+                (bp[a] - bm[a]) / (2.0 * h),
+                hux[(a, c)],
+                &format!("hux[{a}, {c}]"),
+            );
+        }
+    }
+    for c in 0..nu {
+        let (mut up, mut um) = (u, u);
+        up[c] += h;
+        um[c] -= h;
+        let ((_, bp), (_, bm)) = (jv(&x, &up), jv(&x, &um));
+        for a in 0..nu {
+            close(
+                (bp[a] - bm[a]) / (2.0 * h),
+                huu[(a, c)],
+                &format!("huu[{a}, {c}]"),
+            );
+        }
+    }
+    // The kinematic control's value column and its decision carry curvature: the test sees
+    // the column map.
+    let memory = nx - 2;
+    assert!(hxx.column(memory).amax() > 1e-3 * scale && huu[(1, 1)].abs() > 1e-3 * scale);
+}
+
+/// The trajectory read back reports the constraint violation at each knot: the start is
+/// off the string by what the frames say, every later knot on it.
+#[test]
+fn a_solved_task_reports_the_constraint_violation_at_every_knot() {
+    let base = Path::new(ROOT).join("tests/models");
+    let text = "model = \"trep-vi.toml\"\ndt = 0.02\nknots = 5\n[[cost]]\nkind = \"control\"\nweight = 1.0\n";
+    let (task, m) = task_from_str(text, None, &base).unwrap();
+    let res = solve_task(
+        TreeSystem::new(&m).unwrap(),
+        &task,
+        &m,
+        &TaskOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    let origins = m.origins(&task.q0);
+    let (tip, hand) = (
+        m.frame_index("tip").unwrap(),
+        m.frame_index("hand_point").unwrap(),
+    );
+    let d2: f64 = (0..3)
+        .map(|i| (origins[tip][i] - origins[hand][i]).powi(2))
+        .sum();
+    let h0 = (d2 - 0.6 * 0.6).abs();
+    assert!(
+        h0 > 1e-3,
+        "the start must be off the string for this test: {h0}"
+    );
+    assert!(
+        (res.violation[0] - h0).abs() < 1e-9 * h0,
+        "{} vs {h0}",
+        res.violation[0]
+    );
+    for (k, v) in res.violation.iter().enumerate().skip(1) {
+        assert!(*v < 1e-8, "knot {k} is off the string by {v}");
     }
 }

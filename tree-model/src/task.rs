@@ -666,21 +666,13 @@ fn resolve(
                     .dq_ref
                     .as_ref()
                     .map_or(dq0.clone(), |v| per_name(p, "`dq_ref`", v, &names, &dq0));
-                let zero = Spanned::new(0..0, Value::Float(0.0));
-                let q_weight = weights(
-                    p,
-                    "q_weight",
-                    Some(rc.q_weight.as_ref().unwrap_or(&zero)),
-                    &names,
-                    whole.clone(),
-                );
-                let dq_weight = weights(
-                    p,
-                    "dq_weight",
-                    Some(rc.dq_weight.as_ref().unwrap_or(&zero)),
-                    &names,
-                    whole.clone(),
-                );
+                // Either may be left out (zero), not both.
+                let mut optional = |what: &str, value: &Option<Spanned<Value>>| match value {
+                    Some(_) => weights(p, what, value.as_ref(), &names, whole.clone()),
+                    None => vec![0.0; names.len()],
+                };
+                let q_weight = optional("q_weight", &rc.q_weight);
+                let dq_weight = optional("dq_weight", &rc.dq_weight);
                 if rc.q_weight.is_none() && rc.dq_weight.is_none() {
                     p.at(
                         whole,

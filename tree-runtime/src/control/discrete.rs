@@ -15,7 +15,9 @@ use super::cost::Needs;
 use crate::context::StepContext;
 use crate::dynamics::{ModelMotions, NoForce, Prescription};
 use crate::error::SimError;
-use crate::integrate::{MidpointVi, Rk4, StepCovector, StepDerivatives, ViSettings};
+use crate::integrate::{
+    MidpointVi, Rk4, StepCovector, StepDerivatives, StepInput, StepOutput, ViSettings,
+};
 use crate::linearize::{explicit_step_derivatives, RK4};
 use crate::system::{Order, System, Terms, Vector};
 use tree_model::Control;
@@ -27,6 +29,124 @@ where
 {
     Vi(Box<MidpointVi<N>>),
     Rk4(Box<Rk4<N>>),
+}
+
+/// One input coordinate of the VI step (§9's `x = (q₁, p₁, u₁, k₂)`): which block and which
+/// column of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum StepColumn {
+    /// Variable j of `q₁`.
+    Q1(usize),
+    /// Dynamic variable r of `p₁`.
+    P1(usize),
+    /// Input k.
+    U1(usize),
+    /// Kinematic variable at position r of `k₂`.
+    K2(usize),
+}
+
+impl StepColumn {
+    /// Its block and column in [`StepDerivatives`].
+    fn block(self) -> (StepInput, usize) {
+        match self {
+            StepColumn::Q1(j) => (StepInput::Q1, j),
+            StepColumn::P1(r) => (StepInput::P1, r),
+            StepColumn::U1(k) => (StepInput::U1, k),
+            StepColumn::K2(r) => (StepInput::K2, r),
+        }
+    }
+
+    /// Its index in the contracted Hessian over `(q₁ n, p₁ n_d, u₁ inputs, k₂)`.
+    fn index(self, n: usize, nd: usize, inputs: usize) -> usize {
+        match self {
+            StepColumn::Q1(j) => j,
+            StepColumn::P1(r) => n + r,
+            StepColumn::U1(k) => n + nd + k,
+            StepColumn::K2(r) => n + nd + inputs + r,
+        }
+    }
+}
+
+/// Where everything sits: the dynamic and kinematic variables, the controls, each control's
+/// memory in `x`, and which step input each entry of `x` and `u` is (for reading `A`, `B`
+/// and DDP's Hessian off the step's derivatives).
+struct Layout {
+    controls: Vec<Control>,
+    dynamic: Vec<usize>,
+    kinematic: Vec<usize>,
+    /// Per control, its memory's first slot in `x`.
+    memory: Vec<usize>,
+    /// The state's size.
+    states: usize,
+    /// Per entry of `x`, the step input it is (None: a velocity or input memory, which the
+    /// step does not read).
+    x_column: Vec<Option<StepColumn>>,
+    /// Per control, the step input it is.
+    u_column: Vec<StepColumn>,
+}
+
+impl Layout {
+    fn new(dynamic: Vec<usize>, kinematic: Vec<usize>, controls: Vec<Control>) -> Self {
+        let nd = dynamic.len();
+        let mut x_column: Vec<Option<StepColumn>> = dynamic
+            .iter()
+            .map(|&i| Some(StepColumn::Q1(i)))
+            .chain((0..nd).map(|r| Some(StepColumn::P1(r))))
+            .collect();
+        let (mut memory, mut u_column) = (Vec::new(), Vec::new());
+        for c in &controls {
+            memory.push(x_column.len());
+            match *c {
+                Control::Input(k) => {
+                    x_column.push(None);
+                    u_column.push(StepColumn::U1(k));
+                }
+                Control::Kinematic(i) => {
+                    x_column.extend([Some(StepColumn::Q1(i)), None]);
+                    let at = kinematic
+                        .iter()
+                        .position(|&j| j == i)
+                        .expect("checked kinematic");
+                    u_column.push(StepColumn::K2(at));
+                }
+            }
+        }
+        Layout {
+            states: x_column.len(),
+            controls,
+            dynamic,
+            kinematic,
+            memory,
+            x_column,
+            u_column,
+        }
+    }
+
+    /// The configuration at time `t` of state `x` (controlled kinematic variables from the
+    /// memory, the others on their prescription) into `q`, and the kinematic velocities into
+    /// `dq` (its dynamic entries untouched).
+    fn place<N: nalgebra::Dim>(
+        &self,
+        motion: &mut ModelMotions,
+        t: f64,
+        x: &[f64],
+        q: &mut Vector<N>,
+        dq: &mut Vector<N>,
+    ) where
+        DefaultAllocator: Allocator<N>,
+    {
+        for (r, &i) in self.dynamic.iter().enumerate() {
+            q[i] = x[r];
+        }
+        for &i in &self.kinematic {
+            [q[i], dq[i], _] = motion.kinematic(i, t);
+        }
+        for (c, control) in self.controls.iter().enumerate() {
+            if let Control::Kinematic(i) = *control {
+                (q[i], dq[i]) = (x[self.memory[c]], x[self.memory[c] + 1]);
+            }
+        }
+    }
 }
 
 /// The configuration, velocity and their derivatives by the state at a knot: what costs
@@ -54,8 +174,46 @@ pub struct Knot {
     pub previous_at: Vec<usize>,
 }
 
-/// The system as `x_{k+1} = f_k(x_k, u_k)`, with its buffers (nothing allocated per step
-/// after the first Jacobian).
+impl Knot {
+    /// An empty knot, sized by [`DiscreteSystem::knot`] on first use.
+    pub fn empty() -> Self {
+        Knot {
+            x: DVector::zeros(0),
+            q: DVector::zeros(0),
+            dq: DVector::zeros(0),
+            q_x: DMatrix::zeros(0, 0),
+            dq_x: DMatrix::zeros(0, 0),
+            gravity: DVector::zeros(0),
+            gravity_x: DMatrix::zeros(0, 0),
+            previous: DVector::zeros(0),
+            previous_at: Vec::new(),
+        }
+    }
+}
+
+/// A step's buffers: its start and end, the derivatives and the contraction.
+struct Buffers<N: nalgebra::Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    q1: Vector<N>,
+    p1: Vector<N>,
+    q2: Vector<N>,
+    p2: Vector<N>,
+    next: Vector<N>,
+    /// `(variable, value at t₁, value at t₁ + Δt)` of each kinematic control.
+    controlled: Vec<(usize, f64, f64)>,
+    /// The model's inputs over the step (the controlled ones from `u`, the rest zero).
+    inputs: Vec<f64>,
+    first: StepDerivatives,
+    hessian: DMatrix<f64>,
+    covector: StepCovector,
+    terms: Terms<N>,
+}
+
+/// The system as `x_{k+1} = f_k(x_k, u_k)`. A VI step without Jacobians and a knot without
+/// derivatives, velocity or gravity allocate nothing after the first (tests/allocation.rs);
+/// Jacobians, the VI's velocity at a knot and RK4's derivatives still allocate temporaries.
 pub struct DiscreteSystem<S: System>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -68,21 +226,8 @@ where
     pub dt: f64,
     /// The time of knot 0.
     pub t0: f64,
-    controls: Vec<Control>,
-    dynamic: Vec<usize>,
-    kinematic: Vec<usize>,
-    /// Per control, its memory's first slot in `x`.
-    memory: Vec<usize>,
-    inputs: Vec<f64>,
-    q1: Vector<S::N>,
-    p1: Vector<S::N>,
-    q2: Vector<S::N>,
-    p2: Vector<S::N>,
-    next: Vector<S::N>,
-    first: StepDerivatives,
-    hessian: DMatrix<f64>,
-    covector: StepCovector,
-    terms: Terms<S::N>,
+    layout: Layout,
+    buf: Buffers<S::N>,
 }
 
 /// The kinematic variables' motion over a step: the controlled ones linear from their knot
@@ -112,12 +257,14 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     /// The VI of `sys` at step `dt` from time `t0`, every input a control.
-    pub fn new(sys: S, settings: ViSettings, dt: f64, t0: f64) -> Self {
+    pub fn new(sys: S, settings: ViSettings, dt: f64, t0: f64) -> Result<Self, SimError> {
         let controls = (0..sys.input_count()).map(Control::Input).collect();
-        Self::vi(sys, settings, dt, t0, controls).expect("every input is a valid control")
+        Self::vi(sys, settings, dt, t0, controls)
     }
 
-    /// The VI with the given controls (inputs and kinematic variables).
+    /// The VI with the given controls (inputs and kinematic variables). Its steps are never
+    /// subdivided (a subdivided step's derivatives would not be those of one step): a step
+    /// Newton cannot take fails, and the optimiser's line search backs off.
     pub fn vi(
         sys: S,
         settings: ViSettings,
@@ -125,6 +272,10 @@ where
         t0: f64,
         controls: Vec<Control>,
     ) -> Result<Self, SimError> {
+        let settings = ViSettings {
+            max_subdivisions: 0,
+            ..settings
+        };
         let vi = MidpointVi::new(&sys, settings);
         Self::build(sys, Method::Vi(Box::new(vi)), dt, t0, controls)
     }
@@ -172,77 +323,48 @@ where
         let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
         let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
         let nd = dynamic.len();
-        let mut memory = Vec::with_capacity(controls.len());
-        let mut at = 2 * nd;
-        for c in &controls {
-            memory.push(at);
-            at += match c {
-                Control::Input(_) => 1,
-                Control::Kinematic(_) => 2,
-            };
-        }
         let z = sys.zero_vector();
-        Ok(DiscreteSystem {
-            motion: ModelMotions::of(&sys),
-            covector: StepCovector {
-                q2: DVector::zeros(nd),
-                p2: DVector::zeros(nd),
-                lambda: DVector::zeros(sys.constraint_count()),
-            },
-            inputs: vec![0.0; sys.input_count()],
-            terms: Terms::zeros(sys.dim()),
-            method,
-            dt,
-            t0,
-            controls,
-            dynamic,
-            kinematic,
-            memory,
+        let buf = Buffers {
             q1: z.clone(),
             p1: z.clone(),
             q2: z.clone(),
             p2: z.clone(),
             next: z,
+            controlled: Vec::with_capacity(controls.len()),
+            inputs: vec![0.0; sys.input_count()],
             first: StepDerivatives::empty(),
             hessian: DMatrix::zeros(0, 0),
+            covector: StepCovector {
+                q2: DVector::zeros(nd),
+                p2: DVector::zeros(nd),
+                lambda: DVector::zeros(sys.constraint_count()),
+            },
+            terms: Terms::zeros(sys.dim()),
+        };
+        Ok(DiscreteSystem {
+            motion: ModelMotions::of(&sys),
+            layout: Layout::new(dynamic, kinematic, controls),
+            buf,
+            method,
+            dt,
+            t0,
             sys,
         })
     }
 
     /// The state's size: `2 n_d` plus the controls' memory.
     pub fn states(&self) -> usize {
-        2 * self.dynamic.len()
-            + self
-                .controls
-                .iter()
-                .map(|c| match c {
-                    Control::Input(_) => 1,
-                    Control::Kinematic(_) => 2,
-                })
-                .sum::<usize>()
+        self.layout.states
     }
 
     /// The number of controls.
     pub fn controls(&self) -> usize {
-        self.controls.len()
-    }
-
-    /// The controls, in order.
-    pub fn control_list(&self) -> &[Control] {
-        &self.controls
+        self.layout.controls.len()
     }
 
     /// Whether this is the VI (otherwise RK4).
     pub fn is_vi(&self) -> bool {
         matches!(self.method, Method::Vi(_))
-    }
-
-    /// The VI's settings, when it is the VI.
-    pub fn vi_settings(&self) -> Option<&ViSettings> {
-        match &self.method {
-            Method::Vi(vi) => Some(&vi.settings),
-            Method::Rk4(_) => None,
-        }
     }
 
     /// The constraint multipliers of the last step (VI: `λ` of the step; RK4: none).
@@ -254,65 +376,35 @@ where
     }
 
     /// The state of `(q, q̇)` at knot 0, the controls' memory from `previous` (their values
-    /// "before" the start: the initial guess of inputs, the start value of kinematic ones,
-    /// at rest).
+    /// "before" the start: the initial guess of inputs; kinematic controls take their value
+    /// and velocity from `q`, `q̇`).
     pub fn state_of(
         &mut self,
         q: &Vector<S::N>,
         dq: &Vector<S::N>,
         previous: &[f64],
     ) -> DVector<f64> {
-        let nd = self.dynamic.len();
-        let mut x = DVector::zeros(self.states());
+        let l = &self.layout;
+        let nd = l.dynamic.len();
+        let mut x = DVector::zeros(l.states);
         let v = match &mut self.method {
             Method::Vi(vi) => vi.initial_momentum(&mut self.sys, q, dq),
             Method::Rk4(_) => dq.clone(),
         };
-        for (r, &i) in self.dynamic.iter().enumerate() {
+        for (r, &i) in l.dynamic.iter().enumerate() {
             x[r] = q[i];
             x[nd + r] = v[i];
         }
-        for (c, control) in self.controls.iter().enumerate() {
+        for (c, control) in l.controls.iter().enumerate() {
             match *control {
-                Control::Input(_) => x[self.memory[c]] = previous.get(c).copied().unwrap_or(0.0),
+                Control::Input(_) => x[l.memory[c]] = previous.get(c).copied().unwrap_or(0.0),
                 Control::Kinematic(i) => {
-                    x[self.memory[c]] = q[i];
-                    x[self.memory[c] + 1] = dq[i];
+                    x[l.memory[c]] = q[i];
+                    x[l.memory[c] + 1] = dq[i];
                 }
             }
         }
         x
-    }
-
-    /// The configuration at knot `k` of state `x` (controlled kinematic variables from the
-    /// memory, the others on their prescription) into `q`, and their velocities into `dq`'s
-    /// kinematic entries.
-    fn place(&mut self, k: usize, x: &[f64], q: &mut Vector<S::N>, dq: Option<&mut Vector<S::N>>) {
-        let t = self.t0 + k as f64 * self.dt;
-        for (r, &i) in self.dynamic.iter().enumerate() {
-            q[i] = x[r];
-        }
-        let mut dq = dq;
-        for &i in &self.kinematic {
-            let [v, d, _] = self.motion.kinematic(i, t);
-            q[i] = v;
-            if let Some(dq) = dq.as_mut() {
-                dq[i] = d;
-            }
-        }
-        for (c, control) in self.controls.iter().enumerate() {
-            if let Control::Kinematic(i) = *control {
-                q[i] = x[self.memory[c]];
-                if let Some(dq) = dq.as_mut() {
-                    dq[i] = x[self.memory[c] + 1];
-                }
-            }
-        }
-    }
-
-    /// The configuration at knot `k` of state `x`.
-    pub fn configuration(&mut self, k: usize, x: &[f64], q: &mut Vector<S::N>) {
-        self.place(k, x, q, None);
     }
 
     /// The inputs that hold configuration `q` at rest against gravity and springs, per
@@ -320,10 +412,13 @@ where
     /// controls).
     pub fn gravity_compensation(&mut self, q: &Vector<S::N>) -> DVector<f64> {
         let zero = self.sys.zero_vector();
-        self.sys.lagrangian(q, &zero, Order::First, &mut self.terms);
-        DVector::from_fn(self.controls.len(), |c, _| match self.controls[c] {
-            Control::Input(k) => -self.terms.dl_dq[self.sys.input_variable(k)],
-            Control::Kinematic(_) => 0.0,
+        let terms = &mut self.buf.terms;
+        self.sys.lagrangian(q, &zero, Order::First, terms);
+        DVector::from_fn(self.layout.controls.len(), |c, _| {
+            match self.layout.controls[c] {
+                Control::Input(k) => -terms.dl_dq[self.sys.input_variable(k)],
+                Control::Kinematic(_) => 0.0,
+            }
         })
     }
 
@@ -338,13 +433,8 @@ where
         derivatives: bool,
         needs: Needs,
     ) -> Result<(), SimError> {
-        let gravity = needs.gravity;
-        let (n, nx, nu, nd) = (
-            self.sys.dof(),
-            self.states(),
-            self.controls(),
-            self.dynamic.len(),
-        );
+        let l = &self.layout;
+        let (n, nx, nu, nd) = (self.sys.dof(), l.states, l.controls.len(), l.dynamic.len());
         if out.q.len() != n || out.x.len() != nx || out.gravity.len() != nu {
             *out = Knot {
                 x: DVector::zeros(nx),
@@ -355,31 +445,33 @@ where
                 gravity: DVector::zeros(nu),
                 gravity_x: DMatrix::zeros(nu, nx),
                 previous: DVector::zeros(nu),
-                previous_at: self.memory.clone(),
+                previous_at: l.memory.clone(),
             };
         }
         out.x.as_mut_slice().copy_from_slice(x);
-        let (mut q, mut dq) = (self.sys.zero_vector(), self.sys.zero_vector());
-        self.place(k, x, &mut q, Some(&mut dq));
+        // q and q̇ in the step buffers (q̇'s dynamic entries zero until known).
+        let (q, dq) = (&mut self.buf.q1, &mut self.buf.p1);
+        dq.fill(0.0);
+        l.place(&mut self.motion, self.t0 + k as f64 * self.dt, x, q, dq);
         for c in 0..nu {
-            out.previous[c] = x[self.memory[c]];
+            out.previous[c] = x[l.memory[c]];
         }
         if derivatives {
             out.q_x.fill(0.0);
             out.dq_x.fill(0.0);
-            for (r, &i) in self.dynamic.iter().enumerate() {
-                out.q_x[(i, r)] = 1.0;
-            }
-            for (c, control) in self.controls.iter().enumerate() {
-                if let Control::Kinematic(i) = *control {
-                    out.q_x[(i, self.memory[c])] = 1.0;
-                    out.dq_x[(i, self.memory[c] + 1)] = 1.0;
+            for (c, column) in l.x_column.iter().enumerate() {
+                if let Some(StepColumn::Q1(i)) = *column {
+                    out.q_x[(i, c)] = 1.0;
+                    if l.kinematic.contains(&i) {
+                        out.dq_x[(i, c + 1)] = 1.0;
+                    }
                 }
             }
         }
+        let terms = &mut self.buf.terms;
         match self.method {
             Method::Rk4(_) => {
-                for (r, &i) in self.dynamic.iter().enumerate() {
+                for (r, &i) in l.dynamic.iter().enumerate() {
                     dq[i] = x[nd + r];
                     if derivatives {
                         out.dq_x[(i, nd + r)] = 1.0;
@@ -388,45 +480,44 @@ where
             }
             Method::Vi(_) if !needs.velocity => {}
             Method::Vi(_) => {
-                // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇.
-                self.sys
-                    .lagrangian(&q, &dq, Order::Dynamics, &mut self.terms);
-                let m = &self.terms.mass;
-                let mdd = DMatrix::from_fn(nd, nd, |r, c| m[(self.dynamic[r], self.dynamic[c])]);
+                // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇ (M does
+                // not depend on q̇, so q̇_d = 0 here is as good as any).
+                self.sys.lagrangian(q, dq, Order::Dynamics, terms);
+                let m = &terms.mass;
+                let mdd = DMatrix::from_fn(nd, nd, |r, c| m[(l.dynamic[r], l.dynamic[c])]);
                 let lu = mdd.lu();
                 let mut rhs = DVector::from_fn(nd, |r, _| x[nd + r]);
-                for (r, &i) in self.dynamic.iter().enumerate() {
-                    for &j in &self.kinematic {
+                for (r, &i) in l.dynamic.iter().enumerate() {
+                    for &j in &l.kinematic {
                         rhs[r] -= m[(i, j)] * dq[j];
                     }
                 }
-                let v = lu.solve(&rhs).ok_or_else(|| SimError::InvalidInput(
-                    "the mass matrix of the dynamic variables is singular: no velocity matches the momentum".into(),
-                ))?;
-                for (r, &i) in self.dynamic.iter().enumerate() {
+                let v = lu.solve(&rhs).ok_or_else(|| SimError::InvalidInput(format!(
+                    "at knot {k} the mass matrix of the dynamic variables is singular: no velocity matches the momentum"
+                )))?;
+                for (r, &i) in l.dynamic.iter().enumerate() {
                     dq[i] = v[r];
                 }
                 if derivatives {
                     // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇.
-                    self.sys
-                        .lagrangian(&q, &dq, Order::Dynamics, &mut self.terms);
-                    let m = &self.terms.mass;
+                    self.sys.lagrangian(q, dq, Order::Dynamics, terms);
+                    let m = &terms.mass;
                     let mut rhs = DMatrix::zeros(nd, nx);
-                    for (r, &i) in self.dynamic.iter().enumerate() {
+                    for (r, &i) in l.dynamic.iter().enumerate() {
                         rhs[(r, nd + r)] = 1.0;
                         for c in 0..nx {
                             let mut s = 0.0;
                             for j in 0..n {
-                                s += self.terms.d2l_ddq_dq[(i, j)] * out.q_x[(j, c)];
+                                s += terms.d2l_ddq_dq[(i, j)] * out.q_x[(j, c)];
                             }
-                            for &j in &self.kinematic {
+                            for &j in &l.kinematic {
                                 s += m[(i, j)] * out.dq_x[(j, c)];
                             }
                             rhs[(r, c)] -= s;
                         }
                     }
                     let sol = lu.solve(&rhs).expect("factored above");
-                    for (r, &i) in self.dynamic.iter().enumerate() {
+                    for (r, &i) in l.dynamic.iter().enumerate() {
                         for c in 0..nx {
                             out.dq_x[(i, c)] = sol[(r, c)];
                         }
@@ -436,25 +527,25 @@ where
         }
         out.q.as_mut_slice().copy_from_slice(q.as_slice());
         out.dq.as_mut_slice().copy_from_slice(dq.as_slice());
-        if gravity {
-            let zero = self.sys.zero_vector();
+        if needs.gravity {
+            dq.fill(0.0);
             let order = if derivatives {
                 Order::Full
             } else {
                 Order::First
             };
-            self.sys.lagrangian(&q, &zero, order, &mut self.terms);
+            self.sys.lagrangian(q, dq, order, terms);
             out.gravity_x.fill(0.0);
-            for (c, control) in self.controls.iter().enumerate() {
+            for (c, control) in l.controls.iter().enumerate() {
                 out.gravity[c] = 0.0;
                 if let Control::Input(kin) = *control {
                     let i = self.sys.input_variable(kin);
-                    out.gravity[c] = -self.terms.dl_dq[i];
+                    out.gravity[c] = -terms.dl_dq[i];
                     if derivatives {
                         for col in 0..nx {
                             let mut s = 0.0;
                             for j in 0..n {
-                                s -= self.terms.d2l_dq_dq[(i, j)] * out.q_x[(j, col)];
+                                s -= terms.d2l_dq_dq[(i, j)] * out.q_x[(j, col)];
                             }
                             out.gravity_x[(c, col)] = s;
                         }
@@ -462,44 +553,72 @@ where
                 }
             }
         }
-        if !(out
+        if let Some(bad) = out
             .dq
             .iter()
             .chain(out.gravity.iter())
-            .all(|v| v.is_finite()))
+            .find(|v| !v.is_finite())
         {
             return Err(SimError::InvalidInput(format!(
-                "the velocity or gravity compensation at knot {k} is not finite"
+                "the velocity or gravity compensation at knot {k} is not finite ({bad})"
             )));
         }
         Ok(())
     }
 
-    /// Sets up step `k` from `x` with controls `u`: `q1`, `p1` (VI) or `q̇1` (RK4), the
-    /// model's inputs, and the controlled kinematic variables' `(i, k₁, k₂)`.
-    fn begin(&mut self, k: usize, x: &[f64], u: &[f64], controlled: &mut Vec<(usize, f64, f64)>) {
-        let nd = self.dynamic.len();
-        let mut q1 = std::mem::replace(&mut self.q1, self.sys.zero_vector());
-        let mut p1 = std::mem::replace(&mut self.p1, self.sys.zero_vector());
-        self.place(k, x, &mut q1, Some(&mut p1));
-        for (r, &i) in self.dynamic.iter().enumerate() {
-            p1[i] = x[nd + r];
+    /// Sets up step `k` from `x` with controls `u` (`q₁`, `p₁` (VI) or `q̇₁` (RK4), the
+    /// model's inputs, the kinematic controls' `(i, k₁, k₂)`), then runs `f` with the step's
+    /// context, its method and buffers.
+    fn with_step<R>(
+        &mut self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        f: impl FnOnce(
+            &mut Method<S::N>,
+            &mut StepContext<S, NoForce, Decided>,
+            &Layout,
+            &mut Buffers<S::N>,
+        ) -> R,
+    ) -> R {
+        let (l, b) = (&self.layout, &mut self.buf);
+        let nd = l.dynamic.len();
+        let t = self.t0 + k as f64 * self.dt;
+        b.p1.fill(0.0);
+        l.place(&mut self.motion, t, x, &mut b.q1, &mut b.p1);
+        for (r, &i) in l.dynamic.iter().enumerate() {
+            b.p1[i] = x[nd + r];
         }
-        if self.is_vi() {
-            for &i in &self.kinematic {
-                p1[i] = 0.0;
+        if matches!(self.method, Method::Vi(_)) {
+            // The VI's p₁ has dynamic entries only.
+            for &i in &l.kinematic {
+                b.p1[i] = 0.0;
             }
         }
-        self.q1 = q1;
-        self.p1 = p1;
-        self.inputs.iter_mut().for_each(|v| *v = 0.0);
-        controlled.clear();
-        for (c, control) in self.controls.iter().enumerate() {
+        b.inputs.fill(0.0);
+        b.controlled.clear();
+        for (c, control) in l.controls.iter().enumerate() {
             match *control {
-                Control::Input(kin) => self.inputs[kin] = u[c],
-                Control::Kinematic(i) => controlled.push((i, x[self.memory[c]], u[c])),
+                Control::Input(kin) => b.inputs[kin] = u[c],
+                Control::Kinematic(i) => b.controlled.push((i, x[l.memory[c]], u[c])),
             }
         }
+        let controlled = std::mem::take(&mut b.controlled);
+        let inputs = std::mem::take(&mut b.inputs);
+        let mut force = NoForce;
+        let mut motion = Decided {
+            model: &mut self.motion,
+            controlled: &controlled,
+            t1: t,
+            dt: self.dt,
+        };
+        let mut cx = StepContext::new(&mut self.sys, &mut force, &mut motion, self.dt);
+        cx.u = &inputs;
+        cx.at(k, t);
+        let out = f(&mut self.method, &mut cx, l, b);
+        b.controlled = controlled;
+        b.inputs = inputs;
+        out
     }
 
     /// `x₂ = f_k(x₁, u)`; with `jacobians`, also `A = ∂x₂/∂x₁`, `B = ∂x₂/∂u`.
@@ -511,117 +630,98 @@ where
         x2: &mut [f64],
         jacobians: Option<(&mut DMatrix<f64>, &mut DMatrix<f64>)>,
     ) -> Result<(), SimError> {
-        let nd = self.dynamic.len();
-        let n = self.sys.dof();
-        let t = self.t0 + k as f64 * self.dt;
-        let mut controlled = Vec::with_capacity(self.controls.len());
-        self.begin(k, x, u, &mut controlled);
-        let mut force = NoForce;
-        let mut motion = Decided {
-            model: &mut self.motion,
-            controlled: &controlled,
-            t1: t,
-            dt: self.dt,
-        };
-        let mut cx = StepContext::new(&mut self.sys, &mut force, &mut motion, self.dt);
-        cx.u = &self.inputs;
-        cx.at(k, t);
-        let (mut a, mut b) = match jacobians {
-            Some((a, b)) => {
-                a.fill(0.0);
-                b.fill(0.0);
-                (Some(a), Some(b))
-            }
-            None => (None, None),
-        };
-        match &mut self.method {
-            Method::Vi(vi) => {
-                self.q2.copy_from(&self.q1);
-                self.p2.copy_from(&self.p1);
-                vi.last_velocity.fill(0.0);
-                vi.step(&mut cx, &mut self.q2, &mut self.p2, &mut self.next)?;
-                for (r, &i) in self.dynamic.iter().enumerate() {
-                    x2[r] = self.q2[i];
-                    x2[nd + r] = self.p2[i];
-                }
-                if let (Some(a), Some(b)) = (a.as_mut(), b.as_mut()) {
-                    vi.derivatives_into(&mut cx, &self.q1, &self.p1, &self.q2, &mut self.first)?;
-                    let d = &self.first;
-                    for r in 0..nd {
-                        for (c, &j) in self.dynamic.iter().enumerate() {
-                            a[(r, c)] = d.q2_dq1[(r, j)];
-                            a[(nd + r, c)] = d.p2_dq1[(r, j)];
-                            a[(r, nd + c)] = d.q2_dp1[(r, c)];
-                            a[(nd + r, nd + c)] = d.p2_dp1[(r, c)];
-                        }
-                        for (c, control) in self.controls.iter().enumerate() {
-                            match *control {
-                                Control::Input(kin) => {
-                                    b[(r, c)] = d.q2_du1[(r, kin)];
-                                    b[(nd + r, c)] = d.p2_du1[(r, kin)];
-                                }
-                                Control::Kinematic(i) => {
-                                    let col = self.kinematic.iter().position(|&j| j == i).unwrap();
-                                    b[(r, c)] = d.q2_dk2[(r, col)];
-                                    b[(nd + r, c)] = d.p2_dk2[(r, col)];
-                                    a[(r, self.memory[c])] = d.q2_dq1[(r, i)];
-                                    a[(nd + r, self.memory[c])] = d.p2_dq1[(r, i)];
-                                }
+        let dt = self.dt;
+        let mut jacobians = jacobians;
+        if let Some((a, b)) = jacobians.as_mut() {
+            a.fill(0.0);
+            b.fill(0.0);
+        }
+        self.with_step(k, x, u, |method, cx, l, b| {
+            let nd = l.dynamic.len();
+            match method {
+                Method::Vi(vi) => {
+                    b.q2.copy_from(&b.q1);
+                    b.p2.copy_from(&b.p1);
+                    vi.last_velocity.fill(0.0);
+                    vi.step(cx, &mut b.q2, &mut b.p2, &mut b.next)?;
+                    for (r, &i) in l.dynamic.iter().enumerate() {
+                        x2[r] = b.q2[i];
+                        x2[nd + r] = b.p2[i];
+                    }
+                    if let Some((a, bm)) = jacobians.as_mut() {
+                        vi.derivatives_into(cx, &b.q1, &b.p1, &b.q2, &mut b.first)?;
+                        // Each column of A or B: the step input it is, in q₂'s and p₂'s block.
+                        let read = |m: &mut DMatrix<f64>, c: usize, col: StepColumn| {
+                            let (by, j) = col.block();
+                            let (dq2, dp2) = (
+                                b.first.block(StepOutput::Q2, by),
+                                b.first.block(StepOutput::P2, by),
+                            );
+                            for r in 0..nd {
+                                m[(r, c)] = dq2[(r, j)];
+                                m[(nd + r, c)] = dp2[(r, j)];
+                            }
+                        };
+                        for (c, col) in l.x_column.iter().enumerate() {
+                            if let Some(col) = *col {
+                                read(a, c, col);
                             }
                         }
-                    }
-                }
-            }
-            Method::Rk4(rk4) => {
-                if let (Some(a), Some(b)) = (a.as_mut(), b.as_mut()) {
-                    let (q1, v1) = (self.q1.clone(), self.p1.clone());
-                    let d = explicit_step_derivatives(&mut cx, &q1, &v1, &RK4)?;
-                    x2[..2 * nd].copy_from_slice(d.x2.as_slice());
-                    a.view_mut((0, 0), (2 * nd, 2 * nd)).copy_from(&d.x2_dx1);
-                    for (c, control) in self.controls.iter().enumerate() {
-                        if let Control::Input(kin) = *control {
-                            b.view_mut((0, c), (2 * nd, 1))
-                                .copy_from(&d.x2_du1.column(kin));
+                        for (c, &col) in l.u_column.iter().enumerate() {
+                            read(bm, c, col);
                         }
                     }
-                } else {
-                    self.q2.copy_from(&self.q1);
-                    self.p2.copy_from(&self.p1);
-                    rk4.step(&mut cx, &mut self.q2, &mut self.p2)?;
-                    for (r, &i) in self.dynamic.iter().enumerate() {
-                        x2[r] = self.q2[i];
-                        x2[nd + r] = self.p2[i];
+                }
+                Method::Rk4(rk4) => {
+                    if let Some((a, bm)) = jacobians.as_mut() {
+                        let d = explicit_step_derivatives(cx, &b.q1, &b.p1, &RK4)?;
+                        x2[..2 * nd].copy_from_slice(d.x2.as_slice());
+                        a.view_mut((0, 0), (2 * nd, 2 * nd)).copy_from(&d.x2_dx1);
+                        for (c, &col) in l.u_column.iter().enumerate() {
+                            if let StepColumn::U1(kin) = col {
+                                bm.view_mut((0, c), (2 * nd, 1))
+                                    .copy_from(&d.x2_du1.column(kin));
+                            }
+                        }
+                    } else {
+                        b.q2.copy_from(&b.q1);
+                        b.p2.copy_from(&b.p1);
+                        rk4.step(cx, &mut b.q2, &mut b.p2)?;
+                        for (r, &i) in l.dynamic.iter().enumerate() {
+                            x2[r] = b.q2[i];
+                            x2[nd + r] = b.p2[i];
+                        }
                     }
                 }
             }
-        }
-        // The memory: inputs remember their value, kinematic controls value and velocity.
-        for (c, control) in self.controls.iter().enumerate() {
-            let at = self.memory[c];
-            x2[at] = u[c];
-            if let Some(b) = b.as_mut() {
-                b[(at, c)] = 1.0;
-            }
-            if let Control::Kinematic(_) = control {
-                x2[at + 1] = (u[c] - x[at]) / self.dt;
-                if let (Some(a), Some(b)) = (a.as_mut(), b.as_mut()) {
-                    b[(at + 1, c)] = 1.0 / self.dt;
-                    a[(at + 1, at)] = -1.0 / self.dt;
+            // The memory: inputs remember their value, kinematic controls value and velocity.
+            for (c, control) in l.controls.iter().enumerate() {
+                let at = l.memory[c];
+                x2[at] = u[c];
+                if let Some((a, bm)) = jacobians.as_mut() {
+                    bm[(at, c)] = 1.0;
+                    if let Control::Kinematic(_) = control {
+                        bm[(at + 1, c)] = 1.0 / dt;
+                        a[(at + 1, at)] = -1.0 / dt;
+                    }
+                }
+                if let Control::Kinematic(_) = control {
+                    x2[at + 1] = (u[c] - x[at]) / dt;
                 }
             }
-        }
-        let _ = n;
-        if x2.iter().any(|v| !v.is_finite()) {
-            return Err(SimError::InvalidInput(format!(
-                "the state after step {k} is not finite"
-            )));
-        }
-        Ok(())
+            match x2.iter().find(|v| !v.is_finite()) {
+                Some(v) => Err(SimError::InvalidInput(format!(
+                    "the state after step {k} is not finite ({v})"
+                ))),
+                None => Ok(()),
+            }
+        })
     }
 
     /// The step's second derivatives from knot `k` with `(x, u)` contracted with `v` on
     /// `x₂` (DDP's `V_x'·f_xx` terms) into `hxx` (states²), `huu` (controls²) and `hux`
-    /// (controls × states). The VI only (the memory is linear, so only `(q₂, p₂)` count).
+    /// (controls × states). The VI only; the memory is linear in `(x, u)`, so only `(q₂, p₂)`
+    /// carry curvature. Takes the step first (`x2` receives it).
     #[allow(clippy::too_many_arguments)]
     pub fn contracted(
         &mut self,
@@ -629,91 +729,48 @@ where
         x: &[f64],
         u: &[f64],
         v: &[f64],
+        x2: &mut [f64],
         hxx: &mut DMatrix<f64>,
         huu: &mut DMatrix<f64>,
         hux: &mut DMatrix<f64>,
     ) -> Result<(), SimError> {
-        let mut x2 = vec![0.0; self.states()];
-        self.step(k, x, u, &mut x2, None)?;
-        let nd = self.dynamic.len();
-        let n = self.sys.dof();
-        let ni = self.sys.input_count();
-        for r in 0..nd {
-            self.covector.q2[r] = v[r];
-            self.covector.p2[r] = v[nd + r];
-        }
-        let t = self.t0 + k as f64 * self.dt;
-        let mut controlled = Vec::with_capacity(self.controls.len());
-        self.begin(k, x, u, &mut controlled);
-        let Method::Vi(vi) = &mut self.method else {
+        if !self.is_vi() {
             return Err(SimError::InvalidInput(
                 "DDP needs the VI's second derivatives: use iLQR with RK4".into(),
             ));
-        };
-        let mut force = NoForce;
-        let mut motion = Decided {
-            model: &mut self.motion,
-            controlled: &controlled,
-            t1: t,
-            dt: self.dt,
-        };
-        let mut cx = StepContext::new(&mut self.sys, &mut force, &mut motion, self.dt);
-        cx.u = &self.inputs;
-        cx.at(k, t);
-        vi.contracted_second_derivatives(
-            &mut cx,
-            &self.q1,
-            &self.p1,
-            &self.q2,
-            &self.covector,
-            &mut self.hessian,
-        )?;
-        // The step's columns: (q₁ all n, p₁ n_d, u₁ every input, k₂ every kinematic).
-        let nx = self.states();
-        let state = |c: usize| -> Option<usize> {
-            if c < nd {
-                return Some(self.dynamic[c]);
-            }
-            if c < 2 * nd {
-                return Some(n + c - nd);
-            }
-            self.controls
-                .iter()
-                .enumerate()
-                .find_map(|(j, control)| match *control {
-                    Control::Kinematic(i) if self.memory[j] == c => Some(i),
-                    _ => None,
-                })
-        };
-        let control = |c: usize| -> usize {
-            match self.controls[c] {
-                Control::Input(kin) => n + nd + kin,
-                Control::Kinematic(i) => {
-                    n + nd + ni + self.kinematic.iter().position(|&j| j == i).unwrap()
-                }
-            }
-        };
-        let nu = u.len();
-        hxx.fill(0.0);
-        hux.fill(0.0);
-        for r in 0..nx {
-            let Some(sr) = state(r) else { continue };
-            for c in 0..nx {
-                if let Some(sc) = state(c) {
-                    hxx[(r, c)] = self.hessian[(sr, sc)];
-                }
-            }
         }
-        for a in 0..nu {
-            for b in 0..nu {
-                huu[(a, b)] = self.hessian[(control(a), control(b))];
-            }
-            for c in 0..nx {
-                if let Some(sc) = state(c) {
-                    hux[(a, c)] = self.hessian[(control(a), sc)];
+        self.step(k, x, u, x2, None)?;
+        let (n, inputs) = (self.sys.dof(), self.sys.input_count());
+        self.with_step(k, x, u, |method, cx, l, b| {
+            let Method::Vi(vi) = method else {
+                unreachable!("checked above")
+            };
+            let nd = l.dynamic.len();
+            b.covector.q2.copy_from_slice(&v[..nd]);
+            b.covector.p2.copy_from_slice(&v[nd..2 * nd]);
+            vi.contracted_second_derivatives(cx, &b.q1, &b.p1, &b.q2, &b.covector, &mut b.hessian)?;
+            let at = |col: StepColumn| col.index(n, nd, inputs);
+            hxx.fill(0.0);
+            hux.fill(0.0);
+            for (r, row) in l.x_column.iter().enumerate() {
+                let Some(row) = *row else { continue };
+                for (c, col) in l.x_column.iter().enumerate() {
+                    if let Some(col) = *col {
+                        hxx[(r, c)] = b.hessian[(at(row), at(col))];
+                    }
                 }
             }
-        }
-        Ok(())
+            for (a, &ua) in l.u_column.iter().enumerate() {
+                for (c, &ub) in l.u_column.iter().enumerate() {
+                    huu[(a, c)] = b.hessian[(at(ua), at(ub))];
+                }
+                for (c, col) in l.x_column.iter().enumerate() {
+                    if let Some(col) = *col {
+                        hux[(a, c)] = b.hessian[(at(ua), at(col))];
+                    }
+                }
+            }
+            Ok(())
+        })
     }
 }

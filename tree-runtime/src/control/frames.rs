@@ -103,3 +103,43 @@ pub fn right_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
     };
     Matrix3::identity() + k * 0.5 + k * k * c
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    /// `log` inverts `exp` near 0, at moderate angles and near π (each branch of `log_so3`).
+    #[test]
+    fn log_inverts_exp_on_every_branch() {
+        for angle in [1e-9, 1e-4, 0.7, 2.5, std::f64::consts::PI - 1e-8] {
+            let phi = Vector3::new(0.3, -0.5, 0.8).normalize() * angle;
+            let r = Rotation3::from_scaled_axis(phi);
+            let back = log_so3(r.matrix());
+            assert!(
+                (back - phi).norm() < 1e-7 * angle.max(1e-3),
+                "{angle}: {back} vs {phi}"
+            );
+        }
+    }
+
+    /// `J_r⁻¹(φ)` against differences of `log(R exp([δ]×))`.
+    #[test]
+    fn the_inverse_right_jacobian_matches_differences() {
+        let phi = Vector3::new(0.4, -1.1, 0.6);
+        let r = Rotation3::from_scaled_axis(phi);
+        let jr = right_jacobian_inverse(&phi);
+        let h = 1e-6;
+        for c in 0..3 {
+            let d = Vector3::ith(c, h);
+            let plus = log_so3((r * Rotation3::from_scaled_axis(d)).matrix());
+            let minus = log_so3((r * Rotation3::from_scaled_axis(-d)).matrix());
+            let fd = (plus - minus) / (2.0 * h);
+            assert!(
+                (fd - jr.column(c)).norm() < 1e-8,
+                "{fd} vs {}",
+                jr.column(c)
+            );
+        }
+    }
+}

@@ -157,26 +157,24 @@ where
         b: vec![DMatrix::zeros(nx, nu); n],
         k: vec![DVector::zeros(nu); n],
         gain: vec![DMatrix::zeros(nu, nx); n],
-        knot: empty_knot(),
+        knot: Knot::empty(),
         needs: cost.needs(),
+        dx: DVector::zeros(nx),
     };
     let mut x = vec![x0.clone(); n + 1];
-    let mut total = rollout(dynamics, cost, &mut x, &u, &mut work, true)?;
+    let mut total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
     let (mut x_new, mut u_new) = (x.clone(), u.clone());
     let mut mu = settings.mu;
     let mut history = Vec::new();
     let mut converged = false;
     for _ in 0..settings.max_iterations {
-        let gradient = match backward(dynamics, cost, &x, &u, &mut work, mu, settings) {
-            Ok(g) => g,
-            Err(SimError::InvalidInput(m)) if m == NOT_PD => {
-                mu = (mu * 10.0).max(1e-6);
-                if mu > 1e10 {
-                    break;
-                }
-                continue;
+        let Some(gradient) = backward(dynamics, cost, &x, &u, &mut work, mu, settings)? else {
+            // Some Q_uu + μI is not positive definite: regularise more.
+            mu = (mu * 10.0).max(1e-6);
+            if mu > 1e10 {
+                break;
             }
-            Err(e) => return Err(e),
+            continue;
         };
         if gradient < settings.gradient_tolerance {
             converged = true;
@@ -196,11 +194,13 @@ where
         let mut trial_total = total;
         while alpha > 1e-4 {
             for k in 0..n {
-                u_new[k].copy_from(&(&u[k] + &work.k[k] * alpha));
+                u_new[k].copy_from(&u[k]);
+                u_new[k].axpy(alpha, &work.k[k], 1.0);
             }
             x_new[0].copy_from(x0);
-            if let Ok(trial) = forward(
-                dynamics, cost, &x, &mut x_new, &u, &mut u_new, &mut work, settings,
+            let policy = Some((x.as_slice(), settings.limits.as_ref()));
+            if let Ok(trial) = rollout(
+                dynamics, cost, &mut x_new, &mut u_new, &mut work, false, policy,
             ) {
                 if trial.is_finite() && trial < total {
                     accepted = alpha;
@@ -228,7 +228,7 @@ where
         std::mem::swap(&mut x, &mut x_new);
         std::mem::swap(&mut u, &mut u_new);
         let previous = total;
-        total = rollout(dynamics, cost, &mut x, &u, &mut work, true)?;
+        total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
         debug_assert!((total - trial_total).abs() <= 1e-9 * total.abs().max(1.0));
         mu = (mu * 0.1).max(1e-12);
         let it = Iteration {
@@ -263,23 +263,9 @@ struct Work {
     gain: Vec<DMatrix<f64>>,
     knot: Knot,
     needs: Needs,
+    /// `x − x_plan` in the forward pass.
+    dx: DVector<f64>,
 }
-
-fn empty_knot() -> Knot {
-    Knot {
-        x: DVector::zeros(0),
-        q: DVector::zeros(0),
-        dq: DVector::zeros(0),
-        q_x: DMatrix::zeros(0, 0),
-        dq_x: DMatrix::zeros(0, 0),
-        gravity: DVector::zeros(0),
-        gravity_x: DMatrix::zeros(0, 0),
-        previous: DVector::zeros(0),
-        previous_at: Vec::new(),
-    }
-}
-
-const NOT_PD: &str = "Q_uu is not positive definite";
 
 /// Refuses a problem whose sizes do not fit the dynamics: `x0` of `nx` entries, at least one
 /// knot, every `u_k` of `nu`, and a cost that fits.
@@ -331,11 +317,20 @@ where
         b: vec![DMatrix::zeros(nx, nu); n],
         k: Vec::new(),
         gain: Vec::new(),
-        knot: empty_knot(),
+        knot: Knot::empty(),
         needs: cost.needs(),
+        dx: DVector::zeros(0),
     };
     let mut x = vec![x0.clone(); n + 1];
-    let total = rollout(dynamics, cost, &mut x, u, &mut work, true)?;
+    let total = rollout(
+        dynamics,
+        cost,
+        &mut x,
+        &mut u.to_vec(),
+        &mut work,
+        true,
+        None,
+    )?;
     let mut d = super::cost::Derivatives::zeros(nx, nu);
     dynamics.knot(n, x[n].as_slice(), &mut work.knot, true, work.needs)?;
     cost.terminal(&work.knot, Some(&mut d));
@@ -350,15 +345,20 @@ where
     Ok((total, gradient))
 }
 
+/// Box limits on the controls, `(lower, upper)`.
+type Limits = (DVector<f64>, DVector<f64>);
+
 /// Rolls `u` out from `x[0]` (filling `x`), returns the total cost; with `jacobians`, also
-/// each step's `A`, `B`.
+/// each step's `A`, `B`. With a `policy` `(x_plan, limits)` (the forward pass), each control
+/// first gets the feedback `u_k += K_k (x_k − x_plan,k)` and is clamped to the limits.
 fn rollout<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
     x: &mut [DVector<f64>],
-    u: &[DVector<f64>],
+    u: &mut [DVector<f64>],
     work: &mut Work,
     jacobians: bool,
+    policy: Option<(&[DVector<f64>], Option<&Limits>)>,
 ) -> Result<f64, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -366,6 +366,16 @@ where
     let n = u.len();
     let mut total = 0.0;
     for k in 0..n {
+        if let Some((plan, limits)) = policy {
+            work.dx.copy_from(&x[k]);
+            work.dx -= &plan[k];
+            u[k].gemv(1.0, &work.gain[k], &work.dx, 1.0);
+            if let Some((lo, hi)) = limits {
+                for c in 0..u[k].len() {
+                    u[k][c] = u[k][c].clamp(lo[c], hi[c]);
+                }
+            }
+        }
         dynamics.knot(k, x[k].as_slice(), &mut work.knot, false, work.needs)?;
         total += cost.running(k, &work.knot, &u[k], None);
         let (head, tail) = x.split_at_mut(k + 1);
@@ -382,49 +392,8 @@ where
     Ok(total + cost.terminal(&work.knot, None))
 }
 
-/// The forward pass at one step length: `u_new = u + αk + K(x_new − x)` (already holding
-/// `u + αk`), clamped to the limits, rolled out into `x_new`; returns its total cost.
-#[allow(clippy::too_many_arguments)]
-fn forward<S: System>(
-    dynamics: &mut DiscreteSystem<S>,
-    cost: &mut dyn Cost,
-    x: &[DVector<f64>],
-    x_new: &mut [DVector<f64>],
-    u: &[DVector<f64>],
-    u_new: &mut [DVector<f64>],
-    work: &mut Work,
-    settings: &IlqrSettings,
-) -> Result<f64, SimError>
-where
-    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
-{
-    let n = u.len();
-    let mut total = 0.0;
-    for k in 0..n {
-        let dx = &x_new[k] - &x[k];
-        u_new[k].gemv(1.0, &work.gain[k], &dx, 1.0);
-        if let Some((lo, hi)) = &settings.limits {
-            for c in 0..u_new[k].len() {
-                u_new[k][c] = u_new[k][c].clamp(lo[c], hi[c]);
-            }
-        }
-        dynamics.knot(k, x_new[k].as_slice(), &mut work.knot, false, work.needs)?;
-        total += cost.running(k, &work.knot, &u_new[k], None);
-        let (head, tail) = x_new.split_at_mut(k + 1);
-        dynamics.step(
-            k,
-            head[k].as_slice(),
-            u_new[k].as_slice(),
-            tail[0].as_mut_slice(),
-            None,
-        )?;
-    }
-    dynamics.knot(n, x_new[n].as_slice(), &mut work.knot, false, work.needs)?;
-    Ok(total + cost.terminal(&work.knot, None))
-}
-
-/// The backward pass: fills the gains and feed-forward terms; returns `max |k|`, or the
-/// error [`NOT_PD`] when some `Q_uu` is not positive definite at this `μ`.
+/// The backward pass: fills the gains and feed-forward terms; returns `max |k|`, or `None`
+/// when some `Q_uu + μI` is not positive definite.
 fn backward<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
@@ -433,12 +402,13 @@ fn backward<S: System>(
     work: &mut Work,
     mu: f64,
     settings: &IlqrSettings,
-) -> Result<f64, SimError>
+) -> Result<Option<f64>, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let n = u.len();
     let (nx, nu) = (dynamics.states(), dynamics.controls());
+    let mut x2 = vec![0.0; nx];
     let mut d = super::cost::Derivatives::zeros(nx, nu);
     dynamics.knot(n, x[n].as_slice(), &mut work.knot, true, work.needs)?;
     cost.terminal(&work.knot, Some(&mut d));
@@ -464,6 +434,7 @@ where
                 x[k].as_slice(),
                 u[k].as_slice(),
                 vx.as_slice(),
+                &mut x2,
                 &mut hxx,
                 &mut huu,
                 &mut hux,
@@ -473,7 +444,9 @@ where
             qux += &hux;
         }
         let reg = &quu + DMatrix::identity(nu, nu) * mu;
-        let (kk, gain) = control_qp(&reg, &qu, &qux, &u[k], settings)?;
+        let Some((kk, gain)) = control_qp(&reg, &qu, &qux, &u[k], settings) else {
+            return Ok(None);
+        };
         gradient = gradient.max(kk.amax());
         // V_x = Q_x + KᵀQ_uu k + KᵀQ_u + Q_uxᵀk, V_xx = Q_xx + KᵀQ_uuK + KᵀQ_ux + Q_uxᵀK.
         vx = &qx + gain.tr_mul(&(&quu * &kk)) + gain.tr_mul(&qu) + qux.tr_mul(&kk);
@@ -482,24 +455,24 @@ where
         work.k[k] = kk;
         work.gain[k] = gain;
     }
-    Ok(gradient)
+    Ok(Some(gradient))
 }
 
 /// The control QP `min ½δuᵀHδu + gᵀδu` within the limits shifted by `u`: projected Newton
 /// (Bertsekas; Tassa et al. 2014's box-DDP). Returns the feed-forward and the feedback (zero
-/// on the clamped controls: `−H_ff⁻¹ Q_ux,f` on the free ones).
+/// on the clamped controls: `−H_ff⁻¹ Q_ux,f` on the free ones); `None` when `H` (or its
+/// free block) is not positive definite.
 fn control_qp(
     h: &DMatrix<f64>,
     g: &DVector<f64>,
     qux: &DMatrix<f64>,
     u: &DVector<f64>,
     settings: &IlqrSettings,
-) -> Result<(DVector<f64>, DMatrix<f64>), SimError> {
+) -> Option<(DVector<f64>, DMatrix<f64>)> {
     let nu = g.len();
-    let not_pd = || SimError::InvalidInput(NOT_PD.into());
     let Some((lo, hi)) = &settings.limits else {
-        let chol = h.clone().cholesky().ok_or_else(not_pd)?;
-        return Ok((-chol.solve(g), -chol.solve(qux)));
+        let chol = h.clone().cholesky()?;
+        return Some((-chol.solve(g), -chol.solve(qux)));
     };
     let (lo, hi) = (lo - u, hi - u);
     let mut x = DVector::zeros(nu);
@@ -519,7 +492,7 @@ fn control_qp(
         if gf.amax() < 1e-13 * g.amax().max(1.0) {
             break;
         }
-        let step = -hff.cholesky().ok_or_else(not_pd)?.solve(&gf);
+        let step = -hff.cholesky()?.solve(&gf);
         // Projected backtracking.
         let (f0, mut alpha, mut moved) = (value(&x), 1.0, false);
         while alpha > 1e-10 {
@@ -542,12 +515,12 @@ fn control_qp(
     let mut gain = DMatrix::zeros(nu, qux.ncols());
     if !idx.is_empty() {
         let hff = DMatrix::from_fn(idx.len(), idx.len(), |r, c| h[(idx[r], idx[c])]);
-        let chol = hff.cholesky().ok_or_else(not_pd)?;
+        let chol = hff.cholesky()?;
         let rows = DMatrix::from_fn(idx.len(), qux.ncols(), |r, c| qux[(idx[r], c)]);
         let kf = -chol.solve(&rows);
         for (r, &c) in idx.iter().enumerate() {
             gain.set_row(c, &kf.row(r));
         }
     }
-    Ok((x, gain))
+    Some((x, gain))
 }

@@ -129,14 +129,16 @@ impl TaskCost {
         }
     }
 
-    /// The world position of frame `f` at `q`.
-    pub fn frame_position(&self, q: &[f64], f: usize) -> [f64; 3] {
-        let p = world_poses(&self.model, q)[f].1;
-        [p[0], p[1], p[2]]
-    }
-
-    /// Residual of `term` at `knot` (with `u` for running terms).
-    fn residual(&self, term: &Term, knot: &Knot, u: Option<&DVector<f64>>, jac: bool) -> Residual {
+    /// Residual of `term` at `knot` (with `u` for running terms; `poses` every frame's
+    /// world pose at the knot, when a term needs them).
+    fn residual(
+        &self,
+        term: &Term,
+        knot: &Knot,
+        u: Option<&DVector<f64>>,
+        poses: &[(Matrix3<f64>, Vector3<f64>)],
+        jac: bool,
+    ) -> Residual {
         let (nx, nu, n) = (knot.x.len(), self.controls.len(), knot.q.len());
         let zeros = |rows: usize| Residual {
             r: DVector::zeros(rows),
@@ -188,23 +190,21 @@ impl TaskCost {
                 res
             }
             Term::Frame { frame, target, .. } => {
-                let poses = world_poses(&self.model, knot.q.as_slice());
                 let mut res = zeros(3);
                 res.r.copy_from(&(poses[*frame].1 - target));
                 if jac {
-                    let (jp, _) = frame_jacobians(&self.model, &poses, *frame);
+                    let (jp, _) = frame_jacobians(&self.model, poses, *frame);
                     res.jx = jp * &knot.q_x;
                 }
                 res
             }
             Term::Orientation { frame, target, .. } => {
-                let poses = world_poses(&self.model, knot.q.as_slice());
                 let rf = poses[*frame].0;
                 let phi = log_so3(&(target.transpose() * rf));
                 let mut res = zeros(3);
                 res.r.copy_from(&phi);
                 if jac {
-                    let (_, jw) = frame_jacobians(&self.model, &poses, *frame);
+                    let (_, jw) = frame_jacobians(&self.model, poses, *frame);
                     let body = DMatrix::from_fn(3, 3, |i, j| rf[(j, i)]) * jw;
                     let jr = right_jacobian_inverse(&phi);
                     let jr = DMatrix::from_fn(3, 3, |i, j| jr[(i, j)]);
@@ -243,10 +243,18 @@ impl TaskCost {
             d.luu.fill(0.0);
             d.lux.fill(0.0);
         }
+        let placed = terms
+            .iter()
+            .any(|t| matches!(t, Term::Frame { .. } | Term::Orientation { .. }));
+        let poses = if placed {
+            world_poses(&self.model, knot.q.as_slice())
+        } else {
+            Vec::new()
+        };
         let mut total = 0.0;
         for term in terms {
             let w = Self::weight(term);
-            let res = self.residual(term, knot, u, jac);
+            let res = self.residual(term, knot, u, &poses, jac);
             let wr = res.r.component_mul(w) * scale;
             total += 0.5 * wr.dot(&res.r);
             if let Some(d) = d.as_mut() {

@@ -15,7 +15,7 @@ use super::task_cost::TaskCost;
 use crate::dynamics::{ModelMotions, Prescription};
 use crate::error::SimError;
 use crate::integrate::ViSettings;
-use crate::system::System;
+use crate::system::{ConstraintTerms, Order, System};
 
 /// A solved task: the solver's result and the trajectory at every knot.
 #[derive(Clone, Debug, PartialEq)]
@@ -31,6 +31,8 @@ pub struct TaskResult {
     /// The constraint forces `λ` of the step leaving each knot (the last knot repeats the
     /// last step's).
     pub lambda: Vec<DVector<f64>>,
+    /// `max |h(q)|` at each knot (0 without constraints).
+    pub violation: Vec<f64>,
     /// Wall time of the solve.
     pub solve_seconds: f64,
 }
@@ -137,26 +139,23 @@ where
     let solution = solve_with(&mut dynamics, &mut cost, &x0, guess, &settings, report)?;
     let solve_seconds = start.elapsed().as_secs_f64();
     // Read the trajectory back: q, q̇ at every knot, λ of every step.
-    let mut knot = Knot {
-        x: DVector::zeros(0),
-        q: DVector::zeros(0),
-        dq: DVector::zeros(0),
-        q_x: nalgebra::DMatrix::zeros(0, 0),
-        dq_x: nalgebra::DMatrix::zeros(0, 0),
-        gravity: DVector::zeros(0),
-        gravity_x: nalgebra::DMatrix::zeros(0, 0),
-        previous: DVector::zeros(0),
-        previous_at: Vec::new(),
-    };
+    let mut knot = Knot::empty();
     let needs = Needs {
         velocity: true,
         gravity: false,
     };
-    let (mut q, mut dq, mut lambda) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut q, mut dq, mut lambda, mut violation) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut x2 = vec![0.0; dynamics.states()];
+    let mut h = ConstraintTerms::zeros(dynamics.sys.constraint_count(), dynamics.sys.dof());
+    let (mut qv, mut dqv) = (dynamics.sys.zero_vector(), dynamics.sys.zero_vector());
     for k in 0..=task.knots {
         let x = solution.x[k].as_slice();
         dynamics.knot(k, x, &mut knot, false, needs)?;
+        qv.as_mut_slice().copy_from_slice(knot.q.as_slice());
+        dqv.as_mut_slice().copy_from_slice(knot.dq.as_slice());
+        dynamics.sys.constraints(&qv, &dqv, Order::First, &mut h);
+        violation.push(h.violation());
         q.push(knot.q.clone());
         dq.push(knot.dq.clone());
         if k < task.knots {
@@ -170,6 +169,7 @@ where
         q,
         dq,
         lambda,
+        violation,
         solution,
         solve_seconds,
     })
