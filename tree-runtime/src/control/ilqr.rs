@@ -166,6 +166,16 @@ where
     let (mut x_new, mut u_new) = (x.clone(), u.clone());
     let mut mu = settings.mu;
     let mut history = Vec::new();
+    let mut record = |cost: f64, step: f64, mu: f64, gradient: f64| {
+        let it = Iteration {
+            cost,
+            step,
+            mu,
+            gradient,
+        };
+        report(&it);
+        history.push(it);
+    };
     let mut converged = false;
     for _ in 0..settings.max_iterations {
         let Some(gradient) = backward(dynamics, cost, &x, &u, &mut work, mu, settings)? else {
@@ -178,14 +188,7 @@ where
         };
         if gradient < settings.gradient_tolerance {
             converged = true;
-            let it = Iteration {
-                cost: total,
-                step: 0.0,
-                mu,
-                gradient,
-            };
-            report(&it);
-            history.push(it);
+            record(total, 0.0, mu, gradient);
             break;
         }
         // Forward pass: the first step length that lowers the true cost.
@@ -212,14 +215,7 @@ where
         }
         if accepted == 0.0 {
             mu = (mu * 10.0).max(1e-6);
-            let it = Iteration {
-                cost: total,
-                step: 0.0,
-                mu,
-                gradient,
-            };
-            report(&it);
-            history.push(it);
+            record(total, 0.0, mu, gradient);
             if mu > 1e10 {
                 break;
             }
@@ -231,14 +227,7 @@ where
         total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
         debug_assert!((total - trial_total).abs() <= 1e-9 * total.abs().max(1.0));
         mu = (mu * 0.1).max(1e-12);
-        let it = Iteration {
-            cost: total,
-            step: accepted,
-            mu,
-            gradient,
-        };
-        report(&it);
-        history.push(it);
+        record(total, accepted, mu, gradient);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             converged = true;
             break;
