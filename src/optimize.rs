@@ -28,7 +28,7 @@ pub struct Request {
     /// PNG: the variables, the controls and the cost per iteration.
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// GIF of the optimal motion (one picture per knot).
+    /// GIF of the optimal motion (a picture every 1/25 s, as simulate's).
     #[arg(long)]
     animate: Option<PathBuf>,
     /// JSON summary: converged, iterations, cost, q_final, dq_final, frames,
@@ -218,8 +218,16 @@ fn write_outputs(
         plot_with(&traj, model, file, vec![control_panel, history])?;
     }
     if let Some(file) = &files.animate {
-        let mut poses = Vec::with_capacity(n + 1);
-        for k in 0..=n {
+        // As simulate's: a picture every 1/FPS s (every knot when they are further apart),
+        // at most MAX_FRAMES, the last knot always.
+        let interval = (1.0 / animate::FPS).max(res.t[n] / animate::MAX_FRAMES as f64);
+        let every = ((interval / task.dt).round() as usize).max(1);
+        let mut knots: Vec<usize> = (0..=n).step_by(every).collect();
+        if knots.last() != Some(&n) {
+            knots.push(n);
+        }
+        let mut poses = Vec::with_capacity(knots.len());
+        for &k in &knots {
             let mut frame = vec![Pose::IDENTITY; sys.frame_count()];
             sys.poses(
                 &Vector::<Dyn>::from_column_slice(res.q[k].as_slice()),
@@ -227,9 +235,10 @@ fn write_outputs(
             );
             poses.push(frame);
         }
+        let times: Vec<f64> = knots.iter().map(|&k| res.t[k]).collect();
         animate::write_gif(
             model,
-            &res.t,
+            &times,
             &poses,
             file,
             animate::CameraMode::Fixed,

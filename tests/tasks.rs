@@ -199,6 +199,29 @@ fn the_ur5_reaches_within_a_millimetre() {
         .sum::<f64>()
         .sqrt();
     assert!(miss < 1e-3, "the tool misses its target by {miss} m");
+    // Crocoddyl 3.2.1's box-FDDP on the same problem (symplectic Euler instead of the VI,
+    // tools/reference/crocoddyl_reach.py): the same optimum within 1%, the tool at the same
+    // place within 0.1 mm.
+    let path = Path::new(ROOT).join("tests/fixtures/crocoddyl-reach.json");
+    let croc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let theirs = croc["cost"].as_f64().unwrap();
+    let ours = res.solution.cost;
+    assert!(
+        (ours - theirs).abs() < 0.01 * theirs,
+        "cost {ours} against Crocoddyl's {theirs}"
+    );
+    let their_end: Vec<f64> = croc["ee_final"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let apart = (0..3)
+        .map(|i| (end[i] - their_end[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(apart < 1e-4, "the tools end {apart} m apart");
     assert!(
         res.dq[task.knots].amax() < 0.05,
         "not at rest: {}",

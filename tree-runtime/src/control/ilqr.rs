@@ -1,10 +1,11 @@
-//! iLQR and DDP on the VI with box limits on the controls (docs/derivations.md §10): a
+//! iLQR and DDP on the VI (or RK4) with box limits on the controls (docs/derivations.md §10): a
 //! rollout; a backward pass `Q_x = ℓ_x + AᵀV_x`, `Q_u = ℓ_u + BᵀV_x`,
 //! `Q_xx = ℓ_xx + AᵀV_xxA`, `Q_uu = ℓ_uu + BᵀV_xxB + μI`, `Q_ux = ℓ_ux + BᵀV_xxA` (DDP adds
 //! the step's second derivatives contracted with `V_x`); the control QP solved by projected
 //! Newton within the limits (box-DDP: clamped controls get no feedback); a forward pass with
 //! a backtracking line search on the true cost; Levenberg–Marquardt `μ` raised when `Q_uu` is
-//! not positive definite or no step length lowers the cost, lowered after a success.
+//! not positive definite, no step length lowers the cost or the accepted one is under ¼,
+//! lowered after a longer accepted step.
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
@@ -226,7 +227,12 @@ where
         let previous = total;
         total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
         debug_assert!((total - trial_total).abs() <= 1e-9 * total.abs().max(1.0));
-        mu = (mu * 0.1).max(1e-12);
+        // A short step means the model was trusted too far: regularise more next time.
+        mu = if accepted < 0.25 {
+            (mu * 10.0).max(1e-6)
+        } else {
+            (mu * 0.1).max(1e-12)
+        };
         record(total, accepted, mu, gradient);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             converged = true;
