@@ -45,6 +45,8 @@ pub mod sweeps;
 
 // Simulation (needs nalgebra).
 #[cfg(feature = "simulate")]
+pub mod batch;
+#[cfg(feature = "simulate")]
 pub mod context;
 #[cfg(feature = "simulate")]
 pub mod control;

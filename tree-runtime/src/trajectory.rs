@@ -41,6 +41,8 @@ pub struct Trajectory {
     lambda: Vec<f64>,
     /// Total energy `E = T + V` at each sample.
     pub energy: Vec<f64>,
+    /// The inputs in force from each sample on, row after row (empty without inputs).
+    u: Vec<f64>,
     /// `max |h|` at each sample.
     pub violation: Vec<f64>,
     /// Total Newton iterations (VI only).
@@ -93,6 +95,7 @@ impl Trajectory {
         self.lambda.extend_from_slice(s.lambda);
         self.energy.push(s.energy);
         self.violation.push(s.violation);
+        self.u.extend_from_slice(s.u);
     }
 
     /// Configuration of sample `k`.
@@ -111,6 +114,12 @@ impl Trajectory {
     pub fn p(&self, k: usize) -> Option<&[f64]> {
         let n = self.dof();
         (self.p.len() >= (k + 1) * n).then(|| &self.p[k * n..(k + 1) * n])
+    }
+
+    /// The inputs in force from sample k on (empty when the run had none).
+    pub fn u(&self, k: usize) -> &[f64] {
+        let w = self.u.len() / self.len().max(1);
+        &self.u[k * w..(k + 1) * w]
     }
 
     /// The constraint forces at sample k.

@@ -1,0 +1,111 @@
+//! Many rollouts at once: one [`run_with_inputs`] per start state and input schedule, spread
+//! over a pool of threads (rayon), each worker with its own copy of the system. Every
+//! rollout is computed by one thread from its own inputs alone, so the results are bitwise
+//! the same whatever the number of threads; each rollout's failure is its own.
+//!
+//! ```
+//! use tree_runtime::batch::{rollouts, Rollout};
+//! use tree_runtime::integrate::{InputSchedule, Method, SimOptions, ViSettings};
+//! use tree_runtime::TreeSystem;
+//! let model = tree_runtime::tree_model::n_link_pendulum(2);
+//! let sys = TreeSystem::new(&model).unwrap();
+//! let starts: Vec<Rollout> = (0..4)
+//!     .map(|k| Rollout {
+//!         q0: vec![0.1 * k as f64, 0.0],
+//!         dq0: vec![0.0, 0.0],
+//!         inputs: InputSchedule::default(),
+//!     })
+//!     .collect();
+//! let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 0.5);
+//! let runs = rollouts(&sys, &starts, &options, 2).unwrap();
+//! assert_eq!(runs.len(), 4);
+//! assert_eq!(runs[3].as_ref().unwrap().len(), 51);
+//! ```
+
+use nalgebra::{allocator::Allocator, DefaultAllocator};
+use rayon::prelude::*;
+
+use crate::dynamics::{ModelMotions, NoForce};
+use crate::error::SimError;
+use crate::integrate::{run_with_inputs, InputSchedule, SimOptions};
+use crate::system::System;
+use crate::trajectory::Trajectory;
+
+/// One rollout's start and inputs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Rollout {
+    /// The initial configuration (every variable).
+    pub q0: Vec<f64>,
+    /// The initial velocity.
+    pub dq0: Vec<f64>,
+    /// The inputs over the run (empty: none).
+    pub inputs: InputSchedule,
+}
+
+/// Runs every rollout of `sys` under `options` on `threads` threads (0: as many as the
+/// machine has). Returns one result per rollout, in order: its recorded trajectory, or the
+/// error that ended it. Fails as a whole only when the thread pool cannot be made.
+pub fn rollouts<S>(
+    sys: &S,
+    starts: &[Rollout],
+    options: &SimOptions,
+    threads: usize,
+) -> Result<Vec<Result<Trajectory, SimError>>, SimError>
+where
+    S: System + Clone + Send + Sync,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| SimError::InvalidInput(format!("cannot start {threads} threads: {e}")))?;
+    Ok(pool.install(|| {
+        starts
+            .par_iter()
+            .map_init(|| sys.clone(), |sys, start| one(sys, start, options))
+            .collect()
+    }))
+}
+
+/// One rollout on a worker's own system.
+fn one<S>(sys: &mut S, start: &Rollout, options: &SimOptions) -> Result<Trajectory, SimError>
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let n = sys.dof();
+    if start.q0.len() != n || start.dq0.len() != n {
+        return Err(SimError::InvalidInput(format!(
+            "the start has {} positions and {} velocities; the system has {n} variables",
+            start.q0.len(),
+            start.dq0.len()
+        )));
+    }
+    let (mut q0, mut dq0) = (sys.zero_vector(), sys.zero_vector());
+    q0.as_mut_slice().copy_from_slice(&start.q0);
+    dq0.as_mut_slice().copy_from_slice(&start.dq0);
+    let names = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
+    let constraints = (0..sys.constraint_count())
+        .map(|r| sys.constraint_name(r).to_string())
+        .collect();
+    let samples = (options.duration / options.dt / options.every.max(1) as f64).ceil() as usize + 2;
+    let mut traj = Trajectory::new(names, constraints, samples.min(1 << 24));
+    let mut motion = ModelMotions::of(sys);
+    let summary = run_with_inputs(
+        sys,
+        &q0,
+        &dq0,
+        options,
+        &mut NoForce,
+        &mut motion,
+        &start.inputs,
+        &mut |s| {
+            traj.push(s);
+            Ok(())
+        },
+    )?;
+    traj.newton_iterations = summary.newton_iterations;
+    traj.subdivided_steps = summary.subdivided_steps;
+    traj.dissipated = summary.dissipated;
+    Ok(traj)
+}
