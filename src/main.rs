@@ -16,17 +16,14 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tree_mech::integrate::{
-    run_with_inputs, Forcing, InputSchedule, JacobianUpdate, Method, SimOptions, StepContext,
-    Tolerance, ViSettings,
+    run_with_inputs, Forcing, InputSchedule, JacobianUpdate, Method, SimOptions, Tolerance,
+    ViSettings,
 };
 use tree_mech::model;
 use tree_mech::nalgebra::Dyn;
-use tree_mech::runtime::se3::Pose;
-use tree_mech::runtime::{Baumgarte, CsvStream, Dynamics, ModelMotions, Prescription, Vector};
-use tree_mech::{
-    ConstraintTerms, NoForce, Order, PaperEvaluation, PaperSystem, SimError, System, Trajectory,
-    TreeSystem,
-};
+use tree_mech::runtime::evaluation::evaluate_state;
+use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Prescription, Vector};
+use tree_mech::{NoForce, PaperEvaluation, PaperSystem, SimError, System, Trajectory, TreeSystem};
 
 #[derive(Parser)]
 #[command(
@@ -876,55 +873,19 @@ fn run_eval(
     if !time.is_finite() {
         return Err(format!("--t: `{time}` is not a finite time"));
     }
-    let t = sys.evaluate(&q, &dq, Order::Full);
-    let mut qdd = Vector::<Dyn>::zeros(n);
-    let mut motion = ModelMotions::of(&sys);
-    let mut dynamics = Dynamics::new(&sys);
-    let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
-    let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-    let mut no_force = NoForce;
-    let u = match u {
-        Some(text) => {
-            let inputs: Vec<String> = (0..sys.input_count())
-                .map(|k| sys.input_name(k).to_string())
-                .collect();
-            parse_list(text, inputs.len(), "u", &inputs, "inputs")?
-        }
-        None => vec![0.0; sys.input_count()],
-    };
     let input_names: Vec<String> = (0..sys.input_count())
         .map(|k| sys.input_name(k).to_string())
         .collect();
-    let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.0);
-    cx.u = &u;
-    dynamics
-        .acceleration(cx.at(0, time), &q, &dq, &mut qdd)
-        .map_err(|e| format!("at this state, {e}"))?;
+    let u = match u {
+        Some(text) => parse_list(text, input_names.len(), "u", &input_names, "inputs")?,
+        None => vec![0.0; sys.input_count()],
+    };
+    let e = evaluate_state(&mut sys, time, &q, &dq, &u).map_err(|e| e.to_string())?;
+    let (t, c) = (&e.terms, &e.constraints);
+    let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
+    let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
     let rows = sys.constraint_count();
-    let mut c = ConstraintTerms::zeros(rows, n);
-    sys.constraints(&q, &dq, Order::First, &mut c);
-    let energy = t.energy(&dq);
-    // Nothing non-finite is printed: the first output that overflowed is the error.
-    let outputs: [(&str, &[f64]); 10] = [
-        ("L", std::slice::from_ref(&t.l)),
-        ("the energy", std::slice::from_ref(&energy)),
-        ("dL_dq", t.dl_dq.as_slice()),
-        ("dL_ddq", t.dl_ddq.as_slice()),
-        ("M", t.mass.as_slice()),
-        ("d2L_ddqdq", t.d2l_ddq_dq.as_slice()),
-        ("d2L_dqdq", t.d2l_dq_dq.as_slice()),
-        ("qdd", qdd.as_slice()),
-        ("h", c.h.as_slice()),
-        ("dh_dq", c.dh.as_slice()),
-    ];
-    if let Some((name, _)) = outputs
-        .iter()
-        .find(|(_, v)| v.iter().any(|x| !x.is_finite()))
-    {
-        return Err(format!(
-            "at this state, {name} is not finite (it overflowed a floating-point number)"
-        ));
-    }
+    let mut motion = ModelMotions::of(&sys);
     let name_list =
         |list: &[usize]| -> Vec<String> { list.iter().map(|&i| names[i].clone()).collect() };
     let constraint_names: Vec<String> = (0..rows)
@@ -942,9 +903,8 @@ fn run_eval(
             .map(|i| (0..n).map(|j| m[(i, j)]).collect())
             .collect()
     };
-    let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
-    sys.poses(&q, &mut poses);
-    let poses: serde_json::Map<String, serde_json::Value> = poses
+    let poses: serde_json::Map<String, serde_json::Value> = e
+        .poses
         .iter()
         .enumerate()
         .map(|(k, p)| (sys.frame_name(k).to_string(), json!(p.matrix())))
@@ -954,7 +914,7 @@ fn run_eval(
         "q": q.as_slice(),
         "dq": dq.as_slice(),
         "L": t.l,
-        "energy": energy,
+        "energy": e.energy,
         "dL_dq": t.dl_dq.as_slice(),
         "dL_ddq": t.dl_ddq.as_slice(),
         "M": matrix(&t.mass),
@@ -963,11 +923,11 @@ fn run_eval(
         "dynamic": name_list(&dynamic),
         "kinematic": name_list(&kinematic),
         "kinematic_motion": kinematic_motion,
-        "qdd": dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>(),
+        "qdd": dynamic.iter().map(|&i| e.qdd[i]).collect::<Vec<_>>(),
         "constraints": constraint_names,
         "h": c.h.as_slice(),
         "dh_dq": dh,
-        "lambda": dynamics.lambda.as_slice(),
+        "lambda": e.lambda.as_slice(),
         "inputs": input_names,
         "u": u,
         "poses": poses,

@@ -55,6 +55,8 @@ pub mod dynamics;
 #[cfg(feature = "simulate")]
 pub mod error;
 #[cfg(feature = "simulate")]
+pub mod evaluation;
+#[cfg(feature = "simulate")]
 pub mod integrate;
 #[cfg(feature = "simulate")]
 pub mod interpreted;
