@@ -113,6 +113,26 @@ pub enum SimError {
     Unsupported(String),
 }
 
+impl SimError {
+    /// The step the error happened at, when it names one (0: the initial state).
+    pub fn step(&self) -> Option<usize> {
+        match self {
+            SimError::SingularMassMatrix { step, .. }
+            | SimError::SingularConstraints { step, .. }
+            | SimError::SingularJacobian { step, .. }
+            | SimError::NewtonFailed { step, .. }
+            | SimError::StepTooCoarse { step, .. }
+            | SimError::NonFinite { step, .. }
+            | SimError::StepSizeTooSmall { step, .. }
+            | SimError::StepBudget { step, .. } => Some(*step),
+            SimError::Unsatisfiable { .. }
+            | SimError::TooManySteps { .. }
+            | SimError::InvalidInput(_)
+            | SimError::Unsupported(_) => None,
+        }
+    }
+}
+
 impl fmt::Display for SimError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

@@ -1,0 +1,20 @@
+import os
+from typing import Any, Mapping, Optional, Union
+
+from ._native import (
+    Model as Model,
+    ModelError as ModelError,
+    Rollouts as Rollouts,
+    SimulationError as SimulationError,
+    Trajectory as Trajectory,
+    load as load,
+    loads as loads,
+)
+
+__version__: str
+
+def optimize(
+    task: Union[str, os.PathLike, Mapping[str, Any]],
+    solver: Optional[str] = None,
+    max_iterations: Optional[int] = None,
+) -> dict: ...

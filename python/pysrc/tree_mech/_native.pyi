@@ -1,0 +1,89 @@
+from os import PathLike
+from typing import Optional, Sequence, Union
+
+import numpy as np
+import numpy.typing as npt
+
+ArrayLike = npt.ArrayLike
+
+class ModelError(ValueError):
+    file: Optional[str]
+    line: Optional[int]
+
+class SimulationError(RuntimeError):
+    step: Optional[int]
+
+class Trajectory:
+    t: npt.NDArray[np.float64]
+    q: npt.NDArray[np.float64]
+    dq: npt.NDArray[np.float64]
+    energy: npt.NDArray[np.float64]
+    lam: npt.NDArray[np.float64]
+    violation: npt.NDArray[np.float64]
+    u: npt.NDArray[np.float64]
+    variables: list[str]
+    newton_iterations: int
+    dissipated: float
+    def __len__(self) -> int: ...
+
+class Rollouts:
+    t: npt.NDArray[np.float64]
+    q: npt.NDArray[np.float64]
+    dq: npt.NDArray[np.float64]
+    energy: npt.NDArray[np.float64]
+    errors: list[Optional[str]]
+
+class Model:
+    name: str
+    variables: list[str]
+    dynamic: list[str]
+    kinematic: list[str]
+    inputs: list[str]
+    constraints: list[str]
+    frames: list[str]
+    q0: npt.NDArray[np.float64]
+    dq0: npt.NDArray[np.float64]
+    def evaluate(
+        self,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        t: float = 0.0,
+        u: Optional[ArrayLike] = None,
+    ) -> dict: ...
+    def simulate(
+        self,
+        duration: float,
+        dt: float,
+        integrator: str = "vi",
+        q0: Optional[ArrayLike] = None,
+        dq0: Optional[ArrayLike] = None,
+        u: Optional[ArrayLike] = None,
+        every: int = 1,
+        alpha: float = 0.5,
+        forcing: str = "split",
+        newton_tol: Optional[float] = None,
+        rtol: float = 1e-8,
+        atol: float = 1e-10,
+        max_steps: int = 1_000_000,
+    ) -> Trajectory: ...
+    def rollouts(
+        self,
+        q0: ArrayLike,
+        dq0: ArrayLike,
+        duration: float,
+        dt: float,
+        integrator: str = "vi",
+        u: Optional[ArrayLike] = None,
+        threads: Optional[int] = None,
+        every: int = 1,
+    ) -> Rollouts: ...
+
+def load(path: Union[str, PathLike], floating_base: bool = False) -> Model: ...
+def loads(text: str, format: str = "toml", floating_base: bool = False) -> Model: ...
+def optimize_text(
+    text: str,
+    base: Union[str, PathLike],
+    source: Optional[str] = None,
+    solver: Optional[str] = None,
+    max_iterations: Optional[int] = None,
+) -> dict: ...

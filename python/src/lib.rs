@@ -1,0 +1,727 @@
+//! `tree_mech._native`: the Python package's compiled core over the interpreted runtime —
+//! models read at run time, numpy arrays in and out, long calls without the GIL. The
+//! package's `tree_mech/__init__.py` re-exports it with docs and type stubs.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use tree_mech::control::{solve_task, TaskOptions, TaskSolver};
+use tree_mech::integrate::{
+    run_with_inputs, Forcing, InputSchedule, Method, SimOptions, Tolerance, ViSettings,
+};
+use tree_mech::model::{self, ModelError as CoreModelError};
+use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
+use tree_mech::runtime::batch::{rollouts as run_rollouts, Rollout};
+use tree_mech::runtime::evaluation::evaluate_state;
+use tree_mech::runtime::{ModelMotions, Vector};
+use tree_mech::{NoForce, SimError, Trajectory as CoreTrajectory, TreeSystem};
+
+pyo3::create_exception!(
+    _native,
+    ModelError,
+    PyValueError,
+    "A model or task file is wrong: the message names the problem and its place; `file` and `line` say where (None when unknown)."
+);
+pyo3::create_exception!(
+    _native,
+    SimulationError,
+    PyRuntimeError,
+    "A simulation or solve failed: the message names the cause; `step` is the step it failed at (None when it names none)."
+);
+
+/// A `ModelError` exception with `file` and `line` set from the first problem.
+fn model_error(py: Python<'_>, e: &CoreModelError) -> PyErr {
+    let err = ModelError::new_err(e.to_string());
+    let value = err.value(py);
+    let line = e.problems.first().and_then(|p| p.line);
+    let _ = value.setattr("file", e.source_name.clone());
+    let _ = value.setattr("line", line);
+    err
+}
+
+/// A `SimulationError` with `step` set.
+fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
+    let err = SimulationError::new_err(e.to_string());
+    let _ = err.value(py).setattr("step", e.step());
+    err
+}
+
+fn bad(message: impl Into<String>) -> PyErr {
+    PyValueError::new_err(message.into())
+}
+
+/// A model read at run time, with its interpreted system.
+#[pyclass(module = "tree_mech", frozen)]
+struct Model {
+    model: model::Model,
+    sys: Mutex<TreeSystem>,
+}
+
+impl Model {
+    fn of(model: model::Model) -> PyResult<Self> {
+        let sys = TreeSystem::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
+        Ok(Model {
+            model,
+            sys: Mutex::new(sys),
+        })
+    }
+
+    fn system(&self) -> TreeSystem {
+        self.sys.lock().expect("no panic holds the lock").clone()
+    }
+
+    fn n(&self) -> usize {
+        self.model.variables.len()
+    }
+
+    /// A vector of every variable, or the model's default.
+    fn vector(
+        &self,
+        what: &str,
+        given: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        default: impl Fn(usize) -> f64,
+    ) -> PyResult<Vector<Dyn>> {
+        let n = self.n();
+        match given {
+            None => Ok(Vector::<Dyn>::from_fn(n, |i, _| default(i))),
+            Some(a) => {
+                let v = a.as_array();
+                if v.len() != n {
+                    return Err(bad(format!(
+                        "{what} has {} entries; the model has {n} variables ({})",
+                        v.len(),
+                        self.names().join(", ")
+                    )));
+                }
+                Ok(Vector::<Dyn>::from_iterator(n, v.iter().copied()))
+            }
+        }
+    }
+
+    fn names(&self) -> Vec<String> {
+        self.model
+            .variables
+            .iter()
+            .map(|v| v.name.clone())
+            .collect()
+    }
+
+    /// The inputs: none (zero), constant (inputs,), or per step (steps, inputs) at `dt`.
+    fn schedule(&self, u: Option<&Bound<'_, PyAny>>, dt: f64) -> PyResult<InputSchedule> {
+        let width = self.model.inputs.len();
+        let Some(u) = u else {
+            return Ok(InputSchedule::default());
+        };
+        if u.is_none() {
+            return Ok(InputSchedule::default());
+        }
+        if let Ok(a) = u.extract::<PyArrayLike1<f64, AllowTypeChange>>() {
+            let v: Vec<f64> = a.as_array().to_vec();
+            if v.len() != width {
+                return Err(bad(format!(
+                    "u has {} entries; the model has {width} inputs",
+                    v.len()
+                )));
+            }
+            return Ok(InputSchedule::constant(v));
+        }
+        let a = u
+            .extract::<PyArrayLike2<f64, AllowTypeChange>>()
+            .map_err(|_| bad("u must be None, a vector (inputs,) or an array (steps, inputs)"))?;
+        let a = a.as_array();
+        if a.ncols() != width {
+            return Err(bad(format!(
+                "u has {} columns; the model has {width} inputs",
+                a.ncols()
+            )));
+        }
+        let rows = (0..a.nrows())
+            .map(|k| (k as f64 * dt, a.row(k).to_vec()))
+            .collect();
+        InputSchedule::from_rows(rows).map_err(|e| bad(e.to_string()))
+    }
+}
+
+/// The integrator named by `integrator` with the options of `simulate`.
+#[allow(clippy::too_many_arguments)]
+fn method(
+    integrator: &str,
+    alpha: f64,
+    forcing: &str,
+    newton_tol: Option<f64>,
+    rtol: f64,
+    atol: f64,
+) -> PyResult<Method> {
+    Ok(match integrator {
+        "vi" => Method::Vi(ViSettings {
+            alpha,
+            forcing: match forcing {
+                "split" => Forcing::Split,
+                "left" => Forcing::Left,
+                other => return Err(bad(format!("forcing `{other}`: use `split` or `left`"))),
+            },
+            tolerance: newton_tol.unwrap_or(ViSettings::default().tolerance),
+            ..ViSettings::default()
+        }),
+        "rk4" => Method::Rk4,
+        "rk45" => Method::Rk45(Tolerance { rtol, atol }),
+        other => {
+            return Err(bad(format!(
+                "integrator `{other}`: use `vi`, `rk4` or `rk45`"
+            )))
+        }
+    })
+}
+
+/// A run's samples as arrays.
+#[pyclass(module = "tree_mech", frozen, get_all)]
+struct Trajectory {
+    /// Sample times (samples,).
+    t: Py<PyAny>,
+    /// Configurations (samples, n).
+    q: Py<PyAny>,
+    /// Velocities (samples, n).
+    dq: Py<PyAny>,
+    /// Total energy (samples,).
+    energy: Py<PyAny>,
+    /// Constraint forces (samples, constraint rows).
+    lam: Py<PyAny>,
+    /// max |h| (samples,).
+    violation: Py<PyAny>,
+    /// Inputs in force (samples, inputs).
+    u: Py<PyAny>,
+    /// Variable names.
+    variables: Vec<String>,
+    /// Newton iterations over the run (VI).
+    newton_iterations: usize,
+    /// Energy taken out by damping.
+    dissipated: f64,
+}
+
+fn rows(py: Python<'_>, len: usize, width: usize, row: impl Fn(usize) -> Vec<f64>) -> Py<PyAny> {
+    let mut data = Vec::with_capacity(len * width);
+    for k in 0..len {
+        data.extend(row(k));
+    }
+    Array2::from_shape_vec((len, width), data)
+        .expect("rows of one width")
+        .into_pyarray(py)
+        .into_any()
+        .unbind()
+}
+
+fn vector(py: Python<'_>, v: &[f64]) -> Py<PyAny> {
+    Array1::from(v.to_vec())
+        .into_pyarray(py)
+        .into_any()
+        .unbind()
+}
+
+fn matrix(py: Python<'_>, m: &DMatrix<f64>) -> Py<PyAny> {
+    let (r, c) = m.shape();
+    Array2::from_shape_fn((r, c), |(i, j)| m[(i, j)])
+        .into_pyarray(py)
+        .into_any()
+        .unbind()
+}
+
+impl Trajectory {
+    fn of(py: Python<'_>, t: &CoreTrajectory, inputs: usize) -> Self {
+        let (len, n, m) = (t.len(), t.dof(), t.constraints.len());
+        Trajectory {
+            t: vector(py, &t.t),
+            q: rows(py, len, n, |k| t.q(k).to_vec()),
+            dq: rows(py, len, n, |k| t.dq(k).to_vec()),
+            energy: vector(py, &t.energy),
+            lam: rows(py, len, m, |k| t.lambda(k).to_vec()),
+            violation: vector(py, &t.violation),
+            u: rows(py, len, inputs, |k| {
+                let u = t.u(k);
+                if u.is_empty() {
+                    vec![0.0; inputs]
+                } else {
+                    u.to_vec()
+                }
+            }),
+            variables: t.variables.clone(),
+            newton_iterations: t.newton_iterations,
+            dissipated: t.dissipated,
+        }
+    }
+}
+
+#[pymethods]
+impl Trajectory {
+    fn __len__(&self, py: Python<'_>) -> PyResult<usize> {
+        self.t.bind(py).len()
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        Ok(format!(
+            "Trajectory({} samples of {} variables)",
+            self.__len__(py)?,
+            self.variables.len()
+        ))
+    }
+}
+
+/// Many rollouts: shared times, per-rollout arrays, per-rollout errors.
+#[pyclass(module = "tree_mech", frozen, get_all)]
+struct Rollouts {
+    /// Sample times (samples,): those of the longest successful rollout.
+    t: Py<PyAny>,
+    /// Configurations (batch, samples, n); a failed rollout's rows are NaN from its failure on.
+    q: Py<PyAny>,
+    /// Velocities (batch, samples, n).
+    dq: Py<PyAny>,
+    /// Energies (batch, samples).
+    energy: Py<PyAny>,
+    /// Per rollout: None, or the error's message.
+    errors: Vec<Option<String>>,
+}
+
+#[pymethods]
+impl Model {
+    /// The model's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.model.name.clone()
+    }
+
+    /// Every variable's name, in order (the order of q).
+    #[getter]
+    fn variables(&self) -> Vec<String> {
+        self.names()
+    }
+
+    /// The dynamic (simulated) variables' names.
+    #[getter]
+    fn dynamic(&self) -> Vec<String> {
+        self.model
+            .dynamic()
+            .into_iter()
+            .map(|i| self.model.variables[i].name.clone())
+            .collect()
+    }
+
+    /// The kinematic (prescribed) variables' names.
+    #[getter]
+    fn kinematic(&self) -> Vec<String> {
+        self.model
+            .kinematic()
+            .into_iter()
+            .map(|i| self.model.variables[i].name.clone())
+            .collect()
+    }
+
+    /// The inputs' names (u's order).
+    #[getter]
+    fn inputs(&self) -> Vec<String> {
+        self.model.inputs.iter().map(|i| i.name.clone()).collect()
+    }
+
+    /// The constraint equations' names (λ's order).
+    #[getter]
+    fn constraints(&self) -> Vec<String> {
+        self.model.constraint_row_names()
+    }
+
+    /// The frames' names.
+    #[getter]
+    fn frames(&self) -> Vec<String> {
+        self.model.frames.iter().map(|f| f.name.clone()).collect()
+    }
+
+    /// The initial configuration.
+    #[getter]
+    fn q0(&self, py: Python<'_>) -> Py<PyAny> {
+        vector(
+            py,
+            &self
+                .model
+                .variables
+                .iter()
+                .map(|v| v.q0)
+                .collect::<Vec<_>>(),
+        )
+    }
+
+    /// The initial velocity.
+    #[getter]
+    fn dq0(&self, py: Python<'_>) -> Py<PyAny> {
+        vector(
+            py,
+            &self
+                .model
+                .variables
+                .iter()
+                .map(|v| v.dq0)
+                .collect::<Vec<_>>(),
+        )
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Model({:?}: {} variables, {} frames, {} inputs, {} constraint rows)",
+            self.model.name,
+            self.n(),
+            self.model.frames.len(),
+            self.model.inputs.len(),
+            self.model.constraint_rows()
+        )
+    }
+
+    /// Everything at one state (the keys of `tree-mech eval`): L, energy, dL_dq, dL_ddq, M,
+    /// d2L_ddqdq, d2L_dqdq, qdd (dynamic variables), lambda, h, dh_dq, poses (frame → 4×4).
+    #[pyo3(signature = (q=None, dq=None, t=0.0, u=None))]
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        q: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        dq: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        t: f64,
+        u: Option<PyArrayLike1<f64, AllowTypeChange>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
+        let u: Vec<f64> = u.map_or_else(Vec::new, |u| u.as_array().to_vec());
+        let mut sys = self.sys.lock().expect("no panic holds the lock");
+        let e = evaluate_state(&mut *sys, t, &q, &dq, &u).map_err(|e| sim_error(py, &e))?;
+        let out = PyDict::new(py);
+        let square = |m: &tree_mech::runtime::Matrix<Dyn>| {
+            DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
+        };
+        out.set_item("variables", self.names())?;
+        out.set_item("q", vector(py, q.as_slice()))?;
+        out.set_item("dq", vector(py, dq.as_slice()))?;
+        out.set_item("L", e.terms.l)?;
+        out.set_item("energy", e.energy)?;
+        out.set_item("dL_dq", vector(py, e.terms.dl_dq.as_slice()))?;
+        out.set_item("dL_ddq", vector(py, e.terms.dl_ddq.as_slice()))?;
+        out.set_item("M", matrix(py, &square(&e.terms.mass)))?;
+        out.set_item("d2L_ddqdq", matrix(py, &square(&e.terms.d2l_ddq_dq)))?;
+        out.set_item("d2L_dqdq", matrix(py, &square(&e.terms.d2l_dq_dq)))?;
+        let dynamic = self.model.dynamic();
+        out.set_item(
+            "qdd",
+            vector(py, &dynamic.iter().map(|&i| e.qdd[i]).collect::<Vec<_>>()),
+        )?;
+        out.set_item("lambda", vector(py, e.lambda.as_slice()))?;
+        out.set_item("h", vector(py, e.constraints.h.as_slice()))?;
+        out.set_item("dh_dq", matrix(py, &e.constraints.dh))?;
+        let poses = PyDict::new(py);
+        for (f, p) in self.model.frames.iter().zip(&e.poses) {
+            let m = p.matrix();
+            poses.set_item(&f.name, matrix(py, &DMatrix::from_fn(4, 4, |i, j| m[i][j])))?;
+        }
+        out.set_item("poses", poses)?;
+        Ok(out)
+    }
+
+    /// Simulates from (q0, dq0) (default the model's) for `duration` s at step `dt`; `u`
+    /// None, constant (inputs,) or per step (steps, inputs). Returns a `Trajectory`. The GIL
+    /// is released while it runs.
+    #[pyo3(signature = (duration, dt, integrator="vi", q0=None, dq0=None, u=None, every=1, alpha=0.5, forcing="split", newton_tol=None, rtol=1e-8, atol=1e-10, max_steps=1_000_000))]
+    #[allow(clippy::too_many_arguments)]
+    fn simulate(
+        &self,
+        py: Python<'_>,
+        duration: f64,
+        dt: f64,
+        integrator: &str,
+        q0: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        dq0: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        u: Option<&Bound<'_, PyAny>>,
+        every: usize,
+        alpha: f64,
+        forcing: &str,
+        newton_tol: Option<f64>,
+        rtol: f64,
+        atol: f64,
+        max_steps: usize,
+    ) -> PyResult<Trajectory> {
+        let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
+        let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
+        let inputs = self.schedule(u, dt)?;
+        let options = SimOptions {
+            every,
+            max_steps,
+            ..SimOptions::new(
+                method(integrator, alpha, forcing, newton_tol, rtol, atol)?,
+                dt,
+                duration,
+            )
+        };
+        let mut sys = self.system();
+        let names = self.names();
+        let constraints = self.model.constraint_row_names();
+        let result = py.detach(move || {
+            let mut traj = CoreTrajectory::new(names, constraints, 0);
+            let mut motion = ModelMotions::of(&sys);
+            let summary = run_with_inputs(
+                &mut sys,
+                &q0,
+                &dq0,
+                &options,
+                &mut NoForce,
+                &mut motion,
+                &inputs,
+                &mut |s| {
+                    traj.push(s);
+                    Ok(())
+                },
+            )?;
+            traj.newton_iterations = summary.newton_iterations;
+            traj.dissipated = summary.dissipated;
+            Ok::<_, SimError>(traj)
+        });
+        let traj = result.map_err(|e| sim_error(py, &e))?;
+        Ok(Trajectory::of(py, &traj, self.model.inputs.len()))
+    }
+
+    /// Runs a batch: q0, dq0 of shape (batch, n); u None, (batch, inputs) constant or
+    /// (batch, steps, inputs) per step; `threads` None: every core. Each rollout's error is
+    /// reported in `errors`, not raised. The GIL is released while it runs; results are the
+    /// same whatever the thread count.
+    #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1))]
+    #[allow(clippy::too_many_arguments)]
+    fn rollouts(
+        &self,
+        py: Python<'_>,
+        q0: PyArrayLike2<f64, AllowTypeChange>,
+        dq0: PyArrayLike2<f64, AllowTypeChange>,
+        duration: f64,
+        dt: f64,
+        integrator: &str,
+        u: Option<&Bound<'_, PyAny>>,
+        threads: Option<usize>,
+        every: usize,
+    ) -> PyResult<Rollouts> {
+        let (q0, dq0) = (q0.as_array(), dq0.as_array());
+        let (batch, n) = (q0.nrows(), self.n());
+        if q0.ncols() != n || dq0.shape() != q0.shape() {
+            return Err(bad(format!(
+                "q0 and dq0 must both be (batch, {n}); got {:?} and {:?}",
+                q0.shape(),
+                dq0.shape()
+            )));
+        }
+        let width = self.model.inputs.len();
+        let schedules: Vec<InputSchedule> = match u {
+            None => vec![InputSchedule::default(); batch],
+            Some(u) if u.is_none() => vec![InputSchedule::default(); batch],
+            Some(u) => {
+                if let Ok(a) = u.extract::<PyArrayLike2<f64, AllowTypeChange>>() {
+                    let a = a.as_array();
+                    if a.shape() != [batch, width] {
+                        return Err(bad(format!(
+                            "u must be ({batch}, {width}) or ({batch}, steps, {width}); got {:?}",
+                            a.shape()
+                        )));
+                    }
+                    (0..batch)
+                        .map(|b| InputSchedule::constant(a.row(b).to_vec()))
+                        .collect()
+                } else {
+                    let a = u
+                        .extract::<PyArrayLike3<f64, AllowTypeChange>>()
+                        .map_err(|_| {
+                            bad("u must be None, (batch, inputs) or (batch, steps, inputs)")
+                        })?;
+                    let a = a.as_array();
+                    if a.shape()[0] != batch || a.shape()[2] != width {
+                        return Err(bad(format!(
+                            "u must be ({batch}, steps, {width}); got {:?}",
+                            a.shape()
+                        )));
+                    }
+                    let mut out = Vec::with_capacity(batch);
+                    for b in 0..batch {
+                        let rows = (0..a.shape()[1])
+                            .map(|k| {
+                                (
+                                    k as f64 * dt,
+                                    a.slice(numpy::ndarray::s![b, k, ..]).to_vec(),
+                                )
+                            })
+                            .collect();
+                        out.push(InputSchedule::from_rows(rows).map_err(|e| bad(e.to_string()))?);
+                    }
+                    out
+                }
+            }
+        };
+        let starts: Vec<Rollout> = (0..batch)
+            .map(|b| Rollout {
+                q0: q0.row(b).to_vec(),
+                dq0: dq0.row(b).to_vec(),
+                inputs: schedules[b].clone(),
+            })
+            .collect();
+        let options = SimOptions {
+            every,
+            ..SimOptions::new(
+                method(integrator, 0.5, "split", None, 1e-8, 1e-10)?,
+                dt,
+                duration,
+            )
+        };
+        let sys = self.system();
+        let threads = threads.unwrap_or(0);
+        let results = py
+            .detach(move || run_rollouts(&sys, &starts, &options, threads))
+            .map_err(|e| sim_error(py, &e))?;
+        let longest = results
+            .iter()
+            .filter_map(|r| r.as_ref().ok())
+            .max_by_key(|t| t.len());
+        let t: Vec<f64> = longest.map_or_else(Vec::new, |l| l.t.clone());
+        let samples = t.len();
+        let mut q = Array3::from_elem((batch, samples, n), f64::NAN);
+        let mut dq = Array3::from_elem((batch, samples, n), f64::NAN);
+        let mut energy = Array2::from_elem((batch, samples), f64::NAN);
+        let mut errors = Vec::with_capacity(batch);
+        for (b, r) in results.iter().enumerate() {
+            match r {
+                Ok(traj) => {
+                    for k in 0..traj.len().min(samples) {
+                        for i in 0..n {
+                            q[(b, k, i)] = traj.q(k)[i];
+                            dq[(b, k, i)] = traj.dq(k)[i];
+                        }
+                        energy[(b, k)] = traj.energy[k];
+                    }
+                    errors.push(None);
+                }
+                Err(e) => errors.push(Some(e.to_string())),
+            }
+        }
+        Ok(Rollouts {
+            t: vector(py, &t),
+            q: q.into_pyarray(py).into_any().unbind(),
+            dq: dq.into_pyarray(py).into_any().unbind(),
+            energy: energy.into_pyarray(py).into_any().unbind(),
+            errors,
+        })
+    }
+}
+
+/// Reads a model file (TOML, or URDF by its extension).
+#[pyfunction]
+#[pyo3(signature = (path, floating_base=false))]
+fn load(py: Python<'_>, path: PathBuf, floating_base: bool) -> PyResult<Model> {
+    let m = model::from_file(&path, model::UrdfOptions { floating_base })
+        .map_err(|e| model_error(py, &e))?;
+    Model::of(m)
+}
+
+/// Reads a model from text: `format` "toml" or "urdf".
+#[pyfunction]
+#[pyo3(signature = (text, format="toml", floating_base=false))]
+fn loads(py: Python<'_>, text: &str, format: &str, floating_base: bool) -> PyResult<Model> {
+    let m = match format {
+        "toml" => model::from_toml_str(text, None),
+        "urdf" => model::from_urdf_str(text, None, model::UrdfOptions { floating_base }),
+        other => return Err(bad(format!("format `{other}`: use `toml` or `urdf`"))),
+    }
+    .map_err(|e| model_error(py, &e))?;
+    Model::of(m)
+}
+
+/// Solves a task (the text of a task file; its `model` relative to `base`): returns a dict
+/// with the summary of `tree-mech optimize --json` and the trajectory and gains as arrays.
+#[pyfunction]
+#[pyo3(signature = (text, base, source=None, solver=None, max_iterations=None))]
+fn optimize_text<'py>(
+    py: Python<'py>,
+    text: &str,
+    base: PathBuf,
+    source: Option<String>,
+    solver: Option<&str>,
+    max_iterations: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (task, m) = model::task_from_str(text, source.as_deref(), Path::new(&base))
+        .map_err(|e| model_error(py, &e))?;
+    let solver = match solver {
+        None => None,
+        Some("ilqr") => Some(TaskSolver::Ilqr),
+        Some("ddp") => Some(TaskSolver::Ddp),
+        Some(other) => return Err(bad(format!("solver `{other}`: use `ilqr` or `ddp`"))),
+    };
+    let sys = TreeSystem::new(&m).map_err(|e| ModelError::new_err(e.to_string()))?;
+    let options = TaskOptions {
+        solver,
+        max_iterations,
+    };
+    let res = py
+        .detach(|| solve_task(sys, &task, &m, &options, &mut |_| {}))
+        .map_err(|e| sim_error(py, &e))?;
+    let sol = &res.solution;
+    let n = task.knots;
+    let out = PyDict::new(py);
+    out.set_item("converged", sol.converged)?;
+    out.set_item("iterations", sol.history.len())?;
+    out.set_item("cost", sol.cost)?;
+    out.set_item("solve_seconds", res.solve_seconds)?;
+    out.set_item(
+        "variables",
+        m.variables
+            .iter()
+            .map(|v| v.name.clone())
+            .collect::<Vec<_>>(),
+    )?;
+    out.set_item(
+        "controls",
+        (0..task.controls.len())
+            .map(|c| task.control_name(&m, c).to_string())
+            .collect::<Vec<_>>(),
+    )?;
+    out.set_item("q_final", vector(py, res.q[n].as_slice()))?;
+    out.set_item("dq_final", vector(py, res.dq[n].as_slice()))?;
+    let origins = m.origins(res.q[n].as_slice());
+    let frames = PyDict::new(py);
+    for term in task.running.iter().chain(&task.terminal) {
+        if let Some(f) = term.frame() {
+            frames.set_item(&m.frames[f].name, vector(py, &origins[f]))?;
+        }
+    }
+    out.set_item("frames", frames)?;
+    let dvec = |v: &[DVector<f64>]| {
+        let w = v.first().map_or(0, |x| x.len());
+        rows(py, v.len(), w, |k| v[k].as_slice().to_vec())
+    };
+    out.set_item("t", vector(py, &res.t))?;
+    out.set_item("q", dvec(&res.q))?;
+    out.set_item("dq", dvec(&res.dq))?;
+    out.set_item("lam", dvec(&res.lambda))?;
+    out.set_item("u", dvec(&sol.u))?;
+    out.set_item("x", dvec(&sol.x))?;
+    let (nu, nx) = sol.gains.first().map_or((0, 0), |g| g.shape());
+    let gains = Array3::from_shape_fn((n, nu, nx), |(k, i, j)| sol.gains[k][(i, j)]);
+    out.set_item("K", gains.into_pyarray(py))?;
+    out.set_item("feedforward", dvec(&sol.feedforward))?;
+    out.set_item(
+        "cost_history",
+        sol.history.iter().map(|h| h.cost).collect::<Vec<_>>(),
+    )?;
+    Ok(out)
+}
+
+/// The compiled core of the `tree_mech` package.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Model>()?;
+    m.add_class::<Trajectory>()?;
+    m.add_class::<Rollouts>()?;
+    m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add_function(wrap_pyfunction!(loads, m)?)?;
+    m.add_function(wrap_pyfunction!(optimize_text, m)?)?;
+    m.add("ModelError", m.py().get_type::<ModelError>())?;
+    m.add("SimulationError", m.py().get_type::<SimulationError>())?;
+    Ok(())
+}

@@ -1,0 +1,184 @@
+"""The Python package over the Rust runtime: every call, numpy shapes and dtypes, errors,
+the GIL released, rollouts against single runs and across thread counts, optimisation."""
+import math
+import pathlib
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import tree_mech as tm
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+PENDULUM = str(ROOT / "models/pendulum.toml")
+CART = str(ROOT / "tests/models/cart.toml")
+
+
+def test_a_model_names_its_parts():
+    m = tm.load(str(ROOT / "models/marionette.toml"))
+    assert len(m.variables) == 42 and len(m.dynamic) == 24 and len(m.kinematic) == 18
+    assert len(m.constraints) == 6 and m.inputs == []
+    assert m.q0.dtype == np.float64 and m.q0.shape == (42,)
+    assert m.variables[2] == "torso_z" and m.q0[2] == 0.5
+    cart = tm.load(CART)
+    assert cart.inputs == ["push"] and cart.variables == ["x", "theta"]
+    assert "bob" in tm.load(PENDULUM).frames
+    assert tm.__version__ == "0.1.0"
+
+
+def test_evaluate_gives_the_pendulums_terms():
+    m = tm.load(PENDULUM)
+    theta, omega = 0.4, 1.3
+    e = m.evaluate(q=[theta], dq=[omega])
+    # 1 kg on a 1 m rod: M = 1, q̈ = −g sin θ, E = ½ω² − g cos θ.
+    g = 9.81
+    assert e["M"].shape == (1, 1) and e["M"].dtype == np.float64
+    assert e["M"][0, 0] == pytest.approx(1.0, rel=1e-14)
+    assert e["qdd"][0] == pytest.approx(-g * math.sin(theta), rel=1e-12)
+    assert e["energy"] == pytest.approx(0.5 * omega**2 - g * math.cos(theta), rel=1e-12)
+    assert e["poses"]["bob"].shape == (4, 4)
+    assert set(e) >= {"L", "dL_dq", "dL_ddq", "d2L_ddqdq", "d2L_dqdq", "lambda", "h", "dh_dq"}
+
+
+def test_bad_input_is_an_exception_with_a_sentence():
+    m = tm.load(PENDULUM)
+    with pytest.raises(ValueError, match="q has 2 entries; the model has 1 variables"):
+        m.evaluate(q=[0.1, 0.2])
+    with pytest.raises(tm.SimulationError, match="not finite"):
+        m.evaluate(q=[0.1], dq=[1e200])
+    with pytest.raises(ValueError, match="integrator `euler`"):
+        m.simulate(1.0, 0.01, integrator="euler")
+    with pytest.raises(tm.ModelError) as err:
+        tm.loads('[[frame]]\nname = "a"\nrx = "q"\nmass = -1.0\n')
+    assert "mass -1" in str(err.value) and err.value.line == 4
+
+
+def test_a_model_file_error_names_its_file_and_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[frame]]\nname = "a"\nrx = "q"\n\nmass = -2.0\n')
+    with pytest.raises(tm.ModelError) as err:
+        tm.load(str(bad))
+    assert err.value.line == 5 and err.value.file.endswith("bad.toml")
+    assert str(err.value).startswith(f"{bad}:5:")
+
+
+def test_simulate_returns_arrays_and_conserves_energy():
+    m = tm.load(str(ROOT / "models/double-pendulum.toml"))
+    traj = m.simulate(duration=2.0, dt=0.01)
+    assert len(traj) == 201 and traj.q.shape == (201, 2) and traj.dq.shape == (201, 2)
+    assert traj.t[-1] == pytest.approx(2.0)
+    assert abs(traj.energy - traj.energy[0]).max() < 1e-3 * abs(traj.energy[0])
+    sparse = m.simulate(duration=2.0, dt=0.01, every=10)
+    assert sparse.q.shape == (21, 2)
+    np.testing.assert_array_equal(sparse.q[-1], traj.q[-1])
+    rk = m.simulate(duration=0.5, dt=0.001, integrator="rk4")
+    vi = m.simulate(duration=0.5, dt=0.001)
+    assert abs(rk.q[-1] - vi.q[-1]).max() < 1e-5
+
+
+def test_inputs_push_the_cart():
+    m = tm.load(CART)
+    still = m.simulate(1.0, 0.01, q0=[0.0, 0.0])
+    pushed = m.simulate(1.0, 0.01, q0=[0.0, 0.0], u=[2.0])
+    assert pushed.u.shape == (101, 1) and pushed.u[0, 0] == 2.0
+    assert pushed.q[-1, 0] > still.q[-1, 0] + 0.1
+    # Per step: pushing only in the first half.
+    per_step = np.zeros((100, 1))
+    per_step[:50] = 2.0
+    half = m.simulate(1.0, 0.01, q0=[0.0, 0.0], u=per_step)
+    assert half.u[49, 0] == 2.0 and half.u[60, 0] == 0.0
+    assert still.q[-1, 0] < half.q[-1, 0] < pushed.q[-1, 0]
+
+
+def test_a_failed_run_names_its_step():
+    m = tm.load(str(ROOT / "models/double-pendulum.toml"))
+    with pytest.raises(tm.SimulationError) as err:
+        m.simulate(10.0, 0.1, integrator="rk45", rtol=1e-14, atol=1e-16, max_steps=10)
+    assert err.value.step is not None and err.value.step <= 10
+
+
+def test_rollouts_equal_single_runs_whatever_the_threads():
+    m = tm.load(CART)
+    rng = np.random.default_rng(7)
+    q0 = np.column_stack([np.zeros(6), rng.uniform(-0.5, 0.5, 6)])
+    dq0 = rng.normal(0, 0.2, (6, 2))
+    u = rng.normal(0, 1, (6, 1))
+    one = m.rollouts(q0, dq0, duration=1.0, dt=0.01, u=u, threads=1)
+    two = m.rollouts(q0, dq0, duration=1.0, dt=0.01, u=u, threads=2)
+    assert one.q.shape == (6, 101, 2) and one.t.shape == (101,)
+    assert one.errors == [None] * 6
+    np.testing.assert_array_equal(one.q, two.q)
+    np.testing.assert_array_equal(one.dq, two.dq)
+    for b in range(6):
+        single = m.simulate(1.0, 0.01, q0=q0[b], dq0=dq0[b], u=u[b])
+        np.testing.assert_array_equal(single.q, one.q[b])
+    # Inputs per step and rollout: (batch, steps, inputs).
+    steps = np.repeat(u[:, None, :], 100, axis=1)
+    again = m.rollouts(q0, dq0, duration=1.0, dt=0.01, u=steps)
+    np.testing.assert_array_equal(again.q, one.q)
+
+
+def test_a_failing_rollout_fails_alone():
+    m = tm.load(CART)
+    q0 = np.zeros((3, 2))
+    q0[1, 1] = np.nan
+    r = m.rollouts(q0, np.zeros((3, 2)), duration=0.2, dt=0.01)
+    assert r.errors[0] is None and r.errors[2] is None
+    assert "not finite" in r.errors[1]
+    assert np.isnan(r.q[1]).all() and np.isfinite(r.q[0]).all()
+    with pytest.raises(ValueError, match="must both be"):
+        m.rollouts(np.zeros((3, 3)), np.zeros((3, 3)), 0.1, 0.01)
+
+
+def test_long_calls_release_the_gil():
+    m = tm.load(str(ROOT / "models/marionette.toml"))
+    counter = [0]
+    done = threading.Event()
+
+    def count():
+        while not done.is_set():
+            counter[0] += 1
+
+    worker = threading.Thread(target=count)
+    worker.start()
+    time.sleep(0.05)
+    before = counter[0]
+    start = time.perf_counter()
+    m.simulate(duration=30.0, dt=0.01, every=100)
+    elapsed = time.perf_counter() - start
+    during = counter[0] - before
+    done.set()
+    worker.join()
+    # Holding the GIL, the counting thread would not run at all during the call.
+    assert elapsed > 0.1, f"the run must be long enough to see: {elapsed:.3f} s"
+    assert during > 1000, f"the other thread counted {during} in {elapsed:.2f} s"
+
+
+def test_optimize_swings_the_cartpole_up_from_a_file_or_a_dict():
+    path = ROOT / "tasks/cartpole-swingup.toml"
+    plan = tm.optimize(str(path))
+    assert plan["converged"]
+    assert abs(plan["q_final"][1]) < 0.02 and abs(plan["q_final"][0]) < 0.02
+    assert plan["q"].shape == (126, 2) and plan["u"].shape == (125, 1)
+    assert plan["K"].shape[0] == 125 and plan["K"].shape[1] == 1
+    assert np.all(np.abs(plan["u"]) <= 20.0 + 1e-12)
+    task = {
+        "model": str(ROOT / "models/cartpole.toml"),
+        "dt": 0.02,
+        "knots": 125,
+        "start": {"q": {"theta": math.pi}},
+        "cost": [
+            {"kind": "state", "q_weight": {"x": 0.5, "theta": 0.0}, "dq_weight": 0.01,
+             "q_ref": {"x": 0.0, "theta": 0.0}, "dq_ref": 0.0},
+            {"kind": "control", "weight": 0.01, "about": "zero"},
+        ],
+        "terminal": [
+            {"kind": "state", "q_ref": {"x": 0.0, "theta": 0.0}, "dq_ref": 0.0,
+             "q_weight": {"x": 100.0, "theta": 1000.0}, "dq_weight": 100.0},
+        ],
+    }
+    same = tm.optimize(task)
+    assert same["cost"] == pytest.approx(plan["cost"], rel=1e-12)
+    with pytest.raises(tm.ModelError, match="frame `hat` is not in the model"):
+        tm.optimize(dict(task, terminal=[{"kind": "frame", "frame": "hat", "target": [0, 0, 0], "weight": 1.0}]))
