@@ -384,8 +384,8 @@ fn main() -> ExitCode {
                 alpha,
                 explicit: match integrator {
                     StepArg::Vi => None,
-                    StepArg::Rk4 => Some(linearize::Explicit::Rk4),
-                    StepArg::Rk45 => Some(linearize::Explicit::Rk45),
+                    StepArg::Rk4 => Some(tree_mech::runtime::report::Explicit::Rk4),
+                    StepArg::Rk45 => Some(tree_mech::runtime::report::Explicit::Rk45),
                 },
                 second_order,
             },

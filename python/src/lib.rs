@@ -18,6 +18,7 @@ use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, Rollout};
 use tree_mech::runtime::evaluation::evaluate_state;
+use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
 use tree_mech::runtime::{ModelMotions, Vector};
 use tree_mech::{NoForce, SimError, Trajectory as CoreTrajectory, TreeSystem};
 
@@ -484,6 +485,83 @@ impl Model {
         Ok(Trajectory::of(py, &traj, self.model.inputs.len()))
     }
 
+    /// The exact linearisation at a state (the keys of `tree-mech linearize`): `qdd`,
+    /// `qdd_dq`, `qdd_ddq`, `qdd_du`, `lambda`, `lambda_dq`, …; with `dt`, one step as a map
+    /// under `vi` (trep's names: `q2_dq1` …, `lambda1` = −Δt λ; with `second_order`, trep's
+    /// 30 second derivatives as (output, input₁, input₂)) or, with `integrator` "rk4" or
+    /// "rk45", under that key (`x2_dx1`, `x2_du1` on (q_d, q̇_d)).
+    #[pyo3(signature = (q=None, dq=None, u=None, t=0.0, dt=None, p=None, integrator="vi", forcing="split", alpha=0.5, second_order=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn linearize<'py>(
+        &self,
+        py: Python<'py>,
+        q: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        dq: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        u: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        t: f64,
+        dt: Option<f64>,
+        p: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        integrator: &str,
+        forcing: &str,
+        alpha: f64,
+        second_order: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
+        let inputs = self.model.inputs.len();
+        let u = u.map_or_else(|| vec![0.0; inputs], |u| u.as_array().to_vec());
+        if u.len() != inputs {
+            return Err(bad(format!(
+                "u has {} entries; the model has {inputs} inputs",
+                u.len()
+            )));
+        }
+        let request = ReportRequest {
+            t,
+            u,
+            dt,
+            p: p.map(|p| p.as_array().to_vec()),
+            forcing: match forcing {
+                "split" => Forcing::Split,
+                "left" => Forcing::Left,
+                other => return Err(bad(format!("forcing `{other}`: use `split` or `left`"))),
+            },
+            alpha,
+            explicit: match integrator {
+                "vi" => None,
+                "rk4" => Some(Explicit::Rk4),
+                "rk45" => Some(Explicit::Rk45),
+                other => {
+                    return Err(bad(format!(
+                        "integrator `{other}`: use `vi`, `rk4` or `rk45`"
+                    )))
+                }
+            },
+            second_order,
+        };
+        let mut sys = self.system();
+        let r = py
+            .detach(move || report::linearize(&mut sys, &q, &dq, &request))
+            .map_err(|e| sim_error(py, &e))?;
+        let out = PyDict::new(py);
+        out.set_item("variables", self.names())?;
+        out.set_item("dynamic", self.dynamic())?;
+        out.set_item("kinematic", self.kinematic())?;
+        out.set_item("inputs", self.inputs())?;
+        out.set_item("constraints", self.constraints())?;
+        for (key, e) in &r.continuous {
+            out.set_item(key, entry(py, e))?;
+        }
+        if let Some((key, entries)) = &r.step {
+            let step = PyDict::new(py);
+            for (name, e) in entries {
+                step.set_item(name, entry(py, e))?;
+            }
+            out.set_item(*key, step)?;
+        }
+        Ok(out)
+    }
+
     /// Runs a batch: q0, dq0 of shape (batch, n); u None, (batch, inputs) constant or
     /// (batch, steps, inputs) per step; `threads` None: every core. Each rollout's error is
     /// reported in `errors`, not raised. The GIL is released while it runs; results are the
@@ -608,6 +686,22 @@ impl Model {
             energy: energy.into_pyarray(py).into_any().unbind(),
             errors,
         })
+    }
+}
+
+/// A report entry as a Python value: a float or a numpy array.
+fn entry(py: Python<'_>, e: &Entry) -> Py<PyAny> {
+    match e {
+        Entry::Scalar(x) => x.into_pyobject(py).expect("a float").into_any().unbind(),
+        Entry::Vector(v) => vector(py, v),
+        Entry::Matrix(m) => matrix(py, m),
+        Entry::Stack(rows) => {
+            let (r, c) = rows.first().map_or((0, 0), |m| m.shape());
+            Array3::from_shape_fn((rows.len(), r, c), |(k, i, j)| rows[k][(i, j)])
+                .into_pyarray(py)
+                .into_any()
+                .unbind()
+        }
     }
 }
 

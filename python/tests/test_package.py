@@ -182,3 +182,31 @@ def test_optimize_swings_the_cartpole_up_from_a_file_or_a_dict():
     assert same["cost"] == pytest.approx(plan["cost"], rel=1e-12)
     with pytest.raises(tm.ModelError, match="frame `hat` is not in the model"):
         tm.optimize(dict(task, terminal=[{"kind": "frame", "frame": "hat", "target": [0, 0, 0], "weight": 1.0}]))
+
+
+def test_linearize_gives_the_exact_step_derivatives():
+    m = tm.load(CART)
+    q, dq, u = np.array([0.1, 0.4]), np.array([0.2, -0.3]), np.array([0.7])
+    lin = m.linearize(q=q, dq=dq, u=u, dt=0.01)
+    e = m.evaluate(q=q, dq=dq, u=u)
+    # ∂q̈/∂u is M⁻¹'s column of the pushed variable; q̈ itself is evaluate's.
+    np.testing.assert_allclose(lin["qdd_du"][:, 0], np.linalg.inv(e["M"])[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(lin["qdd"], e["qdd"], rtol=1e-12)
+    vi = lin["vi"]
+    assert vi["q2_dq1"].shape == (2, 2) and vi["q2_du1"].shape == (2, 1)
+    # The step is simulate's first step; its derivative by q₁ matches central differences.
+    first = m.simulate(0.01, 0.01, q0=q, dq0=dq, u=u, newton_tol=1e-14)
+    np.testing.assert_allclose(vi["q2"], first.q[1], rtol=1e-9)
+    # p₁ held at its default, ∂L/∂q̇ at the unperturbed state, while q₁ moves.
+    p1 = e["dL_ddq"]
+    h = 1e-6
+    for j in range(2):
+        dq1 = np.zeros(2)
+        dq1[j] = h
+        plus = m.linearize(q=q + dq1, dq=dq, u=u, dt=0.01, p=p1)["vi"]["q2"]
+        minus = m.linearize(q=q - dq1, dq=dq, u=u, dt=0.01, p=p1)["vi"]["q2"]
+        np.testing.assert_allclose((plus - minus) / (2 * h), vi["q2_dq1"][:, j], rtol=1e-6, atol=1e-8)
+    second = m.linearize(q=q, dq=dq, u=u, dt=0.01, second_order=True)["vi"]
+    assert second["q2_dq1dq1"].shape == (2, 2, 2)
+    with pytest.raises(tm.SimulationError, match="second-order derivatives are for the VI step"):
+        m.linearize(second_order=True)

@@ -68,6 +68,8 @@ pub mod linearize;
 #[cfg(feature = "simulate")]
 pub mod reference;
 #[cfg(feature = "simulate")]
+pub mod report;
+#[cfg(feature = "simulate")]
 pub mod system;
 #[cfg(feature = "simulate")]
 pub mod trajectory;

@@ -66,6 +66,19 @@ class Model:
         atol: float = 1e-10,
         max_steps: int = 1_000_000,
     ) -> Trajectory: ...
+    def linearize(
+        self,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        u: Optional[ArrayLike] = None,
+        t: float = 0.0,
+        dt: Optional[float] = None,
+        p: Optional[ArrayLike] = None,
+        integrator: str = "vi",
+        forcing: str = "split",
+        alpha: float = 0.5,
+        second_order: bool = False,
+    ) -> dict: ...
     def rollouts(
         self,
         q0: ArrayLike,

@@ -1,0 +1,245 @@
+//! A state's linearisation as named entries — the continuous derivatives (§9), and one step
+//! as a map (the VI with trep's names and scaling, or an explicit tableau) — what
+//! `tree-mech linearize` prints as JSON and the Python package's `Model.linearize` returns
+//! as arrays. One place computes them; each front end only formats.
+
+use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dyn};
+
+use crate::context::StepContext;
+use crate::dynamics::{ModelMotions, NoForce, Prescription};
+use crate::error::SimError;
+use crate::integrate::{Forcing, MidpointVi, StepInput, StepOutput, ViSettings};
+use crate::linearize::{continuous_derivatives, explicit_step_derivatives, DORMAND_PRINCE, RK4};
+use crate::system::{System, Vector};
+
+/// One named value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Entry {
+    /// A number.
+    Scalar(f64),
+    /// A vector.
+    Vector(Vec<f64>),
+    /// A matrix.
+    Matrix(DMatrix<f64>),
+    /// One matrix per output row (second derivatives: [output][input₁][input₂]).
+    Stack(Vec<DMatrix<f64>>),
+}
+
+/// Named entries, in order.
+pub type Entries = Vec<(String, Entry)>;
+
+/// An explicit step to linearise instead of the VI's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Explicit {
+    /// Classical RK4.
+    Rk4,
+    /// Dormand–Prince's fifth-order step of the given length.
+    Rk45,
+}
+
+/// What to linearise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Request {
+    /// The time (kinematic variables take their prescription at it).
+    pub t: f64,
+    /// The inputs (empty: zero).
+    pub u: Vec<f64>,
+    /// With a step: its length.
+    pub dt: Option<f64>,
+    /// The VI step's start momenta of the dynamic variables (default `∂L/∂q̇` at the state).
+    pub p: Option<Vec<f64>>,
+    /// The VI's forcing.
+    pub forcing: Forcing,
+    /// The VI's quadrature point.
+    pub alpha: f64,
+    /// An explicit step instead of the VI's.
+    pub explicit: Option<Explicit>,
+    /// Also the VI step's second derivatives (trep's 30).
+    pub second_order: bool,
+}
+
+/// The report: the continuous entries, and the step's under its key (`vi`, `rk4`, `rk45`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Report {
+    /// `q`, `dq`, `u`, `qdd`, `qdd_dq`, … (the kinematic entries of q, q̇ as prescribed).
+    pub continuous: Entries,
+    /// The step's entries under its key.
+    pub step: Option<(&'static str, Entries)>,
+}
+
+fn name(s: &str, e: Entry) -> (String, Entry) {
+    (s.to_string(), e)
+}
+
+/// Linearises `sys` at `(q, q̇)` as `request` says. Errors name the part that failed.
+pub fn linearize<S: System<N = Dyn>>(
+    sys: &mut S,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    request: &Request,
+) -> Result<Report, SimError>
+where
+    DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
+{
+    let bad = |m: String| Err(SimError::InvalidInput(m));
+    if request.second_order && (request.explicit.is_some() || request.dt.is_none()) {
+        return bad("second-order derivatives are for the VI step: give a step length (and not an explicit integrator)".into());
+    }
+    if !request.t.is_finite() {
+        return bad(format!("the time {} is not finite", request.t));
+    }
+    if let Some(dt) = request.dt {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return bad(format!("the step must be a positive number, got {dt}"));
+        }
+    }
+    let n = sys.dof();
+    let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
+    let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+    let (mut q, mut dq) = (q.clone(), dq.clone());
+    let t = request.t;
+    let mut motion = ModelMotions::of(sys);
+    for &k in &kinematic {
+        [q[k], dq[k], _] = motion.kinematic(k, t);
+    }
+    let mut force = NoForce;
+    let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
+    cx.u = &request.u;
+    let d = continuous_derivatives(cx.at(0, t), &q, &dq)
+        .map_err(|e| SimError::InvalidInput(format!("at this state, {e}")))?;
+    let continuous = vec![
+        name("q", Entry::Vector(q.as_slice().to_vec())),
+        name("dq", Entry::Vector(dq.as_slice().to_vec())),
+        name("u", Entry::Vector(request.u.clone())),
+        name("qdd", Entry::Vector(d.qdd.as_slice().to_vec())),
+        name("qdd_dq", Entry::Matrix(d.qdd_dq.clone())),
+        name("qdd_ddq", Entry::Matrix(d.qdd_ddq.clone())),
+        name("qdd_du", Entry::Matrix(d.qdd_du.clone())),
+        name("lambda", Entry::Vector(d.lambda.as_slice().to_vec())),
+        name("lambda_dq", Entry::Matrix(d.lambda_dq.clone())),
+        name("lambda_ddq", Entry::Matrix(d.lambda_ddq.clone())),
+        name("lambda_du", Entry::Matrix(d.lambda_du.clone())),
+    ];
+    let Some(dt) = request.dt else {
+        return Ok(Report {
+            continuous,
+            step: None,
+        });
+    };
+    if let Some(method) = request.explicit {
+        cx.dt = dt;
+        let (key, tableau, what) = match method {
+            Explicit::Rk4 => ("rk4", &RK4, "the RK4 step"),
+            Explicit::Rk45 => ("rk45", &DORMAND_PRINCE, "the Dormand–Prince step"),
+        };
+        let d = explicit_step_derivatives(cx.at(0, t), &q, &dq, tableau)
+            .map_err(|e| SimError::InvalidInput(format!("{what}: {e}")))?;
+        let step = vec![
+            name("t2", Entry::Scalar(t + dt)),
+            name("x2", Entry::Vector(d.x2.as_slice().to_vec())),
+            name("x2_dx1", Entry::Matrix(d.x2_dx1)),
+            name("x2_du1", Entry::Matrix(d.x2_du1)),
+        ];
+        return Ok(Report {
+            continuous,
+            step: Some((key, step)),
+        });
+    }
+    if !(0.0..=1.0).contains(&request.alpha) {
+        return bad(format!(
+            "VI alpha must lie in [0, 1], got {}",
+            request.alpha
+        ));
+    }
+    let settings = ViSettings {
+        alpha: request.alpha,
+        forcing: request.forcing,
+        max_subdivisions: 0,
+        ..ViSettings::default()
+    };
+    let mut vi = MidpointVi::new(&*cx.sys, settings);
+    let mut p1 = vi.initial_momentum(cx.sys, &q, &dq);
+    if let Some(p) = &request.p {
+        if p.len() != dynamic.len() {
+            return bad(format!(
+                "p has {} entries; the model has {} dynamic variables",
+                p.len(),
+                dynamic.len()
+            ));
+        }
+        for (c, &i) in dynamic.iter().enumerate() {
+            p1[i] = p[c];
+        }
+    }
+    // A guess for λ: the continuous equations'.
+    vi.lambda.copy_from(&d.lambda);
+    let (mut q2, mut p2, mut next) = (q.clone(), p1.clone(), q.clone());
+    cx.dt = dt;
+    let failed = |e: SimError| SimError::InvalidInput(format!("the VI step: {e}"));
+    vi.step(cx.at(0, t), &mut q2, &mut p2, &mut next)
+        .map_err(failed)?;
+    let (s, second) = if request.second_order {
+        let (s, second) = vi
+            .second_derivatives(cx.at(0, t), &q, &p1, &q2)
+            .map_err(failed)?;
+        (s, Some(second))
+    } else {
+        (
+            vi.derivatives(cx.at(0, t), &q, &p1, &q2).map_err(failed)?,
+            None,
+        )
+    };
+    // trep's λ₁ is −Δt times this integrator's force-scaled λ.
+    let trep = |m: &DMatrix<f64>| Entry::Matrix(m * -dt);
+    let mut step = vec![
+        name("t2", Entry::Scalar(t + dt)),
+        name("q2", Entry::Vector(q2.as_slice().to_vec())),
+        name(
+            "p2",
+            Entry::Vector(dynamic.iter().map(|&i| p2[i]).collect()),
+        ),
+        name("lambda", Entry::Vector(vi.lambda.as_slice().to_vec())),
+        name(
+            "lambda1",
+            Entry::Vector(vi.lambda.iter().map(|l| -dt * l).collect()),
+        ),
+    ];
+    for of in StepOutput::ALL {
+        for by in StepInput::ALL {
+            let m = s.block(of, by);
+            let entry = match of {
+                StepOutput::Lambda => trep(m),
+                _ => Entry::Matrix(m.clone()),
+            };
+            step.push((format!("{}_d{}", output_name(of), by.name()), entry));
+        }
+    }
+    if let Some(second) = second {
+        // Each unordered pair of input blocks once (`dq1dp1`, not also `dp1dq1`), x's order.
+        for of in StepOutput::ALL {
+            let scale = if of == StepOutput::Lambda { -dt } else { 1.0 };
+            for (k, &a) in StepInput::ALL.iter().enumerate() {
+                for &b in &StepInput::ALL[k..] {
+                    let rows = second.block(of, a, b).iter().map(|h| h * scale).collect();
+                    step.push((
+                        format!("{}_d{}d{}", output_name(of), a.name(), b.name()),
+                        Entry::Stack(rows),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(Report {
+        continuous,
+        step: Some(("vi", step)),
+    })
+}
+
+/// trep's name of a step output (`lambda1` for this integrator's −Δt-scaled λ).
+fn output_name(of: StepOutput) -> &'static str {
+    match of {
+        StepOutput::Q2 => "q2",
+        StepOutput::P2 => "p2",
+        StepOutput::Lambda => "lambda1",
+    }
+}
