@@ -110,3 +110,78 @@ fn compiled_rollouts_match_interpreted_and_a_bad_start_fails_alone() {
         }
     }
 }
+
+/// A parameter sweep: the pendulum's rod set per rollout; the small-swing period grows as
+/// √l (the 4 m rod's is twice the 1 m rod's, to 0.2%).
+#[test]
+fn a_sweep_runs_each_rollout_on_its_own_parameters() {
+    use tree_mech::runtime::batch::rollouts_of;
+    let base = model::n_link_pendulum(1);
+    let rod = base
+        .frames
+        .iter()
+        .find(|f| matches!(f.joint, tree_mech::model::Joint::Constant(_)))
+        .unwrap()
+        .name
+        .clone();
+    let lengths = [1.0, 2.0, 4.0];
+    let systems: Vec<TreeSystem> = lengths
+        .iter()
+        .map(|&l| {
+            let mut m = base.clone();
+            m.set_constant(&rod, -l).unwrap();
+            TreeSystem::new(&m).unwrap()
+        })
+        .collect();
+    let starts: Vec<Rollout> = lengths
+        .iter()
+        .map(|_| Rollout {
+            q0: vec![0.05],
+            dq0: vec![0.0],
+            inputs: InputSchedule::default(),
+        })
+        .collect();
+    let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.001, 6.0);
+    let runs = rollouts_of(systems, &starts, &options, 2).unwrap();
+    // The first downward zero crossing, interpolated: a quarter period.
+    let quarter = |t: &Trajectory| {
+        let k = (1..t.len()).find(|&k| t.q(k)[0] <= 0.0).unwrap();
+        let (a, b) = (t.q(k - 1)[0], t.q(k)[0]);
+        t.t[k - 1] + (t.t[k] - t.t[k - 1]) * a / (a - b)
+    };
+    let periods: Vec<f64> = runs
+        .iter()
+        .map(|r| 4.0 * quarter(r.as_ref().unwrap()))
+        .collect();
+    assert!((periods[2] / periods[0] - 2.0).abs() < 2e-3, "{periods:?}");
+    assert!(
+        (periods[1] / periods[0] - 2f64.sqrt()).abs() < 2e-3,
+        "{periods:?}"
+    );
+    // Parameters that cannot be: named.
+    let mut m = base.clone();
+    assert!(m
+        .set_mass("nowhere", 1.0)
+        .unwrap_err()
+        .contains("no frame `nowhere`"));
+    assert!(m
+        .set_mass(&rod, -1.0)
+        .unwrap_err()
+        .contains("finite and positive"));
+    let driven = base
+        .frames
+        .iter()
+        .find(|f| matches!(f.joint, tree_mech::model::Joint::Variable(_)))
+        .unwrap()
+        .name
+        .clone();
+    assert!(m
+        .set_constant(&driven, 1.0)
+        .unwrap_err()
+        .contains("driven by variable"));
+    let err = rollouts_of(vec![TreeSystem::new(&base).unwrap()], &[], &options, 1).unwrap_err();
+    assert!(
+        err.to_string().contains("1 systems for 0 rollouts"),
+        "{err}"
+    );
+}

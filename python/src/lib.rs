@@ -16,7 +16,7 @@ use tree_mech::integrate::{
 };
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
-use tree_mech::runtime::batch::{rollouts as run_rollouts, Rollout};
+use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, Rollout};
 use tree_mech::runtime::evaluation::evaluate_state;
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
 use tree_mech::runtime::{ModelMotions, Vector};
@@ -562,11 +562,38 @@ impl Model {
         Ok(out)
     }
 
+    /// A copy with other parameters: `masses` {frame: kg} (its centre of mass and inertia
+    /// kept), `constants` {frame: the value of its constant primitive, m or rad},
+    /// `gravity` [x, y, z] — a parameter sweep's model (`rollouts(..., models=[…])`).
+    #[pyo3(signature = (masses=None, constants=None, gravity=None))]
+    fn with_parameters(
+        &self,
+        masses: Option<std::collections::BTreeMap<String, f64>>,
+        constants: Option<std::collections::BTreeMap<String, f64>>,
+        gravity: Option<[f64; 3]>,
+    ) -> PyResult<Model> {
+        let mut m = self.model.clone();
+        for (frame, mass) in masses.iter().flatten() {
+            m.set_mass(frame, *mass).map_err(bad)?;
+        }
+        for (frame, value) in constants.iter().flatten() {
+            m.set_constant(frame, *value).map_err(bad)?;
+        }
+        if let Some(g) = gravity {
+            if g.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!("gravity must be finite, got {g:?}")));
+            }
+            m.gravity = g;
+        }
+        Model::of(m)
+    }
+
     /// Runs a batch: q0, dq0 of shape (batch, n); u None, (batch, inputs) constant or
     /// (batch, steps, inputs) per step; `threads` None: every core. Each rollout's error is
-    /// reported in `errors`, not raised. The GIL is released while it runs; results are the
-    /// same whatever the thread count.
-    #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1))]
+    /// reported in `errors`, not raised. `models`: one model per rollout (this one's
+    /// variables, other parameters: `with_parameters`). The GIL is released while it runs;
+    /// results are the same whatever the thread count.
+    #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1, models=None))]
     #[allow(clippy::too_many_arguments)]
     fn rollouts(
         &self,
@@ -579,6 +606,7 @@ impl Model {
         u: Option<&Bound<'_, PyAny>>,
         threads: Option<usize>,
         every: usize,
+        models: Option<Vec<PyRef<'_, Model>>>,
     ) -> PyResult<Rollouts> {
         let (q0, dq0) = (q0.as_array(), dq0.as_array());
         let (batch, n) = (q0.nrows(), self.n());
@@ -649,11 +677,27 @@ impl Model {
                 duration,
             )
         };
-        let sys = self.system();
         let threads = threads.unwrap_or(0);
-        let results = py
-            .detach(move || run_rollouts(&sys, &starts, &options, threads))
-            .map_err(|e| sim_error(py, &e))?;
+        let results = match models {
+            None => {
+                let sys = self.system();
+                py.detach(move || run_rollouts(&sys, &starts, &options, threads))
+            }
+            Some(models) => {
+                if models.len() != batch {
+                    return Err(bad(format!("{} models for {batch} rollouts: give one each", models.len())));
+                }
+                if let Some(m) = models.iter().find(|m| m.names() != self.names()) {
+                    return Err(bad(format!(
+                        "model `{}` has other variables than this one: a sweep changes parameters, not structure",
+                        m.model.name
+                    )));
+                }
+                let systems: Vec<TreeSystem> = models.iter().map(|m| m.system()).collect();
+                py.detach(move || rollouts_of(systems, &starts, &options, threads))
+            }
+        }
+        .map_err(|e| sim_error(py, &e))?;
         let longest = results
             .iter()
             .filter_map(|r| r.as_ref().ok())

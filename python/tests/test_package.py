@@ -210,3 +210,23 @@ def test_linearize_gives_the_exact_step_derivatives():
     assert second["q2_dq1dq1"].shape == (2, 2, 2)
     with pytest.raises(tm.SimulationError, match="second-order derivatives are for the VI step"):
         m.linearize(second_order=True)
+
+
+def test_rollouts_take_a_model_each_for_a_sweep():
+    m = tm.load(PENDULUM)
+    heavy = m.with_parameters(masses={"bob": 3.0})
+    assert heavy.evaluate(q=[0.0])["M"][0, 0] == pytest.approx(3.0, rel=1e-14)
+    longer = m.with_parameters(constants={"bob": -4.0}, gravity=[0.0, 0.0, -9.81])
+    r = m.rollouts(np.full((2, 1), 0.05), np.zeros((2, 1)), 1.0, 0.001, models=[m, longer])
+    # The same model alone gives the same run; the 4 m rod swings slower.
+    alone = m.simulate(1.0, 0.001, q0=[0.05])
+    np.testing.assert_array_equal(r.q[0], alone.q)
+    assert r.q[1, -1, 0] > r.q[0, -1, 0]
+    with pytest.raises(ValueError, match="driven by variable"):
+        m.with_parameters(constants={"pivot": 1.0})
+    with pytest.raises(ValueError, match="no frame `hat`"):
+        m.with_parameters(masses={"hat": 1.0})
+    with pytest.raises(ValueError, match="1 models for 2 rollouts"):
+        m.rollouts(np.zeros((2, 1)), np.zeros((2, 1)), 0.1, 0.01, models=[m])
+    with pytest.raises(ValueError, match="other variables"):
+        m.rollouts(np.zeros((1, 1)), np.zeros((1, 1)), 0.1, 0.01, models=[tm.load(CART)])

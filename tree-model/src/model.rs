@@ -382,6 +382,48 @@ impl Model {
         has
     }
 
+    /// Sets frame `frame`'s mass, keeping its centre of mass and inertia (a frame without a
+    /// body gets a point mass): a parameter changed without touching the structure (a
+    /// sweep's). Refuses an unknown frame or a mass that is not finite and positive.
+    pub fn set_mass(&mut self, frame: &str, mass: f64) -> Result<(), String> {
+        let f = self.frame_for_change(frame)?;
+        if !(mass.is_finite() && mass > 0.0) {
+            return Err(format!(
+                "the mass of frame `{frame}` must be finite and positive, got {mass}"
+            ));
+        }
+        let body = self.frames[f].mass.get_or_insert(Mass::point(mass));
+        body.mass = mass;
+        Ok(())
+    }
+
+    /// Sets the constant parameter of frame `frame`'s primitive (a length in m or an angle in
+    /// rad): a sweep's parameter. Refuses an unknown frame, a frame driven by a variable and
+    /// a value that is not finite.
+    pub fn set_constant(&mut self, frame: &str, value: f64) -> Result<(), String> {
+        let f = self.frame_for_change(frame)?;
+        if !value.is_finite() {
+            return Err(format!(
+                "the parameter of frame `{frame}` must be finite, got {value}"
+            ));
+        }
+        match &mut self.frames[f].joint {
+            Joint::Constant(x) => {
+                *x = value;
+                Ok(())
+            }
+            Joint::Variable(i) => Err(format!(
+                "frame `{frame}` is driven by variable `{}`, not a constant",
+                self.variables[*i].name
+            )),
+        }
+    }
+
+    fn frame_for_change(&self, frame: &str) -> Result<usize, String> {
+        self.frame_index(frame)
+            .ok_or_else(|| format!("the model has no frame `{frame}`"))
+    }
+
     /// The sum of all masses.
     pub fn total_mass(&self) -> f64 {
         self.frames

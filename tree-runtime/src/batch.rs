@@ -55,16 +55,50 @@ where
     S: System + Clone + Send + Sync,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| SimError::InvalidInput(format!("cannot start {threads} threads: {e}")))?;
+    let pool = pool(threads)?;
     Ok(pool.install(|| {
         starts
             .par_iter()
             .map_init(|| sys.clone(), |sys, start| one(sys, start, options))
             .collect()
     }))
+}
+
+/// [`rollouts`] with a system of its own per rollout (`systems[k]` runs `starts[k]`): a
+/// parameter sweep (the same model with other masses or lengths, `Model::set_mass`,
+/// `Model::set_constant`).
+pub fn rollouts_of<S>(
+    systems: Vec<S>,
+    starts: &[Rollout],
+    options: &SimOptions,
+    threads: usize,
+) -> Result<Vec<Result<Trajectory, SimError>>, SimError>
+where
+    S: System + Send,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    if systems.len() != starts.len() {
+        return Err(SimError::InvalidInput(format!(
+            "{} systems for {} rollouts: give one each",
+            systems.len(),
+            starts.len()
+        )));
+    }
+    let pool = pool(threads)?;
+    Ok(pool.install(|| {
+        systems
+            .into_par_iter()
+            .zip(starts.par_iter())
+            .map(|(mut sys, start)| one(&mut sys, start, options))
+            .collect()
+    }))
+}
+
+fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| SimError::InvalidInput(format!("cannot start {threads} threads: {e}")))
 }
 
 /// One rollout on a worker's own system.

@@ -89,7 +89,14 @@ class Model:
         u: Optional[ArrayLike] = None,
         threads: Optional[int] = None,
         every: int = 1,
+        models: Optional[Sequence["Model"]] = None,
     ) -> Rollouts: ...
+    def with_parameters(
+        self,
+        masses: Optional[dict[str, float]] = None,
+        constants: Optional[dict[str, float]] = None,
+        gravity: Optional[Sequence[float]] = None,
+    ) -> "Model": ...
 
 def load(path: Union[str, PathLike], floating_base: bool = False) -> Model: ...
 def loads(text: str, format: str = "toml", floating_base: bool = False) -> Model: ...
