@@ -33,7 +33,7 @@ fn matrix(m: &DMatrix<f64>) -> Value {
         .collect::<Vec<_>>())
 }
 
-/// An entry as JSON: matrices as rows, second derivatives as [output][input₁][input₂].
+/// An entry as JSON: matrices as rows, second derivatives as `[output][input₁][input₂]`.
 fn value(e: &Entry) -> Value {
     match e {
         Entry::Scalar(x) => json!(x),

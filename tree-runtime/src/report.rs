@@ -21,7 +21,7 @@ pub enum Entry {
     Vector(Vec<f64>),
     /// A matrix.
     Matrix(DMatrix<f64>),
-    /// One matrix per output row (second derivatives: [output][input₁][input₂]).
+    /// One matrix per output row (second derivatives, indexed (output, input₁, input₂)).
     Stack(Vec<DMatrix<f64>>),
 }
 
