@@ -432,25 +432,35 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, lagrangian));
     let [c_first, c_dynamics, c_full] =
         [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, constraints));
-    let first = l_first.assigning().emit("__first", n, f64_terms);
-    let dynamics = l_dynamics.assigning().emit("__dynamics", n, f64_terms);
-    let full = l_full.assigning().emit("__full", n, f64_terms);
-    let d_dynamics = l_dynamics.naming().emit("__d_dynamics", n, generic);
-    let d_full = l_full.naming().emit("__d_full", n, generic);
+    let first = l_first.assigning().emit("__first", &var_names, f64_terms);
+    let dynamics = l_dynamics
+        .assigning()
+        .emit("__dynamics", &var_names, f64_terms);
+    let full = l_full.assigning().emit("__full", &var_names, f64_terms);
+    let d_dynamics = l_dynamics
+        .naming()
+        .emit("__d_dynamics", &var_names, generic);
+    let d_full = l_full.naming().emit("__d_full", &var_names, generic);
     let poses = poses_program(&plan).emit(
         "__poses",
-        n,
+        &var_names,
         Flavour::F64 {
             out_ty: &quote!([::tree_mech::runtime::Pose]),
         },
     );
-    let dc_dynamics = c_dynamics.naming().emit("__dc_dynamics", n, generic);
-    let dc_full = c_full.naming().emit("__dc_full", n, generic);
-    let c_first = c_first.assigning().emit("__c_first", n, f64_constraints);
+    let dc_dynamics = c_dynamics
+        .naming()
+        .emit("__dc_dynamics", &var_names, generic);
+    let dc_full = c_full.naming().emit("__dc_full", &var_names, generic);
+    let c_first = c_first
+        .assigning()
+        .emit("__c_first", &var_names, f64_constraints);
     let c_dynamics = c_dynamics
         .assigning()
-        .emit("__c_dynamics", n, f64_constraints);
-    let c_full = c_full.assigning().emit("__c_full", n, f64_constraints);
+        .emit("__c_dynamics", &var_names, f64_constraints);
+    let c_full = c_full
+        .assigning()
+        .emit("__c_full", &var_names, f64_constraints);
     let functions = [
         &first.functions,
         &dynamics.functions,

@@ -39,20 +39,64 @@ pub fn constant(c: f64) -> TokenStream {
     }
 }
 
-fn var(v: u32) -> Ident {
-    format_ident!("t{}", v)
-}
+/// Each statement's name: `q3_elbow` for variable 3 (`elbow`), `dq3_elbow`, `sin_q3_elbow`,
+/// `cos_q3_elbow` for what reads a variable — so a reader of the expansion can map the
+/// statements back to the tree's joints — and `t{n}` for the rest.
+struct Names(Vec<Ident>);
 
-fn term(t: Term, generic: bool) -> TokenStream {
-    match t {
-        Term::Const(c) if generic => {
-            let c = constant(c);
-            quote!(S::constant(#c))
-        }
-        Term::Const(c) => constant(c),
-        Term::Var(v) => {
-            let id = var(v);
-            quote!(#id)
+impl Names {
+    fn of(nodes: &[Node], variables: &[&str]) -> Self {
+        let clean = |i: usize| -> String {
+            let name: String = variables[i]
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() {
+                        c.to_ascii_lowercase()
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            format!("{i}_{name}")
+        };
+        let names = nodes
+            .iter()
+            .enumerate()
+            .map(|(n, node)| {
+                let of_q = |t: Term| match t {
+                    Term::Var(v) => match nodes[v as usize] {
+                        Node::Q(i) => Some(clean(i)),
+                        _ => None,
+                    },
+                    Term::Const(_) => None,
+                };
+                match *node {
+                    Node::Q(i) => format_ident!("q{}", clean(i)),
+                    Node::Dq(i) => format_ident!("dq{}", clean(i)),
+                    Node::Sin(a) if of_q(a).is_some() => format_ident!("sin_q{}", of_q(a).unwrap()),
+                    Node::Cos(a) if of_q(a).is_some() => format_ident!("cos_q{}", of_q(a).unwrap()),
+                    _ => format_ident!("t{}", n),
+                }
+            })
+            .collect();
+        Names(names)
+    }
+
+    fn var(&self, v: u32) -> &Ident {
+        &self.0[v as usize]
+    }
+
+    fn term(&self, t: Term, generic: bool) -> TokenStream {
+        match t {
+            Term::Const(c) if generic => {
+                let c = constant(c);
+                quote!(S::constant(#c))
+            }
+            Term::Const(c) => constant(c),
+            Term::Var(v) => {
+                let id = self.var(v);
+                quote!(#id)
+            }
         }
     }
 }
@@ -65,8 +109,8 @@ fn operands(node: &Node) -> Vec<Term> {
     }
 }
 
-fn expression(node: &Node, generic: bool) -> TokenStream {
-    let term = |t| term(t, generic);
+fn expression(node: &Node, names: &Names, generic: bool) -> TokenStream {
+    let term = |t| names.term(t, generic);
     match *node {
         Node::Q(i) => quote!(q[#i]),
         Node::Dq(i) => quote!(dq[#i]),
@@ -133,9 +177,12 @@ pub struct Emitted {
 
 impl Program {
     /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)`, over
-    /// `flavour`'s number type.
-    pub fn emit(&self, prefix: &str, dof: usize, flavour: Flavour) -> Emitted {
+    /// `flavour`'s number type; `variables` names the model's variables (the statements
+    /// reading them are named after them).
+    pub fn emit(&self, prefix: &str, variables: &[&str], flavour: Flavour) -> Emitted {
         let generic = matches!(flavour, Flavour::Generic { .. });
+        let dof = variables.len();
+        let names = Names::of(&self.nodes, variables);
         let n = self.nodes.len();
         // Liveness, backwards from the outputs.
         let mut live = vec![false; n];
@@ -185,8 +232,8 @@ impl Program {
         let mut outputs_by_chunk: Vec<Vec<TokenStream>> = vec![Vec::new(); chunks];
         for (target, t) in &self.outputs {
             let (c, value) = match t {
-                Term::Var(v) => (chunk_of[*v as usize], term(*t, generic)),
-                Term::Const(_) => (0, term(*t, generic)),
+                Term::Var(v) => (chunk_of[*v as usize], names.term(*t, generic)),
+                Term::Const(_) => (0, names.term(*t, generic)),
             };
             outputs_by_chunk[c].push(if generic {
                 quote!(out.add(#target, #value);)
@@ -224,12 +271,12 @@ impl Program {
             let name = format_ident!("{}_{}", prefix, c);
             let mut stmts = TokenStream::new();
             for &v in &imports[c] {
-                let (id, s) = (var(v), slot[v as usize]);
+                let (id, s) = (names.var(v), slot[v as usize]);
                 stmts.extend(quote!(let #id: #ty = s[#s];));
             }
             for &i in kept.iter().filter(|&&i| chunk_of[i] == c) {
-                let id = var(i as u32);
-                let e = expression(&self.nodes[i], generic);
+                let id = names.var(i as u32);
+                let e = expression(&self.nodes[i], &names, generic);
                 stmts.extend(quote!(let #id: #ty = #e;));
                 if slot[i] != usize::MAX {
                     let s = slot[i];
@@ -265,5 +312,36 @@ impl Program {
             body,
             statements: kept.len(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What reads a variable is named after it (sanitised, indexed: unique), the rest `t{n}`.
+    #[test]
+    fn statements_reading_a_variable_are_named_after_it() {
+        let nodes = [
+            Node::Q(1),
+            Node::Sin(Term::Var(0)),
+            Node::Cos(Term::Var(0)),
+            Node::Dq(0),
+            Node::Mul(Term::Var(1), Term::Var(3)),
+            Node::Sin(Term::Var(4)),
+        ];
+        let names = Names::of(&nodes, &["root-x", "Elbow Joint"]);
+        let shown: Vec<String> = names.0.iter().map(|i| i.to_string()).collect();
+        assert_eq!(
+            shown,
+            [
+                "q1_elbow_joint",
+                "sin_q1_elbow_joint",
+                "cos_q1_elbow_joint",
+                "dq0_root_x",
+                "t4",
+                "t5"
+            ]
+        );
     }
 }
