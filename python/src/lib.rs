@@ -426,8 +426,9 @@ impl Model {
 
     /// Simulates from (q0, dq0) (default the model's) for `duration` s at step `dt`; `u`
     /// None, constant (inputs,) or per step (steps, inputs). Returns a `Trajectory`. The GIL
-    /// is released while it runs.
-    #[pyo3(signature = (duration, dt, integrator="vi", q0=None, dq0=None, u=None, every=1, alpha=0.5, forcing="split", newton_tol=None, rtol=1e-8, atol=1e-10, max_steps=1_000_000))]
+    /// is released while it runs; about a hundred times a run Ctrl-C is honoured and
+    /// `progress(t, duration)`, if given, is called (a tqdm bar's `update`, say).
+    #[pyo3(signature = (duration, dt, integrator="vi", q0=None, dq0=None, u=None, every=1, alpha=0.5, forcing="split", newton_tol=None, rtol=1e-8, atol=1e-10, max_steps=1_000_000, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn simulate(
         &self,
@@ -445,6 +446,7 @@ impl Model {
         rtol: f64,
         atol: f64,
         max_steps: usize,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Trajectory> {
         let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
         let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
@@ -461,9 +463,14 @@ impl Model {
         let mut sys = self.system();
         let names = self.names();
         let constraints = self.model.constraint_row_names();
-        let result = py.detach(move || {
+        // A hundred times a run (at recorded samples): Ctrl-C is checked and `progress(t,
+        // duration)` called, each with the GIL taken back for the moment; an exception from
+        // either ends the run and is raised.
+        let mut raised: Option<PyErr> = None;
+        let result = py.detach(|| {
             let mut traj = CoreTrajectory::new(names, constraints, 0);
             let mut motion = ModelMotions::of(&sys);
+            let mut next = 0.0;
             let summary = run_with_inputs(
                 &mut sys,
                 &q0,
@@ -474,6 +481,20 @@ impl Model {
                 &inputs,
                 &mut |s| {
                     traj.push(s);
+                    if s.t >= next {
+                        next = s.t + 0.01 * duration;
+                        let checked = Python::attach(|py| {
+                            py.check_signals()?;
+                            if let Some(f) = &progress {
+                                f.call1(py, (s.t, duration))?;
+                            }
+                            Ok::<_, PyErr>(())
+                        });
+                        if let Err(e) = checked {
+                            raised = Some(e);
+                            return Err(SimError::InvalidInput("interrupted".into()));
+                        }
+                    }
                     Ok(())
                 },
             )?;
@@ -481,6 +502,9 @@ impl Model {
             traj.dissipated = summary.dissipated;
             Ok::<_, SimError>(traj)
         });
+        if let Some(e) = raised {
+            return Err(e);
+        }
         let traj = result.map_err(|e| sim_error(py, &e))?;
         Ok(Trajectory::of(py, &traj, self.model.inputs.len()))
     }

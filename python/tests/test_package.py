@@ -230,3 +230,24 @@ def test_rollouts_take_a_model_each_for_a_sweep():
         m.rollouts(np.zeros((2, 1)), np.zeros((2, 1)), 0.1, 0.01, models=[m])
     with pytest.raises(ValueError, match="other variables"):
         m.rollouts(np.zeros((1, 1)), np.zeros((1, 1)), 0.1, 0.01, models=[tm.load(CART)])
+
+
+def test_progress_is_reported_and_an_exception_in_it_stops_the_run():
+    m = tm.load(PENDULUM)
+    seen = []
+    traj = m.simulate(2.0, 0.001, progress=lambda t, total: seen.append((t, total)))
+    assert 90 <= len(seen) <= 102, len(seen)
+    assert all(total == 2.0 for _, total in seen)
+    times = [t for t, _ in seen]
+    assert times == sorted(times) and times[-1] > 1.95 and len(traj) == 2001
+
+    calls = []
+
+    def stop(t, total):
+        calls.append(t)
+        if t > 0.5:
+            raise KeyError("enough")
+
+    with pytest.raises(KeyError, match="enough"):
+        m.simulate(2.0, 0.001, progress=stop)
+    assert 0.5 < calls[-1] < 0.6

@@ -1,5 +1,5 @@
 from os import PathLike
-from typing import Optional, Sequence, Union
+from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -65,6 +65,7 @@ class Model:
         rtol: float = 1e-8,
         atol: float = 1e-10,
         max_steps: int = 1_000_000,
+        progress: Optional[Callable[[float, float], object]] = None,
     ) -> Trajectory: ...
     def linearize(
         self,
