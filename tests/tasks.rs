@@ -397,6 +397,21 @@ fn the_contracted_step_hessian_matches_differences_of_the_jacobians() {
             );
         }
     }
+    // A, B at a known converged step (the optimiser's path after a line search) equal the
+    // step's own.
+    let (mut a1, mut b1) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+    let mut stepped = vec![0.0; nx];
+    d.step(1, &x, &u, &mut stepped, Some((&mut a1, &mut b1)))
+        .unwrap();
+    let lambda = d.multipliers().to_vec();
+    let (mut a2, mut b2) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+    d.jacobians(1, &x, &u, &mut stepped, &lambda, &mut a2, &mut b2)
+        .unwrap();
+    assert!((&a1 - &a2).amax() < 1e-10 * a1.amax() && (&b1 - &b2).amax() < 1e-10 * b1.amax());
+    assert!(
+        b1.column(1).amax() > 0.1,
+        "the kinematic control moves the step"
+    );
     // The kinematic control's value column and its decision carry curvature: the test sees
     // the column map.
     let memory = nx - 2;

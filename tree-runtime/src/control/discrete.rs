@@ -650,26 +650,7 @@ where
                     }
                     if let Some((a, bm)) = jacobians.as_mut() {
                         vi.derivatives_into(cx, &b.q1, &b.p1, &b.q2, &mut b.first)?;
-                        // Each column of A or B: the step input it is, in q₂'s and p₂'s block.
-                        let read = |m: &mut DMatrix<f64>, c: usize, col: StepColumn| {
-                            let (by, j) = col.block();
-                            let (dq2, dp2) = (
-                                b.first.block(StepOutput::Q2, by),
-                                b.first.block(StepOutput::P2, by),
-                            );
-                            for r in 0..nd {
-                                m[(r, c)] = dq2[(r, j)];
-                                m[(nd + r, c)] = dp2[(r, j)];
-                            }
-                        };
-                        for (c, col) in l.x_column.iter().enumerate() {
-                            if let Some(col) = *col {
-                                read(a, c, col);
-                            }
-                        }
-                        for (c, &col) in l.u_column.iter().enumerate() {
-                            read(bm, c, col);
-                        }
+                        read_jacobians(l, &b.first, a, bm);
                     }
                 }
                 Method::Rk4(rk4) => {
@@ -698,16 +679,12 @@ where
             for (c, control) in l.controls.iter().enumerate() {
                 let at = l.memory[c];
                 x2[at] = u[c];
-                if let Some((a, bm)) = jacobians.as_mut() {
-                    bm[(at, c)] = 1.0;
-                    if let Control::Kinematic(_) = control {
-                        bm[(at + 1, c)] = 1.0 / dt;
-                        a[(at + 1, at)] = -1.0 / dt;
-                    }
-                }
                 if let Control::Kinematic(_) = control {
                     x2[at + 1] = (u[c] - x[at]) / dt;
                 }
+            }
+            if let Some((a, bm)) = jacobians.as_mut() {
+                memory_jacobians(l, dt, a, bm);
             }
             match x2.iter().find(|v| !v.is_finite()) {
                 Some(v) => Err(SimError::InvalidInput(format!(
@@ -715,6 +692,47 @@ where
                 ))),
                 None => Ok(()),
             }
+        })
+    }
+
+    /// `A`, `B` of the step from knot `k` with `(x, u)` that is known to end at `x2` with the
+    /// multipliers `lambda` (a rollout's): the VI's derivatives at the converged step without
+    /// taking it again (RK4 takes it: its derivatives come with the step).
+    #[allow(clippy::too_many_arguments)]
+    pub fn jacobians(
+        &mut self,
+        k: usize,
+        x: &[f64],
+        u: &[f64],
+        x2: &mut [f64],
+        lambda: &[f64],
+        a: &mut DMatrix<f64>,
+        bm: &mut DMatrix<f64>,
+    ) -> Result<(), SimError> {
+        if !self.is_vi() {
+            return self.step(k, x, u, x2, Some((a, bm)));
+        }
+        a.fill(0.0);
+        bm.fill(0.0);
+        let dt = self.dt;
+        let t2 = self.t0 + (k + 1) as f64 * dt;
+        self.with_step(k, x, u, |method, cx, l, b| {
+            let Method::Vi(vi) = method else {
+                unreachable!("checked above")
+            };
+            // q₂: its dynamic part from x₂, its kinematic part where the step puts it.
+            b.q2.copy_from(&b.q1);
+            for (r, &i) in l.dynamic.iter().enumerate() {
+                b.q2[i] = x2[r];
+            }
+            for &i in &l.kinematic {
+                b.q2[i] = cx.motion.kinematic(i, t2)[0];
+            }
+            vi.lambda.as_mut_slice().copy_from_slice(lambda);
+            vi.derivatives_into(cx, &b.q1, &b.p1, &b.q2, &mut b.first)?;
+            read_jacobians(l, &b.first, a, bm);
+            memory_jacobians(l, dt, a, bm);
+            Ok(())
         })
     }
 
@@ -772,5 +790,39 @@ where
             }
             Ok(())
         })
+    }
+}
+
+/// `A`, `B`'s `(q₂, p₂)` rows from the step's derivatives: each column the step input it is.
+fn read_jacobians(l: &Layout, d: &StepDerivatives, a: &mut DMatrix<f64>, bm: &mut DMatrix<f64>) {
+    let nd = l.dynamic.len();
+    let read = |m: &mut DMatrix<f64>, c: usize, col: StepColumn| {
+        let (by, j) = col.block();
+        let (dq2, dp2) = (d.block(StepOutput::Q2, by), d.block(StepOutput::P2, by));
+        for r in 0..nd {
+            m[(r, c)] = dq2[(r, j)];
+            m[(nd + r, c)] = dp2[(r, j)];
+        }
+    };
+    for (c, col) in l.x_column.iter().enumerate() {
+        if let Some(col) = *col {
+            read(a, c, col);
+        }
+    }
+    for (c, &col) in l.u_column.iter().enumerate() {
+        read(bm, c, col);
+    }
+}
+
+/// `A`, `B`'s memory rows: an input remembers itself, a kinematic control its value and
+/// velocity `(ρ − c)/Δt`.
+fn memory_jacobians(l: &Layout, dt: f64, a: &mut DMatrix<f64>, bm: &mut DMatrix<f64>) {
+    for (c, control) in l.controls.iter().enumerate() {
+        let at = l.memory[c];
+        bm[(at, c)] = 1.0;
+        if let Control::Kinematic(_) = control {
+            bm[(at + 1, c)] = 1.0 / dt;
+            a[(at + 1, at)] = -1.0 / dt;
+        }
     }
 }

@@ -161,6 +161,7 @@ where
         knot: Knot::empty(),
         needs: cost.needs(),
         dx: DVector::zeros(nx),
+        lambda: vec![Vec::new(); n],
     };
     let mut x = vec![x0.clone(); n + 1];
     let mut total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
@@ -225,8 +226,20 @@ where
         std::mem::swap(&mut x, &mut x_new);
         std::mem::swap(&mut u, &mut u_new);
         let previous = total;
-        total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
-        debug_assert!((total - trial_total).abs() <= 1e-9 * total.abs().max(1.0));
+        total = trial_total;
+        // The accepted rollout's Jacobians, at its converged steps.
+        for k in 0..n {
+            let (head, tail) = x.split_at_mut(k + 1);
+            dynamics.jacobians(
+                k,
+                head[k].as_slice(),
+                u[k].as_slice(),
+                tail[0].as_mut_slice(),
+                &work.lambda[k],
+                &mut work.a[k],
+                &mut work.b[k],
+            )?;
+        }
         // A short step means the model was trusted too far: regularise more next time.
         mu = if accepted < 0.25 {
             (mu * 10.0).max(1e-6)
@@ -260,6 +273,8 @@ struct Work {
     needs: Needs,
     /// `x − x_plan` in the forward pass.
     dx: DVector<f64>,
+    /// Each step's multipliers in the last rollout (for its Jacobians without re-stepping).
+    lambda: Vec<Vec<f64>>,
 }
 
 /// Refuses a problem whose sizes do not fit the dynamics: `x0` of `nx` entries, at least one
@@ -315,6 +330,7 @@ where
         knot: Knot::empty(),
         needs: cost.needs(),
         dx: DVector::zeros(0),
+        lambda: vec![Vec::new(); n],
     };
     let mut x = vec![x0.clone(); n + 1];
     let total = rollout(
@@ -382,6 +398,8 @@ where
             tail[0].as_mut_slice(),
             jac,
         )?;
+        work.lambda[k].clear();
+        work.lambda[k].extend_from_slice(dynamics.multipliers());
     }
     dynamics.knot(n, x[n].as_slice(), &mut work.knot, false, work.needs)?;
     Ok(total + cost.terminal(&work.knot, None))
