@@ -11,16 +11,14 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use tree_mech::control::{solve_task, TaskOptions, TaskSolver};
-use tree_mech::integrate::{
-    run_with_inputs, Forcing, InputSchedule, Method, SimOptions, Tolerance, ViSettings,
-};
+use tree_mech::integrate::{Forcing, InputSchedule, Method, SimOptions, Tolerance, ViSettings};
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
-use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, Rollout};
+use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
 use tree_mech::runtime::evaluation::evaluate_state;
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
-use tree_mech::runtime::{ModelMotions, Vector};
-use tree_mech::{NoForce, SimError, Trajectory as CoreTrajectory, TreeSystem};
+use tree_mech::runtime::Vector;
+use tree_mech::{SimError, Trajectory as CoreTrajectory, TreeSystem};
 
 pyo3::create_exception!(
     _native,
@@ -109,6 +107,13 @@ impl Model {
             .variables
             .iter()
             .map(|v| v.name.clone())
+            .collect()
+    }
+
+    /// The names of variables `list`.
+    fn named(&self, list: &[usize]) -> Vec<String> {
+        list.iter()
+            .map(|&i| self.model.variables[i].name.clone())
             .collect()
     }
 
@@ -303,21 +308,13 @@ impl Model {
     /// The dynamic (simulated) variables' names.
     #[getter]
     fn dynamic(&self) -> Vec<String> {
-        self.model
-            .dynamic()
-            .into_iter()
-            .map(|i| self.model.variables[i].name.clone())
-            .collect()
+        self.named(&self.model.dynamic())
     }
 
     /// The kinematic (prescribed) variables' names.
     #[getter]
     fn kinematic(&self) -> Vec<String> {
-        self.model
-            .kinematic()
-            .into_iter()
-            .map(|i| self.model.variables[i].name.clone())
-            .collect()
+        self.named(&self.model.kinematic())
     }
 
     /// The inputs' names (u's order).
@@ -461,46 +458,34 @@ impl Model {
             )
         };
         let mut sys = self.system();
-        let names = self.names();
-        let constraints = self.model.constraint_row_names();
         // A hundred times a run (at recorded samples): Ctrl-C is checked and `progress(t,
         // duration)` called, each with the GIL taken back for the moment; an exception from
         // either ends the run and is raised.
         let mut raised: Option<PyErr> = None;
+        let start = Rollout {
+            q0: q0.as_slice().to_vec(),
+            dq0: dq0.as_slice().to_vec(),
+            inputs,
+        };
         let result = py.detach(|| {
-            let mut traj = CoreTrajectory::new(names, constraints, 0);
-            let mut motion = ModelMotions::of(&sys);
             let mut next = 0.0;
-            let summary = run_with_inputs(
-                &mut sys,
-                &q0,
-                &dq0,
-                &options,
-                &mut NoForce,
-                &mut motion,
-                &inputs,
-                &mut |s| {
-                    traj.push(s);
-                    if s.t >= next {
-                        next = s.t + 0.01 * duration;
-                        let checked = Python::attach(|py| {
-                            py.check_signals()?;
-                            if let Some(f) = &progress {
-                                f.call1(py, (s.t, duration))?;
-                            }
-                            Ok::<_, PyErr>(())
-                        });
-                        if let Err(e) = checked {
-                            raised = Some(e);
-                            return Err(SimError::InvalidInput("interrupted".into()));
-                        }
+            trajectory(&mut sys, &start, &options, &mut |t| {
+                if t < next {
+                    return Ok(());
+                }
+                next = t + 0.01 * duration;
+                let checked = Python::attach(|py| {
+                    py.check_signals()?;
+                    if let Some(f) = &progress {
+                        f.call1(py, (t, duration))?;
                     }
-                    Ok(())
-                },
-            )?;
-            traj.newton_iterations = summary.newton_iterations;
-            traj.dissipated = summary.dissipated;
-            Ok::<_, SimError>(traj)
+                    Ok::<_, PyErr>(())
+                });
+                checked.map_err(|e| {
+                    raised = Some(e);
+                    SimError::InvalidInput("interrupted".into())
+                })
+            })
         });
         if let Some(e) = raised {
             return Err(e);

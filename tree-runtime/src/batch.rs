@@ -59,7 +59,10 @@ where
     Ok(pool.install(|| {
         starts
             .par_iter()
-            .map_init(|| sys.clone(), |sys, start| one(sys, start, options))
+            .map_init(
+                || sys.clone(),
+                |sys, start| trajectory(sys, start, options, &mut |_| Ok(())),
+            )
             .collect()
     }))
 }
@@ -89,7 +92,7 @@ where
         systems
             .into_par_iter()
             .zip(starts.par_iter())
-            .map(|(mut sys, start)| one(&mut sys, start, options))
+            .map(|(mut sys, start)| trajectory(&mut sys, start, options, &mut |_| Ok(())))
             .collect()
     }))
 }
@@ -101,8 +104,15 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
         .map_err(|e| SimError::InvalidInput(format!("cannot start {threads} threads: {e}")))
 }
 
-/// One rollout on a worker's own system.
-fn one<S>(sys: &mut S, start: &Rollout, options: &SimOptions) -> Result<Trajectory, SimError>
+/// One run of `sys` from `start` recorded into a trajectory (every rollout's; the Python
+/// package's `simulate`). `tick(t)` hears of each recorded sample; an error from it ends the
+/// run with that error.
+pub fn trajectory<S>(
+    sys: &mut S,
+    start: &Rollout,
+    options: &SimOptions,
+    tick: &mut dyn FnMut(f64) -> Result<(), SimError>,
+) -> Result<Trajectory, SimError>
 where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -135,7 +145,7 @@ where
         &start.inputs,
         &mut |s| {
             traj.push(s);
-            Ok(())
+            tick(s.t)
         },
     )?;
     traj.newton_iterations = summary.newton_iterations;
