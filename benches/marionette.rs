@@ -8,7 +8,8 @@
 use std::time::Instant;
 
 use tree_mech::integrate::{
-    run, Method, MidpointVi, SimOptions, StepContext, StepCovector, StepDerivatives, ViSettings,
+    run, JacobianUpdate, Method, MidpointVi, SimOptions, StepContext, StepCovector,
+    StepDerivatives, ViSettings,
 };
 use tree_mech::nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 use tree_mech::runtime::ModelMotions;
@@ -107,7 +108,7 @@ where
     let mut go = |sys: &mut S, with: u8| {
         q2.copy_from(&q);
         p2.copy_from(&p);
-        vi.last_velocity.copy_from(&dq);
+        vi.predict_from(&dq);
         let mut force = NoForce;
         let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.01);
         vi.step(&mut cx, &mut q2, &mut p2, &mut next)
@@ -135,6 +136,13 @@ where
     let mut interpreted = TreeSystem::new(model).expect("valid model");
     for (label, method) in [
         ("midpoint VI", Method::Vi(ViSettings::default())),
+        (
+            "midpoint VI, Jacobian once per step",
+            Method::Vi(ViSettings {
+                jacobian: JacobianUpdate::OncePerStep,
+                ..ViSettings::default()
+            }),
+        ),
         ("RK4", Method::Rk4),
     ] {
         let (c, iterations) = ten_seconds(sys, method);

@@ -74,7 +74,7 @@ where
     let vi_step = time_ns(calls / 10, || {
         qk.copy_from(&q);
         pk.copy_from(&p0);
-        vi.last_velocity.copy_from(&dq);
+        vi.predict_from(&dq);
         vi.step(
             &mut StepContext::new(&mut sys, &mut NoForce, &mut motion, 0.001),
             &mut qk,
@@ -106,7 +106,7 @@ where
     let vi_first = time_ns(calls / 10, || {
         qk.copy_from(&q);
         pk.copy_from(&p0);
-        vi.last_velocity.copy_from(&dq);
+        vi.predict_from(&dq);
         let mut force = NoForce;
         let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.001);
         cx.u = &u;

@@ -70,7 +70,7 @@ where
             b.iter_batched_ref(
                 || (q.clone(), p0.clone()),
                 |(qk, pk)| {
-                    vi.last_velocity.copy_from(&dq);
+                    vi.predict_from(&dq);
                     let mut no_force = NoForce;
                     let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.01);
                     vi.step(&mut cx, qk, pk, &mut next).unwrap();

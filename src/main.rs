@@ -145,7 +145,7 @@ enum Command {
         #[arg(long, default_value_t = 0.5)]
         alpha: f64,
         /// VI Newton tolerance: each residual row relative to its momentum scale.
-        #[arg(long, default_value = "1e-10")]
+        #[arg(long, default_value = "1e-12")]
         newton_tol: f64,
         /// VI Newton Jacobian: re-evaluated every iteration (exact Newton) or once per step.
         #[arg(long, value_enum, default_value = "every-iteration")]

@@ -102,7 +102,7 @@ where
             [x, 0.0, 0.0]
         };
         let mut vi = MidpointVi::new(sys, settings);
-        vi.last_velocity.fill(0.0);
+        vi.predict_from_rest();
         let (mut q2, mut p2, mut next) = (q1.clone(), p1.clone(), q1.clone());
         let mut force = NoForce;
         let mut cx = StepContext::new(sys, &mut force, &mut motion, dt);

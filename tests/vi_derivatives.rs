@@ -47,7 +47,7 @@ fn step(
         }
     };
     let mut vi = MidpointVi::new(sys, settings);
-    vi.last_velocity.fill(0.0);
+    vi.predict_from_rest();
     for (s, l) in lambda0.iter().enumerate() {
         vi.lambda[s] = *l;
     }

@@ -56,6 +56,6 @@ pub fn constraints<S: Scalar>(
     order: Order,
     out: &mut impl Sink<S>,
 ) {
-    sweeps::forward(plan, &mut k.tree, q, dq, false);
+    sweeps::forward(plan, &mut k.tree, q, dq, sweeps::Reach::Attachments);
     elements::constraints(plan, &k.tree, &mut k.elements, q, dq, order, out);
 }

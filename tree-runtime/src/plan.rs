@@ -84,6 +84,9 @@ pub struct FramePlan {
     pub needed: bool,
     /// A constraint, spring or damper attaches here: its world point Jacobian is computed.
     pub attached: bool,
+    /// This frame or a descendant is [`Self::attached`]: its `∂v/∂q̇` columns are needed at
+    /// every order (the elements' point Jacobians are built from them).
+    pub leads_to_attached: bool,
     /// The rigid body this frame carries, if it has any mass or inertia.
     pub body: Option<Body>,
     /// Total mass of the subtree rooted here.
@@ -248,6 +251,7 @@ impl TreePlan {
                 col_offset: columns,
                 needed: d.needed,
                 attached: d.attached,
+                leads_to_attached: d.attached,
                 body: d.body,
                 subtree_mass: 0.0,
             });
@@ -257,6 +261,7 @@ impl TreePlan {
             frames[k].subtree_mass += frames[k].body.map_or(0.0, |b| b.mass());
             if let Some(p) = frames[k].parent {
                 frames[p].subtree_mass += frames[k].subtree_mass;
+                frames[p].leads_to_attached |= frames[k].leads_to_attached;
             }
         }
         TreePlan {

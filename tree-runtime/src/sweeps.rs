@@ -93,13 +93,39 @@ pub fn poses<S: Scalar>(plan: &TreePlan, q: &[S], out: &mut [Pose<S>]) {
     }
 }
 
-/// The outward sweep: poses, body velocities and their columns for every frame that carries
-/// or leads to mass (every frame when `all`).
-pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S], all: bool) {
+/// What an outward sweep computes, and on which frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reach {
+    /// Every frame, with velocities and every column (diagnostics).
+    Everything,
+    /// What the Lagrangian's terms up to this order need ([`evaluate`], then the springs and
+    /// dampers): the frames that carry or lead to mass or an element, with velocities; every
+    /// column from [`Order::Dynamics`] on, below it only each frame's own `∂v/∂q` and the
+    /// `∂v/∂q̇` columns on the paths to attached frames.
+    Lagrangian(Order),
+    /// What the constraints need: poses and `∂v/∂q̇` columns on the paths to attached frames
+    /// (`h`, `Dh`, `D²h` are built from world points and axes alone).
+    Attachments,
+}
+
+/// The outward sweep: poses, body velocities and their columns (eqs. (1), (6), (7), (10)),
+/// as much of them as `reach` asks for.
+pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S], reach: Reach) {
+    let (velocities, all_columns) = match reach {
+        Reach::Everything => (true, true),
+        Reach::Lagrangian(order) => (true, order >= Order::Dynamics),
+        Reach::Attachments => (false, false),
+    };
     for (k, f) in plan.frames.iter().enumerate() {
-        if !f.needed && !all {
+        let visit = match reach {
+            Reach::Everything => true,
+            Reach::Lagrangian(_) => f.needed,
+            Reach::Attachments => f.leads_to_attached,
+        };
+        if !visit {
             continue;
         }
+        let velocity_columns = all_columns || f.leads_to_attached;
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let (mut parent_pose, mut parent_vel, np, pc) = match f.parent {
             Some(p) => (
@@ -114,28 +140,40 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
         let pre = |x: &Twist<S>| f.pre.as_ref().map_or(*x, |c| c.ad_inverse(x));
         if let Some(c) = &f.pre {
             parent_pose = c.compose_onto(&parent_pose);
-            parent_vel = c.ad_inverse(&parent_vel);
+            if velocities {
+                parent_vel = c.ad_inverse(&parent_vel);
+            }
         }
         ws.local[k] = local;
         ws.pose[k] = local.compose_onto(&parent_pose);
-        // v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k (eq. (6)).
-        let transported = local.ad_inverse(&parent_vel);
-        let mut v = transported;
-        if let Joint::Variable(i) = f.joint {
-            let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
-            v[axis] += dq[i];
-        }
-        ws.velocity[k] = v;
-        // Columns of variables above k transport (eqs. (7), (10)); the own column is ξ_k and
-        // [Ad v_par, ξ_k].
         let kc = f.col_offset;
-        for a in 0..np {
-            ws.jac[kc + a] = local.ad_inverse(&pre(&ws.jac[pc + a]));
-            ws.dv_dq[kc + a] = local.ad_inverse(&pre(&ws.dv_dq[pc + a]));
+        if velocities {
+            // v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k (eq. (6)).
+            let transported = local.ad_inverse(&parent_vel);
+            let mut v = transported;
+            if let Joint::Variable(i) = f.joint {
+                let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
+                v[axis] += dq[i];
+            }
+            ws.velocity[k] = v;
+            // The own column of ∂v/∂q is [Ad v_par, ξ_k] (eq. (10)).
+            if let Some(d) = f.own() {
+                ws.dv_dq[kc + d] = bracket_with_axis(&transported, f.kind);
+            }
         }
-        if let Some(d) = f.own() {
-            ws.jac[kc + d] = f.kind.twist().map(S::constant);
-            ws.dv_dq[kc + d] = bracket_with_axis(&transported, f.kind);
+        // Columns of variables above k transport (eqs. (7), (10)); the own ∂v/∂q̇ is ξ_k.
+        if velocity_columns {
+            for a in 0..np {
+                ws.jac[kc + a] = local.ad_inverse(&pre(&ws.jac[pc + a]));
+            }
+            if let Some(d) = f.own() {
+                ws.jac[kc + d] = f.kind.twist().map(S::constant);
+            }
+        }
+        if all_columns {
+            for a in 0..np {
+                ws.dv_dq[kc + a] = local.ad_inverse(&pre(&ws.dv_dq[pc + a]));
+            }
         }
         if f.attached {
             let pose = ws.pose[k];
@@ -240,7 +278,7 @@ pub fn evaluate<S: Scalar>(
     order: Order,
     out: &mut impl Sink<S>,
 ) {
-    forward(plan, ws, q, dq, false);
+    forward(plan, ws, q, dq, Reach::Lagrangian(order));
     let l = inward(plan, ws, order);
     out.set(Output::L, l);
     let gravity = plan.gravity.map(S::constant);

@@ -642,7 +642,7 @@ where
                 Method::Vi(vi) => {
                     b.q2.copy_from(&b.q1);
                     b.p2.copy_from(&b.p1);
-                    vi.last_velocity.fill(0.0);
+                    vi.predict_from_rest();
                     vi.step(cx, &mut b.q2, &mut b.p2, &mut b.next)?;
                     for (r, &i) in l.dynamic.iter().enumerate() {
                         x2[r] = b.q2[i];

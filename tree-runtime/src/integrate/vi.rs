@@ -49,13 +49,57 @@ pub const MAX_TURN: f64 = std::f64::consts::FRAC_PI_2;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum JacobianUpdate {
     /// Exact Newton: a full second-order evaluation and a fresh factorisation every iteration.
+    /// Its last update lands far below the tolerance (quadratic convergence), so the discrete
+    /// momenta of cyclic variables are kept to rounding.
     #[default]
     EveryIteration,
     /// Evaluate and factor the exact Jacobian once per step, at the predicted point, and reuse
     /// it (a chord iteration: later iterations need only first derivatives); refreshed when
-    /// the residual stops halving. Converges to the same solution, usually in fewer full
-    /// evaluations.
+    /// the residual stops halving. Converges to the same tolerance in fewer full evaluations
+    /// (trep's Puppet: one Jacobian a step against two), but linearly: it stops just below
+    /// the tolerance, so conserved momenta drift by about the tolerance a step.
     OncePerStep,
+}
+
+/// The history the VI's predictor of `q_{k+1}` extrapolates from.
+#[derive(Clone, Debug)]
+struct Predictor<N: Dim>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    /// `(v_k − v_{k−1}) / ((Δt_k + Δt_{k−1})/2)` for the last two steps' average velocities.
+    acceleration: Vector<N>,
+    /// The last step's length.
+    dt: f64,
+    /// The `q` the last step ended at.
+    ended_at: Vector<N>,
+    /// Whether `ended_at` and `dt` describe a step taken (not a fresh start).
+    valid: bool,
+}
+
+impl<N: Dim> Predictor<N>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    /// Whether a step from `q` continues the recorded one (else only `v_k` is used).
+    fn continues_at(&self, q: &Vector<N>) -> bool {
+        self.valid && self.ended_at == *q
+    }
+
+    /// Records a step of length `dt` whose average velocity was `v` after one of `v_last`
+    /// (`continuing`: the two steps were consecutive).
+    fn record(&mut self, continuing: bool, dt: f64, v_last: &Vector<N>, v: &Vector<N>) {
+        if continuing {
+            let scale = 2.0 / (self.dt + dt);
+            for i in 0..v.len() {
+                self.acceleration[i] = scale * (v[i] - v_last[i]);
+            }
+        } else {
+            self.acceleration.fill(0.0);
+        }
+        self.dt = dt;
+        self.valid = true;
+    }
 }
 
 /// How the forces enter the discrete equations.
@@ -95,7 +139,7 @@ impl Default for ViSettings {
     fn default() -> Self {
         ViSettings {
             alpha: 0.5,
-            tolerance: 1e-10,
+            tolerance: 1e-12,
             constraint_tolerance: 1e-12,
             max_iterations: 30,
             jacobian: JacobianUpdate::EveryIteration,
@@ -117,6 +161,10 @@ where
     pub terms: Terms<N>,
     /// Constraints at the current guess `q₂` (and, after `velocity_and_energy`, at its `q`).
     pub constraint_terms: ConstraintTerms,
+    /// The `q` at which `constraint_terms` hold `h` and `Dh` (when `constraints_known`), so a
+    /// step's `Dh(q₁)` and a recorded state's reuse the evaluation at the last step's solution.
+    constraints_at: Vector<N>,
+    constraints_known: bool,
     /// `Dh(q₁)` of the step under way.
     dh1: DMatrix<f64>,
     /// Which variables are unknowns.
@@ -151,8 +199,13 @@ where
     /// `λ` saved before a step, one per subdivision level (a failed step leaves q, p and the
     /// predictor untouched; only Newton's λ moves).
     saved_lambda: Vec<DVector<f64>>,
-    /// The last step's average velocity `(q_{k+1} − q_k)/Δt`, used to predict the next.
-    pub last_velocity: Vector<N>,
+    /// The last step's average velocity `(q_{k+1} − q_k)/Δt`, used to predict the next (set
+    /// it with [`Self::predict_from`]).
+    last_velocity: Vector<N>,
+    /// The predictor's history: the change of the average velocity between the last two
+    /// steps per unit time (zero after one step), the last step's length, and the `q` the
+    /// last step ended at (the history applies only to a step that starts there).
+    predictor: Predictor<N>,
     /// The step length of the last residual.
     dt: f64,
     /// Newton iterations of the last step (all its sub-steps).
@@ -181,6 +234,8 @@ where
             settings,
             terms: Terms::zeros(n),
             constraint_terms: ConstraintTerms::zeros(m, n.value()),
+            constraints_at: z(),
+            constraints_known: false,
             dh1: DMatrix::zeros(m, n.value()),
             lambda: DVector::zeros(m),
             residual: z(),
@@ -200,6 +255,12 @@ where
             projection: DVector::zeros(m),
             saved_lambda: vec![DVector::zeros(m); settings.max_subdivisions + 1],
             last_velocity: z(),
+            predictor: Predictor {
+                acceleration: z(),
+                dt: 0.0,
+                ended_at: z(),
+                valid: false,
+            },
             dt: 0.0,
             iterations: 0,
             subdivisions: 0,
@@ -223,8 +284,23 @@ where
         dq0: &Vector<N>,
     ) -> Vector<N> {
         sys.lagrangian(q0, dq0, Order::First, &mut self.terms);
-        self.last_velocity.copy_from(dq0);
+        self.predict_from(dq0);
         self.terms.dl_ddq.clone()
+    }
+
+    /// Forgets the steps taken: the next step's predictor starts from `velocity` alone (a step
+    /// then depends only on its own inputs).
+    pub fn predict_from(&mut self, velocity: &Vector<N>) {
+        self.last_velocity.copy_from(velocity);
+        self.predictor.valid = false;
+        self.constraints_known = false;
+    }
+
+    /// [`Self::predict_from`] a zero velocity.
+    pub fn predict_from_rest(&mut self) {
+        self.last_velocity.fill(0.0);
+        self.predictor.valid = false;
+        self.constraints_known = false;
     }
 
     /// Turns the continuous momentum `p(0)` at a constrained start into the discrete one the
@@ -248,10 +324,20 @@ where
         }
     }
 
+    /// `h(q)` and `Dh(q)` into `constraint_terms`, unless they already hold them.
+    fn constraints_at<S: System<N = N>>(&mut self, sys: &mut S, q: &Vector<N>) {
+        if self.constraints_known && self.constraints_at == *q {
+            return;
+        }
+        sys.constraints(q, &self.zero, Order::First, &mut self.constraint_terms);
+        self.constraints_at.copy_from(q);
+        self.constraints_known = true;
+    }
+
     /// Evaluates `Dh(q₁)` for the step from `q₁` (before [`Self::residual`]).
     pub fn prepare<S: System<N = N>>(&mut self, sys: &mut S, q1: &Vector<N>) {
         if self.split.rows > 0 {
-            sys.constraints(q1, &self.zero, Order::First, &mut self.constraint_terms);
+            self.constraints_at(sys, q1);
             self.dh1.copy_from(&self.constraint_terms.dh);
         }
     }
@@ -306,8 +392,8 @@ where
             self.residual[i] = x;
             self.row_scale[i] = scale;
         }
-        if split.rows > 0 {
-            sys.constraints(q2, &self.zero, Order::First, &mut self.constraint_terms);
+        if self.split.rows > 0 {
+            self.constraints_at(sys, q2);
         }
         if jacobian {
             // ∂r/∂q₂ = D₂D₁L_d (eq. (26)) + ∂f⁻/∂q₂, ∂f⁻/∂q₂ = wΔt(α ∂F/∂q + ∂F/∂q̇ /Δt).
@@ -331,7 +417,7 @@ where
                 }
             }
             // Kinematic variables are not unknowns: identity rows and columns.
-            for &k in &split.kinematic {
+            for &k in &self.split.kinematic {
                 for i in 0..n {
                     jac[k * n + i] = 0.0;
                     jac[i * n + k] = 0.0;
@@ -552,9 +638,16 @@ where
     {
         let (step, t, dt) = (cx.index, cx.t, cx.dt);
         self.prepare(cx.sys, q);
-        // Predict q_{k+1} = q_k + Δt v_last; kinematic entries from their prescription.
+        // Predict q_{k+1}: the average velocities of the last two steps extrapolated
+        // (q_k + Δt(2v_k − v_{k−1}) at a constant Δt, an error O(Δt³), so one exact Newton
+        // iteration usually converges); kinematic entries from their prescription.
+        let continuing = self.predictor.continues_at(q);
         q_next.copy_from(q);
         q_next.axpy(dt, &self.last_velocity, 1.0);
+        if continuing {
+            let lead = 0.5 * (self.predictor.dt + dt) * dt;
+            q_next.axpy(lead, &self.predictor.acceleration, 1.0);
+        }
         for &i in &self.split.kinematic {
             q_next[i] = cx.motion.kinematic(i, t + dt)[0];
         }
@@ -668,8 +761,11 @@ where
         p.copy_from(p2);
         // F·(q₂ − q₁) = Δt F·v: the work of the model's forces over the step.
         self.dissipated -= dt * self.terms.force.dot(&self.velocity);
+        self.predictor
+            .record(continuing, dt, &self.last_velocity, &self.velocity);
         self.last_velocity.copy_from(&self.velocity);
         std::mem::swap(q, q_next);
+        self.predictor.ended_at.copy_from(q);
         Ok(())
     }
 
@@ -738,7 +834,7 @@ where
             None,
         );
         if self.split.rows > 0 {
-            sys.constraints(q, &self.zero, Order::First, &mut self.constraint_terms);
+            self.constraints_at(sys, q);
         }
         self.reduced.solve(
             sys,

@@ -10,7 +10,7 @@ use crate::error::SimError;
 use crate::kernel::{self, Kernel};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
-use crate::sweeps::{self, Workspace};
+use crate::sweeps::{self, Reach, Workspace};
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
@@ -63,7 +63,13 @@ impl TreeSystem {
     pub fn frame_velocities(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<FrameVelocity> {
         let plan = &self.full_plan;
         let mut ws = Workspace::new(plan);
-        sweeps::forward(plan, &mut ws, q.as_slice(), dq.as_slice(), true);
+        sweeps::forward(
+            plan,
+            &mut ws,
+            q.as_slice(),
+            dq.as_slice(),
+            Reach::Everything,
+        );
         (0..plan.frames.len())
             .map(|k| {
                 let f = &plan.frames[k];

@@ -166,7 +166,13 @@ impl System for PaperSystem {
         let (q, dq) = (q.as_slice(), dq.as_slice());
         match self.evaluation {
             PaperEvaluation::Cached => {
-                sweeps::forward(&self.plan, &mut self.ws, q, dq, false);
+                sweeps::forward(
+                    &self.plan,
+                    &mut self.ws,
+                    q,
+                    dq,
+                    sweeps::Reach::Lagrangian(Order::Full),
+                );
                 self.second_order_caches(order);
                 self.accumulate_cached(order, out);
             }
