@@ -147,8 +147,10 @@ enum Command {
         /// VI Newton tolerance: each residual row relative to its momentum scale.
         #[arg(long, default_value = "1e-12")]
         newton_tol: f64,
-        /// VI Newton Jacobian: re-evaluated every iteration (exact Newton) or once per step.
-        #[arg(long, value_enum, default_value = "every-iteration")]
+        /// VI Newton Jacobian: exact, evaluated and factored once per step at the predicted
+        /// point and reused while the residual at least halves (a chord iteration), or
+        /// re-evaluated every iteration (plain Newton). Both converge to the same tolerance.
+        #[arg(long, value_enum, default_value = "once-per-step")]
         jacobian: JacobianArg,
         /// rk45 relative tolerance.
         #[arg(long, default_value = "1e-8")]
