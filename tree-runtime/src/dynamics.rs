@@ -8,7 +8,7 @@ use tree_model::Motion;
 
 use crate::context::StepContext;
 use crate::error::SimError;
-use crate::linalg::{cholesky_solve, cholesky_substitute};
+use crate::linalg::{cholesky_backward, cholesky_factor, cholesky_forward, cholesky_solve};
 use crate::system::{ConstraintTerms, Matrix, Order, System, Terms, Vector};
 
 /// An external generalized force `u(t, q, q̇)` (joint torques, actuators, …), added to the
@@ -165,8 +165,8 @@ pub(crate) struct ReducedKkt {
     mdd: DMatrix<f64>,
     rhs: DVector<f64>,
     a: DMatrix<f64>,
-    /// `M_dd⁻¹ Dh_dᵀ`, column by column.
-    y: DMatrix<f64>,
+    /// `Z = L⁻¹ Dh_dᵀ` for the Cholesky factor `M_dd = L Lᵀ`, column by column.
+    z: DMatrix<f64>,
     column: DVector<f64>,
     schur: DMatrix<f64>,
     gamma: DVector<f64>,
@@ -178,7 +178,7 @@ impl ReducedKkt {
             mdd: DMatrix::zeros(nd, nd),
             rhs: DVector::zeros(nd),
             a: DMatrix::zeros(m, nd),
-            y: DMatrix::zeros(nd, m),
+            z: DMatrix::zeros(nd, m),
             column: DVector::zeros(nd),
             schur: DMatrix::zeros(m, m),
             gamma: DVector::zeros(m),
@@ -229,7 +229,7 @@ impl ReducedKkt {
                 self.a[(r, c)] = dh[(r, j)];
             }
         }
-        cholesky_solve::<Dyn>(&mut self.mdd, &mut self.rhs).map_err(|(i, pivot)| {
+        cholesky_factor::<Dyn>(&mut self.mdd).map_err(|(i, pivot)| {
             SimError::SingularMassMatrix {
                 step,
                 t,
@@ -237,19 +237,23 @@ impl ReducedKkt {
                 pivot,
             }
         })?;
+        // With M_dd = L Lᵀ, w = L⁻¹ b and Z = L⁻¹ Dh_dᵀ: the Schur complement
+        // Dh_d M_dd⁻¹ Dh_dᵀ = ZᵀZ, Dh_d x_free = Zᵀw, and x_d = L⁻ᵀ(w + Zλ) — forward
+        // substitutions for every column, one backward one for x.
+        let (nd, factor) = (split.dynamic.len(), self.mdd.as_slice());
+        cholesky_forward(factor, nd, self.rhs.as_mut_slice());
         if split.rows > 0 {
-            // Y = M_dd⁻¹ Dh_dᵀ with the factor now in `mdd`.
             for r in 0..split.rows {
                 for (c, v) in self.column.iter_mut().enumerate() {
                     *v = self.a[(r, c)];
                 }
-                cholesky_substitute::<Dyn>(&self.mdd, &mut self.column);
-                self.y.set_column(r, &self.column);
+                cholesky_forward(factor, nd, self.column.as_mut_slice());
+                self.z.set_column(r, &self.column);
             }
-            // (A Y) λ = γ − A x_free, then x_d = x_free + Y λ.
-            self.schur.gemm(1.0, &self.a, &self.y, 0.0);
+            // (ZᵀZ) λ = γ − Zᵀw, then w + Zλ.
+            self.schur.gemm_tr(1.0, &self.z, &self.z, 0.0);
             lambda.copy_from(&self.gamma);
-            lambda.gemv(-1.0, &self.a, &self.rhs, 1.0);
+            lambda.gemv_tr(-1.0, &self.z, &self.rhs, 1.0);
             cholesky_solve::<Dyn>(&mut self.schur, lambda).map_err(|(r, _)| {
                 SimError::SingularConstraints {
                     step,
@@ -257,8 +261,9 @@ impl ReducedKkt {
                     constraint: sys.constraint_name(r).to_string(),
                 }
             })?;
-            self.rhs.gemv(1.0, &self.y, lambda, 1.0);
+            self.rhs.gemv(1.0, &self.z, lambda, 1.0);
         }
+        cholesky_backward(factor, nd, self.rhs.as_mut_slice());
         for (r, &i) in split.dynamic.iter().enumerate() {
             x[i] = self.rhs[r];
         }

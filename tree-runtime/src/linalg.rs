@@ -59,8 +59,13 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     let n = b.len();
-    let a = a.as_slice();
-    let b = b.as_mut_slice();
+    cholesky_forward(a.as_slice(), n, b.as_mut_slice());
+    cholesky_backward(a.as_slice(), n, b.as_mut_slice());
+}
+
+/// Solves `L y = b` for the factor `L` of [`cholesky_factor`] (column-major `n × n` in `a`);
+/// `b` becomes `y`.
+pub fn cholesky_forward(a: &[f64], n: usize, b: &mut [f64]) {
     for j in 0..n {
         let col = &a[j * n..(j + 1) * n];
         b[j] /= col[j];
@@ -69,6 +74,11 @@ where
             b[i] -= col[i] * bj;
         }
     }
+}
+
+/// Solves `Lᵀ x = y` for the factor `L` of [`cholesky_factor`]; `b` (holding `y`) becomes
+/// `x`.
+pub fn cholesky_backward(a: &[f64], n: usize, b: &mut [f64]) {
     for j in (0..n).rev() {
         let col = &a[j * n..(j + 1) * n];
         let mut s = b[j];

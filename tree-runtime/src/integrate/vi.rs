@@ -182,7 +182,10 @@ where
     factors: Matrix<N>,
     pivots: Pivots<N>,
     /// `J⁻¹B`, column by column, for the factor in `factors`.
-    y: DMatrix<f64>,
+    y: Vec<f64>,
+    /// `Dh(q₂)`'s dynamic columns, packed: row r's entry for dynamic variable `c` at
+    /// `r·n_d + c`.
+    c_packed: Vec<f64>,
     column: Vector<N>,
     schur: DMatrix<f64>,
     /// Newton's update of λ.
@@ -242,7 +245,8 @@ where
             jacobian: Matrix::zeros_generic(n, n),
             factors: Matrix::zeros_generic(n, n),
             pivots: Pivots::<N>::zeros_generic(n, nalgebra::U1),
-            y: DMatrix::zeros(n.value(), m),
+            y: vec![0.0; nd * m],
+            c_packed: vec![0.0; nd * m],
             column: z(),
             schur: DMatrix::zeros(m, m),
             dlambda: DVector::zeros(m),
@@ -480,9 +484,7 @@ where
                 column[ci] = self.dt * self.dh1[(s, i)];
             }
             lu_solve_packed(packed, nd, pivots, column);
-            for (ci, &i) in dynamic.iter().enumerate() {
-                self.y[(i, s)] = column[ci];
-            }
+            self.y[s * nd..(s + 1) * nd].copy_from_slice(&column[..nd]);
         }
         Ok(())
     }
@@ -519,23 +521,23 @@ where
             return Ok(());
         }
         // J Δq + B Δλ = −r, C Δq = −h: with z = −J⁻¹r, Δq = z − Y Δλ and (C Y) Δλ = h + C z.
+        // Packed over the dynamic variables (Y by column, C by row), each entry a dot product
+        // of two contiguous slices.
+        let nd = dynamic.len();
         let c = &self.constraint_terms.dh;
         for r in 0..m {
-            for s in 0..m {
-                self.schur[(r, s)] = self
-                    .split
-                    .dynamic
-                    .iter()
-                    .map(|&i| c[(r, i)] * self.y[(i, s)])
-                    .sum();
+            for (ci, &i) in dynamic.iter().enumerate() {
+                self.c_packed[r * nd + ci] = c[(r, i)];
             }
-            self.dlambda[r] = self.constraint_terms.h[r]
-                + self
-                    .split
-                    .dynamic
-                    .iter()
-                    .map(|&i| c[(r, i)] * self.residual[i])
-                    .sum::<f64>();
+        }
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let z = &column[..nd];
+        for r in 0..m {
+            let c_r = &self.c_packed[r * nd..(r + 1) * nd];
+            for s in 0..m {
+                self.schur[(r, s)] = dot(c_r, &self.y[s * nd..(s + 1) * nd]);
+            }
+            self.dlambda[r] = self.constraint_terms.h[r] + dot(c_r, z);
         }
         lu_solve::<Dyn>(&mut self.schur, &mut self.dlambda).map_err(|r| {
             SimError::SingularJacobian {
@@ -544,10 +546,11 @@ where
                 variable: format!("λ of constraint `{}`", sys.constraint_name(r)),
             }
         })?;
-        for &i in &self.split.dynamic {
-            self.residual[i] -= (0..m)
-                .map(|s| self.y[(i, s)] * self.dlambda[s])
-                .sum::<f64>();
+        for s in 0..m {
+            let (y_s, dl) = (&self.y[s * nd..(s + 1) * nd], self.dlambda[s]);
+            for (ci, &i) in dynamic.iter().enumerate() {
+                self.residual[i] -= y_s[ci] * dl;
+            }
         }
         Ok(())
     }
