@@ -46,6 +46,17 @@ where
 }
 
 fn main() {
+    // `cargo bench --bench marionette -- puppet`: only trep's Puppet over 10 s, compiled and
+    // interpreted (what tools/reference/trep_puppet_bench.sh puts beside trep).
+    if std::env::args().any(|a| a == "puppet") {
+        let mut interpreted = TreeSystem::new(&TrepPuppet::model()).expect("valid model");
+        let method = Method::Vi(ViSettings::default());
+        let (c, _) = ten_seconds(&mut TrepPuppet, method);
+        let (i, _) = interpreted_ten_seconds(&mut interpreted, method);
+        println!("compiled_ms {c:.1}");
+        println!("interpreted_ms {i:.1}");
+        return;
+    }
     println!("| 10 s, Δt = 0.01 | compiled [ms] | interpreted [ms] | interpreted / compiled | compiled per step [µs] | interpreted per step [µs] | Newton iterations / step |");
     println!("|---|---:|---:|---:|---:|---:|---:|");
     rows("marionette", &mut Marionette, &Marionette::model());

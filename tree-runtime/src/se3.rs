@@ -259,6 +259,56 @@ impl<S: Scalar> LocalTransform<S> {
         out
     }
 
+    /// [`Self::ad_inverse`] of every twist of `columns`, in place (a frame's Jacobian
+    /// columns, eqs. (7), (10)), the primitive matched once for all of them.
+    #[inline(always)]
+    pub fn ad_inverse_each(&self, columns: &mut [Twist<S>]) {
+        macro_rules! each {
+            ($x:ident => $e:expr) => {
+                for out in columns.iter_mut() {
+                    let $x = *out;
+                    *out = $e;
+                }
+            };
+        }
+        let (c, s, d) = (self.a, self.b, self.a);
+        match self.kind {
+            PrimitiveKind::Tx => {
+                each!(x => [x[0], x[1] + d * x[5], x[2] - d * x[4], x[3], x[4], x[5]])
+            }
+            PrimitiveKind::Ty => {
+                each!(x => [x[0] - d * x[5], x[1], x[2] + d * x[3], x[3], x[4], x[5]])
+            }
+            PrimitiveKind::Tz => {
+                each!(x => [x[0] + d * x[4], x[1] - d * x[3], x[2], x[3], x[4], x[5]])
+            }
+            PrimitiveKind::Rx => each!(x => [
+                x[0],
+                c * x[1] + s * x[2],
+                -s * x[1] + c * x[2],
+                x[3],
+                c * x[4] + s * x[5],
+                -s * x[4] + c * x[5],
+            ]),
+            PrimitiveKind::Ry => each!(x => [
+                c * x[0] - s * x[2],
+                x[1],
+                s * x[0] + c * x[2],
+                c * x[3] - s * x[5],
+                x[4],
+                s * x[3] + c * x[5],
+            ]),
+            PrimitiveKind::Rz => each!(x => [
+                c * x[0] + s * x[1],
+                -s * x[0] + c * x[1],
+                x[2],
+                c * x[3] + s * x[4],
+                -s * x[3] + c * x[4],
+                x[5],
+            ]),
+        }
+    }
+
     /// `Ad_{g(x)⁻¹} X`: a parent-frame twist seen from the child (docs/derivations.md §2,
     /// `v_k = Ad_{g_k⁻¹} v_par + ξ q̇`).
     #[inline(always)]
@@ -705,6 +755,36 @@ impl Pose {
                     + parent.r[i][2] * c::<S>(self.p[2]));
         }
         out
+    }
+
+    /// [`Self::ad_inverse`] of every twist of `src` into `dst`, this pose's form (a pure
+    /// rotation, a pure translation) found once for all of them.
+    pub fn ad_inverse_each<S: Scalar>(&self, src: &[Twist<S>], dst: &mut [Twist<S>]) {
+        let (rotation_free, translation_free) =
+            (self.is_rotation_free(), self.is_translation_free());
+        let p = self.p.map(c::<S>);
+        let r = self.r.map(|row| row.map(c::<S>));
+        let rt = |a: [S; 3]| {
+            [
+                r[0][0] * a[0] + r[1][0] * a[1] + r[2][0] * a[2],
+                r[0][1] * a[0] + r[1][1] * a[1] + r[2][1] * a[2],
+                r[0][2] * a[0] + r[1][2] * a[1] + r[2][2] * a[2],
+            ]
+        };
+        for (out, x) in dst.iter_mut().zip(src) {
+            let w = [x[3], x[4], x[5]];
+            let mut v = [x[0], x[1], x[2]];
+            if !translation_free {
+                let wp = cross(&w, &p);
+                v = [v[0] + wp[0], v[1] + wp[1], v[2] + wp[2]];
+            }
+            *out = if rotation_free {
+                [v[0], v[1], v[2], w[0], w[1], w[2]]
+            } else {
+                let (v, w) = (rt(v), rt(w));
+                [v[0], v[1], v[2], w[0], w[1], w[2]]
+            };
+        }
     }
 
     /// `Ad_{g⁻¹} X = (Rᵀ(v + ω × p), Rᵀω)`.

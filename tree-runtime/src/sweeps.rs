@@ -137,7 +137,6 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             None => (Pose::identity(), zero6(), 0, 0),
         };
         // A folded constant transform comes first: g = C g_k(x).
-        let pre = |x: &Twist<S>| f.pre.as_ref().map_or(*x, |c| c.ad_inverse(x));
         if let Some(c) = &f.pre {
             parent_pose = c.compose_onto(&parent_pose);
             if velocities {
@@ -163,17 +162,13 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
         }
         // Columns of variables above k transport (eqs. (7), (10)); the own ∂v/∂q̇ is ξ_k.
         if velocity_columns {
-            for a in 0..np {
-                ws.jac[kc + a] = local.ad_inverse(&pre(&ws.jac[pc + a]));
-            }
+            transport(&local, f.pre.as_ref(), &mut ws.jac, pc, kc, np);
             if let Some(d) = f.own() {
                 ws.jac[kc + d] = f.kind.twist().map(S::constant);
             }
         }
         if all_columns {
-            for a in 0..np {
-                ws.dv_dq[kc + a] = local.ad_inverse(&pre(&ws.dv_dq[pc + a]));
-            }
+            transport(&local, f.pre.as_ref(), &mut ws.dv_dq, pc, kc, np);
         }
         if f.attached {
             let pose = ws.pose[k];
@@ -184,6 +179,25 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             }
         }
     }
+}
+
+/// A parent's `n` columns at `from` transported into its child's at `to` (`to ≥ from + n`):
+/// `Ad_{g_k⁻¹} Ad_{C⁻¹} X` for the child's primitive `local` after its folded constant `pre`.
+fn transport<S: Scalar>(
+    local: &LocalTransform<S>,
+    pre: Option<&Pose>,
+    columns: &mut [Twist<S>],
+    from: usize,
+    to: usize,
+    n: usize,
+) {
+    let (head, tail) = columns.split_at_mut(to);
+    let dst = &mut tail[..n];
+    match pre {
+        None => dst.copy_from_slice(&head[from..from + n]),
+        Some(c) => c.ad_inverse_each(&head[from..from + n], dst),
+    }
+    local.ad_inverse_each(dst);
 }
 
 /// The inward sweep: each subtree's momentum wrench and first mass moment (and, from
