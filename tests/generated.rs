@@ -288,6 +288,6 @@ fn the_statement_counts_of_the_shipped_models_are_pinned() {
             FreeBody::STATEMENTS,
             Specialised::STATEMENTS,
         ],
-        [19, 92, 7967, 9685, 411, 1221]
+        [17, 85, 6312, 8108, 331, 1103]
     );
 }

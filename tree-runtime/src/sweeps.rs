@@ -17,7 +17,7 @@
 //! their terms from the world point Jacobians of the frames they attach to (`kernel` runs
 //! both).
 
-use tree_model::Joint;
+use tree_model::{Joint, PrimitiveKind};
 
 use crate::order::Order;
 use crate::outputs::{Output, Sink};
@@ -282,6 +282,45 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
     l
 }
 
+/// `b` with `w·[x, ξ] = x·b` for every twist `x` (`ξ` the unit twist of `kind`, `[x, ξ]` as
+/// [`bracket_with_axis`]): `(e × f, e × τ)` for a rotation about `e`, `(0, e × f)` for a
+/// translation along it, `w = (f, τ)`.
+fn bracket_covector<S: Scalar>(w: &Wrench<S>, kind: PrimitiveKind) -> [S; 6] {
+    let (f, tau) = ([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
+    let e = kind.twist();
+    let axis = [e[3] + e[0], e[4] + e[1], e[5] + e[2]].map(S::constant);
+    let ef = cross(&axis, &f);
+    if kind.is_rotation() {
+        let et = cross(&axis, &tau);
+        [ef[0], ef[1], ef[2], et[0], et[1], et[2]]
+    } else {
+        [S::zero(), S::zero(), S::zero(), ef[0], ef[1], ef[2]]
+    }
+}
+
+/// `c` with `ξ·(m^c δ, h × δ) = c·ω` for `δ = γ × ω` (the gravity term of `∂²L/∂q_i∂q_j`):
+/// `m^c (e × γ)` for a translation along `e`, `(e × h) × γ` for a rotation about it.
+fn gravity_covector<S: Scalar>(kind: PrimitiveKind, mc: S, h: &[S; 3], g: &[S; 3]) -> [S; 3] {
+    let e = kind.twist();
+    let axis = [e[3] + e[0], e[4] + e[1], e[5] + e[2]].map(S::constant);
+    if kind.is_rotation() {
+        cross(&cross(&axis, h), g)
+    } else {
+        cross(&axis, g).map(|x| mc * x)
+    }
+}
+
+fn add6<S: Scalar>(a: &[S; 6], b: &[S; 6]) -> [S; 6] {
+    [
+        a[0] + b[0],
+        a[1] + b[1],
+        a[2] + b[2],
+        a[3] + b[3],
+        a[4] + b[4],
+        a[5] + b[5],
+    ]
+}
+
 /// The tree's own Lagrangian terms up to `order` at `(q, q̇)` by the two sweeps (the
 /// elements' follow in [`crate::kernel::evaluate`]).
 pub fn evaluate<S: Scalar>(
@@ -320,32 +359,25 @@ pub fn evaluate<S: Scalar>(
         let ic = &ws.inertia[fk];
         let y = ic.column(kind);
         let z = ic.times(&dv_own);
+        // The brackets and the gravity term of eq. (17) are linear in the column: `w·[x, ξ_j]
+        // = x·b` and `ξ_j·(m^c δ, h × δ) = c·ω(x)` with `δ = γ_f × ω(x)`, so each entry is a
+        // dot product with a covector formed once per variable.
+        let zb = add6(&z, &bracket_covector(&w, kind));
+        let c = (order >= Order::Full).then(|| gravity_covector(kind, mc, &h, &g));
         for a in 0..=own {
             let i = plan.vars[f.var_start + a];
             let ja = ws.jac[kc + a];
             let dva = ws.dv_dq[kc + a];
             let mij = dot(&ja, &y);
             out.set(Output::Mass(i, j), mij);
-            let mut x = dot(&z, &ja);
             if a < own {
                 out.set(Output::Mass(j, i), mij);
-                x += dot(&w, &bracket_with_axis(&ja, kind));
                 out.set(Output::D2lDdqDq(j, i), dot(&dva, &y));
             }
-            out.set(Output::D2lDdqDq(i, j), x);
-            if order >= Order::Full {
-                let delta = cross(&g, &[ja[3], ja[4], ja[5]]);
-                let hd = cross(&h, &delta);
-                let gw = [
-                    mc * delta[0],
-                    mc * delta[1],
-                    mc * delta[2],
-                    hd[0],
-                    hd[1],
-                    hd[2],
-                ];
-                let x =
-                    dot(&z, &dva) + dot(&w, &bracket_with_axis(&dva, kind)) + component(&gw, kind);
+            // ξ_j·b = 0, so the own column (ja = ξ_j) needs no case of its own.
+            out.set(Output::D2lDdqDq(i, j), dot(&ja, &zb));
+            if let Some(c) = &c {
+                let x = dot(&dva, &zb) + c[0] * ja[3] + c[1] * ja[4] + c[2] * ja[5];
                 out.set(Output::D2lDqDq(i, j), x);
                 if a < own {
                     out.set(Output::D2lDqDq(j, i), x);
