@@ -11,14 +11,17 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use tree_mech::control::{solve_task, TaskOptions, TaskSolver};
-use tree_mech::integrate::{Forcing, InputSchedule, Method, SimOptions, Tolerance, ViSettings};
+use tree_mech::integrate::{
+    Forcing, InputSchedule, Method, MidpointVi, SimOptions, StepContext, StepInput, StepOutput,
+    Tolerance, ViSettings,
+};
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
-use tree_mech::runtime::evaluation::evaluate_state;
+use tree_mech::runtime::evaluation::{evaluate_state, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
-use tree_mech::runtime::Vector;
-use tree_mech::{SimError, Trajectory as CoreTrajectory, TreeSystem};
+use tree_mech::runtime::{Order, Vector};
+use tree_mech::{SimError, System, Trajectory as CoreTrajectory, TreeSystem};
 
 pyo3::create_exception!(
     _native,
@@ -376,7 +379,7 @@ impl Model {
 
     /// Everything at one state (the keys of `tree-mech eval`): L, energy, dL_dq, dL_ddq, M,
     /// d2L_ddqdq, d2L_dqdq, qdd (dynamic variables), lambda, h, dh_dq, poses (frame → 4×4).
-    #[pyo3(signature = (q=None, dq=None, t=0.0, u=None))]
+    #[pyo3(signature = (q=None, dq=None, t=0.0, u=None, ddq=None))]
     fn evaluate<'py>(
         &self,
         py: Python<'py>,
@@ -384,12 +387,21 @@ impl Model {
         dq: Option<PyArrayLike1<f64, AllowTypeChange>>,
         t: f64,
         u: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        ddq: Option<PyArrayLike1<f64, AllowTypeChange>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
         let u: Vec<f64> = u.map_or_else(Vec::new, |u| u.as_array().to_vec());
         let mut sys = self.sys.lock().expect("no panic holds the lock");
-        let e = evaluate_state(&mut *sys, t, &q, &dq, &u).map_err(|e| sim_error(py, &e))?;
+        let e = match ddq {
+            None => evaluate_state(&mut *sys, t, &q, &dq, &u),
+            Some(ddq) => {
+                let ddq = self.vector("ddq", Some(ddq), |_| 0.0)?;
+                let mut given = given_kinematics(&q, &dq, &ddq);
+                evaluate_state_with(&mut *sys, t, &q, &dq, &u, &mut given)
+            }
+        }
+        .map_err(|e| sim_error(py, &e))?;
         let out = PyDict::new(py);
         let square = |m: &tree_mech::runtime::Matrix<Dyn>| {
             DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
@@ -418,6 +430,12 @@ impl Model {
             poses.set_item(&f.name, matrix(py, &DMatrix::from_fn(4, 4, |i, j| m[i][j])))?;
         }
         out.set_item("poses", poses)?;
+        let velocities = PyDict::new(py);
+        let full = &sys.frame_velocities(&q, &dq);
+        for (f, (v, _)) in self.model.frames.iter().zip(full) {
+            velocities.set_item(&f.name, vector(py, v))?;
+        }
+        out.set_item("body_velocities", velocities)?;
         Ok(out)
     }
 
@@ -499,7 +517,7 @@ impl Model {
     /// under `vi` (trep's names: `q2_dq1` …, `lambda1` = −Δt λ; with `second_order`, trep's
     /// 30 second derivatives as (output, input₁, input₂)) or, with `integrator` "rk4" or
     /// "rk45", under that key (`x2_dx1`, `x2_du1` on (q_d, q̇_d)).
-    #[pyo3(signature = (q=None, dq=None, u=None, t=0.0, dt=None, p=None, integrator="vi", forcing="split", alpha=0.5, second_order=false))]
+    #[pyo3(signature = (q=None, dq=None, u=None, t=0.0, dt=None, p=None, integrator="vi", forcing="split", alpha=0.5, second_order=false, ddq=None))]
     #[allow(clippy::too_many_arguments)]
     fn linearize<'py>(
         &self,
@@ -514,7 +532,11 @@ impl Model {
         forcing: &str,
         alpha: f64,
         second_order: bool,
+        ddq: Option<PyArrayLike1<f64, AllowTypeChange>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let ddq = ddq
+            .map(|a| self.vector("ddq", Some(a), |_| 0.0))
+            .transpose()?;
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
         let inputs = self.model.inputs.len();
@@ -550,7 +572,13 @@ impl Model {
         };
         let mut sys = self.system();
         let r = py
-            .detach(move || report::linearize(&mut sys, &q, &dq, &request))
+            .detach(move || match ddq {
+                None => report::linearize(&mut sys, &q, &dq, &request),
+                Some(ddq) => {
+                    let mut given = given_kinematics(&q, &dq, &ddq);
+                    report::linearize_with(&mut sys, &q, &dq, &request, &mut given)
+                }
+            })
             .map_err(|e| sim_error(py, &e))?;
         let out = PyDict::new(py);
         out.set_item("variables", self.names())?;
@@ -742,6 +770,258 @@ impl Model {
     }
 }
 
+/// The midpoint VI one step at a time with everything given by the caller — `q₁` (the
+/// kinematic entries too), the dynamic momenta `p₁`, the inputs `u₁` and the kinematic values
+/// `k₂` at `t₂` — as trep's `MidpointVI` steps (forcing `left`, trep's, by default). The
+/// workspace is kept between steps; the GIL is released while a step runs.
+#[pyclass(module = "tree_mech")]
+struct VariationalStepper {
+    sys: TreeSystem,
+    vi: MidpointVi<Dyn>,
+    dynamic: Vec<usize>,
+    kinematic: Vec<usize>,
+    /// The last step's `q₂`: a step from it keeps the VI's predictor history.
+    last: Vec<f64>,
+}
+
+#[pymethods]
+impl VariationalStepper {
+    #[new]
+    #[pyo3(signature = (model, forcing="left", tolerance=None))]
+    fn new(model: &Model, forcing: &str, tolerance: Option<f64>) -> PyResult<Self> {
+        let forcing = match forcing {
+            "left" => Forcing::Left,
+            "split" => Forcing::Split,
+            other => {
+                return Err(bad(format!(
+                    "forcing must be `left` or `split`, got `{other}`"
+                )))
+            }
+        };
+        let mut settings = ViSettings {
+            forcing,
+            max_subdivisions: 0,
+            ..ViSettings::default()
+        };
+        if let Some(tol) = tolerance {
+            if !(tol > 0.0 && tol.is_finite()) {
+                return Err(bad(format!(
+                    "the tolerance must be a positive number, got {tol}"
+                )));
+            }
+            settings.tolerance = tol;
+        }
+        let sys = model.system();
+        let vi = MidpointVi::new(&sys, settings);
+        let n = model.n();
+        Ok(VariationalStepper {
+            dynamic: (0..n).filter(|&i| !sys.is_kinematic(i)).collect(),
+            kinematic: (0..n).filter(|&i| sys.is_kinematic(i)).collect(),
+            sys,
+            vi,
+            last: Vec::new(),
+        })
+    }
+
+    /// One step from `(t1, q1, p1)` to `t2` with inputs `u1` and kinematic values `k2` (model
+    /// order); `lam` is Newton's first guess for λ. Returns `(q2, p2, lam, iterations,
+    /// derivatives)`: `q2` every variable, `p2` the dynamic momenta, `lam` this integrator's
+    /// multipliers (forces; trep's `lambda1` is `−Δt` times them for its own row scaling),
+    /// and with `order` 1 or 2 a dict of the step's derivatives under trep's names (q2_dq1 …,
+    /// lambda1_* with the `−Δt` scaling), second ones as (output, input₁, input₂) stacks.
+    #[pyo3(signature = (t1, q1, p1, t2, u1, k2, lam, order=0))]
+    #[allow(clippy::too_many_arguments)]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        t1: f64,
+        q1: PyArrayLike1<f64, AllowTypeChange>,
+        p1: PyArrayLike1<f64, AllowTypeChange>,
+        t2: f64,
+        u1: PyArrayLike1<f64, AllowTypeChange>,
+        k2: PyArrayLike1<f64, AllowTypeChange>,
+        lam: PyArrayLike1<f64, AllowTypeChange>,
+        order: u8,
+    ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+        let n = self.sys.dof();
+        let (nd, nk, m) = (
+            self.dynamic.len(),
+            self.kinematic.len(),
+            self.sys.constraint_count(),
+        );
+        let (q1, p1, u1, k2, lam) = (
+            q1.as_array().to_vec(),
+            p1.as_array().to_vec(),
+            u1.as_array().to_vec(),
+            k2.as_array().to_vec(),
+            lam.as_array().to_vec(),
+        );
+        let sizes = [
+            ("q1", q1.len(), n),
+            ("p1", p1.len(), nd),
+            ("u1", u1.len(), self.sys.input_count()),
+            ("k2", k2.len(), nk),
+            ("lambda", lam.len(), m),
+        ];
+        if let Some((what, got, want)) = sizes.iter().find(|(_, got, want)| got != want) {
+            return Err(bad(format!(
+                "{what} has {got} entries; the step needs {want}"
+            )));
+        }
+        let dt = t2 - t1;
+        if !(dt > 0.0 && dt.is_finite() && t1.is_finite()) {
+            return Err(bad(format!(
+                "t2 must come after t1 (got t1 = {t1}, t2 = {t2})"
+            )));
+        }
+        if order > 2 {
+            return Err(bad("order is 0, 1 or 2"));
+        }
+        let (dynamic, kinematic) = (&self.dynamic, &self.kinematic);
+        let continuing = self.last == q1 && order == 0;
+        let (sys, vi) = (&mut self.sys, &mut self.vi);
+        let result = py.detach(|| -> Result<_, SimError> {
+            let q1 = Vector::<Dyn>::from_column_slice(&q1);
+            let mut p = Vector::<Dyn>::zeros(n);
+            for (c, &i) in dynamic.iter().enumerate() {
+                p[i] = p1[c];
+            }
+            let p1v = p.clone();
+            // The kinematic values: q₁'s at t₁, k₂ at t₂ (the step asks for nothing else).
+            let mut k_at = vec![0.0; n];
+            for (c, &i) in kinematic.iter().enumerate() {
+                k_at[i] = k2[c];
+            }
+            let half = t1 + 0.5 * dt;
+            let q1k = q1.clone();
+            let mut motion = move |i: usize, t: f64| {
+                if t > half {
+                    [k_at[i], 0.0, 0.0]
+                } else {
+                    [q1k[i], 0.0, 0.0]
+                }
+            };
+            let mut force = tree_mech::NoForce;
+            let mut cx = StepContext::new(sys, &mut force, &mut motion, dt);
+            cx.u = &u1;
+            vi.lambda.copy_from_slice(&lam);
+            if !continuing {
+                vi.predict_from_rest();
+            }
+            let (mut q2, mut next) = (q1.clone(), q1.clone());
+            vi.step(cx.at(0, t1), &mut q2, &mut p, &mut next)?;
+            let iterations = vi.iterations;
+            let derivatives = match order {
+                0 => None,
+                1 => Some((vi.derivatives(cx.at(0, t1), &q1, &p1v, &q2)?, None)),
+                _ => {
+                    let (first, second) = vi.second_derivatives(cx.at(0, t1), &q1, &p1v, &q2)?;
+                    Some((first, Some(second)))
+                }
+            };
+            Ok((q2, p, vi.lambda.clone(), iterations, derivatives))
+        });
+        let (q2, p2, lambda, iterations, derivatives) = result.map_err(|e| sim_error(py, &e))?;
+        self.last = q2.as_slice().to_vec();
+        let p2: Vec<f64> = self.dynamic.iter().map(|&i| p2[i]).collect();
+        let out = PyDict::new(py);
+        if let Some((first, second)) = derivatives {
+            for of in StepOutput::ALL {
+                let scale = if of == StepOutput::Lambda { -dt } else { 1.0 };
+                for by in StepInput::ALL {
+                    let name = format!("{}_d{}", step_output_name(of), by.name());
+                    out.set_item(name, matrix(py, &(first.block(of, by) * scale)))?;
+                }
+                if let Some(second) = &second {
+                    for (k, &a) in StepInput::ALL.iter().enumerate() {
+                        for &b in &StepInput::ALL[k..] {
+                            let rows: Vec<DMatrix<f64>> =
+                                second.block(of, a, b).iter().map(|h| h * scale).collect();
+                            let name =
+                                format!("{}_d{}d{}", step_output_name(of), a.name(), b.name());
+                            out.set_item(name, entry(py, &Entry::Stack(rows)))?;
+                        }
+                    }
+                }
+            }
+        }
+        (
+            vector(py, q2.as_slice()),
+            vector(py, &p2),
+            vector(py, lambda.as_slice()),
+            iterations,
+            out,
+        )
+            .into_pyobject(py)
+    }
+
+    /// `p₂ = D₂L_d(q₁, q₂) + f⁺` for the step from `(t1, q1)` to `(t2, q2)` (model order; the
+    /// dynamic momenta): how trep's `initialize_from_configs` starts from two configurations.
+    fn momentum<'py>(
+        &mut self,
+        py: Python<'py>,
+        t1: f64,
+        q1: PyArrayLike1<f64, AllowTypeChange>,
+        t2: f64,
+        q2: PyArrayLike1<f64, AllowTypeChange>,
+    ) -> PyResult<Py<PyAny>> {
+        let n = self.sys.dof();
+        let (q1, q2) = (q1.as_array().to_vec(), q2.as_array().to_vec());
+        if q1.len() != n || q2.len() != n {
+            return Err(bad(format!("q1 and q2 need {n} entries each")));
+        }
+        let dt = t2 - t1;
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(bad(format!(
+                "t2 must come after t1 (got t1 = {t1}, t2 = {t2})"
+            )));
+        }
+        let a = self.vi.settings.alpha;
+        let q = Vector::<Dyn>::from_fn(n, |i, _| q1[i] + a * (q2[i] - q1[i]));
+        let v = Vector::<Dyn>::from_fn(n, |i, _| (q2[i] - q1[i]) / dt);
+        let mut terms = tree_mech::runtime::Terms::zeros(Dyn(n));
+        self.sys.lagrangian(&q, &v, Order::First, &mut terms);
+        let plus = match self.vi.settings.forcing {
+            Forcing::Split => a * dt,
+            Forcing::Left => 0.0,
+        };
+        let p: Vec<f64> = self
+            .dynamic
+            .iter()
+            .map(|&i| a * dt * terms.dl_dq[i] + terms.dl_ddq[i] + plus * terms.force[i])
+            .collect();
+        if p.iter().any(|x| !x.is_finite()) {
+            return Err(sim_error(
+                py,
+                &SimError::InvalidInput(
+                    "the momentum is not finite at these configurations".into(),
+                ),
+            ));
+        }
+        Ok(vector(py, &p))
+    }
+}
+
+/// The kinematic variables held at the caller's `(q, q̇, q̈)` (trep's way) instead of the
+/// model's prescription.
+fn given_kinematics(
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    ddq: &Vector<Dyn>,
+) -> impl FnMut(usize, f64) -> [f64; 3] {
+    let (q, dq, ddq) = (q.clone(), dq.clone(), ddq.clone());
+    move |i, _| [q[i], dq[i], ddq[i]]
+}
+
+/// trep's name of a step output.
+fn step_output_name(of: StepOutput) -> &'static str {
+    match of {
+        StepOutput::Q2 => "q2",
+        StepOutput::P2 => "p2",
+        StepOutput::Lambda => "lambda1",
+    }
+}
+
 /// A report entry as a Python value: a float or a numpy array.
 fn entry(py: Python<'_>, e: &Entry) -> Py<PyAny> {
     match e {
@@ -865,6 +1145,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Model>()?;
     m.add_class::<Trajectory>()?;
     m.add_class::<Rollouts>()?;
+    m.add_class::<VariationalStepper>()?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(loads, m)?)?;
     m.add_function(wrap_pyfunction!(optimize_text, m)?)?;

@@ -6,7 +6,7 @@
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 
 use crate::context::StepContext;
-use crate::dynamics::{Dynamics, ModelMotions, NoForce};
+use crate::dynamics::{Dynamics, ModelMotions, NoForce, Prescription};
 use crate::error::SimError;
 use crate::se3::Pose;
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
@@ -31,14 +31,32 @@ where
     pub poses: Vec<Pose>,
 }
 
-/// Evaluates `sys` at `(t, q, q̇)` with inputs `u` (empty: zero). Fails, naming it, when the
-/// dynamics have no solution there or any output is not finite.
+/// Evaluates `sys` at `(t, q, q̇)` with inputs `u` (empty: zero), the kinematic variables'
+/// accelerations from the model's prescription. Fails, naming it, when the dynamics have no
+/// solution there or any output is not finite.
 pub fn evaluate_state<S: System>(
     sys: &mut S,
     t: f64,
     q: &Vector<S::N>,
     dq: &Vector<S::N>,
     u: &[f64],
+) -> Result<Evaluation<S::N>, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let mut motion = ModelMotions::of(sys);
+    evaluate_state_with(sys, t, q, dq, u, &mut motion)
+}
+
+/// [`evaluate_state`] with the kinematic variables' `[q, q̇, q̈]` from `motion` (trep's way:
+/// a closure returning the caller's own values).
+pub fn evaluate_state_with<S: System, P: Prescription>(
+    sys: &mut S,
+    t: f64,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    u: &[f64],
+    motion: &mut P,
 ) -> Result<Evaluation<S::N>, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -60,10 +78,9 @@ where
     }
     let terms = sys.evaluate(q, dq, Order::Full);
     let mut qdd = sys.zero_vector();
-    let mut motion = ModelMotions::of(sys);
     let mut dynamics = Dynamics::new(sys);
     let mut force = NoForce;
-    let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
+    let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
     cx.u = u;
     dynamics
         .acceleration(cx.at(0, t), q, dq, &mut qdd)

@@ -71,12 +71,28 @@ fn name(s: &str, e: Entry) -> (String, Entry) {
     (s.to_string(), e)
 }
 
-/// Linearises `sys` at `(q, q̇)` as `request` says. Errors name the part that failed.
+/// Linearises `sys` at `(q, q̇)` as `request` says, the kinematic variables following the
+/// model's prescription. Errors name the part that failed.
 pub fn linearize<S: System<N = Dyn>>(
     sys: &mut S,
     q: &Vector<Dyn>,
     dq: &Vector<Dyn>,
     request: &Request,
+) -> Result<Report, SimError>
+where
+    DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
+{
+    let mut motion = ModelMotions::of(sys);
+    linearize_with(sys, q, dq, request, &mut motion)
+}
+
+/// [`linearize`] with the kinematic variables' `[q, q̇, q̈]` from `motion`.
+pub fn linearize_with<S: System<N = Dyn>, P: Prescription>(
+    sys: &mut S,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    request: &Request,
+    motion: &mut P,
 ) -> Result<Report, SimError>
 where
     DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
@@ -98,12 +114,11 @@ where
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
     let (mut q, mut dq) = (q.clone(), dq.clone());
     let t = request.t;
-    let mut motion = ModelMotions::of(sys);
     for &k in &kinematic {
         [q[k], dq[k], _] = motion.kinematic(k, t);
     }
     let mut force = NoForce;
-    let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
+    let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
     cx.u = &request.u;
     let d = continuous_derivatives(cx.at(0, t), &q, &dq)
         .map_err(|e| SimError::InvalidInput(format!("at this state, {e}")))?;

@@ -1,0 +1,36 @@
+"""trep 1.0.2's core API on Python 3, computed by tree-mech: change ``import trep`` to
+``from tree_mech import trep`` and a script building a system of frames, configs,
+potentials, forces and constraints, evaluating its Lagrangian and dynamics, and stepping it
+with ``MidpointVI`` runs unchanged. trep is GPL; this is an independent implementation of
+its documented interface (no trep code). What is covered and what is not: the package
+README, "trep on Python 3".
+"""
+from . import constraints, forces, potentials
+from ._core import (
+    CONST_SE3,
+    RX,
+    RY,
+    RZ,
+    TX,
+    TY,
+    TZ,
+    WORLD,
+    Config,
+    Constraint,
+    ConvergenceError,
+    Force,
+    Frame,
+    Input,
+    MidpointVI,
+    Potential,
+    System,
+)
+
+#: The trep release whose API this matches.
+__version__ = "v1.0.2"
+
+__all__ = [
+    "CONST_SE3", "RX", "RY", "RZ", "TX", "TY", "TZ", "WORLD", "Config", "Constraint",
+    "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "System",
+    "constraints", "forces", "potentials", "__version__",
+]

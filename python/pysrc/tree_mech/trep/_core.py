@@ -1,0 +1,1093 @@
+"""The trep layer's core: a trep-style system of frames, configs, potentials, forces,
+constraints and inputs, written as a tree-mech model and evaluated by the Rust runtime.
+
+trep's conventions kept here: configuration vectors list the dynamic configs, then the
+kinematic ones, each in creation order (``Config.index``; ``Config.k_index`` among the
+kinematic); matrices are indexed (output, input); a distance constraint is ``|d| − ℓ`` and
+its multiplier is scaled to match (tree-mech writes ``d·d − ℓ²``, whose gradient is ``2|d|``
+times trep's). The model is rebuilt whenever the structure changes (a frame, config,
+potential, force, input or constraint added, a mass or a constant changed).
+"""
+from __future__ import annotations
+
+import json
+from typing import Any, Dict, List, Optional, Sequence, Union
+
+import numpy as np
+
+from .. import _native
+
+WORLD = "world"
+TX, TY, TZ, RX, RY, RZ = "tx", "ty", "tz", "rx", "ry", "rz"
+CONST_SE3 = "const_se3"
+_PRIMITIVES = (TX, TY, TZ, RX, RY, RZ)
+
+
+class ConvergenceError(Exception):
+    """The midpoint VI's Newton iteration did not converge (or met a singular Jacobian)."""
+
+
+def _toml_string(s: str) -> str:
+    return json.dumps(s)
+
+
+class Config:
+    """A configuration variable: a frame's parameter or, for a distance constraint given a
+    name, the constraint's kinematic length. ``index`` is its place in ``System.configs``
+    (dynamic configs first), ``k_index`` its place among the kinematic ones (or -1)."""
+
+    def __init__(self, system: "System", name: str, kinematic: bool = False,
+                 frame: Optional["Frame"] = None):
+        if name in system._config_names():
+            raise ValueError(f"a config named `{name}` already exists")
+        self._system = system
+        self._name = name
+        self._kinematic = bool(kinematic)
+        self._frame = frame
+        self.index = -1
+        self.k_index = -1
+        system._configs_created.append(self)
+        system._structure_changed()
+
+    def __repr__(self) -> str:
+        kind = "kinematic" if self.kinematic else "dynamic"
+        return f"<Config {self.name!r} {kind} index={self.index}>"
+
+    @property
+    def name(self) -> str:
+        return self._name
+
+    @property
+    def system(self) -> "System":
+        return self._system
+
+    @property
+    def kinematic(self) -> bool:
+        return self._kinematic
+
+    @property
+    def frame(self) -> Optional["Frame"]:
+        return self._frame
+
+    @property
+    def q(self) -> float:
+        return float(self._system._q[self.index])
+
+    @q.setter
+    def q(self, value: float) -> None:
+        self._system._q[self.index] = value
+        self._system._state_changed()
+
+    @property
+    def dq(self) -> float:
+        return float(self._system._dq[self.index])
+
+    @dq.setter
+    def dq(self, value: float) -> None:
+        self._system._dq[self.index] = value
+        self._system._state_changed()
+
+    @property
+    def ddq(self) -> float:
+        return float(self._system._ddq[self.index])
+
+    @ddq.setter
+    def ddq(self, value: float) -> None:
+        self._system._ddq[self.index] = value
+        self._system._state_changed()
+
+
+class Frame:
+    """A coordinate frame: ``Frame(parent, trep.TX…trep.RZ, value or config name, name=,
+    kinematic=, mass=)``. A number is a constant transform; a name makes a config (kinematic
+    when ``kinematic=True``). ``mass`` is a number or ``(m, Ixx, Iyy, Izz)``."""
+
+    def __init__(self, parent: Union["Frame", str, None], transform: str, param: Any,
+                 name: Optional[str] = None, kinematic: bool = False, mass: Any = 0.0):
+        if transform == WORLD:
+            raise ValueError("the world frame is made by System; give frames a parent")
+        if transform == CONST_SE3:
+            raise NotImplementedError(
+                "trep.CONST_SE3 frames are not supported by tree_mech.trep; "
+                "compose TX…RZ frames with constant values instead")
+        if transform not in _PRIMITIVES:
+            raise ValueError(f"transform must be one of trep.TX … trep.RZ, got {transform!r}")
+        if isinstance(parent, str):
+            raise TypeError("a Frame's parent is a Frame (use system.get_frame(name))")
+        if not isinstance(parent, Frame):
+            raise TypeError("a Frame needs a parent Frame (system.world_frame at the root)")
+        system = parent.system
+        self._system = system
+        self._parent = parent
+        self._children: List[Frame] = []
+        self._transform = transform
+        self._mass = 0.0
+        self._inertia = (0.0, 0.0, 0.0)
+        self._config: Optional[Config] = None
+        self._value = 0.0
+        self._name = name
+        if name is not None and system._frame_named(name) is not None:
+            raise ValueError(f"a frame named `{name}` already exists")
+        parent._children.append(self)
+        system._hold()
+        try:
+            system._frames_created.append(self)
+            if isinstance(param, str):
+                self._config = Config(system, param, kinematic, frame=self)
+            else:
+                self._value = float(param)
+            if isinstance(mass, (tuple, list)):
+                self.set_mass(*mass)
+            elif mass:
+                self.set_mass(mass)
+        finally:
+            system._release()
+
+    def __repr__(self) -> str:
+        what = self._config.name if self._config else self._value
+        return f"<Frame {self.name!r} {self._transform}({what})>"
+
+    @property
+    def system(self) -> "System":
+        return self._system
+
+    @property
+    def name(self) -> Optional[str]:
+        return self._name
+
+    @property
+    def parent(self) -> Optional["Frame"]:
+        return self._parent
+
+    @property
+    def children(self) -> tuple:
+        return tuple(self._children)
+
+    @property
+    def config(self) -> Optional[Config]:
+        return self._config
+
+    @property
+    def transform_type(self) -> str:
+        return self._transform
+
+    @property
+    def transform_value(self) -> float:
+        return self._config.q if self._config else self._value
+
+    @transform_value.setter
+    def transform_value(self, value: float) -> None:
+        if self._config:
+            self._config.q = value
+        else:
+            self._value = float(value)
+            self._system._structure_changed()
+
+    @property
+    def mass(self) -> float:
+        return self._mass
+
+    @mass.setter
+    def mass(self, value: float) -> None:
+        self.set_mass(value, *self._inertia)
+
+    @property
+    def Ixx(self) -> float:
+        return self._inertia[0]
+
+    @property
+    def Iyy(self) -> float:
+        return self._inertia[1]
+
+    @property
+    def Izz(self) -> float:
+        return self._inertia[2]
+
+    def set_mass(self, mass: float, Ixx: float = 0.0, Iyy: float = 0.0,
+                 Izz: float = 0.0) -> None:
+        """A rigid body at this frame's origin: mass and principal moments in its axes."""
+        self._mass = float(mass)
+        self._inertia = (float(Ixx), float(Iyy), float(Izz))
+        self._system._structure_changed()
+
+    def uses_config(self, q: Config) -> bool:
+        """Whether this frame moves with config ``q``."""
+        f: Optional[Frame] = self
+        while f is not None and f is not self._system.world_frame:
+            if f._config is q:
+                return True
+            f = f._parent
+        return False
+
+    def g(self) -> np.ndarray:
+        """The frame's pose in the world (4×4)."""
+        if self is self._system.world_frame:
+            return np.eye(4)
+        return self._system._state()["poses"][self._system._frame_key(self)].copy()
+
+    def p(self) -> np.ndarray:
+        """The frame's origin in the world, homogeneous ``[x, y, z, 1]``."""
+        return self.g()[:, 3].copy()
+
+    def vb(self) -> np.ndarray:
+        """The body velocity in se(3) (4×4: ω̂ and v)."""
+        if self is self._system.world_frame:
+            return np.zeros((4, 4))
+        v = self._system._state()["body_velocities"][self._system._frame_key(self)]
+        w = v[3:]
+        out = np.zeros((4, 4))
+        out[:3, :3] = [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]
+        out[:3, 3] = v[:3]
+        return out
+
+
+class _World(Frame):
+    def __init__(self, system: "System"):
+        self._system = system
+        self._parent = None
+        self._children = []
+        self._transform = WORLD
+        self._mass = 0.0
+        self._inertia = (0.0, 0.0, 0.0)
+        self._config = None
+        self._value = 0.0
+        self._name = "World"
+
+    def __repr__(self) -> str:
+        return "<Frame 'World'>"
+
+
+class Input:
+    """An input: one entry of ``System.u`` (trep's finput), ``index`` its place."""
+
+    def __init__(self, system: "System", name: Optional[str]):
+        self._system = system
+        self.name = name if name is not None else f"input{len(system._inputs) + 1}"
+        self.index = len(system._inputs)
+        system._inputs.append(self)
+
+    @property
+    def system(self) -> "System":
+        return self._system
+
+    @property
+    def u(self) -> float:
+        return float(self._system._u[self.index])
+
+    @u.setter
+    def u(self, value: float) -> None:
+        self._system._u[self.index] = value
+        self._system._state_changed()
+
+    def __repr__(self) -> str:
+        return f"<Input {self.name!r}>"
+
+
+class System:
+    """A trep system over tree-mech: frames from ``world_frame`` out, configs, potentials,
+    forces, inputs and constraints; state ``q``, ``dq``, ``ddq`` (kinematic accelerations are
+    given, dynamic ones computed by ``f()``), ``u`` and ``t``."""
+
+    def __init__(self) -> None:
+        self._frames_created: List[Frame] = []
+        self._configs_created: List[Config] = []
+        self._potentials: List[Any] = []
+        self._forces: List[Any] = []
+        self._inputs: List[Input] = []
+        self._constraints: List[Any] = []
+        self._holds = 0
+        self._q = np.zeros(0)
+        self._dq = np.zeros(0)
+        self._ddq = np.zeros(0)
+        self._u = np.zeros(0)
+        self.t = 0.0
+        self._configs: tuple = ()
+        self._model: Optional[_native.Model] = None
+        self._cache: Dict[str, Any] = {}
+        self._world = _World(self)
+
+    def __repr__(self) -> str:
+        return (f"<System {self.nQ} configs, {len(self.frames)} frames, "
+                f"{len(self._potentials)} potentials, {self.nc} constraints, "
+                f"{len(self._forces)} forces, {self.nu} inputs>")
+
+    # Structure ----------------------------------------------------------------------
+    def _hold(self) -> None:
+        self._holds += 1
+
+    def _release(self) -> None:
+        self._holds -= 1
+        if self._holds == 0:
+            self._structure_changed()
+
+    def hold_structure_changes(self) -> None:
+        """Defer the updates a structure change causes until ``resume_structure_changes``."""
+        self._hold()
+
+    def resume_structure_changes(self) -> None:
+        """Undo one ``hold_structure_changes``; the last one applies the changes."""
+        if self._holds == 0:
+            raise RuntimeError("resume_structure_changes without hold_structure_changes")
+        self._release()
+
+    def _structure_changed(self) -> None:
+        self._model = None
+        self._cache = {}
+        if self._holds:
+            return
+        # Keep each config's state across the renumbering.
+        old = {c.name: (self._q[c.index], self._dq[c.index], self._ddq[c.index])
+               for c in self._configs if 0 <= c.index < len(self._q)}
+        dyn = [c for c in self._configs_created if not c.kinematic]
+        kin = [c for c in self._configs_created if c.kinematic]
+        self._configs = tuple(dyn + kin)
+        for i, c in enumerate(self._configs):
+            c.index = i
+            c.k_index = i - len(dyn) if c.kinematic else -1
+        n = len(self._configs)
+        self._q, self._dq, self._ddq = np.zeros(n), np.zeros(n), np.zeros(n)
+        for c in self._configs:
+            if c.name in old:
+                self._q[c.index], self._dq[c.index], self._ddq[c.index] = old[c.name]
+        u = self._u
+        self._u = np.zeros(len(self._inputs))
+        self._u[: min(len(u), len(self._u))] = u[: len(self._u)]
+
+    def _state_changed(self) -> None:
+        self._cache = {}
+
+    def _config_names(self) -> List[str]:
+        return [c.name for c in self._configs_created]
+
+    def _frame_named(self, name: str) -> Optional[Frame]:
+        if name == "World":
+            return self._world
+        for f in self._frames_created:
+            if f.name == name:
+                return f
+        return None
+
+    def _frame_key(self, frame: Frame) -> str:
+        return frame.name if frame.name is not None else \
+            f"frame_{self._frames_created.index(frame) + 1}"
+
+    # Lookups ------------------------------------------------------------------------
+    @property
+    def world_frame(self) -> Frame:
+        return self._world
+
+    @property
+    def frames(self) -> tuple:
+        return (self._world,) + tuple(self._frames_created)
+
+    @property
+    def configs(self) -> tuple:
+        return self._configs
+
+    @property
+    def dyn_configs(self) -> tuple:
+        return tuple(c for c in self._configs if not c.kinematic)
+
+    @property
+    def kin_configs(self) -> tuple:
+        return tuple(c for c in self._configs if c.kinematic)
+
+    @property
+    def potentials(self) -> tuple:
+        return tuple(self._potentials)
+
+    @property
+    def forces(self) -> tuple:
+        return tuple(self._forces)
+
+    @property
+    def inputs(self) -> tuple:
+        return tuple(self._inputs)
+
+    @property
+    def constraints(self) -> tuple:
+        return tuple(self._constraints)
+
+    @property
+    def masses(self) -> tuple:
+        return tuple(f for f in self._frames_created if f.mass or any(f._inertia))
+
+    @property
+    def nQ(self) -> int:
+        return len(self._configs)
+
+    @property
+    def nQd(self) -> int:
+        return len(self.dyn_configs)
+
+    @property
+    def nQk(self) -> int:
+        return len(self.kin_configs)
+
+    @property
+    def nu(self) -> int:
+        return len(self._inputs)
+
+    @property
+    def nc(self) -> int:
+        return len(self._constraints)
+
+    @staticmethod
+    def _find(items: Sequence[Any], what: str, identifier: Any) -> Any:
+        for i, x in enumerate(items):
+            if x is identifier or getattr(x, "name", None) == identifier or i == identifier \
+                    and isinstance(identifier, int) and not isinstance(identifier, bool):
+                return x
+        raise KeyError(f"no {what} {identifier!r} in the system")
+
+    def get_frame(self, identifier: Any) -> Frame:
+        if isinstance(identifier, Frame):
+            return identifier
+        f = self._frame_named(identifier) if isinstance(identifier, str) else None
+        if f is None:
+            raise KeyError(f"no frame {identifier!r} in the system")
+        return f
+
+    def get_config(self, identifier: Any) -> Config:
+        return self._find(self._configs, "config", identifier)
+
+    def get_potential(self, identifier: Any) -> Any:
+        return self._find(self._potentials, "potential", identifier)
+
+    def get_constraint(self, identifier: Any) -> Any:
+        return self._find(self._constraints, "constraint", identifier)
+
+    def get_force(self, identifier: Any) -> Any:
+        return self._find(self._forces, "force", identifier)
+
+    def get_input(self, identifier: Any) -> Input:
+        return self._find(self._inputs, "input", identifier)
+
+    # State ----------------------------------------------------------------------------
+    def _set(self, target: np.ndarray, value: Any, configs: Sequence[Config]) -> None:
+        if isinstance(value, dict):
+            for k, v in value.items():
+                target[self.get_config(k).index] = v
+        else:
+            v = np.asarray(value, dtype=float).reshape(-1)
+            if len(v) != len(configs):
+                raise ValueError(f"expected {len(configs)} values, got {len(v)}")
+            target[[c.index for c in configs]] = v
+        self._state_changed()
+
+    q = property(lambda self: self._q.copy(),
+                 lambda self, v: self._set(self._q, v, self._configs))
+    dq = property(lambda self: self._dq.copy(),
+                  lambda self, v: self._set(self._dq, v, self._configs))
+    ddq = property(lambda self: self._ddq.copy(),
+                   lambda self, v: self._set(self._ddq, v, self._configs))
+    qd = property(lambda self: self._q[: self.nQd].copy(),
+                  lambda self, v: self._set(self._q, v, self.dyn_configs))
+    dqd = property(lambda self: self._dq[: self.nQd].copy(),
+                   lambda self, v: self._set(self._dq, v, self.dyn_configs))
+    ddqd = property(lambda self: self._ddq[: self.nQd].copy(),
+                    lambda self, v: self._set(self._ddq, v, self.dyn_configs))
+    qk = property(lambda self: self._q[self.nQd:].copy(),
+                  lambda self, v: self._set(self._q, v, self.kin_configs))
+    dqk = property(lambda self: self._dq[self.nQd:].copy(),
+                   lambda self, v: self._set(self._dq, v, self.kin_configs))
+    ddqk = property(lambda self: self._ddq[self.nQd:].copy(),
+                    lambda self, v: self._set(self._ddq, v, self.kin_configs))
+
+    @property
+    def u(self) -> np.ndarray:
+        return self._u.copy()
+
+    @u.setter
+    def u(self, value: Any) -> None:
+        v = np.asarray(value, dtype=float).reshape(-1)
+        if len(v) != self.nu:
+            raise ValueError(f"expected {self.nu} inputs, got {len(v)}")
+        self._u[:] = v
+        self._state_changed()
+
+    def set_state(self, q: Any = None, dq: Any = None, u: Any = None, ddqk: Any = None,
+                  t: Optional[float] = None) -> None:
+        """Sets any of q, dq, u, ddqk and t at once."""
+        if q is not None:
+            self.q = q
+        if dq is not None:
+            self.dq = dq
+        if u is not None:
+            self.u = u
+        if ddqk is not None:
+            self.ddqk = ddqk
+        if t is not None:
+            self.t = t
+            self._state_changed()
+
+    # The model ----------------------------------------------------------------------
+    def _toml(self) -> str:
+        gravity = [0.0, 0.0, 0.0]
+        for p in self._potentials:
+            if isinstance(p, _Gravity):
+                gravity = [a + b for a, b in zip(gravity, p.gravity)]
+        out = ['name = "trep"', f"gravity = {json.dumps([float(g) for g in gravity])}", ""]
+        if any(self._world in c._frames() for c in self._constraints):
+            # A constraint on the world frame attaches to a fixed frame at the origin.
+            out += ["[[frame]]", 'name = "World"', "tx = 0.0", ""]
+        for f in self._frames_created:
+            out.append("[[frame]]")
+            out.append(f"name = {_toml_string(self._frame_key(f))}")
+            if f.parent is not self._world:
+                out.append(f"parent = {_toml_string(self._frame_key(f.parent))}")
+            value = _toml_string(f.config.name) if f.config else repr(f._value)
+            out.append(f"{f.transform_type} = {value}")
+            if f.mass or any(f._inertia):
+                out.append(f"mass = {f.mass!r}")
+                out.append(f"inertia = {json.dumps(list(f._inertia))}")
+            out.append("")
+        damping: Dict[str, float] = {}
+        for force in self._forces:
+            if isinstance(force, _Damping):
+                for c in self.dyn_configs:
+                    damping[c.name] = damping.get(c.name, 0.0) + force.get_damping_coefficient(c)
+        for c in self._configs:
+            out.append(f"[variables.{_toml_string(c.name)}]")
+            if c.kinematic:
+                out.append("kinematic = true")
+            if damping.get(c.name):
+                out.append(f"damping = {damping[c.name]!r}")
+            out.append("")
+        for p in self._potentials:
+            if isinstance(p, _ConfigSpring):
+                out += ["[[spring]]", f"variable = {_toml_string(p.config.name)}",
+                        f"stiffness = {p.k!r}", f"rest = {p.q0!r}", ""]
+        for force in self._forces:
+            if isinstance(force, _ConfigForce):
+                out += ["[[input]]", f"name = {_toml_string(force.finput.name)}",
+                        f"variable = {_toml_string(force.config.name)}", ""]
+        for c in self._constraints:
+            out += c._toml()
+        return "\n".join(out)
+
+    def _native_model(self) -> _native.Model:
+        if self._holds:
+            raise RuntimeError("the structure is on hold (resume_structure_changes first)")
+        if self._model is None:
+            if not self._configs:
+                raise ValueError("the system has no configs")
+            self._model = _native.loads(self._toml())
+            index = {name: i for i, name in enumerate(self._model.variables)}
+            dynamic = {name: i for i, name in enumerate(self._model.dynamic)}
+            kinematic = {name: i for i, name in enumerate(self._model.kinematic)}
+            # Model order → trep order: trep_vector = model_vector[perm].
+            self._perm = np.array([index[c.name] for c in self._configs], dtype=int)
+            self._dperm = np.array([dynamic[c.name] for c in self.dyn_configs], dtype=int)
+            self._kperm = np.array([kinematic[c.name] for c in self.kin_configs], dtype=int)
+        return self._model
+
+    def _to_model(self, v: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(v))
+        out[self._perm] = v
+        return out
+
+    def _state(self) -> Dict[str, Any]:
+        """The model evaluated at the current state (cached until the state changes)."""
+        if "state" not in self._cache:
+            m = self._native_model()
+            try:
+                self._cache["state"] = m.evaluate(
+                    self._to_model(self._q), self._to_model(self._dq), self.t,
+                    self._u if self.nu else None, ddq=self._to_model(self._ddq))
+            except _native.SimulationError as e:
+                raise ValueError(str(e)) from None
+        return self._cache["state"]
+
+    def _linear(self) -> Dict[str, Any]:
+        if "linear" not in self._cache:
+            m = self._native_model()
+            try:
+                self._cache["linear"] = m.linearize(
+                    self._to_model(self._q), self._to_model(self._dq),
+                    self._u if self.nu else None, self.t, ddq=self._to_model(self._ddq))
+            except _native.SimulationError as e:
+                raise ValueError(str(e)) from None
+        return self._cache["linear"]
+
+    # The Lagrangian ------------------------------------------------------------------
+    def total_energy(self) -> float:
+        """T + V at the current state."""
+        return float(self._state()["energy"])
+
+    def L(self) -> float:
+        """The Lagrangian at the current state."""
+        return float(self._state()["L"])
+
+    def _i(self, c: Config) -> int:
+        if not isinstance(c, Config):
+            raise TypeError("expected a Config")
+        self._native_model()
+        return int(self._perm[c.index])
+
+    def L_dq(self, q1: Config) -> float:
+        return float(self._state()["dL_dq"][self._i(q1)])
+
+    def L_ddq(self, dq1: Config) -> float:
+        return float(self._state()["dL_ddq"][self._i(dq1)])
+
+    def L_dqdq(self, q1: Config, q2: Config) -> float:
+        return float(self._state()["d2L_dqdq"][self._i(q1), self._i(q2)])
+
+    def L_ddqdq(self, dq1: Config, q2: Config) -> float:
+        return float(self._state()["d2L_ddqdq"][self._i(dq1), self._i(q2)])
+
+    def L_ddqddq(self, dq1: Config, dq2: Config) -> float:
+        return float(self._state()["M"][self._i(dq1), self._i(dq2)])
+
+    # The dynamics ---------------------------------------------------------------------
+    def _index(self, kind: str, obj: Any) -> Any:
+        """trep's indexing: an object → its index, None → every entry."""
+        if obj is None:
+            return slice(None)
+        if kind in "qd":
+            if kind == "d" and obj.kinematic:
+                raise TypeError(f"`{obj.name}` is kinematic; a dynamic config is needed")
+            return obj.index
+        if kind == "k":
+            if not obj.kinematic:
+                raise TypeError(f"`{obj.name}` is dynamic; a kinematic config is needed")
+            return obj.k_index
+        return obj.index  # an input or a constraint
+
+    def f(self, q: Optional[Config] = None) -> Any:
+        """The dynamic configs' accelerations at the current state (one, given a config)."""
+        self._native_model()
+        ddq = self._state()["qdd"][self._dperm]
+        return ddq[self._index("d", q)].copy() if q is None else float(ddq[self._index("d", q)])
+
+    def _block(self, key: str, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return np.asarray(self._linear()[key])[np.ix_(rows, cols)]
+
+    def _rows_d(self) -> np.ndarray:
+        self._native_model()
+        return self._perm[: self.nQd]
+
+    def f_dq(self, q: Optional[Config] = None, q1: Optional[Config] = None) -> Any:
+        m = self._block("qdd_dq", self._rows_d(), self._perm)
+        return m[self._index("d", q), self._index("q", q1)]
+
+    def f_ddq(self, q: Optional[Config] = None, dq1: Optional[Config] = None) -> Any:
+        m = self._block("qdd_ddq", self._rows_d(), self._perm)
+        return m[self._index("d", q), self._index("q", dq1)]
+
+    def f_du(self, q: Optional[Config] = None, u1: Optional[Input] = None) -> Any:
+        m = self._block("qdd_du", self._rows_d(), np.arange(self.nu))
+        return m[self._index("d", q), self._index("u", u1)]
+
+    def _signs(self) -> np.ndarray:
+        """Per constraint, trep's row over tree-mech's: +1 (a distance: both ``d·d − ℓ²``) or
+        −1 (a plane: trep's ``n·(p_plane − p_point)``); multipliers scale the same way."""
+        return np.array([c._sign for c in self._constraints], dtype=float)
+
+    def lambda_(self, constraint: Any = None) -> Any:
+        """The constraint forces at the current state, for trep's rows."""
+        lam = np.asarray(self._state()["lambda"]) * self._signs()
+        return lam.copy() if constraint is None else float(lam[self._index("c", constraint)])
+
+    def _lambda_derivative(self, key: str, cols: np.ndarray) -> np.ndarray:
+        return np.asarray(self._linear()[key])[:, cols] * self._signs()[:, None]
+
+    def lambda_dq(self, constraint: Any = None, q1: Optional[Config] = None) -> Any:
+        self._native_model()
+        m = self._lambda_derivative("lambda_dq", self._perm)
+        return m[self._index("c", constraint), self._index("q", q1)]
+
+    def lambda_ddq(self, constraint: Any = None, dq1: Optional[Config] = None) -> Any:
+        self._native_model()
+        m = self._lambda_derivative("lambda_ddq", self._perm)
+        return m[self._index("c", constraint), self._index("q", dq1)]
+
+    def lambda_du(self, constraint: Any = None, u1: Optional[Input] = None) -> Any:
+        self._native_model()
+        m = self._lambda_derivative("lambda_du", np.arange(self.nu))
+        return m[self._index("c", constraint), self._index("u", u1)]
+
+
+# Potentials, forces and constraints (re-exported by the submodules of trep's names) -------
+class Potential:
+    """A potential energy term of the system."""
+
+    def __init__(self, system: System, name: Optional[str] = None):
+        self._system = system
+        self.name = name
+        system._potentials.append(self)
+        system._structure_changed()
+
+    @property
+    def system(self) -> System:
+        return self._system
+
+
+class _Gravity(Potential):
+    """Uniform gravity ``gravity`` (default ``[0, 0, -9.8]``) on every mass."""
+
+    def __init__(self, system: System, gravity: Sequence[float] = (0.0, 0.0, -9.8),
+                 name: Optional[str] = None):
+        self.gravity = [float(g) for g in gravity]
+        super().__init__(system, name)
+
+
+class _ConfigSpring(Potential):
+    """``½k(q − q0)²`` on one config."""
+
+    def __init__(self, system: System, config: Any, k: float, q0: float = 0.0,
+                 name: Optional[str] = None):
+        self.config = system.get_config(config) if not isinstance(config, Config) else config
+        self.k, self.q0 = float(k), float(q0)
+        super().__init__(system, name)
+
+
+class Force:
+    """A generalized force of the system."""
+
+    def __init__(self, system: System, name: Optional[str] = None):
+        self._system = system
+        self.name = name
+        system._forces.append(self)
+        system._structure_changed()
+
+    @property
+    def system(self) -> System:
+        return self._system
+
+
+class _Damping(Force):
+    """Viscous damping ``−c q̇`` on every dynamic config: ``damping`` maps config names to
+    ``c``, ``default_damping`` for the rest."""
+
+    def __init__(self, system: System, default_damping: float = 0.0,
+                 damping: Optional[Dict[Any, float]] = None, name: Optional[str] = None):
+        self.default_damping = float(default_damping)
+        self._damping = {}
+        for k, v in (damping or {}).items():
+            key = k.name if isinstance(k, Config) else k
+            self._damping[key] = float(v)
+        super().__init__(system, name)
+
+    def get_damping_coefficient(self, config: Config) -> float:
+        return self._damping.get(config.name, self.default_damping)
+
+    def set_damping_coefficient(self, config: Config, coefficient: float) -> None:
+        self._damping[config.name] = float(coefficient)
+        self._system._structure_changed()
+
+
+class _ConfigForce(Force):
+    """The input ``finput`` as a generalized force on ``config``."""
+
+    def __init__(self, system: System, config: Any, finput: Optional[str],
+                 name: Optional[str] = None):
+        self.config = system.get_config(config) if not isinstance(config, Config) else config
+        if self.config.kinematic:
+            raise ValueError(f"a ConfigForce acts on a dynamic config; `{self.config.name}` "
+                             "is kinematic")
+        system._hold()
+        try:
+            self.finput = Input(system, finput)
+            super().__init__(system, name)
+        finally:
+            system._release()
+
+
+class Constraint:
+    """A holonomic constraint ``h(q) = 0`` with ``index`` its row."""
+
+    #: trep's row over tree-mech's (see ``System._signs``).
+    _sign = 1.0
+
+    def __init__(self, system: System, name: Optional[str]):
+        self._system = system
+        self.name = name if name is not None else f"constraint{len(system._constraints) + 1}"
+        self.index = len(system._constraints)
+        system._constraints.append(self)
+
+    @property
+    def system(self) -> System:
+        return self._system
+
+    def _frames(self) -> tuple:
+        return ()
+
+    def h(self) -> float:
+        """The constraint's value at the current state (trep's form)."""
+        return self._sign * float(self._system._state()["h"][self.index])
+
+    def h_dq(self, q1: Config) -> float:
+        """``∂h/∂q1`` at the current state (trep's form)."""
+        s = self._system
+        return self._sign * float(np.asarray(s._state()["dh_dq"])[self.index][s._i(q1)])
+
+
+class _Distance(Constraint):
+    """``|p₁ − p₂|² − ℓ²`` for two frames' origins (trep's row, and tree-mech's); ``distance``
+    a number or the name of a new kinematic config holding ℓ."""
+
+    def __init__(self, system: System, frame1: Any, frame2: Any, distance: Any,
+                 name: Optional[str] = None):
+        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
+        system._hold()
+        try:
+            super().__init__(system, name)
+            if isinstance(distance, str):
+                self.config: Optional[Config] = Config(system, distance, kinematic=True)
+                self._distance = 0.0
+            else:
+                self.config = None
+                self._distance = float(distance)
+        finally:
+            system._release()
+
+    def _frames(self) -> tuple:
+        return (self.frame1, self.frame2)
+
+    @property
+    def distance(self) -> float:
+        return self.config.q if self.config else self._distance
+
+    def _toml(self) -> List[str]:
+        s = self._system
+        length = _toml_string(self.config.name) if self.config else repr(self._distance)
+        return ["[[constraint]]", f"name = {_toml_string(self.name)}", 'kind = "distance"',
+                f"frames = [{_toml_string(s._frame_key(self.frame1))}, "
+                f"{_toml_string(s._frame_key(self.frame2))}]", f"length = {length}", ""]
+
+
+class _PointOnPlane(Constraint):
+    """trep's ``n·(p_plane − p_point)``, the normal ``plane_normal`` in ``plane_frame``'s
+    axes (tree-mech's plane row with the opposite sign)."""
+
+    _sign = -1.0
+
+    def __init__(self, system: System, plane_frame: Any, plane_normal: Sequence[float],
+                 point_frame: Any, name: Optional[str] = None):
+        self.plane_frame = system.get_frame(plane_frame)
+        self.point_frame = system.get_frame(point_frame)
+        self.normal = [float(x) for x in plane_normal]
+        system._hold()
+        try:
+            super().__init__(system, name)
+        finally:
+            system._release()
+
+    def _frames(self) -> tuple:
+        return (self.plane_frame, self.point_frame)
+
+    def _toml(self) -> List[str]:
+        s = self._system
+        return ["[[constraint]]", f"name = {_toml_string(self.name)}", 'kind = "plane"',
+                f"frames = [{_toml_string(s._frame_key(self.plane_frame))}, "
+                f"{_toml_string(s._frame_key(self.point_frame))}]",
+                f"normal = {json.dumps(self.normal)}", ""]
+
+
+class MidpointVI:
+    """trep's midpoint variational integrator over tree-mech's: state ``(t1, q1, p1)`` →
+    ``(t2, q2, p2)`` and ``lambda1`` by ``step(t2, u1, k2)``, trep's forcing (the force over
+    a step on its left end) and trep's scaling of ``lambda1``; first derivatives
+    (``q2_dq1`` …, ``lambda1_dq1`` …) and second ones of ``q2`` and ``p2`` on request.
+    Newton runs to tree-mech's relative tolerance (1e-12), tighter than trep's default; a
+    step that does not converge raises ``ConvergenceError``."""
+
+    def __init__(self, system: System, tolerance: float = 1e-10,
+                 num_threads: Optional[int] = None):
+        self._system = system
+        self.tolerance = tolerance
+        model = system._native_model()
+        self._stepper = _native.VariationalStepper(model, forcing="left")
+        nq, nd, nk, nc = system.nQ, system.nQd, system.nQk, system.nc
+        self.t1 = self.t2 = 0.0
+        self._q1, self._q2 = np.zeros(nq), np.zeros(nq)
+        self._p1, self._p2 = np.zeros(nd), np.zeros(nd)
+        self._u1 = np.zeros(system.nu)
+        self._lambda1 = np.zeros(nc)
+        self._lam = np.zeros(nc)
+        self._derivs: Optional[Dict[str, np.ndarray]] = None
+        self._order = 0
+        self._k2: Optional[np.ndarray] = None
+
+    # State ----------------------------------------------------------------------------
+    @property
+    def system(self) -> System:
+        return self._system
+
+    nq = property(lambda self: self._system.nQ)
+    nd = property(lambda self: self._system.nQd)
+    nk = property(lambda self: self._system.nQk)
+    nu = property(lambda self: self._system.nu)
+    nc = property(lambda self: self._system.nc)
+
+    def _vec(self, value: Any, n: int, what: str) -> np.ndarray:
+        v = np.asarray(value, dtype=float).reshape(-1)
+        if len(v) != n:
+            raise ValueError(f"{what} needs {n} entries, got {len(v)}")
+        return v.copy()
+
+    q1 = property(lambda self: self._q1.copy(),
+                  lambda self, v: setattr(self, "_q1", self._vec(v, self.nq, "q1")))
+    q2 = property(lambda self: self._q2.copy(),
+                  lambda self, v: setattr(self, "_q2", self._vec(v, self.nq, "q2")))
+    p1 = property(lambda self: self._p1.copy(),
+                  lambda self, v: setattr(self, "_p1", self._vec(v, self.nd, "p1")))
+    p2 = property(lambda self: self._p2.copy(),
+                  lambda self, v: setattr(self, "_p2", self._vec(v, self.nd, "p2")))
+    u1 = property(lambda self: self._u1.copy(),
+                  lambda self, v: setattr(self, "_u1", self._vec(v, self.nu, "u1")))
+    lambda1 = property(lambda self: self._lambda1.copy(),
+                       lambda self, v: setattr(self, "_lambda1", self._vec(v, self.nc, "lambda1")))
+
+    @property
+    def v2(self) -> Optional[np.ndarray]:
+        """The kinematic configs' discrete velocity ``(q2k − q1k)/(t2 − t1)``."""
+        if self.t2 == self.t1:
+            return None
+        return ((self._q2 - self._q1) / (self.t2 - self.t1))[self.nd:]
+
+    def initialize_from_state(self, t1: float, q1: Any, p1: Any, lambda1: Any = None) -> None:
+        """Starts from a known time, configuration and (dynamic) momentum."""
+        self.t1 = self.t2 = float(t1)
+        self.q1 = self.q2 = q1
+        self.p1 = self.p2 = p1
+        self.lambda1 = np.zeros(self.nc) if lambda1 is None else lambda1
+        self._lam = np.zeros(self.nc)
+        self._derivs, self._k2 = None, None
+
+    def initialize_from_configs(self, t0: float, q0: Any, t1: float, q1: Any,
+                                lambda1: Any = None) -> None:
+        """Starts from two consecutive configurations: ``p1 = D₂L_d(q0, q1)``."""
+        s = self._system
+        q0, q1 = self._vec(q0, self.nq, "q0"), self._vec(q1, self.nq, "q1")
+        try:
+            p = self._stepper.momentum(float(t0), s._to_model(q0), float(t1), s._to_model(q1))
+        except _native.SimulationError as e:
+            raise ValueError(str(e)) from None
+        self.t1, self.t2 = float(t0), float(t1)
+        self._q1, self._q2 = q0, q1
+        self._p1 = self._p2 = np.asarray(p)[s._dperm]
+        self.lambda1 = np.zeros(self.nc) if lambda1 is None else lambda1
+        self._lam = np.zeros(self.nc)
+        self._derivs, self._k2 = None, None
+
+    def step(self, t2: float, u1: Any = (), k2: Any = (), max_iterations: int = 200,
+             q2_hint: Any = None, lambda1_hint: Any = None) -> int:
+        """Steps to ``t2`` with inputs ``u1`` over the step and the kinematic configs at
+        ``k2`` at its end; returns Newton's iterations."""
+        u1 = self._vec(u1, self.nu, "u1")
+        k2 = self._vec(k2, self.nk, "k2")
+        self._q1, self._p1, self.t1 = self._q2.copy(), self._p2.copy(), self.t2
+        self._u1, self.t2 = u1, float(t2)
+        self._k2 = k2
+        self._derivs = None
+        self._solve(0)
+        return self._iterations
+
+    def _solve(self, order: int) -> None:
+        s = self._system
+        kin_model = np.zeros(self.nk)
+        kin_model[s._kperm] = self._k2
+        p1 = np.zeros(self.nd)
+        p1[s._dperm] = self._p1
+        try:
+            q2, p2, lam, iterations, derivs = self._stepper.step(
+                self.t1, s._to_model(self._q1), p1, self.t2, self._u1, kin_model, self._lam,
+                order)
+        except _native.SimulationError as e:
+            raise ConvergenceError(f"the step to t = {self.t2}: {e}") from None
+        self._q2 = np.asarray(q2)[s._perm]
+        self._p2 = np.asarray(p2)[s._dperm]
+        self._lam = np.asarray(lam)
+        self._iterations = iterations
+        # trep's λ₁ multiplies its rows (System._signs) with the opposite sign and Δt folded
+        # in: λ₁ = −Δt·sign·λ (the native derivatives already carry the −Δt).
+        self._lambda1 = -(self.t2 - self.t1) * s._signs() * self._lam
+        if order:
+            self._derivs = {k: np.asarray(v) for k, v in derivs.items()}
+            self._order = order
+
+    # Derivatives ----------------------------------------------------------------------
+    def _need(self, order: int) -> Dict[str, np.ndarray]:
+        """The last step's derivatives up to `order` (the step solved again with them)."""
+        if self._derivs is None or self._order < order:
+            if self._k2 is None:
+                raise ValueError("derivatives need a step (call step first)")
+            self._solve(order)
+        assert self._derivs is not None
+        return self._derivs
+
+    def _cols(self, by: str) -> np.ndarray:
+        s = self._system
+        return {"q1": s._perm, "p1": s._dperm, "u1": np.arange(self.nu),
+                "k2": s._kperm}[by]
+
+    def _first(self, of: str, by: str) -> np.ndarray:
+        s = self._system
+        d = self._need(1)
+        rows = {"q2": s._dperm, "p2": s._dperm, "lambda1": np.arange(self.nc)}[of]
+        m = d[f"{of}_d{by}"][np.ix_(rows, self._cols(by))]
+        return m * s._signs()[:, None] if of == "lambda1" else m
+
+    def _second(self, of: str, a: str, b: str) -> np.ndarray:
+        s = self._system
+        d = self._need(2)
+        key, swap = f"{of}_d{a}d{b}", False
+        if key not in d:
+            key, swap = f"{of}_d{b}d{a}", True
+        rows = s._dperm if of != "lambda1" else np.arange(self.nc)
+        stack = d[key][np.ix_(rows, self._cols(b if swap else a), self._cols(a if swap else b))]
+        if swap:
+            stack = stack.transpose(0, 2, 1)
+        if of == "lambda1":
+            stack = stack * s._signs()[:, None, None]
+        # trep lays second derivatives out (input₁, input₂, output).
+        return stack.transpose(1, 2, 0)
+
+    def _pick(self, m: np.ndarray, kinds: str, args: Sequence[Any]) -> Any:
+        s = self._system
+        return m[tuple(s._index(k, x) for k, x in zip(kinds, args))]
+
+    def q2_dq1(self, q=None, q1=None): return self._pick(self._first("q2", "q1"), "dq", (q, q1))
+    def q2_dp1(self, q=None, p1=None): return self._pick(self._first("q2", "p1"), "dd", (q, p1))
+    def q2_du1(self, q=None, u1=None): return self._pick(self._first("q2", "u1"), "du", (q, u1))
+    def q2_dk2(self, q=None, k2=None): return self._pick(self._first("q2", "k2"), "dk", (q, k2))
+    def p2_dq1(self, p=None, q1=None): return self._pick(self._first("p2", "q1"), "dq", (p, q1))
+    def p2_dp1(self, p=None, p1=None): return self._pick(self._first("p2", "p1"), "dd", (p, p1))
+    def p2_du1(self, p=None, u1=None): return self._pick(self._first("p2", "u1"), "du", (p, u1))
+    def p2_dk2(self, p=None, k2=None): return self._pick(self._first("p2", "k2"), "dk", (p, k2))
+
+    def lambda1_dq1(self, constraint=None, q1=None):
+        return self._pick(self._first("lambda1", "q1"), "cq", (constraint, q1))
+
+    def lambda1_dp1(self, constraint=None, p1=None):
+        return self._pick(self._first("lambda1", "p1"), "cd", (constraint, p1))
+
+    def lambda1_du1(self, constraint=None, u1=None):
+        return self._pick(self._first("lambda1", "u1"), "cu", (constraint, u1))
+
+    def lambda1_dk2(self, constraint=None, k2=None):
+        return self._pick(self._first("lambda1", "k2"), "ck", (constraint, k2))
+
+
+def _second_derivative(of: str, a: str, b: str) -> Any:
+    kinds = {"q1": "q", "p1": "d", "u1": "u", "k2": "k"}
+    out_kind = "c" if of == "lambda1" else "d"
+
+    def method(self: MidpointVI, x: Any = None, y: Any = None, z: Any = None) -> Any:
+        # Arguments (output, input₁, input₂); trep's layout (input₁, input₂, output).
+        return self._pick(self._second(of, a, b), kinds[a] + kinds[b] + out_kind, (y, z, x))
+
+    method.__name__ = f"{of}_d{a}d{b}"
+    method.__doc__ = f"The second derivative of {of} with respect to {a} and {b} (trep's)."
+    return method
+
+
+# trep's 30 second derivatives: each output by each unordered pair of (q1, p1, u1, k2).
+for _of in ("q2", "p2", "lambda1"):
+    _inputs = ("q1", "p1", "u1", "k2")
+    for _k, _a in enumerate(_inputs):
+        for _b in _inputs[_k:]:
+            setattr(MidpointVI, f"{_of}_d{_a}d{_b}", _second_derivative(_of, _a, _b))

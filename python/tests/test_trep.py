@@ -1,0 +1,117 @@
+"""tree_mech.trep against trep 1.0.2 itself: the scripts of trep_scripts.py, run here on the
+layer, match what they recorded on trep (fixtures/trep-api.json, written by
+tools/reference/trep_api.py under Python 2.7)."""
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from tree_mech import trep
+
+import trep_scripts
+
+HERE = pathlib.Path(__file__).parent
+FIXTURE = json.loads((HERE / "fixtures" / "trep-api.json").read_text())
+SPEC = json.loads((HERE.parent.parent / "tools" / "reference" / "trep-puppet.json").read_text())
+
+
+def close(ours, theirs, tol, what):
+    ours, theirs = np.asarray(ours, dtype=float), np.asarray(theirs, dtype=float)
+    if ours.size == 0 and theirs.size == 0:
+        return  # trep shapes some empty blocks (0,)
+    assert ours.shape == theirs.shape, f"{what}: shape {ours.shape} vs trep's {theirs.shape}"
+    scale = max(1.0, float(np.max(np.abs(theirs))) if theirs.size else 1.0)
+    err = float(np.max(np.abs(ours - theirs))) if theirs.size else 0.0
+    assert err <= tol * scale, f"{what}: off by {err:.3e} (scale {scale:.3e})"
+
+
+@pytest.fixture(scope="module", params=[name for name, _ in trep_scripts.SYSTEMS])
+def recorded(request):
+    build = dict(trep_scripts.SYSTEMS)[request.param]
+    return request.param, trep_scripts.record(trep, build), FIXTURE[request.param]
+
+
+def test_configs_are_in_treps_order(recorded):
+    name, ours, theirs = recorded
+    for key in ("configs", "dyn", "kin"):
+        assert ours[key] == theirs[key], f"{name}: {key}"
+
+
+@pytest.mark.parametrize("key", ["q", "dq", "L", "E", "L_dq", "L_ddq", "L_dqdq", "L_ddqdq",
+                                 "L_ddqddq", "h", "h_dq"])
+def test_lagrangian_and_constraints_match_trep(recorded, key):
+    name, ours, theirs = recorded
+    close(ours[key], theirs[key], 1e-12, f"{name} {key}")
+
+
+@pytest.mark.parametrize("key", ["f", "f_dq", "f_ddq", "f_du", "lambda", "lambda_dq",
+                                 "lambda_ddq"])
+def test_dynamics_and_their_derivatives_match_trep(recorded, key):
+    name, ours, theirs = recorded
+    if key not in theirs:
+        pytest.skip(f"{name} has no inputs")
+    close(ours[key], theirs[key], 1e-12, f"{name} {key}")
+
+
+def test_frames_match_trep(recorded):
+    name, ours, theirs = recorded
+    for frame, values in theirs["frames"].items():
+        if frame == "World":
+            continue
+        for key in ("g", "p", "vb"):
+            close(ours["frames"][frame][key], values[key], 1e-12, f"{name} {frame}.{key}")
+
+
+def test_midpoint_vi_steps_match_trep(recorded):
+    name, ours, theirs = recorded
+    assert len(ours["vi"]) == len(theirs["vi"])
+    for k, (a, b) in enumerate(zip(ours["vi"], theirs["vi"])):
+        for key in ("t2", "q2", "p2", "lambda1"):
+            close(a[key], b[key], 1e-10, f"{name} step {k} {key}")
+
+
+def test_midpoint_vi_derivatives_match_trep(recorded):
+    name, ours, theirs = recorded
+    for key, value in theirs["vi_derivatives"].items():
+        close(ours["vi_derivatives"][key], value, 1e-10, f"{name} {key}")
+
+
+def test_treps_own_puppet_steps_as_trep_does():
+    s = trep_scripts.puppet_from_frames(trep, SPEC)
+    assert [c.name for c in s.configs] == FIXTURE["puppet"]["configs"]
+    q = trep_scripts.step_puppet(trep, s, 100, 0.01)
+    close(q, FIXTURE["puppet"]["q100"], 1e-9, "the Puppet after 100 steps")
+
+
+def test_structure_changes_rebuild_the_model():
+    s = trep.System()
+    f = trep.Frame(s.world_frame, trep.RX, "a", name="arm")
+    trep.Frame(f, trep.TZ, -1.0, name="bob", mass=1.0)
+    trep.potentials.Gravity(s)
+    s.q = [0.5]
+    energy = s.total_energy()
+    s.get_frame("bob").set_mass(2.0)
+    assert s.total_energy() == pytest.approx(2 * energy, rel=1e-12)
+    s.hold_structure_changes()
+    trep.Frame(s.get_frame("bob"), trep.RX, "b", name="second")
+    with pytest.raises(RuntimeError, match="on hold"):
+        s.L()
+    s.resume_structure_changes()
+    assert [c.name for c in s.configs] == ["a", "b"] and s.q[0] == 0.5
+
+
+def test_errors_are_plain():
+    s = trep.System()
+    with pytest.raises(KeyError, match="no frame"):
+        s.get_frame("nowhere")
+    with pytest.raises(NotImplementedError, match="CONST_SE3"):
+        trep.Frame(s.world_frame, trep.CONST_SE3, 0.0)
+    trep.Frame(s.world_frame, trep.TX, "a", name="slider", mass=1.0)
+    with pytest.raises(ValueError, match="expected 1 values"):
+        s.q = [1.0, 2.0]
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_state(0.0, [0.1], [0.0])
+    with pytest.raises(ValueError, match="call step first"):
+        mvi.q2_dq1()
+    assert trep.__version__ == "v1.0.2"

@@ -1,0 +1,170 @@
+# -*- coding: utf-8 -*-
+"""trep-style scripts, run unchanged by trep 1.0.2 itself (Python 2.7, through
+tools/reference/trep_api.py, which saves what they record as tests/fixtures/trep-api.json)
+and by tree_mech.trep (python/tests/test_trep.py, which compares). Each takes the `trep`
+module as its argument: that is the only difference between the two runs. Written for this
+project (no trep code or examples); Python 2.7 and 3 alike.
+"""
+from __future__ import division, print_function
+
+import math
+
+import numpy as np
+
+
+def cart_pendulum_string(trep):
+    """A cart (x) carrying a double pendulum (theta, phi) whose tip hangs on a string of
+    kinematic length from a kinematically driven hand; a spring on phi, damping, a push on
+    the cart, gravity."""
+    s = trep.System()
+    cart = trep.Frame(s.world_frame, trep.TX, "x", name="cart")
+    cart.set_mass(2.0, 0.1, 0.2, 0.3)
+    pivot = trep.Frame(cart, trep.RY, "theta", name="pivot")
+    bob = trep.Frame(pivot, trep.TZ, -0.8, name="bob", mass=(0.5, 0.01, 0.02, 0.015))
+    elbow = trep.Frame(bob, trep.RY, "phi", name="elbow")
+    trep.Frame(elbow, trep.TZ, -0.5, name="tip", mass=0.3)
+    hand_x = trep.Frame(s.world_frame, trep.TX, "hand_x", kinematic=True, name="hand_x")
+    trep.Frame(hand_x, trep.TZ, 1.0, name="hand")
+    trep.potentials.Gravity(s, [0.0, 0.0, -9.8])
+    trep.potentials.ConfigSpring(s, "phi", 3.0, q0=0.1)
+    trep.forces.Damping(s, 0.05, {"theta": 0.2})
+    trep.forces.ConfigForce(s, "x", "push")
+    trep.constraints.Distance(s, "tip", "hand", "string")
+    # A state on the string: its length is the tip-hand distance there.
+    s.get_config("x").q = 0.1
+    s.get_config("theta").q = 0.3
+    s.get_config("phi").q = -0.4
+    s.get_config("hand_x").q = 0.25
+    s.get_config("string").q = 1.0
+    tip, hand = s.get_frame("tip"), s.get_frame("hand")
+    s.get_config("string").q = float(np.linalg.norm(tip.p()[:3] - hand.p()[:3]))
+    return s
+
+
+def ball_on_incline(trep):
+    """A point mass free in space (bx, by, bz) held on an inclined plane, with gravity."""
+    s = trep.System()
+    trep.Frame(s.world_frame, trep.RX, 0.3, name="incline")
+    fx = trep.Frame(s.world_frame, trep.TX, "bx")
+    fy = trep.Frame(fx, trep.TY, "by")
+    ball = trep.Frame(fy, trep.TZ, "bz", name="ball")
+    ball.set_mass(1.5, 0.1, 0.1, 0.1)
+    trep.potentials.Gravity(s)
+    trep.constraints.PointOnPlane(s, "incline", [0.0, 0.0, 1.0], "ball")
+    # On the plane: n = (0, -sin 0.3, cos 0.3), so z = tan(0.3) y.
+    s.get_config("bx").q = 0.2
+    s.get_config("by").q = 0.5
+    s.get_config("bz").q = math.tan(0.3) * 0.5
+    return s
+
+
+SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline)]
+
+
+def _list(x):
+    return np.asarray(x, dtype=float).tolist()
+
+
+def record(trep, build):
+    """Everything the layer covers, at one state and over a VI run: the Lagrangian and its
+    derivatives, the dynamics and theirs, frames, constraints, MidpointVI steps and the last
+    step's derivatives."""
+    s = build(trep)
+    out = {"configs": [c.name for c in s.configs],
+           "dyn": [c.name for c in s.dyn_configs], "kin": [c.name for c in s.kin_configs]}
+    n = s.nQ
+    s.dq = [0.3 * (-1) ** i + 0.1 * i for i in range(n)]
+    if s.nQk:
+        s.ddqk = [0.7 + 0.1 * i for i in range(s.nQk)]
+    if s.nu:
+        s.u = [0.4 + 0.2 * i for i in range(s.nu)]
+    out["q"], out["dq"] = _list(s.q), _list(s.dq)
+    out["L"], out["E"] = s.L(), s.total_energy()
+    cs = s.configs
+    out["L_dq"] = [s.L_dq(a) for a in cs]
+    out["L_ddq"] = [s.L_ddq(a) for a in cs]
+    out["L_dqdq"] = [[s.L_dqdq(a, b) for b in cs] for a in cs]
+    out["L_ddqdq"] = [[s.L_ddqdq(a, b) for b in cs] for a in cs]
+    out["L_ddqddq"] = [[s.L_ddqddq(a, b) for b in cs] for a in cs]
+    out["f"] = _list(s.f())
+    out["f_dq"], out["f_ddq"] = _list(s.f_dq()), _list(s.f_ddq())
+    if s.nu:
+        out["f_du"] = _list(s.f_du())
+    out["lambda"] = _list(s.lambda_())
+    out["lambda_dq"], out["lambda_ddq"] = _list(s.lambda_dq()), _list(s.lambda_ddq())
+    out["frames"] = dict((f.name, {"g": _list(f.g()), "p": _list(f.p()), "vb": _list(f.vb())})
+                         for f in s.frames if f.name is not None)
+    out["h"] = [c.h() for c in s.constraints]
+    out["h_dq"] = [[c.h_dq(a) for a in cs] for c in s.constraints]
+    # The midpoint VI from rest at this configuration, 20 steps of dt = 0.01 with the
+    # kinematic configs moving and a constant input.
+    dt = 0.01
+    mvi = trep.MidpointVI(s, tolerance=1e-13)  # both solvers to rounding
+    q0 = s.q
+    mvi.initialize_from_configs(0.0, q0, dt, q0)
+    steps = []
+    u1 = [0.4 + 0.2 * i for i in range(s.nu)]
+    for k in range(20):
+        t2 = mvi.t2 + dt
+        k2 = [q0[s.nQd + j] + 0.05 * math.sin(3.0 * t2) for j in range(s.nQk)]
+        mvi.step(t2, u1, k2)
+        steps.append({"t2": mvi.t2, "q2": _list(mvi.q2), "p2": _list(mvi.p2),
+                      "lambda1": _list(mvi.lambda1)})
+    out["vi"] = steps
+    d = {}
+    inputs = ["q1", "p1", "u1", "k2"]
+    for of in ["q2", "p2", "lambda1"]:
+        for k, a in enumerate(inputs):
+            d["%s_d%s" % (of, a)] = _list(getattr(mvi, "%s_d%s" % (of, a))())
+            for b in inputs[k:]:
+                name = "%s_d%sd%s" % (of, a, b)
+                d[name] = _list(getattr(mvi, name)())
+    out["vi_derivatives"] = d
+    return out
+
+
+def _plain(x):
+    """JSON's strings as `str` (Python 2.7 reads them as `unicode`, which trep refuses)."""
+    if isinstance(x, dict):
+        return dict((_plain(k), _plain(v)) for k, v in x.items())
+    if isinstance(x, list):
+        return [_plain(v) for v in x]
+    if isinstance(x, (bool, int, float)) or x is None:
+        return x
+    return str(x)
+
+
+def puppet_from_frames(trep, spec):
+    """A marionette built through the trep API from `spec` (tools/reference/trep-puppet.json:
+    the frames, masses, damping and strings of trep's own Puppet), ready to step."""
+    spec = _plain(spec)
+    kinds = {"tx": trep.TX, "ty": trep.TY, "tz": trep.TZ,
+             "rx": trep.RX, "ry": trep.RY, "rz": trep.RZ}
+    s = trep.System()
+    s.hold_structure_changes()
+    frames = {}
+    for f in spec["frames"]:
+        parent = frames[f["parent"]] if f["parent"] else s.world_frame
+        frames[f["name"]] = trep.Frame(parent, kinds[f["kind"]], f["value"], name=f["name"],
+                                       kinematic=f.get("kinematic", False))
+        if f.get("mass"):
+            frames[f["name"]].set_mass(f["mass"], *f["inertia"])
+    s.resume_structure_changes()
+    trep.potentials.Gravity(s, spec["gravity"])
+    trep.forces.Damping(s, 0.0, spec["damping"])
+    for c in spec["strings"]:
+        trep.constraints.Distance(s, c["frames"][0], c["frames"][1], c["length"], name=c["name"])
+    q = dict((c.name, spec["q0"].get(c.name, 0.0)) for c in s.configs)
+    s.q = q
+    return s
+
+
+def step_puppet(trep, s, steps, dt):
+    """`steps` midpoint-VI steps of the puppet from rest, the strings' kinematic configs held;
+    returns the final configuration."""
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, s.q, dt, s.q)
+    k2 = s.qk
+    for _ in range(steps):
+        mvi.step(mvi.t2 + dt, [], k2)
+    return mvi.q2

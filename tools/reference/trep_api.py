@@ -1,0 +1,50 @@
+"""Runs python/tests/trep_scripts.py on trep 1.0.2 itself and saves what the scripts record
+as python/tests/fixtures/trep-api.json (read by python/tests/test_trep.py, which runs the
+same scripts on tree_mech.trep); with --time, times trep's Puppet built by the same script
+(1000 VI steps at dt = 0.01) instead. trep is called, never copied.
+
+Run with trep's Python 2.7 (README, "Checked against trep"):
+    v27/bin/python tools/reference/trep_api.py [--time]
+"""
+from __future__ import print_function
+
+import json
+import os
+import sys
+import time
+import types
+
+# trep.puppets imports its OpenGL/Qt viewer at module level; nothing here draws.
+visual = types.ModuleType('trep.visual')
+visual.VisualItem3D = type('VisualItem3D', (object,), {})
+visual.__all__ = ['VisualItem3D']
+sys.modules['trep.visual'] = visual
+
+import trep  # noqa: E402
+
+root = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..')
+sys.path.insert(0, os.path.join(root, 'python', 'tests'))
+import trep_scripts  # noqa: E402
+
+with open(os.path.join(root, 'tools', 'reference', 'trep-puppet.json')) as f:
+    spec = json.load(f)
+
+if '--time' in sys.argv:
+    best = float('inf')
+    for _ in range(3):
+        s = trep_scripts.puppet_from_frames(trep, spec)
+        start = time.time()
+        trep_scripts.step_puppet(trep, s, 1000, 0.01)
+        best = min(best, time.time() - start)
+    print('trep_seconds %.4f' % best)
+    sys.exit(0)
+
+out = dict((name, trep_scripts.record(trep, build)) for name, build in trep_scripts.SYSTEMS)
+s = trep_scripts.puppet_from_frames(trep, spec)
+out['puppet'] = {'configs': [c.name for c in s.configs],
+                 'q100': [float(x) for x in trep_scripts.step_puppet(trep, s, 100, 0.01)]}
+path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-api.json')
+with open(path, 'w') as f:
+    json.dump(out, f, indent=1, sort_keys=True)
+    f.write('\n')
+print('wrote', path)
