@@ -5,9 +5,9 @@
 //! an input, with trep's forcing (`left`), compiled and interpreted.
 //!
 //! Conventions: trep's `λ₁` multiplies its constraint row `h_dq` with the opposite sign and Δt
-//! folded in, and its distance constraint is `|d| − ℓ` where ours is `d·d − ℓ²`; so
-//! `λ₁ = −Δt r λ` with `r` the ratio of the two rows (`2ℓ` on the constraint), read from the
-//! fixture's `h_dq` and our `Dh` at q₁. Both solvers converge to rounding here, and the two
+//! folded in; so `λ₁ = −Δt r λ` with `r` the ratio of our row to trep's, read from the
+//! fixture's `h_dq` and our `Dh` at q₁ (1 for this distance constraint: `d·d − ℓ²` in both).
+//! Both solvers converge to rounding here, and the two
 //! agree to ~1e-15 (asserted to 1e-12).
 
 mod common;

@@ -9,8 +9,8 @@ The model: a slider (`slide`, damped) carrying a double pendulum (`theta1` pushe
 `torque`, `theta2` damped and sprung) whose tip hangs from a kinematic hand (`hand_y`) by a
 string of fixed length. For three steps from a configuration on the constraint it writes the
 step's inputs (t1, t2, q1, p1, u1, k2), trep's result (q2, p2, lambda1), the constraint's
-`h_dq` at q1 (trep's distance constraint is |d| − ℓ, tree-mech's d·d − ℓ²: the multipliers
-differ by the ratio of the two rows) and every derivative trep has: the 12 first ones as
+`h_dq` at q1 (the multipliers differ by the ratio of the two libraries' constraint rows:
+1 for a distance, d·d − ℓ² in both) and every derivative trep has: the 12 first ones as
 [output][input] and the 30 second ones as [output][input1][input2]. Names are trep's configs,
 in trep's order (dynamic, then kinematic). trep is called, not copied.
 """

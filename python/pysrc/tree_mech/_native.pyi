@@ -49,6 +49,7 @@ class Model:
         dq: Optional[ArrayLike] = None,
         t: float = 0.0,
         u: Optional[ArrayLike] = None,
+        ddq: Optional[ArrayLike] = None,
     ) -> dict: ...
     def simulate(
         self,
@@ -79,6 +80,7 @@ class Model:
         forcing: str = "split",
         alpha: float = 0.5,
         second_order: bool = False,
+        ddq: Optional[ArrayLike] = None,
     ) -> dict: ...
     def rollouts(
         self,
@@ -98,6 +100,22 @@ class Model:
         constants: Optional[dict[str, float]] = None,
         gravity: Optional[Sequence[float]] = None,
     ) -> "Model": ...
+
+class VariationalStepper:
+    """The midpoint VI one step at a time with everything given (tree_mech.trep's engine)."""
+    def __init__(self, model: Model, forcing: str = "left", tolerance: Optional[float] = None) -> None: ...
+    def step(
+        self,
+        t1: float,
+        q1: ArrayLike,
+        p1: ArrayLike,
+        t2: float,
+        u1: ArrayLike,
+        k2: ArrayLike,
+        lam: ArrayLike,
+        order: int = 0,
+    ) -> tuple: ...
+    def momentum(self, t1: float, q1: ArrayLike, t2: float, q2: ArrayLike) -> np.ndarray: ...
 
 def load(path: Union[str, PathLike], floating_base: bool = False) -> Model: ...
 def loads(text: str, format: str = "toml", floating_base: bool = False) -> Model: ...

@@ -302,6 +302,8 @@ class System:
         self._u = np.zeros(0)
         self.t = 0.0
         self._configs: tuple = ()
+        self._dyn: tuple = ()
+        self._kin: tuple = ()
         self._model: Optional[_native.Model] = None
         self._cache: Dict[str, Any] = {}
         self._world = _World(self)
@@ -341,6 +343,7 @@ class System:
         dyn = [c for c in self._configs_created if not c.kinematic]
         kin = [c for c in self._configs_created if c.kinematic]
         self._configs = tuple(dyn + kin)
+        self._dyn, self._kin = tuple(dyn), tuple(kin)
         for i, c in enumerate(self._configs):
             c.index = i
             c.k_index = i - len(dyn) if c.kinematic else -1
@@ -386,11 +389,11 @@ class System:
 
     @property
     def dyn_configs(self) -> tuple:
-        return tuple(c for c in self._configs if not c.kinematic)
+        return self._dyn
 
     @property
     def kin_configs(self) -> tuple:
-        return tuple(c for c in self._configs if c.kinematic)
+        return self._kin
 
     @property
     def potentials(self) -> tuple:
@@ -418,11 +421,11 @@ class System:
 
     @property
     def nQd(self) -> int:
-        return len(self.dyn_configs)
+        return len(self._dyn)
 
     @property
     def nQk(self) -> int:
-        return len(self.kin_configs)
+        return len(self._kin)
 
     @property
     def nu(self) -> int:
