@@ -148,9 +148,9 @@ where
     for (label, method) in [
         ("midpoint VI", Method::Vi(ViSettings::default())),
         (
-            "midpoint VI, Jacobian once per step",
+            "midpoint VI, exact Newton",
             Method::Vi(ViSettings {
-                jacobian: JacobianUpdate::OncePerStep,
+                jacobian: JacobianUpdate::EveryIteration,
                 ..ViSettings::default()
             }),
         ),

@@ -313,36 +313,9 @@ impl<S: Scalar> LocalTransform<S> {
     /// `v_k = Ad_{g_k⁻¹} v_par + ξ q̇`).
     #[inline(always)]
     pub fn ad_inverse(&self, x: &Twist<S>) -> Twist<S> {
-        let (c, s, d) = (self.a, self.b, self.a);
-        match self.kind {
-            PrimitiveKind::Tx => [x[0], x[1] + d * x[5], x[2] - d * x[4], x[3], x[4], x[5]],
-            PrimitiveKind::Ty => [x[0] - d * x[5], x[1], x[2] + d * x[3], x[3], x[4], x[5]],
-            PrimitiveKind::Tz => [x[0] + d * x[4], x[1] - d * x[3], x[2], x[3], x[4], x[5]],
-            PrimitiveKind::Rx => [
-                x[0],
-                c * x[1] + s * x[2],
-                -s * x[1] + c * x[2],
-                x[3],
-                c * x[4] + s * x[5],
-                -s * x[4] + c * x[5],
-            ],
-            PrimitiveKind::Ry => [
-                c * x[0] - s * x[2],
-                x[1],
-                s * x[0] + c * x[2],
-                c * x[3] - s * x[5],
-                x[4],
-                s * x[3] + c * x[5],
-            ],
-            PrimitiveKind::Rz => [
-                c * x[0] + s * x[1],
-                -s * x[0] + c * x[1],
-                x[2],
-                c * x[3] + s * x[4],
-                -s * x[3] + c * x[4],
-                x[5],
-            ],
-        }
+        let mut one = [*x];
+        self.ad_inverse_each(&mut one);
+        one[0]
     }
 }
 

@@ -69,31 +69,18 @@ class Config:
     def frame(self) -> Optional["Frame"]:
         return self._frame
 
-    @property
-    def q(self) -> float:
-        return float(self._system._q[self.index])
+    q = property(lambda self: self._get("_q"), lambda self, v: self._put("_q", v),
+                 doc="The config's value.")
+    dq = property(lambda self: self._get("_dq"), lambda self, v: self._put("_dq", v),
+                  doc="Its velocity.")
+    ddq = property(lambda self: self._get("_ddq"), lambda self, v: self._put("_ddq", v),
+                   doc="Its acceleration (given for a kinematic config; see System.f).")
 
-    @q.setter
-    def q(self, value: float) -> None:
-        self._system._q[self.index] = value
-        self._system._state_changed()
+    def _get(self, array: str) -> float:
+        return float(getattr(self._system, array)[self.index])
 
-    @property
-    def dq(self) -> float:
-        return float(self._system._dq[self.index])
-
-    @dq.setter
-    def dq(self, value: float) -> None:
-        self._system._dq[self.index] = value
-        self._system._state_changed()
-
-    @property
-    def ddq(self) -> float:
-        return float(self._system._ddq[self.index])
-
-    @ddq.setter
-    def ddq(self, value: float) -> None:
-        self._system._ddq[self.index] = value
+    def _put(self, array: str, value: float) -> None:
+        getattr(self._system, array)[self.index] = value
         self._system._state_changed()
 
 
@@ -713,18 +700,27 @@ class System:
 
 
 # Potentials, forces and constraints (re-exported by the submodules of trep's names) -------
-class Potential:
-    """A potential energy term of the system."""
+class _Part:
+    """Something a system holds in one of its lists (``_list`` names it); adding one is a
+    structure change."""
+
+    _list = ""
 
     def __init__(self, system: System, name: Optional[str] = None):
         self._system = system
         self.name = name
-        system._potentials.append(self)
+        getattr(system, self._list).append(self)
         system._structure_changed()
 
     @property
     def system(self) -> System:
         return self._system
+
+
+class Potential(_Part):
+    """A potential energy term of the system."""
+
+    _list = "_potentials"
 
 
 class _Gravity(Potential):
@@ -746,18 +742,10 @@ class _ConfigSpring(Potential):
         super().__init__(system, name)
 
 
-class Force:
+class Force(_Part):
     """A generalized force of the system."""
 
-    def __init__(self, system: System, name: Optional[str] = None):
-        self._system = system
-        self.name = name
-        system._forces.append(self)
-        system._structure_changed()
-
-    @property
-    def system(self) -> System:
-        return self._system
+    _list = "_forces"
 
 
 class _Damping(Force):
