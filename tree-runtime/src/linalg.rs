@@ -120,6 +120,52 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
     forward_backward(&a[..n * n], n, &mut b[..n]);
 }
 
+/// Solves `A X = B` for `k` right-hand sides at once with the factors from
+/// [`lu_factor_packed`]: `b` holds `B` row-major (`n × k`, row i at `i·k`) and becomes `X`.
+/// Each elimination updates a whole row of right-hand sides (one contiguous pass), where `k`
+/// calls of [`lu_solve_packed`] would walk the factor `k` times.
+pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64], k: usize) {
+    let b = &mut b[..n * k];
+    for (j, &p) in pivots[..n].iter().enumerate() {
+        if p != j {
+            for c in 0..k {
+                b.swap(p * k + c, j * k + c);
+            }
+        }
+    }
+    for j in 0..n {
+        let col = &a[j * n..(j + 1) * n];
+        let (done, rest) = b.split_at_mut((j + 1) * k);
+        let bj = &done[j * k..];
+        for i in j + 1..n {
+            let l = col[i];
+            if l != 0.0 {
+                let bi = &mut rest[(i - j - 1) * k..(i - j) * k];
+                for (x, y) in bi.iter_mut().zip(bj) {
+                    *x -= l * y;
+                }
+            }
+        }
+    }
+    for j in (0..n).rev() {
+        let col = &a[j * n..(j + 1) * n];
+        let (head, tail) = b.split_at_mut(j * k);
+        let bj = &mut tail[..k];
+        let d = col[j];
+        for x in bj.iter_mut() {
+            *x /= d;
+        }
+        for i in 0..j {
+            let u = col[i];
+            if u != 0.0 {
+                for (x, y) in head[i * k..(i + 1) * k].iter_mut().zip(bj.iter()) {
+                    *x -= u * y;
+                }
+            }
+        }
+    }
+}
+
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors.
 fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
     for j in 0..n {

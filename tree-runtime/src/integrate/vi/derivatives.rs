@@ -30,7 +30,7 @@ use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
-use crate::linalg::{lu_factor_packed, lu_solve_packed};
+use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
 use crate::system::{ConstraintTerms, Order, Sparsity, System, Vector};
@@ -566,6 +566,10 @@ pub(crate) struct Linearisation {
     tangent: DMatrix<f64>,
     dp2: DMatrix<f64>,
     column: Vec<f64>,
+    /// `−R_x`, then `dz/dx`: row-major `rows × x` (all right-hand sides of one solve).
+    rhs: Vec<f64>,
+    /// One row of `dp₂/dx` being formed.
+    row: Vec<f64>,
     /// The point: `q₁`, `q₂` (all variables).
     q1: Vec<f64>,
     q2: Vec<f64>,
@@ -608,6 +612,8 @@ impl Linearisation {
             tangent: DMatrix::zeros(w, x),
             dp2: DMatrix::zeros(nd, x),
             column: vec![0.0; rows],
+            rhs: vec![0.0; rows * x],
+            row: vec![0.0; x],
             q1: vec![0.0; n],
             q2: vec![0.0; n],
             duals: None,
@@ -641,26 +647,40 @@ impl Linearisation {
         self.transposed = false;
         lu_factor_packed(&mut self.factor, rows, &mut self.pivots)
             .map_err(|_| singular(step, t))?;
-        // Δ: the identity on x's own coordinates, dz/dx = −R_z⁻¹ R_x on the unknowns.
-        self.tangent.fill(0.0);
-        for (c, &xc) in self.x_columns.iter().enumerate() {
-            for r in 0..rows {
-                self.column[r] = -self.jac[r * w + xc];
-            }
-            lu_solve_packed(&self.factor, rows, &self.pivots, &mut self.column);
-            self.tangent[(xc, c)] = 1.0;
-            for (r, &zc) in self.z_columns.iter().enumerate() {
-                self.tangent[(zc, c)] = self.column[r];
+        // Δ: the identity on x's own coordinates, dz/dx = −R_z⁻¹ R_x on the unknowns (every
+        // column of R_x in one solve).
+        let k = self.x_columns.len();
+        for r in 0..rows {
+            let row = &self.jac[r * w..(r + 1) * w];
+            for (c, &xc) in self.x_columns.iter().enumerate() {
+                self.rhs[r * k + c] = -row[xc];
             }
         }
-        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z).
+        lu_solve_packed_rows(&self.factor, rows, &self.pivots, &mut self.rhs, k);
+        self.tangent.fill(0.0);
+        for (c, &xc) in self.x_columns.iter().enumerate() {
+            self.tangent[(xc, c)] = 1.0;
+            for (r, &zc) in self.z_columns.iter().enumerate() {
+                self.tangent[(zc, c)] = self.rhs[r * k + c];
+            }
+        }
+        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z),
+        // a row at a time: P_x's row, then each dz/dx row (contiguous in `rhs`) scaled.
         for r in 0..nd {
             let prow = &self.pjac[r * w..(r + 1) * w];
-            for (c, &xc) in self.x_columns.iter().enumerate() {
-                let mut v = prow[xc];
-                for &zc in &self.z_columns[..nd] {
-                    v += prow[zc] * self.tangent[(zc, c)];
+            let out = &mut self.row[..k];
+            for (o, &xc) in out.iter_mut().zip(&self.x_columns) {
+                *o = prow[xc];
+            }
+            for (rz, &zc) in self.z_columns[..nd].iter().enumerate() {
+                let coefficient = prow[zc];
+                if coefficient != 0.0 {
+                    for (o, dz) in out.iter_mut().zip(&self.rhs[rz * k..(rz + 1) * k]) {
+                        *o += coefficient * dz;
+                    }
                 }
+            }
+            for (c, &v) in out.iter().enumerate() {
                 self.dp2[(r, c)] = v;
             }
         }
