@@ -30,6 +30,20 @@ pub enum Slots {
     D2D2,
 }
 
+/// A second slot derivative of `L_d` with its coefficients `[k_qq, k_t, k_vq, k_m]` on `L_qq`,
+/// `L_q̇q` transposed, `L_q̇q` and `M` (from [`DiscreteLagrangian::slot`]).
+#[derive(Clone, Copy, Debug)]
+pub struct SecondSlot<T>([T; 4]);
+
+impl<T: Scalar> SecondSlot<T> {
+    /// Entry `(i, j)` from `L_qq[i][j]`, `L_q̇q[i][j]`, `L_q̇q[j][i]`, `M[i][j]`.
+    #[inline(always)]
+    pub fn at(&self, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
+        let [k_qq, k_t, k_vq, k_m] = self.0;
+        k_qq * lqq_ij + k_t * lvq_ji + k_vq * lvq_ij + k_m * m_ij
+    }
+}
+
 /// The discrete Lagrangian of one step: its quadrature point `α` and length `Δt`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DiscreteLagrangian {
@@ -103,8 +117,13 @@ impl DiscreteLagrangian {
     /// second derivatives differentiate it over dual numbers).
     #[inline]
     pub fn second<T: Scalar>(&self, slots: Slots, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
-        let [k_qq, k_t, k_vq, k_m] = self.coefficients(slots).map(T::constant);
-        k_qq * lqq_ij + k_t * lvq_ji + k_vq * lvq_ij + k_m * m_ij
+        self.slot(slots).at(lqq_ij, lvq_ij, lvq_ji, m_ij)
+    }
+
+    /// The second slot derivative `slots` with its coefficients worked out once, for filling
+    /// many entries ([`Self::second`] entry by entry).
+    pub fn slot<T: Scalar>(&self, slots: Slots) -> SecondSlot<T> {
+        SecondSlot(self.coefficients(slots).map(T::constant))
     }
 
     /// Fills `out` (column-major, n × n) with `D₂D₁L_d`: entry `(i, j) = ∂(D₁L_d)ᵢ/∂q₂ⱼ`

@@ -29,7 +29,7 @@ use crate::context::StepContext;
 use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
-use crate::integrate::discrete::{DiscreteLagrangian, Slots};
+use crate::integrate::discrete::{DiscreteLagrangian, SecondSlot, Slots};
 use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
@@ -168,13 +168,13 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
     jac.fill(T::zero());
     pjac.fill(T::zero());
     let (by_q1_q, by_q1_v, by_q2_q, by_q2_v) = (c(1.0 - a), c(-1.0 / dt), c(a), c(1.0 / dt));
+    let [d1d1, d2d1, d2d2] = [Slots::D1D1, Slots::D2D1, Slots::D2D2].map(|s| sh.ld.slot::<T>(s));
     for (r, &i) in sh.dynamic.iter().enumerate() {
         let (row, prow) = (&mut jac[r * w..(r + 1) * w], &mut pjac[r * w..(r + 1) * w]);
         for j in 0..n {
             let (ij, ji) = (i * n + j, j * n + i);
-            let second = |slots, ij: usize, ji: usize| {
-                sh.ld
-                    .second(slots, st.lqq[ij], st.lvq[ij], st.lvq[ji], st.mass[ij])
+            let second = |slot: &SecondSlot<T>, ij: usize, ji: usize| {
+                slot.at(st.lqq[ij], st.lvq[ij], st.lvq[ji], st.mass[ij])
             };
             let f1 = by_q1_q * st.fq[ij] + by_q1_v * st.fv[ij];
             let f2 = by_q2_q * st.fq[ij] + by_q2_v * st.fv[ij];
@@ -182,11 +182,11 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
             for s in 0..m {
                 multiplier += st.lambda[s] * st.d2h1[(s * n + i) * n + j];
             }
-            row[j] = second(Slots::D1D1, ij, ji) + c(sh.left) * f1 + c(dt) * multiplier;
-            row[sh.w_q2() + j] = second(Slots::D2D1, ij, ji) + c(sh.left) * f2;
+            row[j] = second(&d1d1, ij, ji) + c(sh.left) * f1 + c(dt) * multiplier;
+            row[sh.w_q2() + j] = second(&d2d1, ij, ji) + c(sh.left) * f2;
             // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁.
-            prow[j] = second(Slots::D2D1, ji, ij) + c(sh.plus) * f1;
-            prow[sh.w_q2() + j] = second(Slots::D2D2, ij, ji) + c(sh.plus) * f2;
+            prow[j] = second(&d2d1, ji, ij) + c(sh.plus) * f1;
+            prow[sh.w_q2() + j] = second(&d2d2, ij, ji) + c(sh.plus) * f2;
         }
         row[sh.w_p1() + r] = c(1.0);
         for (k, &v) in sh.inputs.iter().enumerate() {
@@ -589,6 +589,11 @@ impl Linearisation {
             .chain((0..shape.nu()).map(|k| shape.w_u1() + k))
             .chain(shape.kinematic.iter().map(|&k| shape.w_q2() + k))
             .collect();
+        // Δ's rows for x's own coordinates: the identity (`solve` fills the unknowns').
+        let mut tangent = DMatrix::zeros(w, x);
+        for (c, &xc) in x_columns.iter().enumerate() {
+            tangent[(xc, c)] = 1.0;
+        }
         Linearisation {
             lqq: vec![0.0; n * n],
             lvq: vec![0.0; n * n],
@@ -609,7 +614,7 @@ impl Linearisation {
             factor_t: vec![0.0; rows * rows],
             pivots_t: vec![0; rows],
             transposed: false,
-            tangent: DMatrix::zeros(w, x),
+            tangent,
             dp2: DMatrix::zeros(nd, x),
             column: vec![0.0; rows],
             rhs: vec![0.0; rows * x],
@@ -657,11 +662,12 @@ impl Linearisation {
             }
         }
         lu_solve_packed_rows(&self.factor, rows, &self.pivots, &mut self.rhs, k);
-        self.tangent.fill(0.0);
-        for (c, &xc) in self.x_columns.iter().enumerate() {
-            self.tangent[(xc, c)] = 1.0;
+        // Only the unknowns' rows change: the identity on x's own rows was set once (`new`).
+        let tangent = self.tangent.as_mut_slice();
+        for c in 0..k {
+            let column = &mut tangent[c * w..(c + 1) * w];
             for (r, &zc) in self.z_columns.iter().enumerate() {
-                self.tangent[(zc, c)] = self.rhs[r * k + c];
+                column[zc] = self.rhs[r * k + c];
             }
         }
         // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z),
