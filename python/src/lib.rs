@@ -20,7 +20,7 @@ use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
 use tree_mech::runtime::evaluation::{evaluate_state, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
-use tree_mech::runtime::{Order, Vector};
+use tree_mech::runtime::Vector;
 use tree_mech::{SimError, System, Trajectory as CoreTrajectory, TreeSystem};
 
 pyo3::create_exception!(
@@ -103,6 +103,11 @@ impl Model {
                 Ok(Vector::<Dyn>::from_iterator(n, v.iter().copied()))
             }
         }
+    }
+
+    /// One number per variable, as a numpy array.
+    fn per_variable(&self, py: Python<'_>, of: impl Fn(&model::Variable) -> f64) -> Py<PyAny> {
+        vector(py, &self.model.variables.iter().map(of).collect::<Vec<_>>())
     }
 
     fn names(&self) -> Vec<String> {
@@ -341,29 +346,13 @@ impl Model {
     /// The initial configuration.
     #[getter]
     fn q0(&self, py: Python<'_>) -> Py<PyAny> {
-        vector(
-            py,
-            &self
-                .model
-                .variables
-                .iter()
-                .map(|v| v.q0)
-                .collect::<Vec<_>>(),
-        )
+        self.per_variable(py, |v| v.q0)
     }
 
     /// The initial velocity.
     #[getter]
     fn dq0(&self, py: Python<'_>) -> Py<PyAny> {
-        vector(
-            py,
-            &self
-                .model
-                .variables
-                .iter()
-                .map(|v| v.dq0)
-                .collect::<Vec<_>>(),
-        )
+        self.per_variable(py, |v| v.dq0)
     }
 
     fn __repr__(&self) -> String {
@@ -976,28 +965,17 @@ impl VariationalStepper {
                 "t2 must come after t1 (got t1 = {t1}, t2 = {t2})"
             )));
         }
-        let a = self.vi.settings.alpha;
-        let q = Vector::<Dyn>::from_fn(n, |i, _| q1[i] + a * (q2[i] - q1[i]));
-        let v = Vector::<Dyn>::from_fn(n, |i, _| (q2[i] - q1[i]) / dt);
-        let mut terms = tree_mech::runtime::Terms::zeros(Dyn(n));
-        self.sys.lagrangian(&q, &v, Order::First, &mut terms);
-        let plus = match self.vi.settings.forcing {
-            Forcing::Split => a * dt,
-            Forcing::Left => 0.0,
-        };
-        let p: Vec<f64> = self
-            .dynamic
-            .iter()
-            .map(|&i| a * dt * terms.dl_dq[i] + terms.dl_ddq[i] + plus * terms.force[i])
-            .collect();
-        if p.iter().any(|x| !x.is_finite()) {
-            return Err(sim_error(
-                py,
-                &SimError::InvalidInput(
-                    "the momentum is not finite at these configurations".into(),
-                ),
-            ));
-        }
+        let (q1, q2) = (
+            Vector::<Dyn>::from_column_slice(&q1),
+            Vector::<Dyn>::from_column_slice(&q2),
+        );
+        let (mut force, mut motion) = (tree_mech::NoForce, |_: usize, _: f64| [0.0; 3]);
+        let mut cx = StepContext::new(&mut self.sys, &mut force, &mut motion, dt);
+        let p = self
+            .vi
+            .momentum_after(cx.at(0, t1), &q1, &q2)
+            .map_err(|e| sim_error(py, &e))?;
+        let p: Vec<f64> = self.dynamic.iter().map(|&i| p[i]).collect();
         Ok(vector(py, &p))
     }
 }

@@ -110,6 +110,18 @@ def test_errors_are_plain():
     trep.Frame(s.world_frame, trep.TX, "a", name="slider", mass=1.0)
     with pytest.raises(ValueError, match="expected 1 values"):
         s.q = [1.0, 2.0]
+    with pytest.raises(ValueError, match="parameter must be a finite number or a config name"):
+        trep.Frame(s.world_frame, trep.TZ, None, name="nowhere")
+    with pytest.raises(ValueError, match="three finite numbers"):
+        trep.potentials.Gravity(s, [0.0, -9.8])
+    with pytest.raises(KeyError, match="Damping: no config 'b'"):
+        trep.forces.Damping(s, 0.1, {"b": 0.2})
+    with pytest.raises(ValueError, match="must not be zero"):
+        trep.constraints.PointOnPlane(s, s.world_frame, [0.0, 0.0, 0.0], "slider")
+    with pytest.raises(ValueError, match="u1 needs 0 entries, got 1"):
+        mvi0 = trep.MidpointVI(s)
+        mvi0.initialize_from_state(0.0, [0.1], [0.0])
+        mvi0.step(0.01, [1.0])
     mvi = trep.MidpointVI(s)
     mvi.initialize_from_state(0.0, [0.1], [0.0])
     with pytest.raises(ValueError, match="call step first"):

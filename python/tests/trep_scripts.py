@@ -168,3 +168,16 @@ def step_puppet(trep, s, steps, dt):
     for _ in range(steps):
         mvi.step(mvi.t2 + dt, [], k2)
     return mvi.q2
+
+
+def time_puppet(trep, spec, runs=3, steps=1000, dt=0.01):
+    """The best of `runs` wall times (s) of `steps` VI steps of the Puppet built from `spec`
+    (building it is not timed)."""
+    import time
+    best = float("inf")
+    for _ in range(runs):
+        s = puppet_from_frames(trep, spec)
+        start = time.time()
+        step_puppet(trep, s, steps, dt)
+        best = min(best, time.time() - start)
+    return best

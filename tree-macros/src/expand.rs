@@ -15,7 +15,7 @@ use tree_runtime::Order;
 
 use crate::ast::{Input, Source};
 use crate::lower;
-use crate::program::{constant, Flavour, Program};
+use crate::program::{constant, identifier_part, Flavour, Program};
 use crate::trace::{self, Term};
 
 /// Collects what the recursions hand out, summing the contributions to each output, in the
@@ -129,16 +129,7 @@ fn poses_program(plan: &TreePlan) -> Program {
 
 /// `theta1` → `THETA1`; anything not alphanumeric becomes `_`.
 fn constant_name(prefix: &str, name: &str) -> String {
-    let mut s: String = name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() {
-                c.to_ascii_uppercase()
-            } else {
-                '_'
-            }
-        })
-        .collect();
+    let mut s = identifier_part(name).to_uppercase();
     if prefix.is_empty() && s.starts_with(|c: char| c.is_ascii_digit()) {
         s.insert(0, '_');
     }

@@ -39,6 +39,14 @@ pub fn constant(c: f64) -> TokenStream {
     }
 }
 
+/// `name` with everything that is not an ASCII letter or digit turned into `_`, so it can be
+/// part of a Rust identifier.
+pub(crate) fn identifier_part(name: &str) -> String {
+    name.chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect()
+}
+
 /// Each statement's name: `q3_elbow` for variable 3 (`elbow`), `dq3_elbow`, `sin_q3_elbow`,
 /// `cos_q3_elbow` for what reads a variable — so a reader of the expansion can map the
 /// statements back to the tree's joints — and `t{n}` for the rest.
@@ -46,19 +54,7 @@ struct Names(Vec<Ident>);
 
 impl Names {
     fn of(nodes: &[Node], variables: &[&str]) -> Self {
-        let clean = |i: usize| -> String {
-            let name: String = variables[i]
-                .chars()
-                .map(|c| {
-                    if c.is_ascii_alphanumeric() {
-                        c.to_ascii_lowercase()
-                    } else {
-                        '_'
-                    }
-                })
-                .collect();
-            format!("{i}_{name}")
-        };
+        let clean = |i: usize| format!("{i}_{}", identifier_part(variables[i]).to_lowercase());
         let names = nodes
             .iter()
             .enumerate()

@@ -233,3 +233,41 @@ fn lu_core_factor(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Several right-hand sides at once give what one solve each gives, and `A X = B` holds
+    /// (a matrix whose first pivot must be swapped).
+    #[test]
+    fn many_right_hand_sides_solve_as_one_each() {
+        let n = 5;
+        let a: Vec<f64> = (0..n * n)
+            .map(|k| {
+                if k == 0 {
+                    0.0
+                } else {
+                    ((k * 7 % 11) as f64 - 5.0) / 3.0 + (k % 6 == 0) as u8 as f64 * 4.0
+                }
+            })
+            .collect();
+        let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
+        lu_factor_packed(&mut factor, n, &mut pivots).expect("regular");
+        assert_ne!(pivots[0], 0, "the first pivot is swapped");
+        let k = 3;
+        let b: Vec<f64> = (0..n * k).map(|i| (i as f64).sin()).collect();
+        let mut x = b.clone();
+        lu_solve_packed_rows(&factor, n, &pivots, &mut x, k);
+        for c in 0..k {
+            let mut one: Vec<f64> = (0..n).map(|r| b[r * k + c]).collect();
+            lu_solve_packed(&factor, n, &pivots, &mut one);
+            for r in 0..n {
+                assert!((x[r * k + c] - one[r]).abs() < 1e-13, "column {c}, row {r}");
+                // A (column-major) times x's column c gives b's.
+                let ax: f64 = (0..n).map(|j| a[j * n + r] * x[j * k + c]).sum();
+                assert!((ax - b[r * k + c]).abs() < 1e-12, "residual at ({r}, {c})");
+            }
+        }
+    }
+}

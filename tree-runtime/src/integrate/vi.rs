@@ -727,16 +727,10 @@ where
         }
         self.iterations += iterations;
         // p_{k+1} = D₂L_d + f⁺ (eq. (24)), terms at the solution.
-        let a = self.settings.alpha;
-        let ld = DiscreteLagrangian { alpha: a, dt };
-        let plus = match self.settings.forcing {
-            Forcing::Split => a * dt,
-            Forcing::Left => 0.0,
-        };
-        let p2 = &mut self.q_alpha;
-        for i in 0..p2.len() {
-            p2[i] = ld.d2(&self.terms, i) + plus * self.force[i];
+        for i in 0..self.q_alpha.len() {
+            self.q_alpha[i] = self.end_momentum(dt, i);
         }
+        let p2 = &self.q_alpha;
         if q_next.iter().chain(p2.iter()).any(|x| !x.is_finite()) {
             return Err(SimError::NonFinite {
                 step,
@@ -769,6 +763,48 @@ where
         std::mem::swap(q, q_next);
         self.predictor.ended_at.copy_from(q);
         Ok(())
+    }
+
+    /// Entry `i` of `p₂ = D₂L_d + f⁺` (eq. (24)) from the terms and forces of the last
+    /// [`Self::residual`] (a step of length `dt`).
+    fn end_momentum(&self, dt: f64, i: usize) -> f64 {
+        let a = self.settings.alpha;
+        let plus = match self.settings.forcing {
+            Forcing::Split => a * dt,
+            Forcing::Left => 0.0,
+        };
+        DiscreteLagrangian { alpha: a, dt }.d2(&self.terms, i) + plus * self.force[i]
+    }
+
+    /// `p₂ = D₂L_d(q₁, q₂) + f⁺` for the step from `q₁` at `cx.t` to `q₂` at `cx.t + cx.dt`,
+    /// with this integrator's quadrature and forcing: the momentum a run that is given two
+    /// configurations instead of a state starts from (trep's `initialize_from_configs`).
+    pub fn momentum_after<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        q2: &Vector<N>,
+    ) -> Result<Vector<N>, SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        self.prepare(cx.sys, q1);
+        // The residual's rows are not used: any p₁ will do.
+        let p1 = self.zero.clone();
+        self.residual(cx, q1, &p1, q2, false);
+        let mut p2 = p1;
+        for i in 0..p2.len() {
+            p2[i] = self.end_momentum(cx.dt, i);
+        }
+        if p2.iter().any(|x| !x.is_finite()) {
+            return Err(SimError::NonFinite {
+                step: cx.index,
+                t: cx.t + cx.dt,
+                what: "the momentum at the second configuration".into(),
+            });
+        }
+        Ok(p2)
     }
 
     /// The largest dynamic row of the last residual relative to its momentum scale: `max_i

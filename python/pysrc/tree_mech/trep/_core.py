@@ -27,6 +27,14 @@ class ConvergenceError(Exception):
     """The midpoint VI's Newton iteration did not converge (or met a singular Jacobian)."""
 
 
+def _vector3(v: Any, what: str) -> List[float]:
+    """Three finite numbers, or a ValueError naming `what`."""
+    out = [float(x) for x in v]
+    if len(out) != 3 or not all(np.isfinite(out)):
+        raise ValueError(f"{what} must be three finite numbers, got {list(v)!r}")
+    return out
+
+
 def _toml_string(s: str) -> str:
     return json.dumps(s)
 
@@ -115,6 +123,10 @@ class Frame:
         self._name = name
         if name is not None and system._frame_named(name) is not None:
             raise ValueError(f"a frame named `{name}` already exists")
+        number = isinstance(param, (int, float)) and not isinstance(param, bool)
+        if not (isinstance(param, str) or number and np.isfinite(param)):
+            raise ValueError(f"frame {name or '(unnamed)'}: the {transform} parameter must be a "
+                             f"finite number or a config name, got {param!r}")
         parent._children.append(self)
         system._hold()
         try:
@@ -424,9 +436,11 @@ class System:
 
     @staticmethod
     def _find(items: Sequence[Any], what: str, identifier: Any) -> Any:
+        """The item that is `identifier`, is named it, or (an int) sits at that index."""
+        is_index = isinstance(identifier, int) and not isinstance(identifier, bool)
         for i, x in enumerate(items):
-            if x is identifier or getattr(x, "name", None) == identifier or i == identifier \
-                    and isinstance(identifier, int) and not isinstance(identifier, bool):
+            if x is identifier or getattr(x, "name", None) == identifier \
+                    or (is_index and i == identifier):
                 return x
         raise KeyError(f"no {what} {identifier!r} in the system")
 
@@ -728,7 +742,7 @@ class _Gravity(Potential):
 
     def __init__(self, system: System, gravity: Sequence[float] = (0.0, 0.0, -9.8),
                  name: Optional[str] = None):
-        self.gravity = [float(g) for g in gravity]
+        self.gravity = _vector3(gravity, "Gravity: gravity")
         super().__init__(system, name)
 
 
@@ -756,8 +770,11 @@ class _Damping(Force):
                  damping: Optional[Dict[Any, float]] = None, name: Optional[str] = None):
         self.default_damping = float(default_damping)
         self._damping = {}
+        known = system._config_names()
         for k, v in (damping or {}).items():
             key = k.name if isinstance(k, Config) else k
+            if key not in known:
+                raise KeyError(f"Damping: no config {key!r} in the system")
             self._damping[key] = float(v)
         super().__init__(system, name)
 
@@ -859,7 +876,9 @@ class _PointOnPlane(Constraint):
                  point_frame: Any, name: Optional[str] = None):
         self.plane_frame = system.get_frame(plane_frame)
         self.point_frame = system.get_frame(point_frame)
-        self.normal = [float(x) for x in plane_normal]
+        self.normal = _vector3(plane_normal, f"PointOnPlane {name or ''}: plane_normal")
+        if not any(self.normal):
+            raise ValueError(f"PointOnPlane {name or ''}: plane_normal must not be zero")
         system._hold()
         try:
             super().__init__(system, name)
