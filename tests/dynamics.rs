@@ -313,3 +313,44 @@ fn damping_removes_energy_monotonically() {
         assert!(traj.energy.last().unwrap() < &(traj.energy[0] - 1.0));
     }
 }
+
+/// `System::mass_matrix` (the interpreted system runs only the sweeps it needs: poses,
+/// `∂v/∂q̇` columns, composite inertias) gives the `M` and `L = −V` of the full evaluation at
+/// rest, on every shipped and test model (springs, dampers, constraints, kinematic inputs) at
+/// random configurations. Garbage left in the output beforehand must not survive.
+#[test]
+fn the_mass_matrix_evaluation_is_the_lagrangians_at_rest() {
+    let test_models = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/models");
+    let mut files = common::model_files();
+    files.extend(
+        std::fs::read_dir(test_models)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
+    );
+    let mut rng = Rng::new(41);
+    for path in files {
+        let model = tree_mech::model::from_toml_file(&path).unwrap();
+        let mut sys = interpreted(&model);
+        let n = sys.dof();
+        let rest = Vector::<Dyn>::zeros(n);
+        for _ in 0..3 {
+            let q = rng.vector(n, 1.0);
+            let full = sys.evaluate(&q, &rest, tree_mech::runtime::Order::Dynamics);
+            let mut mass = tree_mech::runtime::Terms::zeros(Dyn(n));
+            mass.l = 1e9;
+            mass.mass.fill(1e9);
+            sys.mass_matrix(&q, &mut mass);
+            let what = path.display();
+            let scale = full.mass.amax().max(1.0);
+            assert!(
+                (mass.l - full.l).abs() <= 1e-13 * full.l.abs().max(1.0),
+                "{what}: L {} against {}",
+                mass.l,
+                full.l
+            );
+            let diff = (&mass.mass - &full.mass).amax();
+            assert!(diff <= 1e-14 * scale, "{what}: M differs by {diff:e}");
+        }
+    }
+}

@@ -362,26 +362,6 @@ impl Model {
         self.variables.iter().position(|v| v.name == name)
     }
 
-    /// For each frame, whether it or any descendant carries a non-zero mass or has a
-    /// constraint, spring or damper attached (whether the recursions must visit it).
-    pub fn needed_frames(&self) -> Vec<bool> {
-        let mut has = vec![false; self.frames.len()];
-        for k in self.attached_frames() {
-            has[k] = true;
-        }
-        for k in (0..self.frames.len()).rev() {
-            if self.frames[k].mass.is_some_and(|m| m.is_nonzero()) {
-                has[k] = true;
-            }
-            if has[k] {
-                if let Some(p) = self.frames[k].parent {
-                    has[p] = true;
-                }
-            }
-        }
-        has
-    }
-
     /// Sets frame `frame`'s mass, keeping its centre of mass and inertia (a frame without a
     /// body gets a point mass): a parameter changed without touching the structure (a
     /// sweep's). Refuses an unknown frame or a mass that is not finite and positive.

@@ -207,15 +207,22 @@ impl ReducedKkt {
     where
         DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
     {
+        // Column-major storage throughout: gather column by column.
+        let (n, nd) = (mass.nrows(), split.dynamic.len());
+        let (m, mdd) = (mass.as_slice(), self.mdd.as_mut_slice());
+        for (c, &j) in split.dynamic.iter().enumerate() {
+            let (from, to) = (&m[j * n..(j + 1) * n], &mut mdd[c * nd..(c + 1) * nd]);
+            for (x, &i) in to.iter_mut().zip(&split.dynamic) {
+                *x = from[i];
+            }
+        }
         for (r, &i) in split.dynamic.iter().enumerate() {
-            self.rhs[r] = b[i]
-                - split
-                    .kinematic
-                    .iter()
-                    .map(|&k| mass[(i, k)] * x[k])
-                    .sum::<f64>();
-            for (c, &j) in split.dynamic.iter().enumerate() {
-                self.mdd[(r, c)] = mass[(i, j)];
+            self.rhs[r] = b[i];
+        }
+        for &k in &split.kinematic {
+            let (column, xk) = (&m[k * n..(k + 1) * n], x[k]);
+            for (r, &i) in split.dynamic.iter().enumerate() {
+                self.rhs[r] -= column[i] * xk;
             }
         }
         for r in 0..split.rows {

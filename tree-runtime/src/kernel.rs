@@ -46,6 +46,14 @@ pub fn evaluate<S: Scalar>(
     elements::forces(plan, &k.tree, &mut k.elements, dq, order, out);
 }
 
+/// The mass matrix `M(q)` and `L(q, 0) = −V(q)` (the springs' potentials included) of the
+/// model at rest: [`sweeps::mass`], then the springs at [`Order::First`] (which also add
+/// their `∂L/∂q`).
+pub fn mass<S: Scalar>(plan: &TreePlan, k: &mut Kernel<S>, q: &[S], out: &mut impl Sink<S>) {
+    sweeps::mass(plan, &mut k.tree, q, out);
+    elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
+}
+
 /// The constraints `h`, `Dh` and, from `Order::Dynamics` on, `q̇ᵀD²h q̇` (and at `Order::Full`
 /// all of `D²h`) at `(q, q̇)`.
 pub fn constraints<S: Scalar>(

@@ -79,14 +79,19 @@ pub struct FramePlan {
     pub n: usize,
     /// Offset of this frame's `n` columns (`∂v/∂q̇_i`, `∂v/∂q_i`) in the column buffers.
     pub col_offset: usize,
-    /// Whether this frame or a descendant carries mass or has an element attached; other
-    /// frames are skipped.
+    /// Whether this frame or a descendant carries mass or has a spring or damper attached:
+    /// the frames the Lagrangian's sweeps visit (constraints have their own reach,
+    /// [`Self::leads_to_attached`]).
     pub needed: bool,
     /// A constraint, spring or damper attaches here: its world point Jacobian is computed.
     pub attached: bool,
-    /// This frame or a descendant is [`Self::attached`]: its `∂v/∂q̇` columns are needed at
-    /// every order (the elements' point Jacobians are built from them).
+    /// This frame or a descendant is [`Self::attached`]: the constraints' sweep visits it,
+    /// and its `∂v/∂q̇` columns are needed at every order (the elements' point Jacobians are
+    /// built from them).
     pub leads_to_attached: bool,
+    /// This frame or a descendant has a spring or damper attached: the Lagrangian's sweep
+    /// needs its `∂v/∂q̇` columns at every order.
+    pub leads_to_element: bool,
     /// The rigid body this frame carries, if it has any mass or inertia.
     pub body: Option<Body>,
     /// Total mass of the subtree rooted here.
@@ -147,14 +152,15 @@ struct Draft {
     joint: Joint,
     needed: bool,
     attached: bool,
+    element: bool,
     body: Option<Body>,
 }
 
 impl TreePlan {
     /// The plan of every model frame as it is.
     pub fn new(model: &Model) -> Self {
-        let has_mass = model.needed_frames();
-        let attached = attached(model);
+        let (attached, element) = attachments(model);
+        let has_mass = lagrangian_reach(model, &element);
         let drafts = model
             .frames
             .iter()
@@ -166,6 +172,7 @@ impl TreePlan {
                 joint: f.joint,
                 needed: has_mass[k],
                 attached: attached[k],
+                element: element[k],
                 body: f.mass.as_ref().and_then(Body::of),
             })
             .collect();
@@ -176,8 +183,8 @@ impl TreePlan {
     /// remain, each with the constant transform from its nearest remaining ancestor to its
     /// parent in `pre`.
     pub fn folded(model: &Model) -> Self {
-        let has_mass = model.needed_frames();
-        let attached = attached(model);
+        let (attached, element) = attachments(model);
+        let has_mass = lagrangian_reach(model, &element);
         let mut drafts: Vec<Draft> = Vec::new();
         // For each model frame: its index in `drafts` if kept, and the constant transform from
         // the nearest kept ancestor (or the world) to it if not.
@@ -213,6 +220,7 @@ impl TreePlan {
                     joint,
                     needed: has_mass[k],
                     attached: attached[k],
+                    element: element[k],
                     body,
                 });
             } else {
@@ -252,6 +260,7 @@ impl TreePlan {
                 needed: d.needed,
                 attached: d.attached,
                 leads_to_attached: d.attached,
+                leads_to_element: d.element,
                 body: d.body,
                 subtree_mass: 0.0,
             });
@@ -262,6 +271,7 @@ impl TreePlan {
             if let Some(p) = frames[k].parent {
                 frames[p].subtree_mass += frames[k].subtree_mass;
                 frames[p].leads_to_attached |= frames[k].leads_to_attached;
+                frames[p].leads_to_element |= frames[k].leads_to_element;
             }
         }
         TreePlan {
@@ -335,13 +345,35 @@ fn at(kept: &[Option<usize>], f: usize) -> usize {
     kept[f].expect("attached frames are always kept")
 }
 
-/// For each model frame, whether a constraint, spring or damper attaches to it.
-fn attached(model: &Model) -> Vec<bool> {
-    let mut out = vec![false; model.frames.len()];
+/// For each model frame, whether a constraint, spring or damper attaches to it, and whether
+/// a spring or damper does (an element of the Lagrangian's evaluation).
+fn attachments(model: &Model) -> (Vec<bool>, Vec<bool>) {
+    let mut attached = vec![false; model.frames.len()];
     for k in model.attached_frames() {
-        out[k] = true;
+        attached[k] = true;
     }
-    out
+    let mut element = vec![false; model.frames.len()];
+    let springs = model.springs.iter().filter_map(|s| match s.kind {
+        SpringKind::Frames(f) => Some(f),
+        SpringKind::Variable(_) => None,
+    });
+    for f in springs.chain(model.dampers.iter().map(|d| d.frames)) {
+        f.iter().for_each(|&k| element[k] = true);
+    }
+    (attached, element)
+}
+
+/// For each model frame, whether it or a descendant carries a non-zero mass or has a spring
+/// or damper attached (`element`): the frames the Lagrangian's sweeps visit.
+fn lagrangian_reach(model: &Model, element: &[bool]) -> Vec<bool> {
+    let mut reach = element.to_vec();
+    for k in (0..model.frames.len()).rev() {
+        reach[k] |= model.frames[k].mass.is_some_and(|m| m.is_nonzero());
+        if let (true, Some(p)) = (reach[k], model.frames[k].parent) {
+            reach[p] = true;
+        }
+    }
+    reach
 }
 
 /// The kept frame nearest above model frame `k` (itself not kept).

@@ -106,26 +106,35 @@ pub enum Reach {
     /// What the constraints need: poses and `∂v/∂q̇` columns on the paths to attached frames
     /// (`h`, `Dh`, `D²h` are built from world points and axes alone).
     Attachments,
+    /// What the mass matrix and the potential need ([`mass`]): poses and `∂v/∂q̇` columns on
+    /// the frames that carry or lead to mass or an element; no velocities.
+    Mass,
 }
 
 /// The outward sweep: poses, body velocities and their columns (eqs. (1), (6), (7), (10)),
 /// as much of them as `reach` asks for.
 pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S], reach: Reach) {
-    let (velocities, all_columns) = match reach {
-        Reach::Everything => (true, true),
-        Reach::Lagrangian(order) => (true, order >= Order::Dynamics),
-        Reach::Attachments => (false, false),
+    // Velocities; every `∂v/∂q̇` column; every `∂v/∂q` column.
+    let (velocities, all_jac, all_dv_dq) = match reach {
+        Reach::Everything => (true, true, true),
+        Reach::Lagrangian(order) => (true, order >= Order::Dynamics, order >= Order::Dynamics),
+        Reach::Attachments => (false, false, false),
+        Reach::Mass => (false, true, false),
     };
     for (k, f) in plan.frames.iter().enumerate() {
         let visit = match reach {
             Reach::Everything => true,
-            Reach::Lagrangian(_) => f.needed,
+            Reach::Lagrangian(_) | Reach::Mass => f.needed,
             Reach::Attachments => f.leads_to_attached,
         };
         if !visit {
             continue;
         }
-        let velocity_columns = all_columns || f.leads_to_attached;
+        let velocity_columns = all_jac
+            || match reach {
+                Reach::Lagrangian(_) | Reach::Mass => f.leads_to_element,
+                Reach::Everything | Reach::Attachments => f.leads_to_attached,
+            };
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let (mut parent_pose, mut parent_vel, np, pc) = match f.parent {
             Some(p) => (
@@ -167,10 +176,10 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
                 ws.jac[kc + d] = f.kind.twist().map(S::constant);
             }
         }
-        if all_columns {
+        if all_dv_dq {
             transport(&local, f.pre.as_ref(), &mut ws.dv_dq, pc, kc, np);
         }
-        if f.attached {
+        if f.attached && velocity_columns {
             let pose = ws.pose[k];
             for a in 0..f.n {
                 let j = ws.jac[kc + a];
@@ -202,7 +211,9 @@ fn transport<S: Scalar>(
 
 /// The inward sweep: each subtree's momentum wrench and first mass moment (and, from
 /// `Order::Dynamics` on, composite inertia) at its root. Returns the Lagrangian `L` (eq. (15)).
-pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -> S {
+/// Without `kinetic` (no velocities computed: the state at rest) the wrenches are zero and `L`
+/// is `−V`.
+fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order, kinetic: bool) -> S {
     let gravity = plan.gravity.map(S::constant);
     let dynamics = order >= Order::Dynamics;
     let mut l = S::zero();
@@ -213,12 +224,16 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
         ws.moment[k] = [S::zero(); 3];
         match f.body {
             Some(Body::Principal { mass, moments }) => {
-                let v = &ws.velocity[k];
                 let p = &ws.pose[k].p;
-                ws.wrench[k] = inertia_times(mass, &moments, v);
-                l += S::constant(0.5) * dot(v, &ws.wrench[k])
-                    + S::constant(mass)
-                        * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
+                if kinetic {
+                    let v = &ws.velocity[k];
+                    ws.wrench[k] = inertia_times(mass, &moments, v);
+                    l += S::constant(0.5) * dot(v, &ws.wrench[k]);
+                } else {
+                    ws.wrench[k] = zero6();
+                }
+                l +=
+                    S::constant(mass) * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
                 if dynamics {
                     ws.inertia[k] = SpatialInertia::diagonal(mass, &moments);
                 }
@@ -230,16 +245,20 @@ pub fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order) -
                 let pose = &ws.pose[k];
                 let g_local = pose.rotate_inverse(&gravity);
                 let (com, mass) = (com.map(S::constant), S::constant(mass));
-                ws.wrench[k] = inertia.times(&ws.velocity[k]);
+                if kinetic {
+                    ws.wrench[k] = inertia.times(&ws.velocity[k]);
+                    l += S::constant(0.5) * dot(&ws.velocity[k], &ws.wrench[k]);
+                } else {
+                    ws.wrench[k] = zero6();
+                }
                 ws.moment[k] = com.map(|x| mass * x);
-                l += S::constant(0.5) * dot(&ws.velocity[k], &ws.wrench[k])
-                    + mass
-                        * (gravity[0] * pose.p[0]
-                            + gravity[1] * pose.p[1]
-                            + gravity[2] * pose.p[2]
-                            + g_local[0] * com[0]
-                            + g_local[1] * com[1]
-                            + g_local[2] * com[2]);
+                l += mass
+                    * (gravity[0] * pose.p[0]
+                        + gravity[1] * pose.p[1]
+                        + gravity[2] * pose.p[2]
+                        + g_local[0] * com[0]
+                        + g_local[1] * com[1]
+                        + g_local[2] * com[2]);
                 if dynamics {
                     ws.inertia[k] = inertia;
                 }
@@ -332,12 +351,16 @@ pub fn evaluate<S: Scalar>(
     out: &mut impl Sink<S>,
 ) {
     forward(plan, ws, q, dq, Reach::Lagrangian(order));
-    let l = inward(plan, ws, order);
+    let l = inward(plan, ws, order, true);
     out.set(Output::L, l);
     let gravity = plan.gravity.map(S::constant);
     for (j, fk) in plan.variable_frames.iter().enumerate() {
         let Some(fk) = *fk else { continue };
         let f = &plan.frames[fk];
+        // A variable with no mass, spring or damper below it has no terms.
+        if !f.needed {
+            continue;
+        }
         let kind = f.kind;
         let own = f.n - 1;
         let kc = f.col_offset;
@@ -382,6 +405,33 @@ pub fn evaluate<S: Scalar>(
                 if a < own {
                     out.set(Output::D2lDqDq(j, i), x);
                 }
+            }
+        }
+    }
+}
+
+/// The mass matrix `M(q)` (eq. (18)) and `L(q, 0) = −V(q)` of the tree at rest: the outward
+/// sweep's poses and `∂v/∂q̇` columns and the inward sweep's composite inertias only — no
+/// velocities, no `∂v/∂q` columns (Pinocchio's CRBA; about half of an [`Order::Dynamics`]
+/// evaluation). Sets [`Output::L`] and every [`Output::Mass`] entry.
+pub fn mass<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], out: &mut impl Sink<S>) {
+    forward(plan, ws, q, &[], Reach::Mass);
+    let l = inward(plan, ws, Order::Dynamics, false);
+    out.set(Output::L, l);
+    for (j, fk) in plan.variable_frames.iter().enumerate() {
+        let Some(fk) = *fk else { continue };
+        let f = &plan.frames[fk];
+        if !f.needed {
+            continue;
+        }
+        let own = f.n - 1;
+        let y = ws.inertia[fk].column(f.kind);
+        for a in 0..=own {
+            let i = plan.vars[f.var_start + a];
+            let mij = dot(&ws.jac[f.col_offset + a], &y);
+            out.set(Output::Mass(i, j), mij);
+            if a < own {
+                out.set(Output::Mass(j, i), mij);
             }
         }
     }

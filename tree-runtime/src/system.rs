@@ -317,6 +317,16 @@ where
         out: &mut Terms<Self::N>,
     );
 
+    /// The mass matrix `M(q)` into `out.mass` and `L(q, 0) = −V(q)` into `out.l` — what
+    /// the Legendre transform `q̇ = M⁻¹p` and the energy of a state at `q` need. The rest of
+    /// `out` is left unspecified. The default is [`Self::lagrangian`] at rest at
+    /// [`Order::Dynamics`] (which allocates its zero velocity for a `Dyn` system: those
+    /// override it); the interpreted system runs only the sweeps these two need.
+    fn mass_matrix(&mut self, q: &Vector<Self::N>, out: &mut Terms<Self::N>) {
+        let rest = self.zero_vector();
+        self.lagrangian(q, &rest, Order::Dynamics, out);
+    }
+
     /// Every frame's pose in the world, `g_sk(q)` (eq. (1)); `out.len()` must be
     /// `frame_count()`.
     fn poses(&mut self, q: &Vector<Self::N>, out: &mut [Pose]);

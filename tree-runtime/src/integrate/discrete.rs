@@ -163,11 +163,12 @@ impl DiscreteLagrangian {
             t.d2l_ddq_dq.as_slice(),
             t.mass.as_slice(),
         );
+        let slot = self.slot::<f64>(slots);
         // Column-major: entry (i, j) at j·n + i.
         for j in 0..n {
             for i in 0..n {
                 let ij = j * n + i;
-                out[ij] = self.second(slots, lqq[ij], lvq[ij], lvq[i * n + j], mass[ij]);
+                out[ij] = slot.at(lqq[ij], lvq[ij], lvq[i * n + j], mass[ij]);
             }
         }
     }

@@ -861,7 +861,7 @@ where
         P: Prescription,
     {
         let (sys, motion, step, t) = (&mut *cx.sys, &mut *cx.motion, cx.index, cx.t);
-        sys.lagrangian(q, &self.zero, Order::Dynamics, &mut self.terms);
+        sys.mass_matrix(q, &mut self.terms);
         self.q_alpha.copy_from(q);
         prescribe(
             &self.split.kinematic,

@@ -184,6 +184,11 @@ impl System for TreeSystem {
         );
     }
 
+    fn mass_matrix(&mut self, q: &Vector<Dyn>, out: &mut Terms<Dyn>) {
+        out.clear(Order::Dynamics);
+        kernel::mass(&self.plan, &mut self.kernel, q.as_slice(), out);
+    }
+
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
         sweeps::poses(&self.full_plan, q.as_slice(), out);
     }

@@ -10,7 +10,7 @@ mod accumulate;
 mod cached;
 mod uncached;
 
-use nalgebra::Dyn;
+use nalgebra::{DVector, Dyn};
 use tree_model::{Model, Motion};
 
 use crate::dual::{Dual, DualOutputs};
@@ -51,6 +51,8 @@ pub struct PaperSystem {
     tri_offset: Vec<usize>,
     d2v_ddq_dq: Vec<Twist>,
     d2v_dq_dq: Vec<Twist>,
+    /// A zero velocity, for [`System::mass_matrix`] (the Lagrangian at rest).
+    rest: DVector<f64>,
 }
 
 impl PaperSystem {
@@ -87,6 +89,7 @@ impl PaperSystem {
             tri_offset,
             d2v_ddq_dq: vec![[0.0; 6]; tris],
             d2v_dq_dq: vec![[0.0; 6]; tris],
+            rest: DVector::zeros(model.variables.len()),
         })
     }
 
@@ -187,6 +190,13 @@ impl System for PaperSystem {
                 }
             }
         }
+    }
+
+    fn mass_matrix(&mut self, q: &Vector<Dyn>, out: &mut Terms<Dyn>) {
+        // The paper's own sums at rest (taken out for the call: no allocation).
+        let rest = std::mem::take(&mut self.rest);
+        self.lagrangian(q, &rest, Order::Dynamics, out);
+        self.rest = rest;
     }
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
