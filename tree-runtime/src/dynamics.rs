@@ -144,7 +144,8 @@ pub struct Dynamics<N: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
-    /// The Lagrangian terms of the last evaluation.
+    /// The Lagrangian terms of the last evaluation (after an articulated-body solve, only
+    /// the model's own forces: `force` and the springs' `dl_dq`).
     pub terms: Terms<N>,
     /// The constraint terms of the last evaluation.
     pub constraint_terms: ConstraintTerms,
@@ -154,6 +155,10 @@ where
     pub baumgarte: Baumgarte,
     /// Which variables are simulated.
     pub split: Split,
+    /// Whether [`Self::acceleration`] may use the system's articulated-body algorithm
+    /// (models without constraints); off, it always forms `M` (and leaves the terms of a
+    /// [`Order::Dynamics`] evaluation in [`Self::terms`], as the linearisation needs).
+    pub articulated: bool,
     factor: Matrix<N>,
     rhs: Vector<N>,
     reduced: ReducedKkt,
@@ -292,6 +297,7 @@ where
             constraint_terms: ConstraintTerms::zeros(m, n.value()),
             lambda: DVector::zeros(m),
             baumgarte: Baumgarte::default(),
+            articulated: true,
             factor: Matrix::zeros_generic(n, n),
             rhs: Vector::zeros_generic(n, nalgebra::U1),
             reduced: ReducedKkt::new(nd, m),
@@ -314,6 +320,29 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
+        if self.articulated && self.split.rows == 0 {
+            // The articulated-body algorithm, O(frames), where the system has it: τ from
+            // outside the model (the caller's force, B u), kinematic q̈ prescribed.
+            self.rhs.fill(0.0);
+            cx.force.add_force(cx.t, q, dq, &mut self.rhs);
+            cx.add_inputs(&mut self.rhs);
+            for &i in &self.split.kinematic {
+                qdd[i] = cx.motion.kinematic(i, cx.t)[2];
+            }
+            if cx
+                .sys
+                .articulated_acceleration(q, dq, &self.rhs, qdd, &mut self.terms)
+            {
+                if qdd.iter().any(|x| !x.is_finite()) {
+                    return Err(SimError::NonFinite {
+                        step: cx.index,
+                        t: cx.t,
+                        what: "acceleration q̈".into(),
+                    });
+                }
+                return Ok(());
+            }
+        }
         cx.sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
         // rhs = F + u + B u_inputs + ∂L/∂q − (∂²L/∂q̇∂q) q̇
         self.rhs.copy_from(&self.terms.force);

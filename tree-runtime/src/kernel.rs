@@ -54,6 +54,27 @@ pub fn mass<S: Scalar>(plan: &TreePlan, k: &mut Kernel<S>, q: &[S], out: &mut im
     elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
 }
 
+/// The outward sweep at `(q, q̇)` and, from it, the model's own generalized forces without
+/// the tree's terms: the springs' `L` and `∂L/∂q`, the damping's and dampers' forces (what the
+/// articulated-body algorithm, [`crate::articulated`], takes as its inputs besides `τ`).
+pub fn elements_at<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    dq: &[S],
+    out: &mut impl Sink<S>,
+) {
+    sweeps::forward(
+        plan,
+        &mut k.tree,
+        q,
+        dq,
+        sweeps::Reach::Lagrangian(Order::First),
+    );
+    elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
+    elements::forces(plan, &k.tree, &mut k.elements, dq, Order::First, out);
+}
+
 /// The constraints `h`, `Dh` and, from `Order::Dynamics` on, `q̇ᵀD²h q̇` (and at `Order::Full`
 /// all of `D²h`) at `(q, q̇)`.
 pub fn constraints<S: Scalar>(

@@ -42,6 +42,9 @@ pub mod scalar;
 pub mod se3;
 #[doc(hidden)]
 pub mod sweeps;
+// Forward dynamics by the articulated-body algorithm (f64: the interpreted system's).
+#[doc(hidden)]
+pub mod articulated;
 
 // Simulation (needs nalgebra).
 #[cfg(feature = "simulate")]

@@ -57,6 +57,8 @@ where
 {
     let n = q.len();
     let mut dynamics = Dynamics::new(&*cx.sys);
+    // The derivatives read M and ∂²L/∂q̇∂q from the evaluation.
+    dynamics.articulated = false;
     let mut qdd = Vector::<S::N>::zeros_generic(cx.sys.dim(), nalgebra::U1);
     dynamics.acceleration(cx, q, dq, &mut qdd)?;
     let lambda = dynamics.lambda.clone();

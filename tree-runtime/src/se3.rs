@@ -606,6 +606,19 @@ impl<S: Scalar> SpatialInertia<S> {
         }
     }
 
+    /// `self −= s u uᵀ` (the articulated-body step's rank-one update).
+    #[inline(always)]
+    pub fn sub_outer(&mut self, u: &Wrench<S>, s: S) {
+        for i in 0..3 {
+            let (a, b) = (s * u[i], s * u[i + 3]);
+            for j in 0..3 {
+                self.vv[i][j] -= a * u[j];
+                self.vw[i][j] -= a * u[j + 3];
+                self.ww[i][j] -= b * u[j + 3];
+            }
+        }
+    }
+
     /// `I X`.
     #[inline(always)]
     pub fn times(&self, x: &Twist<S>) -> Wrench<S> {

@@ -327,6 +327,26 @@ where
         self.lagrangian(q, &rest, Order::Dynamics, out);
     }
 
+    /// `q̈` of the dynamic variables by the articulated-body algorithm, in O(frames), for a
+    /// model without constraints: `tau` the generalized forces from outside the model
+    /// (inputs, a caller's force) on every variable, `qdd`'s kinematic entries their
+    /// prescribed accelerations. The model's own forces (springs, damping, dampers) are
+    /// left in `own.force` and `own.dl_dq` (the rest of `own` unspecified). Returns `false`
+    /// when the system has no such algorithm, the model has constraints, or a pivot
+    /// vanishes; the caller then solves `M q̈ = …` (which names a singular variable). The
+    /// default returns `false`.
+    fn articulated_acceleration(
+        &mut self,
+        q: &Vector<Self::N>,
+        dq: &Vector<Self::N>,
+        tau: &Vector<Self::N>,
+        qdd: &mut Vector<Self::N>,
+        own: &mut Terms<Self::N>,
+    ) -> bool {
+        let _ = (q, dq, tau, qdd, own);
+        false
+    }
+
     /// Every frame's pose in the world, `g_sk(q)` (eq. (1)); `out.len()` must be
     /// `frame_count()`.
     fn poses(&mut self, q: &Vector<Self::N>, out: &mut [Pose]);

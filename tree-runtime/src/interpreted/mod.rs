@@ -5,6 +5,7 @@
 use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
+use crate::articulated::{self, Articulated};
 use crate::dual::{Dual, DualOutputs};
 use crate::error::SimError;
 use crate::kernel::{self, Kernel};
@@ -28,6 +29,10 @@ pub struct TreeSystem {
     /// Every frame as modelled, for the poses.
     full_plan: TreePlan,
     constraint_names: Vec<String>,
+    /// The articulated-body algorithm's storage, and its inputs' buffers.
+    articulated: Articulated,
+    kinematic: Vec<bool>,
+    tau: Vec<f64>,
 }
 
 impl TreeSystem {
@@ -47,9 +52,12 @@ impl TreeSystem {
             model: model.clone(),
             kernel: Kernel::new(&plan),
             dual_kernel: None,
-            plan,
             full_plan: TreePlan::new(model),
             constraint_names: model.constraint_row_names(),
+            articulated: Articulated::new(&plan),
+            kinematic: model.variables.iter().map(|v| v.is_kinematic()).collect(),
+            tau: vec![0.0; model.variables.len()],
+            plan,
         })
     }
 
@@ -187,6 +195,34 @@ impl System for TreeSystem {
     fn mass_matrix(&mut self, q: &Vector<Dyn>, out: &mut Terms<Dyn>) {
         out.clear(Order::Dynamics);
         kernel::mass(&self.plan, &mut self.kernel, q.as_slice(), out);
+    }
+
+    fn articulated_acceleration(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        tau: &Vector<Dyn>,
+        qdd: &mut Vector<Dyn>,
+        own: &mut Terms<Dyn>,
+    ) -> bool {
+        if self.plan.rows > 0 {
+            return false;
+        }
+        own.clear(Order::First);
+        let (q, dq) = (q.as_slice(), dq.as_slice());
+        kernel::elements_at(&self.plan, &mut self.kernel, q, dq, own);
+        for (i, t) in self.tau.iter_mut().enumerate() {
+            *t = tau[i] + own.force[i] + own.dl_dq[i];
+        }
+        articulated::accelerations(
+            &self.plan,
+            &self.kernel.tree,
+            &mut self.articulated,
+            dq,
+            &self.tau,
+            &self.kinematic,
+            qdd.as_mut_slice(),
+        )
     }
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
