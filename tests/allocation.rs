@@ -4,7 +4,6 @@
 
 use std::alloc::{GlobalAlloc, Layout, System as SystemAlloc};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use tree_mech::integrate::{
     JacobianUpdate, MidpointVi, Rk4, Rk45, StepContext, StepCovector, StepDerivatives, Tolerance,
@@ -19,17 +18,22 @@ use tree_mech::{
 
 struct Counting;
 
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
 thread_local! {
     /// Whether this thread is being measured (a const `Cell`: reading it never allocates).
     static MEASURED: Cell<bool> = const { Cell::new(false) };
+    /// The allocations this thread made while measured (tests run in parallel threads).
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+/// This thread's measured allocations so far.
+fn allocated() -> usize {
+    ALLOCATIONS.with(Cell::get)
 }
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if MEASURED.try_with(Cell::get).unwrap_or(false) {
-            ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+            let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
         }
         unsafe { SystemAlloc.alloc(layout) }
     }
@@ -46,11 +50,11 @@ tree_model!(struct StringPendulum from "tests/models/string-pendulum.toml");
 
 /// Allocations made by `f`.
 fn allocations(f: impl FnOnce()) -> usize {
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocated();
     MEASURED.with(|m| m.set(true));
     f();
     MEASURED.with(|m| m.set(false));
-    ALLOCATIONS.load(Ordering::SeqCst) - before
+    allocated() - before
 }
 
 /// `derivatives`: also the VI step's derivatives (the paper's reference system evaluates
@@ -185,4 +189,55 @@ fn a_discrete_system_step_allocates_nothing() {
         }
     });
     assert_eq!(n, 0, "{n} allocations in 19 discrete steps");
+}
+
+/// An iLQR or DDP iteration (backward pass, line search, the accepted rollout's Jacobians)
+/// allocates nothing once the solve is set up: counted between the reports of successive
+/// iterations on the cart-pole with limits.
+#[test]
+fn optimiser_iterations_allocate_nothing() {
+    use tree_mech::control::{solve_with, DiscreteSystem, IlqrSettings, QuadraticCost, Solver};
+    let model = tree_mech::model::from_file(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/models/cart.toml"),
+        Default::default(),
+    )
+    .unwrap();
+    for solver in [Solver::Ilqr, Solver::Ddp] {
+        let sys = TreeSystem::new(&model).unwrap();
+        let (dt, knots) = (0.02, 30);
+        let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap();
+        let (q0, dq0) = dynamics.sys.initial_state();
+        let x0 = dynamics.state_of(&q0, &dq0, &[]);
+        let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0, 0.0]);
+        let mut cost = QuadraticCost {
+            dt,
+            x_ref: target.clone(),
+            x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1, 0.0]),
+            u_ref: DVector::zeros(1),
+            u_weight: DVector::from_vec(vec![1e-3]),
+            terminal_ref: target,
+            terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0, 0.0]),
+        };
+        let options = IlqrSettings {
+            solver,
+            limits: Some((DVector::from_vec(vec![-2.0]), DVector::from_vec(vec![2.0]))),
+            max_iterations: 8,
+            cost_tolerance: 0.0,
+            ..IlqrSettings::default()
+        };
+        let u0 = vec![DVector::zeros(1); knots];
+        let mut counts = Vec::with_capacity(64);
+        allocations(|| {
+            solve_with(&mut dynamics, &mut cost, &x0, u0, &options, &mut |_| {
+                counts.push(allocated());
+            })
+            .unwrap();
+        });
+        assert!(counts.len() >= 3, "{solver:?}: {} iterations", counts.len());
+        let per: Vec<usize> = counts.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(
+            per.iter().all(|&a| a == 0),
+            "{solver:?}: allocations per iteration {per:?}"
+        );
+    }
 }

@@ -25,7 +25,13 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     let n = a.nrows();
-    let a = a.as_mut_slice();
+    cholesky_factor_packed(a.as_mut_slice(), n)
+}
+
+/// [`cholesky_factor`] of the `n × n` column-major matrix in `a[..n²]` (a smaller system
+/// packed into larger storage).
+pub fn cholesky_factor_packed(a: &mut [f64], n: usize) -> Result<(), (usize, f64)> {
+    let a = &mut a[..n * n];
     for j in 0..n {
         let (done, rest) = a.split_at_mut(j * n);
         let col_j = &mut rest[..n];

@@ -88,8 +88,26 @@ pub struct QuadraticCost {
     pub terminal_weight: DVector<f64>,
 }
 
-fn quadratic(r: &DVector<f64>, w: &DVector<f64>) -> f64 {
-    0.5 * r.iter().zip(w.iter()).map(|(r, w)| w * r * r).sum::<f64>()
+/// `½ Σ w_i (a_i − b_i)²` and, with `grad`, `grad_i = s·w_i (a_i − b_i)` and `hess = s·diag(w)`.
+fn quadratic(
+    a: &DVector<f64>,
+    b: &DVector<f64>,
+    w: &DVector<f64>,
+    s: f64,
+    derivatives: Option<(&mut DVector<f64>, &mut DMatrix<f64>)>,
+) -> f64 {
+    let value = 0.5
+        * (0..a.len())
+            .map(|i| w[i] * (a[i] - b[i]).powi(2))
+            .sum::<f64>();
+    if let Some((grad, hess)) = derivatives {
+        hess.fill(0.0);
+        for i in 0..a.len() {
+            grad[i] = s * w[i] * (a[i] - b[i]);
+            hess[(i, i)] = s * w[i];
+        }
+    }
+    value
 }
 
 impl Cost for QuadraticCost {
@@ -100,15 +118,19 @@ impl Cost for QuadraticCost {
         u: &DVector<f64>,
         d: Option<&mut Derivatives>,
     ) -> f64 {
-        let (rx, ru) = (&x.x - &self.x_ref, u - &self.u_ref);
-        if let Some(d) = d {
-            d.lx = rx.component_mul(&self.x_weight) * self.dt;
-            d.lu = ru.component_mul(&self.u_weight) * self.dt;
-            d.lxx = DMatrix::from_diagonal(&(&self.x_weight * self.dt));
-            d.luu = DMatrix::from_diagonal(&(&self.u_weight * self.dt));
-            d.lux.fill(0.0);
-        }
-        self.dt * (quadratic(&rx, &self.x_weight) + quadratic(&ru, &self.u_weight))
+        let dt = self.dt;
+        let (lx, lu) = match d {
+            Some(d) => {
+                d.lux.fill(0.0);
+                let Derivatives {
+                    lx, lu, lxx, luu, ..
+                } = d;
+                (Some((lx, lxx)), Some((lu, luu)))
+            }
+            None => (None, None),
+        };
+        dt * (quadratic(&x.x, &self.x_ref, &self.x_weight, dt, lx)
+            + quadratic(u, &self.u_ref, &self.u_weight, dt, lu))
     }
 
     fn check(&self, nx: usize, nu: usize) -> Result<(), String> {
@@ -144,11 +166,7 @@ impl Cost for QuadraticCost {
     }
 
     fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64 {
-        let r = &x.x - &self.terminal_ref;
-        if let Some(d) = d {
-            d.lx = r.component_mul(&self.terminal_weight);
-            d.lxx = DMatrix::from_diagonal(&self.terminal_weight);
-        }
-        quadratic(&r, &self.terminal_weight)
+        let lx = d.map(|d| (&mut d.lx, &mut d.lxx));
+        quadratic(&x.x, &self.terminal_ref, &self.terminal_weight, 1.0, lx)
     }
 }

@@ -18,6 +18,7 @@ use crate::error::SimError;
 use crate::integrate::{
     MidpointVi, Rk4, StepCovector, StepDerivatives, StepInput, StepOutput, ViSettings,
 };
+use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
 use crate::linearize::{explicit_step_derivatives, RK4};
 use crate::system::{Order, System, Terms, Vector};
 use tree_model::Control;
@@ -209,11 +210,16 @@ where
     hessian: DMatrix<f64>,
     covector: StepCovector,
     terms: Terms<N>,
+    /// A knot's velocity from its momentum: `M_dd`'s LU factor (column-major), its pivots,
+    /// the right-hand sides (row-major `n_d × states`: the velocity's, then its derivative's).
+    mdd: Vec<f64>,
+    pivots: Vec<usize>,
+    velocity_rhs: Vec<f64>,
 }
 
-/// The system as `x_{k+1} = f_k(x_k, u_k)`. A VI step without Jacobians and a knot without
-/// derivatives, velocity or gravity allocate nothing after the first (tests/allocation.rs);
-/// Jacobians, the VI's velocity at a knot and RK4's derivatives still allocate temporaries.
+/// The system as `x_{k+1} = f_k(x_k, u_k)`. On the VI, steps, their Jacobians and second
+/// derivatives and knots (velocity from the momentum included) allocate nothing after the
+/// first (tests/allocation.rs); RK4's step derivatives still allocate temporaries.
 pub struct DiscreteSystem<S: System>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -340,6 +346,9 @@ where
                 lambda: DVector::zeros(sys.constraint_count()),
             },
             terms: Terms::zeros(sys.dim()),
+            mdd: vec![0.0; nd * nd],
+            pivots: vec![0; nd],
+            velocity_rhs: Vec::new(),
         };
         Ok(DiscreteSystem {
             motion: ModelMotions::of(&sys),
@@ -468,7 +477,12 @@ where
                 }
             }
         }
-        let terms = &mut self.buf.terms;
+        let (terms, mdd, pivots, rhs) = (
+            &mut self.buf.terms,
+            &mut self.buf.mdd,
+            &mut self.buf.pivots,
+            &mut self.buf.velocity_rhs,
+        );
         match self.method {
             Method::Rk4(_) => {
                 for (r, &i) in l.dynamic.iter().enumerate() {
@@ -482,44 +496,53 @@ where
             Method::Vi(_) => {
                 // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇ (M does
                 // not depend on q̇, so q̇_d = 0 here is as good as any).
-                self.sys.lagrangian(q, dq, Order::Dynamics, terms);
+                self.sys.mass_matrix(q, terms);
                 let m = &terms.mass;
-                let mdd = DMatrix::from_fn(nd, nd, |r, c| m[(l.dynamic[r], l.dynamic[c])]);
-                let lu = mdd.lu();
-                let mut rhs = DVector::from_fn(nd, |r, _| x[nd + r]);
+                for (c, &j) in l.dynamic.iter().enumerate() {
+                    for (r, &i) in l.dynamic.iter().enumerate() {
+                        mdd[c * nd + r] = m[(i, j)];
+                    }
+                }
+                let singular = || {
+                    SimError::InvalidInput(format!(
+                        "at knot {k} the mass matrix of the dynamic variables is singular: no velocity matches the momentum"
+                    ))
+                };
+                lu_factor_packed(mdd, nd, pivots).map_err(|_| singular())?;
+                rhs.resize(nd * nx, 0.0);
                 for (r, &i) in l.dynamic.iter().enumerate() {
+                    rhs[r] = x[nd + r];
                     for &j in &l.kinematic {
                         rhs[r] -= m[(i, j)] * dq[j];
                     }
                 }
-                let v = lu.solve(&rhs).ok_or_else(|| SimError::InvalidInput(format!(
-                    "at knot {k} the mass matrix of the dynamic variables is singular: no velocity matches the momentum"
-                )))?;
+                lu_solve_packed(mdd, nd, pivots, &mut rhs[..nd]);
                 for (r, &i) in l.dynamic.iter().enumerate() {
-                    dq[i] = v[r];
+                    dq[i] = rhs[r];
+                }
+                if dq.iter().any(|v| !v.is_finite()) {
+                    return Err(singular());
                 }
                 if derivatives {
                     // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇.
                     self.sys.lagrangian(q, dq, Order::Dynamics, terms);
                     let m = &terms.mass;
-                    let mut rhs = DMatrix::zeros(nd, nx);
                     for (r, &i) in l.dynamic.iter().enumerate() {
-                        rhs[(r, nd + r)] = 1.0;
                         for c in 0..nx {
-                            let mut s = 0.0;
+                            let mut s = if c == nd + r { 1.0 } else { 0.0 };
                             for j in 0..n {
-                                s += terms.d2l_ddq_dq[(i, j)] * out.q_x[(j, c)];
+                                s -= terms.d2l_ddq_dq[(i, j)] * out.q_x[(j, c)];
                             }
                             for &j in &l.kinematic {
-                                s += m[(i, j)] * out.dq_x[(j, c)];
+                                s -= m[(i, j)] * out.dq_x[(j, c)];
                             }
-                            rhs[(r, c)] -= s;
+                            rhs[r * nx + c] = s;
                         }
                     }
-                    let sol = lu.solve(&rhs).expect("factored above");
+                    lu_solve_packed_rows(mdd, nd, pivots, rhs, nx);
                     for (r, &i) in l.dynamic.iter().enumerate() {
                         for c in 0..nx {
-                            out.dq_x[(i, c)] = sol[(r, c)];
+                            out.dq_x[(i, c)] = rhs[r * nx + c];
                         }
                     }
                 }

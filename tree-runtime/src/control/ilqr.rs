@@ -9,8 +9,9 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
-use super::cost::{Cost, Needs};
+use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::{DiscreteSystem, Knot};
+use super::qp::{ControlQp, Limits};
 use crate::error::SimError;
 use crate::system::System;
 
@@ -162,12 +163,13 @@ where
         needs: cost.needs(),
         dx: DVector::zeros(nx),
         lambda: vec![Vec::new(); n],
+        backward: Backward::new(nx, nu),
     };
     let mut x = vec![x0.clone(); n + 1];
     let mut total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
     let (mut x_new, mut u_new) = (x.clone(), u.clone());
     let mut mu = settings.mu;
-    let mut history = Vec::new();
+    let mut history = Vec::with_capacity(settings.max_iterations);
     let mut record = |cost: f64, step: f64, mu: f64, gradient: f64| {
         let it = Iteration {
             cost,
@@ -275,6 +277,7 @@ struct Work {
     dx: DVector<f64>,
     /// Each step's multipliers in the last rollout (for its Jacobians without re-stepping).
     lambda: Vec<Vec<f64>>,
+    backward: Backward,
 }
 
 /// Refuses a problem whose sizes do not fit the dynamics: `x0` of `nx` entries, at least one
@@ -331,6 +334,7 @@ where
         needs: cost.needs(),
         dx: DVector::zeros(0),
         lambda: vec![Vec::new(); n],
+        backward: Backward::new(0, 0),
     };
     let mut x = vec![x0.clone(); n + 1];
     let total = rollout(
@@ -357,8 +361,6 @@ where
 }
 
 /// Box limits on the controls, `(lower, upper)`.
-type Limits = (DVector<f64>, DVector<f64>);
-
 /// Rolls `u` out from `x[0]` (filling `x`), returns the total cost; with `jacobians`, also
 /// each step's `A`, `B`. With a `policy` `(x_plan, limits)` (the forward pass), each control
 /// first gets the feedback `u_k += K_k (x_k − x_plan,k)` and is clamped to the limits.
@@ -405,8 +407,57 @@ where
     Ok(total + cost.terminal(&work.knot, None))
 }
 
+/// The backward pass's buffers (sized once per solve): the value function `V_x`, `V_xx`,
+/// the `Q` blocks, the cost's and (DDP) the dynamics' second-order terms, products.
+struct Backward {
+    d: Derivatives,
+    vx: DVector<f64>,
+    vxx: DMatrix<f64>,
+    qx: DVector<f64>,
+    qu: DVector<f64>,
+    qxx: DMatrix<f64>,
+    quu: DMatrix<f64>,
+    qux: DMatrix<f64>,
+    hxx: DMatrix<f64>,
+    huu: DMatrix<f64>,
+    hux: DMatrix<f64>,
+    /// `V_xx A`, `V_xx B`, `Q_uu K`, `Q_uu k`, and `V_xx` before symmetrising.
+    vxx_a: DMatrix<f64>,
+    vxx_b: DMatrix<f64>,
+    quu_gain: DMatrix<f64>,
+    quu_k: DVector<f64>,
+    v: DMatrix<f64>,
+    x2: Vec<f64>,
+    qp: ControlQp,
+}
+
+impl Backward {
+    fn new(nx: usize, nu: usize) -> Self {
+        Backward {
+            d: Derivatives::zeros(nx, nu),
+            vx: DVector::zeros(nx),
+            vxx: DMatrix::zeros(nx, nx),
+            qx: DVector::zeros(nx),
+            qu: DVector::zeros(nu),
+            qxx: DMatrix::zeros(nx, nx),
+            quu: DMatrix::zeros(nu, nu),
+            qux: DMatrix::zeros(nu, nx),
+            hxx: DMatrix::zeros(nx, nx),
+            huu: DMatrix::zeros(nu, nu),
+            hux: DMatrix::zeros(nu, nx),
+            vxx_a: DMatrix::zeros(nx, nx),
+            vxx_b: DMatrix::zeros(nx, nu),
+            quu_gain: DMatrix::zeros(nu, nx),
+            quu_k: DVector::zeros(nu),
+            v: DMatrix::zeros(nx, nx),
+            x2: vec![0.0; nx],
+            qp: ControlQp::new(nu),
+        }
+    }
+}
+
 /// The backward pass: fills the gains and feed-forward terms; returns `max |k|`, or `None`
-/// when some `Q_uu + μI` is not positive definite.
+/// when some `Q_uu + μI` is not positive definite (docs/derivations.md §10).
 fn backward<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
@@ -420,120 +471,76 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let n = u.len();
-    let (nx, nu) = (dynamics.states(), dynamics.controls());
-    let mut x2 = vec![0.0; nx];
-    let mut d = super::cost::Derivatives::zeros(nx, nu);
+    let bw = &mut work.backward;
     dynamics.knot(n, x[n].as_slice(), &mut work.knot, true, work.needs)?;
-    cost.terminal(&work.knot, Some(&mut d));
-    let (mut vx, mut vxx) = (d.lx.clone(), d.lxx.clone());
+    cost.terminal(&work.knot, Some(&mut bw.d));
+    bw.vx.copy_from(&bw.d.lx);
+    bw.vxx.copy_from(&bw.d.lxx);
     let mut gradient = 0.0f64;
-    let (mut hxx, mut huu, mut hux) = (
-        DMatrix::zeros(nx, nx),
-        DMatrix::zeros(nu, nu),
-        DMatrix::zeros(nu, nx),
-    );
     for k in (0..n).rev() {
         dynamics.knot(k, x[k].as_slice(), &mut work.knot, true, work.needs)?;
-        cost.running(k, &work.knot, &u[k], Some(&mut d));
+        cost.running(k, &work.knot, &u[k], Some(&mut bw.d));
         let (a, b) = (&work.a[k], &work.b[k]);
-        let qx = &d.lx + a.tr_mul(&vx);
-        let qu = &d.lu + b.tr_mul(&vx);
-        let mut qxx = &d.lxx + a.tr_mul(&(&vxx * a));
-        let mut quu = &d.luu + b.tr_mul(&(&vxx * b));
-        let mut qux = &d.lux + b.tr_mul(&(&vxx * a));
+        // Q_x = ℓ_x + AᵀV_x, Q_u = ℓ_u + BᵀV_x, Q_xx = ℓ_xx + AᵀV_xxA, Q_uu = ℓ_uu + BᵀV_xxB,
+        // Q_ux = ℓ_ux + BᵀV_xxA.
+        bw.qx.copy_from(&bw.d.lx);
+        bw.qx.gemv_tr(1.0, a, &bw.vx, 1.0);
+        bw.qu.copy_from(&bw.d.lu);
+        bw.qu.gemv_tr(1.0, b, &bw.vx, 1.0);
+        bw.vxx_a.gemm(1.0, &bw.vxx, a, 0.0);
+        bw.vxx_b.gemm(1.0, &bw.vxx, b, 0.0);
+        bw.qxx.copy_from(&bw.d.lxx);
+        bw.qxx.gemm_tr(1.0, a, &bw.vxx_a, 1.0);
+        bw.quu.copy_from(&bw.d.luu);
+        bw.quu.gemm_tr(1.0, b, &bw.vxx_b, 1.0);
+        bw.qux.copy_from(&bw.d.lux);
+        bw.qux.gemm_tr(1.0, b, &bw.vxx_a, 1.0);
         if settings.solver == Solver::Ddp {
             dynamics.contracted(
                 k,
                 x[k].as_slice(),
                 u[k].as_slice(),
-                vx.as_slice(),
-                &mut x2,
-                &mut hxx,
-                &mut huu,
-                &mut hux,
+                bw.vx.as_slice(),
+                &mut bw.x2,
+                &mut bw.hxx,
+                &mut bw.huu,
+                &mut bw.hux,
             )?;
-            qxx += &hxx;
-            quu += &huu;
-            qux += &hux;
+            bw.qxx += &bw.hxx;
+            bw.quu += &bw.huu;
+            bw.qux += &bw.hux;
         }
-        let reg = &quu + DMatrix::identity(nu, nu) * mu;
-        let Some((kk, gain)) = control_qp(&reg, &qu, &qux, &u[k], settings) else {
+        // The regularised Q_uu + μI, in huu (free after the DDP terms are added).
+        bw.huu.copy_from(&bw.quu);
+        for c in 0..bw.huu.nrows() {
+            bw.huu[(c, c)] += mu;
+        }
+        let (kk, gain) = (&mut work.k[k], &mut work.gain[k]);
+        let limits = settings.limits.as_ref();
+        if !bw
+            .qp
+            .solve(&bw.huu, &bw.qu, &bw.qux, &u[k], limits, kk, gain)
+        {
             return Ok(None);
-        };
+        }
         gradient = gradient.max(kk.amax());
         // V_x = Q_x + KᵀQ_uu k + KᵀQ_u + Q_uxᵀk, V_xx = Q_xx + KᵀQ_uuK + KᵀQ_ux + Q_uxᵀK.
-        vx = &qx + gain.tr_mul(&(&quu * &kk)) + gain.tr_mul(&qu) + qux.tr_mul(&kk);
-        let v = &qxx + gain.tr_mul(&(&quu * &gain)) + gain.tr_mul(&qux) + qux.tr_mul(&gain);
-        vxx = (&v + v.transpose()) * 0.5;
-        work.k[k] = kk;
-        work.gain[k] = gain;
+        bw.quu_k.gemv(1.0, &bw.quu, kk, 0.0);
+        bw.vx.copy_from(&bw.qx);
+        bw.vx.gemv_tr(1.0, gain, &bw.quu_k, 1.0);
+        bw.vx.gemv_tr(1.0, gain, &bw.qu, 1.0);
+        bw.vx.gemv_tr(1.0, &bw.qux, kk, 1.0);
+        bw.quu_gain.gemm(1.0, &bw.quu, gain, 0.0);
+        bw.v.copy_from(&bw.qxx);
+        bw.v.gemm_tr(1.0, gain, &bw.quu_gain, 1.0);
+        bw.v.gemm_tr(1.0, gain, &bw.qux, 1.0);
+        bw.v.gemm_tr(1.0, &bw.qux, gain, 1.0);
+        let nx = bw.v.nrows();
+        for i in 0..nx {
+            for j in 0..nx {
+                bw.vxx[(i, j)] = 0.5 * (bw.v[(i, j)] + bw.v[(j, i)]);
+            }
+        }
     }
     Ok(Some(gradient))
-}
-
-/// The control QP `min ½δuᵀHδu + gᵀδu` within the limits shifted by `u`: projected Newton
-/// (Bertsekas; Tassa et al. 2014's box-DDP). Returns the feed-forward and the feedback (zero
-/// on the clamped controls: `−H_ff⁻¹ Q_ux,f` on the free ones); `None` when `H` (or its
-/// free block) is not positive definite.
-fn control_qp(
-    h: &DMatrix<f64>,
-    g: &DVector<f64>,
-    qux: &DMatrix<f64>,
-    u: &DVector<f64>,
-    settings: &IlqrSettings,
-) -> Option<(DVector<f64>, DMatrix<f64>)> {
-    let nu = g.len();
-    let Some((lo, hi)) = &settings.limits else {
-        let chol = h.clone().cholesky()?;
-        return Some((-chol.solve(g), -chol.solve(qux)));
-    };
-    let (lo, hi) = (lo - u, hi - u);
-    let mut x = DVector::zeros(nu);
-    let value = |x: &DVector<f64>| 0.5 * x.dot(&(h * x)) + g.dot(x);
-    let mut free = vec![true; nu];
-    for _ in 0..100 {
-        let grad = g + h * &x;
-        for c in 0..nu {
-            free[c] = !((x[c] <= lo[c] && grad[c] > 0.0) || (x[c] >= hi[c] && grad[c] < 0.0));
-        }
-        let idx: Vec<usize> = (0..nu).filter(|&c| free[c]).collect();
-        if idx.is_empty() {
-            break;
-        }
-        let hff = DMatrix::from_fn(idx.len(), idx.len(), |r, c| h[(idx[r], idx[c])]);
-        let gf = DVector::from_fn(idx.len(), |r, _| grad[idx[r]]);
-        if gf.amax() < 1e-13 * g.amax().max(1.0) {
-            break;
-        }
-        let step = -hff.cholesky()?.solve(&gf);
-        // Projected backtracking.
-        let (f0, mut alpha, mut moved) = (value(&x), 1.0, false);
-        while alpha > 1e-10 {
-            let mut y = x.clone();
-            for (r, &c) in idx.iter().enumerate() {
-                y[c] = (x[c] + alpha * step[r]).clamp(lo[c], hi[c]);
-            }
-            if value(&y) < f0 - 1e-14 * f0.abs() {
-                x = y;
-                moved = true;
-                break;
-            }
-            alpha *= 0.5;
-        }
-        if !moved {
-            break;
-        }
-    }
-    let idx: Vec<usize> = (0..nu).filter(|&c| free[c]).collect();
-    let mut gain = DMatrix::zeros(nu, qux.ncols());
-    if !idx.is_empty() {
-        let hff = DMatrix::from_fn(idx.len(), idx.len(), |r, c| h[(idx[r], idx[c])]);
-        let chol = hff.cholesky()?;
-        let rows = DMatrix::from_fn(idx.len(), qux.ncols(), |r, c| qux[(idx[r], c)]);
-        let kf = -chol.solve(&rows);
-        for (r, &c) in idx.iter().enumerate() {
-            gain.set_row(c, &kf.row(r));
-        }
-    }
-    Some((x, gain))
 }

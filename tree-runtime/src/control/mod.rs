@@ -10,6 +10,7 @@ pub mod discrete;
 pub mod frames;
 pub mod ilqr;
 pub mod lqr;
+mod qp;
 pub mod task_cost;
 pub mod task_solve;
 
