@@ -241,3 +241,34 @@ fn optimiser_iterations_allocate_nothing() {
         );
     }
 }
+
+/// The shipped tasks' iterations (task costs: state with velocities, control about gravity,
+/// control rate, frame and orientation terms; kinematic controls) allocate nothing either.
+#[test]
+fn task_iterations_allocate_nothing() {
+    use tree_mech::control::{solve_task, TaskOptions};
+    for file in ["tasks/ur5-reach.toml", "tasks/cartpole-swingup.toml"] {
+        let (task, model) = tree_mech::model::read_task(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file),
+        )
+        .unwrap();
+        let sys = TreeSystem::new(&model).unwrap();
+        let options = TaskOptions {
+            max_iterations: Some(5),
+            ..TaskOptions::default()
+        };
+        let mut counts = Vec::with_capacity(64);
+        allocations(|| {
+            solve_task(sys, &task, &model, &options, &mut |_| {
+                counts.push(allocated())
+            })
+            .unwrap();
+        });
+        assert!(counts.len() >= 3, "{file}: {} iterations", counts.len());
+        let per: Vec<usize> = counts.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(
+            per.iter().all(|&a| a == 0),
+            "{file}: allocations per iteration {per:?}"
+        );
+    }
+}

@@ -2,7 +2,7 @@
 //! fixed-size system stays on the stack and an interpreted one reuses its buffers. They work
 //! on the column-major storage directly (`a[j * n + i]` is row i, column j).
 
-use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
+use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dim};
 
 use crate::system::{Matrix, Vector};
 
@@ -240,6 +240,57 @@ fn lu_core_factor(
     Ok(())
 }
 
+/// `C = A B + β C` for column-major dense matrices, by plain loops: no allocation (nalgebra's
+/// `gemm` hands large products to `matrixmultiply`, which allocates packing buffers per
+/// call). For the small dense products of a control problem's backward pass.
+pub fn mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
+    let (m, n, p) = (a.nrows(), b.ncols(), a.ncols());
+    assert!(
+        b.nrows() == p && c.nrows() == m && c.ncols() == n,
+        "mul_into: shapes"
+    );
+    let (a, b, c) = (a.as_slice(), b.as_slice(), c.as_mut_slice());
+    for j in 0..n {
+        let cj = &mut c[j * m..(j + 1) * m];
+        if beta == 0.0 {
+            cj.fill(0.0);
+        } else if beta != 1.0 {
+            cj.iter_mut().for_each(|x| *x *= beta);
+        }
+        for k in 0..p {
+            let bkj = b[j * p + k];
+            for (x, &aik) in cj.iter_mut().zip(&a[k * m..(k + 1) * m]) {
+                *x += aik * bkj;
+            }
+        }
+    }
+}
+
+/// `C = Aᵀ B + β C` by plain loops (see [`mul_into`]).
+pub fn tr_mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
+    let (m, n, p) = (a.ncols(), b.ncols(), a.nrows());
+    assert!(
+        b.nrows() == p && c.nrows() == m && c.ncols() == n,
+        "tr_mul_into: shapes"
+    );
+    let (a, b, c) = (a.as_slice(), b.as_slice(), c.as_mut_slice());
+    for j in 0..n {
+        let bj = &b[j * p..(j + 1) * p];
+        for i in 0..m {
+            let s: f64 = a[i * p..(i + 1) * p]
+                .iter()
+                .zip(bj)
+                .map(|(x, y)| x * y)
+                .sum();
+            c[j * m + i] = if beta == 0.0 {
+                s
+            } else {
+                s + beta * c[j * m + i]
+            };
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -275,5 +326,23 @@ mod tests {
                 assert!((ax - b[r * k + c]).abs() < 1e-12, "residual at ({r}, {c})");
             }
         }
+    }
+
+    /// The loop products equal nalgebra's, with and without accumulation, transposed or not.
+    #[test]
+    fn loop_products_equal_nalgebras() {
+        let a = DMatrix::from_fn(4, 3, |i, j| ((i * 3 + j) as f64).sin());
+        let b = DMatrix::from_fn(3, 5, |i, j| ((i * 5 + j) as f64).cos());
+        let at = a.transpose();
+        let c0 = DMatrix::from_fn(4, 5, |i, j| (i + 2 * j) as f64);
+        let mut c = c0.clone();
+        mul_into(&mut c, &a, &b, 0.5);
+        assert!((&c - (&a * &b + &c0 * 0.5)).amax() < 1e-14);
+        let mut c = c0.clone();
+        tr_mul_into(&mut c, &at, &b, 1.0);
+        assert!((&c - (&a * &b + &c0)).amax() < 1e-14);
+        let mut c = DMatrix::from_element(4, 5, f64::NAN);
+        mul_into(&mut c, &a, &b, 0.0);
+        assert!((&c - &a * &b).amax() < 1e-14, "β = 0 overwrites");
     }
 }

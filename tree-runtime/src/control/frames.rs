@@ -8,7 +8,14 @@ use tree_model::{Joint, Model};
 
 /// Every frame's world rotation and origin at `q`.
 pub fn world_poses(model: &Model, q: &[f64]) -> Vec<(Matrix3<f64>, Vector3<f64>)> {
-    let mut out: Vec<(Matrix3<f64>, Vector3<f64>)> = Vec::with_capacity(model.frames.len());
+    let mut out = Vec::with_capacity(model.frames.len());
+    world_poses_into(model, q, &mut out);
+    out
+}
+
+/// [`world_poses`] into `out` (cleared; no allocation once it has the capacity).
+pub fn world_poses_into(model: &Model, q: &[f64], out: &mut Vec<(Matrix3<f64>, Vector3<f64>)>) {
+    out.clear();
     for f in &model.frames {
         let (r, p) = f
             .parent
@@ -28,18 +35,19 @@ pub fn world_poses(model: &Model, q: &[f64]) -> Vec<(Matrix3<f64>, Vector3<f64>)
             (r, p + r.column(axis) * x)
         });
     }
-    out
 }
 
 /// Frame `f`'s world position Jacobian `∂p_f/∂q` and angular Jacobian `J_ω` (world
-/// components: `ω = J_ω q̇`), each 3 × n, from the poses of [`world_poses`].
+/// components: `ω = J_ω q̇`), each 3 × n, from the poses of [`world_poses`], into `jp`, `jw`.
 pub fn frame_jacobians(
     model: &Model,
     poses: &[(Matrix3<f64>, Vector3<f64>)],
     f: usize,
-) -> (DMatrix<f64>, DMatrix<f64>) {
-    let n = model.variables.len();
-    let (mut jp, mut jw) = (DMatrix::zeros(3, n), DMatrix::zeros(3, n));
+    jp: &mut DMatrix<f64>,
+    jw: &mut DMatrix<f64>,
+) {
+    jp.fill(0.0);
+    jw.fill(0.0);
     let pf = poses[f].1;
     let mut a = Some(f);
     while let Some(k) = a {
@@ -61,7 +69,6 @@ pub fn frame_jacobians(
         }
         a = frame.parent;
     }
-    (jp, jw)
 }
 
 /// `log(R)`: the rotation vector `φ` with `R = exp([φ]×)`, `|φ| ≤ π`.

@@ -13,6 +13,7 @@ use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::{DiscreteSystem, Knot};
 use super::qp::{ControlQp, Limits};
 use crate::error::SimError;
+use crate::linalg::{mul_into, tr_mul_into};
 use crate::system::System;
 
 /// Which second-order model of the dynamics the backward pass uses.
@@ -482,19 +483,19 @@ where
         cost.running(k, &work.knot, &u[k], Some(&mut bw.d));
         let (a, b) = (&work.a[k], &work.b[k]);
         // Q_x = ℓ_x + AᵀV_x, Q_u = ℓ_u + BᵀV_x, Q_xx = ℓ_xx + AᵀV_xxA, Q_uu = ℓ_uu + BᵀV_xxB,
-        // Q_ux = ℓ_ux + BᵀV_xxA.
+        // Q_ux = ℓ_ux + BᵀV_xxA (products by plain loops: nalgebra's gemm allocates).
         bw.qx.copy_from(&bw.d.lx);
         bw.qx.gemv_tr(1.0, a, &bw.vx, 1.0);
         bw.qu.copy_from(&bw.d.lu);
         bw.qu.gemv_tr(1.0, b, &bw.vx, 1.0);
-        bw.vxx_a.gemm(1.0, &bw.vxx, a, 0.0);
-        bw.vxx_b.gemm(1.0, &bw.vxx, b, 0.0);
+        mul_into(&mut bw.vxx_a, &bw.vxx, a, 0.0);
+        mul_into(&mut bw.vxx_b, &bw.vxx, b, 0.0);
         bw.qxx.copy_from(&bw.d.lxx);
-        bw.qxx.gemm_tr(1.0, a, &bw.vxx_a, 1.0);
+        tr_mul_into(&mut bw.qxx, a, &bw.vxx_a, 1.0);
         bw.quu.copy_from(&bw.d.luu);
-        bw.quu.gemm_tr(1.0, b, &bw.vxx_b, 1.0);
+        tr_mul_into(&mut bw.quu, b, &bw.vxx_b, 1.0);
         bw.qux.copy_from(&bw.d.lux);
-        bw.qux.gemm_tr(1.0, b, &bw.vxx_a, 1.0);
+        tr_mul_into(&mut bw.qux, b, &bw.vxx_a, 1.0);
         if settings.solver == Solver::Ddp {
             dynamics.contracted(
                 k,
@@ -530,11 +531,11 @@ where
         bw.vx.gemv_tr(1.0, gain, &bw.quu_k, 1.0);
         bw.vx.gemv_tr(1.0, gain, &bw.qu, 1.0);
         bw.vx.gemv_tr(1.0, &bw.qux, kk, 1.0);
-        bw.quu_gain.gemm(1.0, &bw.quu, gain, 0.0);
+        mul_into(&mut bw.quu_gain, &bw.quu, gain, 0.0);
         bw.v.copy_from(&bw.qxx);
-        bw.v.gemm_tr(1.0, gain, &bw.quu_gain, 1.0);
-        bw.v.gemm_tr(1.0, gain, &bw.qux, 1.0);
-        bw.v.gemm_tr(1.0, &bw.qux, gain, 1.0);
+        tr_mul_into(&mut bw.v, gain, &bw.quu_gain, 1.0);
+        tr_mul_into(&mut bw.v, gain, &bw.qux, 1.0);
+        tr_mul_into(&mut bw.v, &bw.qux, gain, 1.0);
         let nx = bw.v.nrows();
         for i in 0..nx {
             for j in 0..nx {

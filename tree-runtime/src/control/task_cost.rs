@@ -14,7 +14,10 @@ use tree_model::{About, Control, CostTerm, Model, Target, Task};
 
 use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::Knot;
-use super::frames::{frame_jacobians, log_so3, right_jacobian_inverse, world_poses};
+use super::frames::{
+    frame_jacobians, log_so3, right_jacobian_inverse, world_poses, world_poses_into,
+};
+use crate::linalg::{mul_into, tr_mul_into};
 
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,10 +47,43 @@ enum Term {
 }
 
 /// One residual's value, Jacobians and weights, accumulated into a [`Derivatives`].
+#[derive(Clone, Debug, Default)]
 struct Residual {
     r: DVector<f64>,
     jx: DMatrix<f64>,
     ju: DMatrix<f64>,
+    /// `s w ∘ r`, and the Jacobians' rows scaled by `s w` (for the Gauss–Newton terms).
+    wr: DVector<f64>,
+    wjx: DMatrix<f64>,
+    wju: DMatrix<f64>,
+}
+
+impl Residual {
+    /// Sized for `rows` rows over `nx` states and `nu` controls (allocates only when the
+    /// shape changes: on the first knot).
+    fn fit(&mut self, rows: usize, nx: usize, nu: usize) {
+        if self.r.len() != rows || self.jx.ncols() != nx || self.ju.ncols() != nu {
+            *self = Residual {
+                r: DVector::zeros(rows),
+                jx: DMatrix::zeros(rows, nx),
+                ju: DMatrix::zeros(rows, nu),
+                wr: DVector::zeros(rows),
+                wjx: DMatrix::zeros(rows, nx),
+                wju: DMatrix::zeros(rows, nu),
+            };
+        }
+    }
+}
+
+/// What one evaluation works in, kept between knots: the world poses, a frame's Jacobians and
+/// each term's residual.
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    poses: Vec<(Matrix3<f64>, Vector3<f64>)>,
+    jp: DMatrix<f64>,
+    jw: DMatrix<f64>,
+    running: Vec<Residual>,
+    terminal: Vec<Residual>,
 }
 
 /// The cost of a [`Task`] on its model.
@@ -60,6 +96,7 @@ pub struct TaskCost {
     start: DVector<f64>,
     running: Vec<Term>,
     terminal: Vec<Term>,
+    scratch: Scratch,
 }
 
 impl TaskCost {
@@ -126,11 +163,111 @@ impl TaskCost {
             controls: task.controls.clone(),
             running: task.running.iter().map(place).collect(),
             terminal: task.terminal.iter().map(place).collect(),
+            scratch: Scratch {
+                running: vec![Residual::default(); task.running.len()],
+                terminal: vec![Residual::default(); task.terminal.len()],
+                ..Scratch::default()
+            },
         }
     }
 
-    /// Residual of `term` at `knot` (with `u` for running terms; `poses` every frame's
-    /// world pose at the knot, when a term needs them).
+    fn weight(term: &Term) -> &DVector<f64> {
+        match term {
+            Term::State { weight, .. }
+            | Term::Control { weight, .. }
+            | Term::ControlRate { weight }
+            | Term::Frame { weight, .. }
+            | Term::Orientation { weight, .. } => weight,
+        }
+    }
+
+    /// `Σ ½ s w r²` over the running (`u` given) or terminal terms, `s = scale`, with the
+    /// Gauss–Newton derivatives into `d`; nothing allocated after the first knot.
+    fn sum(
+        &mut self,
+        knot: &Knot,
+        u: Option<&DVector<f64>>,
+        scale: f64,
+        d: Option<&mut Derivatives>,
+    ) -> f64 {
+        let Scratch {
+            poses,
+            jp,
+            jw,
+            running,
+            terminal,
+        } = &mut self.scratch;
+        let (terms, residuals) = match u {
+            Some(_) => (&self.running, running),
+            None => (&self.terminal, terminal),
+        };
+        let jac = d.is_some();
+        let mut d = d;
+        if let Some(d) = d.as_mut() {
+            d.lx.fill(0.0);
+            d.lu.fill(0.0);
+            d.lxx.fill(0.0);
+            d.luu.fill(0.0);
+            d.lux.fill(0.0);
+        }
+        let placed = terms
+            .iter()
+            .any(|t| matches!(t, Term::Frame { .. } | Term::Orientation { .. }));
+        if placed {
+            world_poses_into(&self.model, knot.q.as_slice(), poses);
+            let n = knot.q.len();
+            if jp.ncols() != n {
+                (*jp, *jw) = (DMatrix::zeros(3, n), DMatrix::zeros(3, n));
+            }
+        }
+        let at = At {
+            model: &self.model,
+            controls: &self.controls,
+            start: &self.start,
+            dt: self.dt,
+        };
+        let mut total = 0.0;
+        for (term, res) in terms.iter().zip(residuals.iter_mut()) {
+            at.residual(term, knot, u, poses, jac, (&mut *jp, &mut *jw), res);
+            let w = Self::weight(term);
+            for i in 0..res.r.len() {
+                res.wr[i] = scale * w[i] * res.r[i];
+                total += 0.5 * res.wr[i] * res.r[i];
+            }
+            if let Some(d) = d.as_mut() {
+                for i in 0..res.r.len() {
+                    let sw = scale * w[i];
+                    for c in 0..res.jx.ncols() {
+                        res.wjx[(i, c)] = sw * res.jx[(i, c)];
+                    }
+                    for c in 0..res.ju.ncols() {
+                        res.wju[(i, c)] = sw * res.ju[(i, c)];
+                    }
+                }
+                d.lx.gemv_tr(1.0, &res.jx, &res.wr, 1.0);
+                d.lu.gemv_tr(1.0, &res.ju, &res.wr, 1.0);
+                tr_mul_into(&mut d.lxx, &res.jx, &res.wjx, 1.0);
+                tr_mul_into(&mut d.luu, &res.ju, &res.wju, 1.0);
+                tr_mul_into(&mut d.lux, &res.ju, &res.wjx, 1.0);
+            }
+        }
+        total
+    }
+}
+
+/// What a residual reads besides the knot.
+struct At<'a> {
+    model: &'a Model,
+    controls: &'a [Control],
+    start: &'a DVector<f64>,
+    dt: f64,
+}
+
+impl At<'_> {
+    /// Residual of `term` at `knot` into `res` (with `u` for running terms; `poses` every
+    /// frame's world pose at the knot, when a term needs them; `frame` 3 × n buffers for a
+    /// frame's Jacobians).
+    #[allow(clippy::too_many_arguments)] // the term, where it is read, and its buffers
     fn residual(
         &self,
         term: &Term,
@@ -138,27 +275,33 @@ impl TaskCost {
         u: Option<&DVector<f64>>,
         poses: &[(Matrix3<f64>, Vector3<f64>)],
         jac: bool,
-    ) -> Residual {
+        frame_jac: (&mut DMatrix<f64>, &mut DMatrix<f64>),
+        res: &mut Residual,
+    ) {
         let (nx, nu, n) = (knot.x.len(), self.controls.len(), knot.q.len());
-        let zeros = |rows: usize| Residual {
-            r: DVector::zeros(rows),
-            jx: DMatrix::zeros(if jac { rows } else { 0 }, nx),
-            ju: DMatrix::zeros(if jac { rows } else { 0 }, nu),
+        let rows = match term {
+            Term::State { .. } => 2 * n,
+            Term::Control { .. } | Term::ControlRate { .. } => nu,
+            Term::Frame { .. } | Term::Orientation { .. } => 3,
         };
+        res.fit(rows, nx, nu);
+        if jac {
+            res.jx.fill(0.0);
+            res.ju.fill(0.0);
+        }
         match term {
             Term::State { q_ref, dq_ref, .. } => {
-                let mut res = zeros(2 * n);
-                res.r.rows_mut(0, n).copy_from(&(&knot.q - q_ref));
-                res.r.rows_mut(n, n).copy_from(&(&knot.dq - dq_ref));
+                for i in 0..n {
+                    res.r[i] = knot.q[i] - q_ref[i];
+                    res.r[n + i] = knot.dq[i] - dq_ref[i];
+                }
                 if jac {
                     res.jx.rows_mut(0, n).copy_from(&knot.q_x);
                     res.jx.rows_mut(n, n).copy_from(&knot.dq_x);
                 }
-                res
             }
             Term::Control { about, .. } => {
                 let u = u.expect("a running term");
-                let mut res = zeros(nu);
                 for (c, control) in self.controls.iter().enumerate() {
                     res.r[c] = u[c]
                         - match (control, about) {
@@ -175,11 +318,9 @@ impl TaskCost {
                         }
                     }
                 }
-                res
             }
             Term::ControlRate { .. } => {
                 let u = u.expect("a running term");
-                let mut res = zeros(nu);
                 for c in 0..nu {
                     res.r[c] = (u[c] - knot.previous[c]) / self.dt;
                     if jac {
@@ -187,91 +328,33 @@ impl TaskCost {
                         res.jx[(c, knot.previous_at[c])] = -1.0 / self.dt;
                     }
                 }
-                res
             }
             Term::Frame { frame, target, .. } => {
-                let mut res = zeros(3);
                 res.r.copy_from(&(poses[*frame].1 - target));
                 if jac {
-                    let (jp, _) = frame_jacobians(&self.model, poses, *frame);
-                    res.jx = jp * &knot.q_x;
+                    let (jp, jw) = frame_jac;
+                    frame_jacobians(self.model, poses, *frame, jp, jw);
+                    mul_into(&mut res.jx, jp, &knot.q_x, 0.0);
                 }
-                res
             }
             Term::Orientation { frame, target, .. } => {
                 let rf = poses[*frame].0;
                 let phi = log_so3(&(target.transpose() * rf));
-                let mut res = zeros(3);
                 res.r.copy_from(&phi);
                 if jac {
-                    let (_, jw) = frame_jacobians(&self.model, poses, *frame);
-                    let body = DMatrix::from_fn(3, 3, |i, j| rf[(j, i)]) * jw;
-                    let jr = right_jacobian_inverse(&phi);
-                    let jr = DMatrix::from_fn(3, 3, |i, j| jr[(i, j)]);
-                    res.jx = jr * body * &knot.q_x;
+                    let (jp, jw) = frame_jac;
+                    frame_jacobians(self.model, poses, *frame, jp, jw);
+                    // J_r⁻¹(φ) R_fᵀ J_ω (the body-frame angular Jacobian), into `jp`.
+                    let m = right_jacobian_inverse(&phi) * rf.transpose();
+                    for c in 0..n {
+                        for i in 0..3 {
+                            jp[(i, c)] = (0..3).map(|k| m[(i, k)] * jw[(k, c)]).sum();
+                        }
+                    }
+                    mul_into(&mut res.jx, jp, &knot.q_x, 0.0);
                 }
-                res
             }
         }
-    }
-
-    fn weight(term: &Term) -> &DVector<f64> {
-        match term {
-            Term::State { weight, .. }
-            | Term::Control { weight, .. }
-            | Term::ControlRate { weight }
-            | Term::Frame { weight, .. }
-            | Term::Orientation { weight, .. } => weight,
-        }
-    }
-
-    /// `Σ ½ w r²` over `terms` times `scale`, with derivatives into `d`.
-    fn sum(
-        &self,
-        terms: &[Term],
-        knot: &Knot,
-        u: Option<&DVector<f64>>,
-        scale: f64,
-        d: Option<&mut Derivatives>,
-    ) -> f64 {
-        let jac = d.is_some();
-        let mut d = d;
-        if let Some(d) = d.as_mut() {
-            d.lx.fill(0.0);
-            d.lu.fill(0.0);
-            d.lxx.fill(0.0);
-            d.luu.fill(0.0);
-            d.lux.fill(0.0);
-        }
-        let placed = terms
-            .iter()
-            .any(|t| matches!(t, Term::Frame { .. } | Term::Orientation { .. }));
-        let poses = if placed {
-            world_poses(&self.model, knot.q.as_slice())
-        } else {
-            Vec::new()
-        };
-        let mut total = 0.0;
-        for term in terms {
-            let w = Self::weight(term);
-            let res = self.residual(term, knot, u, &poses, jac);
-            let wr = res.r.component_mul(w) * scale;
-            total += 0.5 * wr.dot(&res.r);
-            if let Some(d) = d.as_mut() {
-                let wjx = DMatrix::from_fn(res.jx.nrows(), res.jx.ncols(), |i, j| {
-                    w[i] * scale * res.jx[(i, j)]
-                });
-                let wju = DMatrix::from_fn(res.ju.nrows(), res.ju.ncols(), |i, j| {
-                    w[i] * scale * res.ju[(i, j)]
-                });
-                d.lx += res.jx.tr_mul(&wr);
-                d.lu += res.ju.tr_mul(&wr);
-                d.lxx += res.jx.tr_mul(&wjx);
-                d.luu += res.ju.tr_mul(&wju);
-                d.lux += res.ju.tr_mul(&wjx);
-            }
-        }
-        total
     }
 }
 
@@ -283,11 +366,12 @@ impl Cost for TaskCost {
         u: &DVector<f64>,
         d: Option<&mut Derivatives>,
     ) -> f64 {
-        self.sum(&self.running, x, Some(u), self.dt, d)
+        let dt = self.dt;
+        self.sum(x, Some(u), dt, d)
     }
 
     fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64 {
-        self.sum(&self.terminal, x, None, 1.0, d)
+        self.sum(x, None, 1.0, d)
     }
 
     fn needs(&self) -> Needs {
