@@ -13,7 +13,7 @@ use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::{DiscreteSystem, Knot};
 use super::qp::{ControlQp, Limits};
 use crate::error::SimError;
-use crate::linalg::{mul_into, tr_mul_into};
+use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric};
 use crate::system::System;
 
 /// Which second-order model of the dynamics the backward pass uses.
@@ -491,9 +491,9 @@ where
         mul_into(&mut bw.vxx_a, &bw.vxx, a, 0.0);
         mul_into(&mut bw.vxx_b, &bw.vxx, b, 0.0);
         bw.qxx.copy_from(&bw.d.lxx);
-        tr_mul_into(&mut bw.qxx, a, &bw.vxx_a, 1.0);
+        tr_mul_into_symmetric(&mut bw.qxx, a, &bw.vxx_a, 1.0);
         bw.quu.copy_from(&bw.d.luu);
-        tr_mul_into(&mut bw.quu, b, &bw.vxx_b, 1.0);
+        tr_mul_into_symmetric(&mut bw.quu, b, &bw.vxx_b, 1.0);
         bw.qux.copy_from(&bw.d.lux);
         tr_mul_into(&mut bw.qux, b, &bw.vxx_a, 1.0);
         if settings.solver == Solver::Ddp {

@@ -17,7 +17,7 @@ use super::discrete::Knot;
 use super::frames::{
     frame_jacobians, log_so3, right_jacobian_inverse, world_poses, world_poses_into,
 };
-use crate::linalg::{mul_into, tr_mul_into};
+use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric};
 
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]
@@ -246,8 +246,8 @@ impl TaskCost {
                 }
                 d.lx.gemv_tr(1.0, &res.jx, &res.wr, 1.0);
                 d.lu.gemv_tr(1.0, &res.ju, &res.wr, 1.0);
-                tr_mul_into(&mut d.lxx, &res.jx, &res.wjx, 1.0);
-                tr_mul_into(&mut d.luu, &res.ju, &res.wju, 1.0);
+                tr_mul_into_symmetric(&mut d.lxx, &res.jx, &res.wjx, 1.0);
+                tr_mul_into_symmetric(&mut d.luu, &res.ju, &res.wju, 1.0);
                 tr_mul_into(&mut d.lux, &res.ju, &res.wjx, 1.0);
             }
         }
