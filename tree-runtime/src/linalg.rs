@@ -242,7 +242,8 @@ fn lu_core_factor(
 
 /// `C = A B + β C` for column-major dense matrices, by plain loops: no allocation (nalgebra's
 /// `gemm` hands large products to `matrixmultiply`, which allocates packing buffers per
-/// call). For the small dense products of a control problem's backward pass.
+/// call). For the dense products of a control problem's backward pass; a zero entry of `B`
+/// skips its column of `A` (so `0 · ∞` counts as 0 there).
 pub fn mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
     let (m, n, p) = (a.nrows(), b.ncols(), a.ncols());
     assert!(
@@ -259,6 +260,10 @@ pub fn mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: 
         }
         for k in 0..p {
             let bkj = b[j * p + k];
+            // Structural zeros of B (the step Jacobians' memory blocks) cost nothing.
+            if bkj == 0.0 {
+                continue;
+            }
             for (x, &aik) in cj.iter_mut().zip(&a[k * m..(k + 1) * m]) {
                 *x += aik * bkj;
             }

@@ -245,10 +245,13 @@ impl TaskCost {
                     }
                 }
                 d.lx.gemv_tr(1.0, &res.jx, &res.wr, 1.0);
-                d.lu.gemv_tr(1.0, &res.ju, &res.wr, 1.0);
                 tr_mul_into_symmetric(&mut d.lxx, &res.jx, &res.wjx, 1.0);
-                tr_mul_into_symmetric(&mut d.luu, &res.ju, &res.wju, 1.0);
-                tr_mul_into(&mut d.lux, &res.ju, &res.wjx, 1.0);
+                // State, frame and orientation residuals do not read the controls.
+                if matches!(term, Term::Control { .. } | Term::ControlRate { .. }) {
+                    d.lu.gemv_tr(1.0, &res.ju, &res.wr, 1.0);
+                    tr_mul_into_symmetric(&mut d.luu, &res.ju, &res.wju, 1.0);
+                    tr_mul_into(&mut d.lux, &res.ju, &res.wjx, 1.0);
+                }
             }
         }
         total
