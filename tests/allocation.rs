@@ -2,6 +2,8 @@
 //! counted by a global allocator that tallies the allocations of the thread measuring (the
 //! test harness's own threads allocate when they please).
 
+mod common;
+
 use std::alloc::{GlobalAlloc, Layout, System as SystemAlloc};
 use std::cell::Cell;
 
@@ -191,12 +193,24 @@ fn a_discrete_system_step_allocates_nothing() {
     assert_eq!(n, 0, "{n} allocations in 19 discrete steps");
 }
 
+/// No allocation between successive iterations' reports (`counts`: this thread's running
+/// count at each report), over at least three iterations.
+#[track_caller]
+fn none_between(what: &str, counts: &[usize]) {
+    assert!(counts.len() >= 3, "{what}: {} iterations", counts.len());
+    let per: Vec<usize> = counts.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(
+        per.iter().all(|&a| a == 0),
+        "{what}: allocations per iteration {per:?}"
+    );
+}
+
 /// An iLQR or DDP iteration (backward pass, line search, the accepted rollout's Jacobians)
 /// allocates nothing once the solve is set up: counted between the reports of successive
 /// iterations on the cart-pole with limits.
 #[test]
 fn optimiser_iterations_allocate_nothing() {
-    use tree_mech::control::{solve_with, DiscreteSystem, IlqrSettings, QuadraticCost, Solver};
+    use tree_mech::control::{solve_with, DiscreteSystem, IlqrSettings, Solver};
     let model = tree_mech::model::from_file(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/models/cart.toml"),
         Default::default(),
@@ -208,16 +222,7 @@ fn optimiser_iterations_allocate_nothing() {
         let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap();
         let (q0, dq0) = dynamics.sys.initial_state();
         let x0 = dynamics.state_of(&q0, &dq0, &[]);
-        let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0, 0.0]);
-        let mut cost = QuadraticCost {
-            dt,
-            x_ref: target.clone(),
-            x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1, 0.0]),
-            u_ref: DVector::zeros(1),
-            u_weight: DVector::from_vec(vec![1e-3]),
-            terminal_ref: target,
-            terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0, 0.0]),
-        };
+        let mut cost = common::cart_to_half_metre(dt);
         let options = IlqrSettings {
             solver,
             limits: Some((DVector::from_vec(vec![-2.0]), DVector::from_vec(vec![2.0]))),
@@ -233,12 +238,7 @@ fn optimiser_iterations_allocate_nothing() {
             })
             .unwrap();
         });
-        assert!(counts.len() >= 3, "{solver:?}: {} iterations", counts.len());
-        let per: Vec<usize> = counts.windows(2).map(|w| w[1] - w[0]).collect();
-        assert!(
-            per.iter().all(|&a| a == 0),
-            "{solver:?}: allocations per iteration {per:?}"
-        );
+        none_between(&format!("{solver:?}"), &counts);
     }
 }
 
@@ -264,11 +264,6 @@ fn task_iterations_allocate_nothing() {
             })
             .unwrap();
         });
-        assert!(counts.len() >= 3, "{file}: {} iterations", counts.len());
-        let per: Vec<usize> = counts.windows(2).map(|w| w[1] - w[0]).collect();
-        assert!(
-            per.iter().all(|&a| a == 0),
-            "{file}: allocations per iteration {per:?}"
-        );
+        none_between(file, &counts);
     }
 }

@@ -3,6 +3,8 @@
 //! VI step is linear) converging in one iteration to the time-varying LQR; iLQR and DDP on
 //! the cart-pole with limits: cost never increasing, limits held, compiled ≡ interpreted.
 
+mod common;
+
 use tree_mech::control::{
     cost_gradient, dare, solve, tvlqr, Control, DiscreteSystem, IlqrSettings, QuadraticCost, Solver,
 };
@@ -149,16 +151,7 @@ where
     let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap();
     let (q0, dq0) = dynamics.sys.initial_state();
     let x0 = dynamics.state_of(&q0, &dq0, &[]);
-    let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0, 0.0]);
-    let mut cost = QuadraticCost {
-        dt,
-        x_ref: target.clone(),
-        x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1, 0.0]),
-        u_ref: DVector::zeros(1),
-        u_weight: DVector::from_vec(vec![1e-3]),
-        terminal_ref: target,
-        terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0, 0.0]),
-    };
+    let mut cost = common::cart_to_half_metre(dt);
     let options = IlqrSettings {
         solver,
         limits: Some((DVector::from_vec(vec![-2.0]), DVector::from_vec(vec![2.0]))),

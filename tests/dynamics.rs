@@ -320,16 +320,8 @@ fn damping_removes_energy_monotonically() {
 /// random configurations. Garbage left in the output beforehand must not survive.
 #[test]
 fn the_mass_matrix_evaluation_is_the_lagrangians_at_rest() {
-    let test_models = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/models");
-    let mut files = common::model_files();
-    files.extend(
-        std::fs::read_dir(test_models)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
-    );
     let mut rng = Rng::new(41);
-    for path in files {
+    for path in every_model_file() {
         let model = tree_mech::model::from_toml_file(&path).unwrap();
         let mut sys = interpreted(&model);
         let n = sys.dof();

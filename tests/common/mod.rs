@@ -81,3 +81,19 @@ pub fn numbers(v: &serde_json::Value) -> Vec<f64> {
         .map(|x| x.as_f64().unwrap())
         .collect()
 }
+
+/// The cart-pole of `tests/models/cart.toml` pushed to x = 0.5 with its pendulum down: a
+/// quadratic cost on its VI state `(x, θ, p_x, p_θ, previous push)` and the push.
+pub fn cart_to_half_metre(dt: f64) -> tree_mech::control::QuadraticCost {
+    use tree_mech::nalgebra::DVector;
+    let target = DVector::from_vec(vec![0.5, 0.0, 0.0, 0.0, 0.0]);
+    tree_mech::control::QuadraticCost {
+        dt,
+        x_ref: target.clone(),
+        x_weight: DVector::from_vec(vec![1.0, 1.0, 0.1, 0.1, 0.0]),
+        u_ref: DVector::zeros(1),
+        u_weight: DVector::from_vec(vec![1e-3]),
+        terminal_ref: target,
+        terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0, 0.0]),
+    }
+}
