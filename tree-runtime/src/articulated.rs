@@ -83,7 +83,7 @@ fn lost(d: f64, scale: f64) -> bool {
 /// outward sweep `ws` at `(q, q̇)`: `tau` the generalized forces on every variable, `qdd`'s
 /// kinematic entries (`kinematic[i]`) their prescribed accelerations. Returns `false`, with
 /// `qdd`'s dynamic entries unspecified, when a pivot vanishes (a variable with no inertia
-/// below it along its axis) or a dynamic variable moves no frame.
+/// below it along its axis) or a dynamic variable moves no frame with mass below it.
 pub fn accelerations(
     plan: &TreePlan,
     ws: &Workspace<f64>,
@@ -93,12 +93,10 @@ pub fn accelerations(
     kinematic: &[bool],
     qdd: &mut [f64],
 ) -> bool {
-    if plan
-        .variable_frames
-        .iter()
-        .zip(kinematic)
-        .any(|(f, &k)| f.is_none() && !k)
-    {
+    // A dynamic variable that moves no frame, or no frame the sweeps visit, has no inertia.
+    let unresolved =
+        |(f, &k): (&Option<usize>, &bool)| !k && f.is_none_or(|f| !plan.frames[f].needed);
+    if plan.variable_frames.iter().zip(kinematic).any(unresolved) {
         return false;
     }
     // The bodies' own inertias and bias wrenches.
@@ -200,9 +198,5 @@ pub fn accelerations(
         }
         art.acceleration[k] = a;
     }
-    // A dynamic variable whose frame is not visited has no inertia below it.
-    plan.variable_frames
-        .iter()
-        .zip(kinematic)
-        .all(|(f, &k)| k || f.is_some_and(|f| plan.frames[f].needed))
+    true
 }

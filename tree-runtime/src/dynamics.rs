@@ -333,14 +333,7 @@ where
                 .sys
                 .articulated_acceleration(q, dq, &self.rhs, qdd, &mut self.terms)
             {
-                if qdd.iter().any(|x| !x.is_finite()) {
-                    return Err(SimError::NonFinite {
-                        step: cx.index,
-                        t: cx.t,
-                        what: "acceleration q̈".into(),
-                    });
-                }
-                return Ok(());
+                return finite(qdd, &self.lambda, cx.index, cx.t);
             }
         }
         cx.sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
@@ -390,13 +383,26 @@ where
                 t,
             )?;
         }
-        if qdd.iter().chain(self.lambda.iter()).any(|x| !x.is_finite()) {
-            return Err(SimError::NonFinite {
-                step,
-                t,
-                what: "acceleration q̈".into(),
-            });
-        }
-        Ok(())
+        finite(qdd, &self.lambda, step, t)
     }
+}
+
+/// `q̈` and `λ` finite, or the error naming the step.
+fn finite<N: Dim>(
+    qdd: &Vector<N>,
+    lambda: &DVector<f64>,
+    step: usize,
+    t: f64,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    if qdd.iter().chain(lambda.iter()).any(|x| !x.is_finite()) {
+        return Err(SimError::NonFinite {
+            step,
+            t,
+            what: "acceleration q̈".into(),
+        });
+    }
+    Ok(())
 }
