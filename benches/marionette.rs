@@ -120,6 +120,8 @@ where
         q2.copy_from(&q);
         p2.copy_from(&p);
         vi.predict_from(&dq);
+        // A step whose derivatives follow ends on the evaluation they reuse.
+        vi.settings.derivatives = with >= 1;
         let mut force = NoForce;
         let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.01);
         vi.step(&mut cx, &mut q2, &mut p2, &mut next)

@@ -103,6 +103,14 @@ where
         black_box(continuous_derivatives(&mut cx, &q, &dq).unwrap());
     });
     let mut first = tree_mech::integrate::StepDerivatives::empty();
+    // Steps whose derivatives follow: Newton's last check leaves the terms they need.
+    let mut vi = MidpointVi::new(
+        &sys,
+        ViSettings {
+            derivatives: true,
+            ..ViSettings::default()
+        },
+    );
     let vi_first = time_ns(calls / 10, || {
         qk.copy_from(&q);
         pk.copy_from(&p0);

@@ -206,20 +206,28 @@ fn none_between(what: &str, counts: &[usize]) {
 }
 
 /// An iLQR or DDP iteration (backward pass, line search, the accepted rollout's Jacobians)
-/// allocates nothing once the solve is set up: counted between the reports of successive
-/// iterations on the cart-pole with limits.
+/// allocates nothing once the solve is set up, on the VI and (iLQR) on RK4: counted between
+/// the reports of successive iterations on the cart-pole with limits.
 #[test]
 fn optimiser_iterations_allocate_nothing() {
-    use tree_mech::control::{solve_with, DiscreteSystem, IlqrSettings, Solver};
+    use tree_mech::control::{solve_with, Control, DiscreteSystem, IlqrSettings, Solver};
     let model = tree_mech::model::from_file(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/models/cart.toml"),
         Default::default(),
     )
     .unwrap();
-    for solver in [Solver::Ilqr, Solver::Ddp] {
+    for (solver, rk4) in [
+        (Solver::Ilqr, false),
+        (Solver::Ddp, false),
+        (Solver::Ilqr, true),
+    ] {
         let sys = TreeSystem::new(&model).unwrap();
         let (dt, knots) = (0.02, 30);
-        let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap();
+        let mut dynamics = if rk4 {
+            DiscreteSystem::rk4(sys, dt, 0.0, vec![Control::Input(0)]).unwrap()
+        } else {
+            DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap()
+        };
         let (q0, dq0) = dynamics.sys.initial_state();
         let x0 = dynamics.state_of(&q0, &dq0, &[]);
         let mut cost = common::cart_to_half_metre(dt);
@@ -238,7 +246,8 @@ fn optimiser_iterations_allocate_nothing() {
             })
             .unwrap();
         });
-        none_between(&format!("{solver:?}"), &counts);
+        let integrator = if rk4 { "RK4" } else { "VI" };
+        none_between(&format!("{solver:?} on the {integrator}"), &counts);
     }
 }
 

@@ -184,6 +184,16 @@ fn cases() -> Vec<(Model, ViSettings, String)> {
             let what = format!("{name}, α {alpha}, {forcing:?}");
             out.push((model.clone(), tight(alpha, forcing), what));
         }
+        // Steps that end on a second-order evaluation, which the derivatives then reuse.
+        let settings = ViSettings {
+            derivatives: true,
+            ..tight(0.5, Forcing::Split)
+        };
+        out.push((
+            model,
+            settings,
+            format!("{name}, reusing the step's evaluation"),
+        ));
     }
     out
 }
@@ -451,4 +461,48 @@ fn compiled_and_interpreted_second_derivatives_agree() {
         );
     }
     assert!(a.iter().any(|m| m.amax() > 1e-3));
+}
+
+/// A step that ends on a second-order evaluation hands it to its derivatives: they equal the
+/// ones evaluated afresh at the solution (to the solve's rounding), on every model.
+#[test]
+fn derivatives_reuse_the_steps_last_evaluation() {
+    for (model, settings, what) in cases() {
+        if settings.derivatives {
+            continue;
+        }
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let (mut q1, dq1) = sys.initial_state();
+        let mut motion = ModelMotions::of(&sys);
+        for k in (0..sys.dof()).filter(|&i| sys.is_kinematic(i)) {
+            q1[k] = motion.kinematic(k, 0.0)[0];
+        }
+        let mut dq1 = dq1 * 0.3;
+        let split = tree_mech::runtime::dynamics::Split::of(&sys);
+        project_initial_state(&mut sys, &split, &mut q1, &mut dq1).unwrap();
+        let mut vi = MidpointVi::new(&sys, settings);
+        let p1 = vi.initial_momentum(&mut sys, &q1, &dq1);
+        let u: Vec<f64> = (0..sys.input_count()).map(|k| 0.5 + k as f64).collect();
+        let nk = (0..sys.dof()).filter(|&i| sys.is_kinematic(i)).count();
+        let first = |sys: &mut TreeSystem, derivatives: bool| {
+            let settings = ViSettings {
+                derivatives,
+                ..settings
+            };
+            let (out, mut vi) = step(sys, settings, &q1, &p1, &u, &vec![0.0; nk], &[]);
+            let mut motion = ModelMotions::of(sys);
+            let mut force = NoForce;
+            let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.1);
+            cx.u = &u;
+            flat(&vi.derivatives(&mut cx, &q1, &p1, &out.q2).unwrap())
+        };
+        let (fresh, reused) = (first(&mut sys, false), first(&mut sys, true));
+        for (a, b) in fresh.iter().zip(&reused) {
+            let scale = a.amax().max(1.0);
+            assert!(
+                (a - b).amax() < 1e-10 * scale,
+                "{what}: reused {b} vs fresh {a}"
+            );
+        }
+    }
 }

@@ -143,10 +143,8 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
         let col = &a[j * n..(j + 1) * n];
         let (done, rest) = b.split_at_mut((j + 1) * k);
         let bj = &done[j * k..];
-        for i in j + 1..n {
-            let l = col[i];
+        for (bi, &l) in rest.chunks_exact_mut(k).zip(&col[j + 1..]) {
             if l != 0.0 {
-                let bi = &mut rest[(i - j - 1) * k..(i - j) * k];
                 for (x, y) in bi.iter_mut().zip(bj) {
                     *x -= l * y;
                 }
@@ -157,14 +155,13 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
         let col = &a[j * n..(j + 1) * n];
         let (head, tail) = b.split_at_mut(j * k);
         let bj = &mut tail[..k];
-        let d = col[j];
+        let inverse = 1.0 / col[j];
         for x in bj.iter_mut() {
-            *x /= d;
+            *x *= inverse;
         }
-        for i in 0..j {
-            let u = col[i];
+        for (row, &u) in head.chunks_exact_mut(k).zip(&col[..j]) {
             if u != 0.0 {
-                for (x, y) in head[i * k..(i + 1) * k].iter_mut().zip(bj.iter()) {
+                for (x, y) in row.iter_mut().zip(bj.iter()) {
                     *x -= u * y;
                 }
             }
@@ -175,18 +172,20 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors.
 fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
     for j in 0..n {
-        let col = &a[j * n..(j + 1) * n];
-        let bj = b[j];
-        for i in j + 1..n {
-            b[i] -= col[i] * bj;
+        let col = &a[j * n + j + 1..(j + 1) * n];
+        let (head, below) = b.split_at_mut(j + 1);
+        let bj = head[j];
+        for (x, l) in below.iter_mut().zip(col) {
+            *x -= l * bj;
         }
     }
     for j in (0..n).rev() {
-        let col = &a[j * n..(j + 1) * n];
-        b[j] /= col[j];
-        let bj = b[j];
-        for i in 0..j {
-            b[i] -= col[i] * bj;
+        let col = &a[j * n..j * n + j + 1];
+        let (above, rest) = b.split_at_mut(j);
+        rest[0] /= col[j];
+        let bj = rest[0];
+        for (x, u) in above.iter_mut().zip(col) {
+            *x -= u * bj;
         }
     }
 }
@@ -222,17 +221,18 @@ fn lu_core_factor(
             }
         }
         // Multipliers below the pivot, then update the trailing columns.
-        for i in j + 1..n {
-            a[j * n + i] /= pivot;
-        }
+        let inverse = 1.0 / pivot;
+        a[j * n + j + 1..(j + 1) * n]
+            .iter_mut()
+            .for_each(|x| *x *= inverse);
         let (left, right) = a.split_at_mut((j + 1) * n);
-        let mult = &left[j * n..(j + 1) * n];
-        for c in 0..n - j - 1 {
-            let col = &mut right[c * n..(c + 1) * n];
-            let ajc = col[j];
+        let mult = &left[j * n + j + 1..(j + 1) * n];
+        for col in right.chunks_exact_mut(n) {
+            let (head, below) = col.split_at_mut(j + 1);
+            let ajc = head[j];
             if ajc != 0.0 {
-                for i in j + 1..n {
-                    col[i] -= mult[i] * ajc;
+                for (x, m) in below.iter_mut().zip(mult) {
+                    *x -= m * ajc;
                 }
             }
         }

@@ -16,6 +16,7 @@ use crate::context::StepContext;
 use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
+use crate::linalg::{lu_factor_packed, lu_solve_packed, mul_into};
 use crate::outputs::Output;
 use crate::system::{Order, System, Vector};
 
@@ -43,7 +44,8 @@ pub struct ContinuousDerivatives {
 }
 
 /// The linearisation of `sys`'s dynamics at `(cx.t, q, q̇)` with inputs `cx.u` (the
-/// kinematic entries of `q`, `q̇` must hold their prescription at `cx.t`).
+/// kinematic entries of `q`, `q̇` must hold their prescription at `cx.t`). Allocates its
+/// workspace and result; see [`continuous_derivatives_into`].
 pub fn continuous_derivatives<S, F, P>(
     cx: &mut StepContext<S, F, P>,
     q: &Vector<S::N>,
@@ -55,33 +57,150 @@ where
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    let mut ws = ContinuousWorkspace::new(&*cx.sys);
+    let mut out = ContinuousDerivatives::empty();
+    continuous_derivatives_into(cx, q, dq, &mut ws, &mut out)?;
+    Ok(out)
+}
+
+/// The buffers of [`continuous_derivatives_into`], sized for one system.
+#[derive(Clone, Debug)]
+pub struct ContinuousWorkspace<N: nalgebra::Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// The dynamics at the state, by the mass matrix (the derivatives read `M` and
+    /// `∂²L/∂q̇∂q` from its evaluation).
+    dynamics: Dynamics<N>,
+    qdd: Vector<N>,
+    /// The KKT matrix `[[M_dd, −Dh_dᵀ], [Dh_d, 0]]`, LU-factored (column-major, packed).
+    kkt: Vec<f64>,
+    pivots: Vec<usize>,
+    /// The state over dual numbers, and the evaluation along one direction.
+    qd: Vec<Dual>,
+    vd: Vec<Dual>,
+    along: DualOutputs,
+    /// A coordinate direction, zeros, and one right-hand side.
+    e: Vec<f64>,
+    zero: Vec<f64>,
+    b: Vec<f64>,
+}
+
+impl<N: nalgebra::Dim> ContinuousWorkspace<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// Buffers for `sys`.
+    pub fn new<S: System<N = N>>(sys: &S) -> Self {
+        let mut dynamics = Dynamics::new(sys);
+        dynamics.articulated = false;
+        let (n, k) = (
+            sys.dof(),
+            dynamics.split.dynamic.len() + dynamics.split.rows,
+        );
+        ContinuousWorkspace {
+            qdd: Vector::<N>::zeros_generic(sys.dim(), nalgebra::U1),
+            kkt: vec![0.0; k * k],
+            pivots: vec![0; k],
+            qd: vec![Dual::default(); n],
+            vd: vec![Dual::default(); n],
+            along: DualOutputs::new(n, sys.constraint_count()),
+            e: vec![0.0; n],
+            zero: vec![0.0; n],
+            b: vec![0.0; k],
+            dynamics,
+        }
+    }
+}
+
+impl ContinuousDerivatives {
+    /// Empty (sized by the first [`continuous_derivatives_into`]).
+    pub fn empty() -> Self {
+        let z = || DMatrix::zeros(0, 0);
+        ContinuousDerivatives {
+            qdd: DVector::zeros(0),
+            lambda: DVector::zeros(0),
+            qdd_dq: z(),
+            qdd_ddq: z(),
+            qdd_du: z(),
+            lambda_dq: z(),
+            lambda_ddq: z(),
+            lambda_du: z(),
+        }
+    }
+
+    /// Resizes every block for `nd` dynamic variables of `n`, `m` constraint equations and
+    /// `nu` inputs (only when a shape differs).
+    fn fit(&mut self, nd: usize, n: usize, m: usize, nu: usize) {
+        let fit = |mat: &mut DMatrix<f64>, r: usize, c: usize| {
+            if mat.shape() != (r, c) {
+                *mat = DMatrix::zeros(r, c);
+            }
+        };
+        if self.qdd.len() != nd {
+            self.qdd = DVector::zeros(nd);
+        }
+        if self.lambda.len() != m {
+            self.lambda = DVector::zeros(m);
+        }
+        fit(&mut self.qdd_dq, nd, n);
+        fit(&mut self.qdd_ddq, nd, n);
+        fit(&mut self.qdd_du, nd, nu);
+        fit(&mut self.lambda_dq, m, n);
+        fit(&mut self.lambda_ddq, m, n);
+        fit(&mut self.lambda_du, m, nu);
+    }
+}
+
+/// [`continuous_derivatives`] into `out` with the buffers `ws` (made for `cx.sys`): after the
+/// first call (which sizes `out`), nothing is allocated.
+pub fn continuous_derivatives_into<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    ws: &mut ContinuousWorkspace<S::N>,
+    out: &mut ContinuousDerivatives,
+) -> Result<(), SimError>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let n = q.len();
-    let mut dynamics = Dynamics::new(&*cx.sys);
-    // The derivatives read M and ∂²L/∂q̇∂q from the evaluation.
-    dynamics.articulated = false;
-    let mut qdd = Vector::<S::N>::zeros_generic(cx.sys.dim(), nalgebra::U1);
-    dynamics.acceleration(cx, q, dq, &mut qdd)?;
-    let lambda = dynamics.lambda.clone();
-    let (dynamic, m, nu) = (
-        dynamics.split.dynamic.clone(),
-        dynamics.split.rows,
-        cx.u.len(),
-    );
-    let nd = dynamic.len();
-    // The KKT matrix [[M_dd, −Dh_dᵀ], [Dh_d, 0]] at the state.
+    let dynamics = &mut ws.dynamics;
+    let qdd = &mut ws.qdd;
+    dynamics.acceleration(cx, q, dq, qdd)?;
+    let (dynamic, m, nu) = (&dynamics.split.dynamic, dynamics.split.rows, cx.u.len());
+    let (nd, k) = (dynamic.len(), dynamic.len() + m);
+    out.fit(nd, n, m, nu);
+    let lambda = &dynamics.lambda;
+    for (r, &i) in dynamic.iter().enumerate() {
+        out.qdd[r] = qdd[i];
+    }
+    out.lambda.copy_from(lambda);
+    // The KKT matrix [[M_dd, −Dh_dᵀ], [Dh_d, 0]] at the state, column-major.
     let mass = &dynamics.terms.mass;
     let dh = &dynamics.constraint_terms.dh;
-    let kkt = DMatrix::from_fn(nd + m, nd + m, |r, c| match (r < nd, c < nd) {
-        (true, true) => mass[(dynamic[r], dynamic[c])],
-        (true, false) => -dh[(c - nd, dynamic[r])],
-        (false, true) => dh[(r - nd, dynamic[c])],
-        (false, false) => 0.0,
-    });
-    let lu = kkt.lu();
+    for c in 0..k {
+        for r in 0..k {
+            ws.kkt[c * k + r] = match (r < nd, c < nd) {
+                (true, true) => mass[(dynamic[r], dynamic[c])],
+                (true, false) => -dh[(c - nd, dynamic[r])],
+                (false, true) => dh[(r - nd, dynamic[c])],
+                (false, false) => 0.0,
+            };
+        }
+    }
+    let singular = || SimError::SingularConstraints {
+        step: cx.index,
+        t: cx.t,
+        constraint: "(the linearisation's KKT system)".into(),
+    };
+    lu_factor_packed(&mut ws.kkt, k, &mut ws.pivots).map_err(|_| singular())?;
     let lvq = &dynamics.terms.d2l_ddq_dq;
     // The right side of the differentiated equations along one direction.
-    let rhs_along = |d: &DualOutputs, dir_dq: &[f64], du: Option<usize>, sys: &S| {
-        let mut b = DVector::<f64>::zeros(nd + m);
+    let rhs_along = |d: &DualOutputs, dir_dq: &[f64], du: Option<usize>, sys: &S, b: &mut [f64]| {
         for (r, &i) in dynamic.iter().enumerate() {
             let mut x = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d;
             for j in 0..n {
@@ -105,67 +224,53 @@ where
             }
             b[nd + s] = x;
         }
-        b
     };
-    let mut out = ContinuousDerivatives {
-        qdd: DVector::from_iterator(nd, dynamic.iter().map(|&i| qdd[i])),
-        lambda: lambda.clone(),
-        qdd_dq: DMatrix::zeros(nd, n),
-        qdd_ddq: DMatrix::zeros(nd, n),
-        qdd_du: DMatrix::zeros(nd, nu),
-        lambda_dq: DMatrix::zeros(m, n),
-        lambda_ddq: DMatrix::zeros(m, n),
-        lambda_du: DMatrix::zeros(m, nu),
-    };
-    let singular = || SimError::SingularConstraints {
-        step: cx.index,
-        t: cx.t,
-        constraint: "(the linearisation's KKT system)".into(),
-    };
-    let zero = vec![0.0; n];
-    let (mut qd, mut vd) = (
-        Dual::seed(q.as_slice(), &zero),
-        Dual::seed(dq.as_slice(), &zero),
-    );
-    let mut d = DualOutputs::new(n, m);
-    let mut e = vec![0.0; n];
+    for (x, &v) in ws.qd.iter_mut().zip(q.iter()) {
+        *x = Dual::new(v, 0.0);
+    }
+    for (x, &v) in ws.vd.iter_mut().zip(dq.iter()) {
+        *x = Dual::new(v, 0.0);
+    }
+    let (e, zero, b, d) = (&mut ws.e, &ws.zero, &mut ws.b, &mut ws.along);
     for j in 0..(2 * n + nu) {
-        let b = if j < 2 * n {
+        if j < 2 * n {
             // Seed the one coordinate direction j.
             e.fill(0.0);
             e[j % n] = 1.0;
             let (seeded, other) = if j < n {
-                (&mut qd, &mut vd)
+                (&mut ws.qd, &mut ws.vd)
             } else {
-                (&mut vd, &mut qd)
+                (&mut ws.vd, &mut ws.qd)
             };
-            seeded.iter_mut().zip(&e).for_each(|(x, &de)| x.d = de);
+            seeded
+                .iter_mut()
+                .zip(e.iter())
+                .for_each(|(x, &de)| x.d = de);
             other.iter_mut().for_each(|x| x.d = 0.0);
-            cx.sys.evaluate_dual(&qd, &vd, Order::Dynamics, &mut d);
-            rhs_along(&d, if j < n { &zero } else { &e }, None, cx.sys)
+            cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, d);
+            rhs_along(d, if j < n { zero } else { e }, None, cx.sys, b);
         } else {
             // An input moves only its own row of B u.
             d.clear();
-            rhs_along(&d, &zero, Some(j - 2 * n), cx.sys)
-        };
-        let x = lu.solve(&b).ok_or_else(singular)?;
-        let (qcol, lcol) = (x.rows(0, nd), x.rows(nd, m));
-        match j {
-            j if j < n => {
-                out.qdd_dq.set_column(j, &qcol);
-                out.lambda_dq.set_column(j, &lcol);
-            }
-            j if j < 2 * n => {
-                out.qdd_ddq.set_column(j - n, &qcol);
-                out.lambda_ddq.set_column(j - n, &lcol);
-            }
-            j => {
-                out.qdd_du.set_column(j - 2 * n, &qcol);
-                out.lambda_du.set_column(j - 2 * n, &lcol);
-            }
+            rhs_along(d, zero, Some(j - 2 * n), cx.sys, b);
         }
+        lu_solve_packed(&ws.kkt, k, &ws.pivots, b);
+        let (qcol, lcol) = match j {
+            j if j < n => (out.qdd_dq.column_mut(j), out.lambda_dq.column_mut(j)),
+            j if j < 2 * n => (
+                out.qdd_ddq.column_mut(j - n),
+                out.lambda_ddq.column_mut(j - n),
+            ),
+            j => (
+                out.qdd_du.column_mut(j - 2 * n),
+                out.lambda_du.column_mut(j - 2 * n),
+            ),
+        };
+        let (mut qcol, mut lcol) = (qcol, lcol);
+        qcol.copy_from_slice(&b[..nd]);
+        lcol.copy_from_slice(&b[nd..]);
     }
-    Ok(out)
+    Ok(())
 }
 
 /// An explicit Runge–Kutta method: stage times `c`, the strictly lower-triangular stage
@@ -232,73 +337,190 @@ where
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    let n = q.len();
-    let dynamic: Vec<usize> = (0..n).filter(|&i| !cx.sys.is_kinematic(i)).collect();
-    let kinematic: Vec<usize> = (0..n).filter(|&i| cx.sys.is_kinematic(i)).collect();
-    let (nd, nu, h, t) = (dynamic.len(), cx.u.len(), cx.dt, cx.t);
+    let mut ws = ExplicitStepWorkspace::new(&*cx.sys);
+    let mut out = ExplicitStepDerivatives::empty();
+    explicit_step_derivatives_into(cx, q, dq, tableau, &mut ws, &mut out)?;
+    Ok(out)
+}
+
+/// The buffers of [`explicit_step_derivatives_into`], sized for one system (the stages'
+/// on the first call of a tableau).
+#[derive(Clone, Debug)]
+pub struct ExplicitStepWorkspace<N: nalgebra::Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    continuous: ContinuousWorkspace<N>,
+    derivatives: ContinuousDerivatives,
+    dynamic: Vec<usize>,
+    kinematic: Vec<usize>,
+    /// Per stage: `∂K_s/∂x`, `∂K_s/∂u` and the rates `K_s = (q̇, q̈)` over all variables.
+    kx: Vec<DMatrix<f64>>,
+    ku: Vec<DMatrix<f64>>,
+    rate_q: Vec<Vector<N>>,
+    rate_v: Vec<Vector<N>>,
+    /// `∂X_s/∂x`, `∂X_s/∂u` of the stage under way, its `A_s`, `B_s`.
+    ix: DMatrix<f64>,
+    iu: DMatrix<f64>,
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    /// The stage's point, and the step's end.
+    qs: Vector<N>,
+    vs: Vector<N>,
+    q2: Vector<N>,
+    dq2: Vector<N>,
+}
+
+impl<N: nalgebra::Dim> ExplicitStepWorkspace<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// Buffers for `sys`.
+    pub fn new<S: System<N = N>>(sys: &S) -> Self {
+        let n = sys.dof();
+        let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
+        let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
+        let (w, nu) = (2 * dynamic.len(), sys.input_count());
+        ExplicitStepWorkspace {
+            continuous: ContinuousWorkspace::new(sys),
+            derivatives: ContinuousDerivatives::empty(),
+            dynamic,
+            kinematic,
+            kx: Vec::new(),
+            ku: Vec::new(),
+            rate_q: Vec::new(),
+            rate_v: Vec::new(),
+            ix: DMatrix::zeros(w, w),
+            iu: DMatrix::zeros(w, nu),
+            a: DMatrix::zeros(w, w),
+            b: DMatrix::zeros(w, nu),
+            qs: sys.zero_vector(),
+            vs: sys.zero_vector(),
+            q2: sys.zero_vector(),
+            dq2: sys.zero_vector(),
+        }
+    }
+}
+
+impl ExplicitStepDerivatives {
+    /// Empty (sized by the first [`explicit_step_derivatives_into`]).
+    pub fn empty() -> Self {
+        ExplicitStepDerivatives {
+            x2: DVector::zeros(0),
+            x2_dx1: DMatrix::zeros(0, 0),
+            x2_du1: DMatrix::zeros(0, 0),
+        }
+    }
+}
+
+/// `y += a·x` over whole matrices of one shape.
+fn add_scaled(y: &mut DMatrix<f64>, a: f64, x: &DMatrix<f64>) {
+    for (y, x) in y.as_mut_slice().iter_mut().zip(x.as_slice()) {
+        *y += a * x;
+    }
+}
+
+/// [`explicit_step_derivatives`] into `out` with the buffers `ws` (made for `cx.sys`): after
+/// the first call with a tableau, nothing is allocated.
+pub fn explicit_step_derivatives_into<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    tableau: &Tableau,
+    ws: &mut ExplicitStepWorkspace<S::N>,
+    out: &mut ExplicitStepDerivatives,
+) -> Result<(), SimError>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (nd, nu, h, t) = (ws.dynamic.len(), cx.u.len(), cx.dt, cx.t);
     let (w, stages) = (2 * nd, tableau.b.len());
-    // Per stage: ∂K_s/∂x, ∂K_s/∂u and the rates K_s = (q̇, q̈) over all variables.
-    let mut kx: Vec<DMatrix<f64>> = Vec::with_capacity(stages);
-    let mut ku: Vec<DMatrix<f64>> = Vec::with_capacity(stages);
-    let mut rate_q: Vec<Vector<S::N>> = Vec::with_capacity(stages);
-    let mut rate_v: Vec<Vector<S::N>> = Vec::with_capacity(stages);
-    let (mut x2_dx1, mut x2_du1) = (DMatrix::<f64>::identity(w, w), DMatrix::<f64>::zeros(w, nu));
-    let (mut q2, mut dq2) = (q.clone(), dq.clone());
+    while ws.kx.len() < stages {
+        ws.kx.push(DMatrix::zeros(w, w));
+        ws.ku.push(DMatrix::zeros(w, nu));
+        ws.rate_q.push(q.clone());
+        ws.rate_v.push(q.clone());
+    }
+    if ws.iu.ncols() != nu {
+        // The inputs given (missing ones are zero; only these have columns).
+        ws.iu = DMatrix::zeros(w, nu);
+        ws.b = DMatrix::zeros(w, nu);
+        ws.ku.iter_mut().for_each(|k| *k = DMatrix::zeros(w, nu));
+    }
+    if out.x2.len() != w || out.x2_du1.ncols() != nu {
+        out.x2 = DVector::zeros(w);
+        out.x2_dx1 = DMatrix::zeros(w, w);
+        out.x2_du1 = DMatrix::zeros(w, nu);
+    }
+    out.x2_dx1.fill_with_identity();
+    out.x2_du1.fill(0.0);
+    ws.q2.copy_from(q);
+    ws.dq2.copy_from(dq);
     for s in 0..stages {
-        let (mut qs, mut vs) = (q.clone(), dq.clone());
-        let (mut ix, mut iu) = (DMatrix::<f64>::identity(w, w), DMatrix::<f64>::zeros(w, nu));
+        ws.qs.copy_from(q);
+        ws.vs.copy_from(dq);
+        ws.ix.fill_with_identity();
+        ws.iu.fill(0.0);
         for r in 0..s {
             let a = tableau.a[s][r];
             if a != 0.0 {
-                qs.axpy(a * h, &rate_q[r], 1.0);
-                vs.axpy(a * h, &rate_v[r], 1.0);
-                ix += &kx[r] * (a * h);
-                iu += &ku[r] * (a * h);
+                ws.qs.axpy(a * h, &ws.rate_q[r], 1.0);
+                ws.vs.axpy(a * h, &ws.rate_v[r], 1.0);
+                add_scaled(&mut ws.ix, a * h, &ws.kx[r]);
+                add_scaled(&mut ws.iu, a * h, &ws.ku[r]);
             }
         }
         let ts = t + tableau.c[s] * h;
-        for &k in &kinematic {
+        for &k in &ws.kinematic {
             let [x, v, _] = cx.motion.kinematic(k, ts);
-            (qs[k], vs[k]) = (x, v);
+            (ws.qs[k], ws.vs[k]) = (x, v);
         }
         cx.t = ts;
-        let d = continuous_derivatives(cx, &qs, &vs);
+        let d = continuous_derivatives_into(
+            cx,
+            &ws.qs,
+            &ws.vs,
+            &mut ws.continuous,
+            &mut ws.derivatives,
+        );
         cx.t = t;
-        let d = d?;
-        // A_s on the dynamic state: rows (q̇_d, q̈_d), columns (q_d, q̇_d).
-        let mut a = DMatrix::<f64>::zeros(w, w);
+        d?;
+        let d = &ws.derivatives;
+        // A_s on the dynamic state: rows (q̇_d, q̈_d), columns (q_d, q̇_d); B_s.
+        ws.a.fill(0.0);
         for r in 0..nd {
-            a[(r, nd + r)] = 1.0;
-            for (c, &j) in dynamic.iter().enumerate() {
-                a[(nd + r, c)] = d.qdd_dq[(r, j)];
-                a[(nd + r, nd + c)] = d.qdd_ddq[(r, j)];
+            ws.a[(r, nd + r)] = 1.0;
+            for (c, &j) in ws.dynamic.iter().enumerate() {
+                ws.a[(nd + r, c)] = d.qdd_dq[(r, j)];
+                ws.a[(nd + r, nd + c)] = d.qdd_ddq[(r, j)];
             }
         }
-        let mut b = DMatrix::<f64>::zeros(w, nu);
-        b.view_mut((nd, 0), (nd, nu)).copy_from(&d.qdd_du);
-        kx.push(&a * ix);
-        ku.push(&a * iu + b);
-        x2_dx1 += &kx[s] * (tableau.b[s] * h);
-        x2_du1 += &ku[s] * (tableau.b[s] * h);
+        ws.b.fill(0.0);
+        ws.b.view_mut((nd, 0), (nd, nu)).copy_from(&d.qdd_du);
+        mul_into(&mut ws.kx[s], &ws.a, &ws.ix, 0.0);
+        ws.ku[s].copy_from(&ws.b);
+        mul_into(&mut ws.ku[s], &ws.a, &ws.iu, 1.0);
+        add_scaled(&mut out.x2_dx1, tableau.b[s] * h, &ws.kx[s]);
+        add_scaled(&mut out.x2_du1, tableau.b[s] * h, &ws.ku[s]);
         // This stage's rates.
-        let mut kv = cx.sys.zero_vector();
-        for (r, &i) in dynamic.iter().enumerate() {
+        let kv = &mut ws.rate_v[s];
+        kv.fill(0.0);
+        for (r, &i) in ws.dynamic.iter().enumerate() {
             kv[i] = d.qdd[r];
         }
-        for &k in &kinematic {
+        for &k in &ws.kinematic {
             kv[k] = cx.motion.kinematic(k, ts)[2];
         }
-        q2.axpy(tableau.b[s] * h, &vs, 1.0);
-        dq2.axpy(tableau.b[s] * h, &kv, 1.0);
-        rate_q.push(vs);
-        rate_v.push(kv);
+        ws.q2.axpy(tableau.b[s] * h, &ws.vs, 1.0);
+        ws.dq2.axpy(tableau.b[s] * h, kv, 1.0);
+        ws.rate_q[s].copy_from(&ws.vs);
     }
-    let x2 = DVector::from_iterator(
-        w,
-        dynamic
-            .iter()
-            .map(|&i| q2[i])
-            .chain(dynamic.iter().map(|&i| dq2[i])),
-    );
-    Ok(ExplicitStepDerivatives { x2, x2_dx1, x2_du1 })
+    for (r, &i) in ws.dynamic.iter().enumerate() {
+        out.x2[r] = ws.q2[i];
+        out.x2[nd + r] = ws.dq2[i];
+    }
+    Ok(())
 }

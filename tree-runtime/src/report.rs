@@ -170,6 +170,7 @@ where
         alpha: request.alpha,
         forcing: request.forcing,
         max_subdivisions: 0,
+        derivatives: true,
         ..ViSettings::default()
     };
     let mut vi = MidpointVi::new(&*cx.sys, settings);

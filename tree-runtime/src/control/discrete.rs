@@ -19,7 +19,9 @@ use crate::integrate::{
     MidpointVi, Rk4, StepCovector, StepDerivatives, StepInput, StepOutput, ViSettings,
 };
 use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
-use crate::linearize::{explicit_step_derivatives, RK4};
+use crate::linearize::{
+    explicit_step_derivatives_into, ExplicitStepDerivatives, ExplicitStepWorkspace, RK4,
+};
 use crate::system::{Order, System, Terms, Vector};
 use tree_model::Control;
 
@@ -29,7 +31,17 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     Vi(Box<MidpointVi<N>>),
-    Rk4(Box<Rk4<N>>),
+    Rk4(Box<ExplicitStep<N>>),
+}
+
+/// RK4's stepper, and the buffers of its step derivatives.
+struct ExplicitStep<N: nalgebra::Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    rk4: Rk4<N>,
+    workspace: ExplicitStepWorkspace<N>,
+    derivatives: ExplicitStepDerivatives,
 }
 
 /// One input coordinate of the VI step (§9's `x = (q₁, p₁, u₁, k₂)`): which block and which
@@ -297,8 +309,12 @@ where
                 sys.variable_name(*i)
             )));
         }
-        let rk4 = Rk4::new(&sys);
-        Self::build(sys, Method::Rk4(Box::new(rk4)), dt, t0, controls)
+        let rk4 = Box::new(ExplicitStep {
+            rk4: Rk4::new(&sys),
+            workspace: ExplicitStepWorkspace::new(&sys),
+            derivatives: ExplicitStepDerivatives::empty(),
+        });
+        Self::build(sys, Method::Rk4(rk4), dt, t0, controls)
     }
 
     fn build(
@@ -666,6 +682,7 @@ where
                     b.q2.copy_from(&b.q1);
                     b.p2.copy_from(&b.p1);
                     vi.predict_from_rest();
+                    vi.settings.derivatives = jacobians.is_some();
                     vi.step(cx, &mut b.q2, &mut b.p2, &mut b.next)?;
                     for (r, &i) in l.dynamic.iter().enumerate() {
                         x2[r] = b.q2[i];
@@ -676,9 +693,10 @@ where
                         read_jacobians(l, &b.first, a, bm);
                     }
                 }
-                Method::Rk4(rk4) => {
+                Method::Rk4(explicit) => {
                     if let Some((a, bm)) = jacobians.as_mut() {
-                        let d = explicit_step_derivatives(cx, &b.q1, &b.p1, &RK4)?;
+                        let (ws, d) = (&mut explicit.workspace, &mut explicit.derivatives);
+                        explicit_step_derivatives_into(cx, &b.q1, &b.p1, &RK4, ws, d)?;
                         x2[..2 * nd].copy_from_slice(d.x2.as_slice());
                         a.view_mut((0, 0), (2 * nd, 2 * nd)).copy_from(&d.x2_dx1);
                         for (c, &col) in l.u_column.iter().enumerate() {
@@ -690,7 +708,7 @@ where
                     } else {
                         b.q2.copy_from(&b.q1);
                         b.p2.copy_from(&b.p1);
-                        rk4.step(cx, &mut b.q2, &mut b.p2)?;
+                        explicit.rk4.step(cx, &mut b.q2, &mut b.p2)?;
                         for (r, &i) in l.dynamic.iter().enumerate() {
                             x2[r] = b.q2[i];
                             x2[nd + r] = b.p2[i];

@@ -132,6 +132,10 @@ pub struct ViSettings {
     pub forcing: Forcing,
     /// When Newton fails, retry the step as two half steps, recursively, this deep (0: never).
     pub max_subdivisions: usize,
+    /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): Newton
+    /// checks convergence with second-order evaluations, so the derivatives find the terms at
+    /// the solution already evaluated instead of evaluating them again.
+    pub derivatives: bool,
 }
 
 impl Default for ViSettings {
@@ -144,6 +148,7 @@ impl Default for ViSettings {
             jacobian: JacobianUpdate::OncePerStep,
             forcing: Forcing::Split,
             max_subdivisions: 4,
+            derivatives: false,
         }
     }
 }
@@ -210,6 +215,11 @@ where
     predictor: Predictor<N>,
     /// The step length of the last residual.
     dt: f64,
+    /// `terms` hold a second-order evaluation for the step from `full_q1` to `full_q2` over
+    /// `dt` (the last residual's, with its Jacobian), when `full_known`.
+    full_q1: Vector<N>,
+    full_q2: Vector<N>,
+    full_known: bool,
     /// Newton iterations of the last step (all its sub-steps).
     pub iterations: usize,
     /// Subdivisions the last step needed (0 when it went through whole).
@@ -265,6 +275,9 @@ where
                 valid: false,
             },
             dt: 0.0,
+            full_q1: z(),
+            full_q2: z(),
+            full_known: false,
             iterations: 0,
             subdivisions: 0,
             dissipated: 0.0,
@@ -287,6 +300,7 @@ where
         dq0: &Vector<N>,
     ) -> Vector<N> {
         sys.lagrangian(q0, dq0, Order::First, &mut self.terms);
+        self.full_known = false;
         self.predict_from(dq0);
         self.terms.dl_ddq.clone()
     }
@@ -374,6 +388,11 @@ where
         self.dt = dt;
         let order = if jacobian { Order::Full } else { Order::First };
         sys.lagrangian(&self.q_alpha, &self.velocity, order, &mut self.terms);
+        self.full_known = jacobian;
+        if jacobian {
+            self.full_q1.copy_from(q1);
+            self.full_q2.copy_from(q2);
+        }
         self.force.copy_from(&self.terms.force);
         force.add_force(t + a * dt, &self.q_alpha, &self.velocity, &mut self.force);
         // The inputs, held over the step: B u.
@@ -653,7 +672,10 @@ where
         for &i in &self.split.kinematic {
             q_next[i] = cx.motion.kinematic(i, t + dt)[0];
         }
-        let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep;
+        // With derivatives to follow, exact Newton with second-order checks: the check that
+        // converges leaves the terms the derivatives need at the solution.
+        let derivatives = self.settings.derivatives;
+        let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep && !derivatives;
         let mut factored = false;
         let mut last_residual = f64::INFINITY;
         let mut iterations = 0;
@@ -663,8 +685,8 @@ where
             // (quadratically) within tol: check it with first derivatives alone, and
             // evaluate the Jacobian only if the check fails (the last full evaluation of a
             // step was otherwise thrown away).
-            let check_first = fresh && last_residual <= CHECK_FIRST_BELOW;
-            self.residual(cx, q, p, q_next, fresh && !check_first);
+            let check_first = fresh && last_residual <= CHECK_FIRST_BELOW && !derivatives;
+            self.residual(cx, q, p, q_next, derivatives || (fresh && !check_first));
             let (residual, violation) = self.residual_norms();
             let mut relative = self.relative_residual();
             if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
@@ -721,7 +743,7 @@ where
             // An update lost in the last bits of q: the residual is at its rounding floor
             // (≈ ε‖M‖‖q‖/Δt), which a large, stiff model can hold above the tolerance.
             if largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
-                self.residual(cx, q, p, q_next, false);
+                self.residual(cx, q, p, q_next, derivatives);
                 break;
             }
         }
@@ -862,6 +884,7 @@ where
     {
         let (sys, motion, step, t) = (&mut *cx.sys, &mut *cx.motion, cx.index, cx.t);
         sys.mass_matrix(q, &mut self.terms);
+        self.full_known = false;
         self.q_alpha.copy_from(q);
         prescribe(
             &self.split.kinematic,

@@ -165,8 +165,8 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
     let (n, m, w) = (sh.n, sh.m, sh.w());
     let (a, dt) = (sh.ld.alpha, sh.ld.dt);
     let c = T::constant;
-    jac.fill(T::zero());
-    pjac.fill(T::zero());
+    // Every entry this writes is written on every call; the others stay zero from the
+    // buffers' making (so nothing is cleared here).
     let (by_q1_q, by_q1_v, by_q2_q, by_q2_v) = (c(1.0 - a), c(-1.0 / dt), c(a), c(1.0 / dt));
     let [d1d1, d2d1, d2d2] = [Slots::D1D1, Slots::D2D1, Slots::D2D2].map(|s| sh.ld.slot::<T>(s));
     for (r, &i) in sh.dynamic.iter().enumerate() {
@@ -359,6 +359,7 @@ where
         F: GeneralizedForce<N>,
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
+        lin.fill_tangent();
         let mut first = StepDerivatives::empty();
         lin.first_into(&mut first);
         let sh = lin.shape.clone();
@@ -421,6 +422,7 @@ where
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
         lin.factor_transposed(cx.index, cx.t)?;
+        lin.fill_tangent();
         let sh = &lin.shape;
         let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
         // μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p), w_z = (w_q, w_λ).
@@ -491,9 +493,18 @@ where
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
         let m = lin.shape.m;
-        // Terms at the quadrature point, Dh(q₁), Dh(q₂) at the solution; D²h(q₁).
-        self.prepare(cx.sys, q1);
-        self.residual(cx, q1, p1, q2, true);
+        // Terms at the quadrature point, Dh(q₁), Dh(q₂) at the solution (the step's last
+        // evaluation, when it was of second order at this point); D²h(q₁).
+        let evaluated =
+            self.full_known && self.dt == cx.dt && self.full_q1 == *q1 && self.full_q2 == *q2;
+        if evaluated {
+            if m > 0 {
+                self.constraints_at(cx.sys, q2);
+            }
+        } else {
+            self.prepare(cx.sys, q1);
+            self.residual(cx, q1, p1, q2, true);
+        }
         if m > 0 {
             cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
         }
@@ -552,9 +563,13 @@ pub(crate) struct Linearisation {
     /// `J` (rows × w) and `P` (n_d × w), row-major.
     jac: Vec<f64>,
     pjac: Vec<f64>,
-    /// The columns of `w` that are the unknowns `z`, and those that are `x`.
+    /// The columns of `w` that are the unknowns `z`, and those of `x` the solve
+    /// works for (`q₁`, `p₁`, `k₂`: an input's column is `left` times its variable's `p₁`
+    /// column, since `∂R/∂u_k = left·∂R/∂p₁` there and `∂p₂/∂p₁ = 0`).
     z_columns: Vec<usize>,
-    x_columns: Vec<usize>,
+    solved: Vec<usize>,
+    /// Each input's variable as a dynamic row (its `p₁` column), if it is dynamic.
+    input_rows: Vec<Option<usize>>,
     /// `R_z`'s LU factor (column-major, packed) and its pivots; `R_zᵀ`'s likewise.
     factor: Vec<f64>,
     pivots: Vec<usize>,
@@ -562,14 +577,15 @@ pub(crate) struct Linearisation {
     pivots_t: Vec<usize>,
     /// Whether `factor_t` holds this linearisation's `R_zᵀ`.
     transposed: bool,
-    /// `Δ = dw/dx` (w × x) and `dp₂/dx = P Δ` (n_d × x).
+    /// `Δ = dw/dx` (w × x), filled from `rhs` when second derivatives ask for it.
     tangent: DMatrix<f64>,
-    dp2: DMatrix<f64>,
+    tangent_ready: bool,
     column: Vec<f64>,
-    /// `−R_x`, then `dz/dx`: row-major `rows × x` (all right-hand sides of one solve).
+    /// `−R_x`, then `dz/dx`, over the solved columns: row-major `rows × solved` (all
+    /// right-hand sides of one solve).
     rhs: Vec<f64>,
-    /// One row of `dp₂/dx` being formed.
-    row: Vec<f64>,
+    /// `dp₂/dx = P Δ` over the solved columns, row-major `n_d × solved`.
+    dp2: Vec<f64>,
     /// The point: `q₁`, `q₂` (all variables).
     q1: Vec<f64>,
     q2: Vec<f64>,
@@ -589,11 +605,19 @@ impl Linearisation {
             .chain((0..shape.nu()).map(|k| shape.w_u1() + k))
             .chain(shape.kinematic.iter().map(|&k| shape.w_q2() + k))
             .collect();
-        // Δ's rows for x's own coordinates: the identity (`solve` fills the unknowns').
+        let solved: Vec<usize> = (0..n)
+            .chain((0..nd).map(|r| shape.w_p1() + r))
+            .chain(shape.kinematic.iter().map(|&k| shape.w_q2() + k))
+            .collect();
+        let input_rows = (shape.inputs.iter())
+            .map(|v| shape.dynamic.iter().position(|d| d == v))
+            .collect();
+        // Δ's rows for x's own coordinates: the identity (`fill_tangent` adds the unknowns').
         let mut tangent = DMatrix::zeros(w, x);
         for (c, &xc) in x_columns.iter().enumerate() {
             tangent[(xc, c)] = 1.0;
         }
+        let ks = solved.len();
         Linearisation {
             lqq: vec![0.0; n * n],
             lvq: vec![0.0; n * n],
@@ -608,17 +632,18 @@ impl Linearisation {
             jac: vec![0.0; rows * w],
             pjac: vec![0.0; nd * w],
             z_columns,
-            x_columns,
+            solved,
+            input_rows,
             factor: vec![0.0; rows * rows],
             pivots: vec![0; rows],
             factor_t: vec![0.0; rows * rows],
             pivots_t: vec![0; rows],
             transposed: false,
             tangent,
-            dp2: DMatrix::zeros(nd, x),
+            tangent_ready: false,
             column: vec![0.0; rows],
-            rhs: vec![0.0; rows * x],
-            row: vec![0.0; x],
+            rhs: vec![0.0; rows * ks],
+            dp2: vec![0.0; nd * ks],
             q1: vec![0.0; n],
             q2: vec![0.0; n],
             duals: None,
@@ -652,30 +677,22 @@ impl Linearisation {
         self.transposed = false;
         lu_factor_packed(&mut self.factor, rows, &mut self.pivots)
             .map_err(|_| singular(step, t))?;
-        // Δ: the identity on x's own coordinates, dz/dx = −R_z⁻¹ R_x on the unknowns (every
-        // column of R_x in one solve).
-        let k = self.x_columns.len();
+        self.tangent_ready = false;
+        // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve.
+        let k = self.solved.len();
         for r in 0..rows {
             let row = &self.jac[r * w..(r + 1) * w];
-            for (c, &xc) in self.x_columns.iter().enumerate() {
+            for (c, &xc) in self.solved.iter().enumerate() {
                 self.rhs[r * k + c] = -row[xc];
             }
         }
         lu_solve_packed_rows(&self.factor, rows, &self.pivots, &mut self.rhs, k);
-        // Only the unknowns' rows change: the identity on x's own rows was set once (`new`).
-        let tangent = self.tangent.as_mut_slice();
-        for c in 0..k {
-            let column = &mut tangent[c * w..(c + 1) * w];
-            for (r, &zc) in self.z_columns.iter().enumerate() {
-                column[zc] = self.rhs[r * k + c];
-            }
-        }
         // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z),
         // a row at a time: P_x's row, then each dz/dx row (contiguous in `rhs`) scaled.
         for r in 0..nd {
             let prow = &self.pjac[r * w..(r + 1) * w];
-            let out = &mut self.row[..k];
-            for (o, &xc) in out.iter_mut().zip(&self.x_columns) {
+            let out = &mut self.dp2[r * k..(r + 1) * k];
+            for (o, &xc) in out.iter_mut().zip(&self.solved) {
                 *o = prow[xc];
             }
             for (rz, &zc) in self.z_columns[..nd].iter().enumerate() {
@@ -686,11 +703,48 @@ impl Linearisation {
                     }
                 }
             }
-            for (c, &v) in out.iter().enumerate() {
-                self.dp2[(r, c)] = v;
-            }
         }
         Ok(())
+    }
+
+    /// Where column `c` of `x` comes from: a solved column, or (an input's) `left` times a
+    /// solved `p₁` column with `plus` on `p₂`'s own row — `None` for an input on no dynamic
+    /// variable (a zero column).
+    fn source(&self, c: usize) -> Option<Source> {
+        let sh = &self.shape;
+        let (u0, nu) = sh.x_block(StepInput::U1);
+        if c < u0 {
+            Some(Source::Solved(c))
+        } else if c >= u0 + nu {
+            Some(Source::Solved(c - nu))
+        } else {
+            let r = self.input_rows[c - u0]?;
+            Some(Source::Input(sh.x_block(StepInput::P1).0 + r, r))
+        }
+    }
+
+    /// Entry `(r, c)` of `dz/dx` (`r` over the unknowns: `q₂_d`, then `λ`).
+    fn dz(&self, r: usize, c: usize) -> f64 {
+        let k = self.solved.len();
+        match self.source(c) {
+            Some(Source::Solved(s)) => self.rhs[r * k + s],
+            Some(Source::Input(s, _)) => self.shape.left * self.rhs[r * k + s],
+            None => 0.0,
+        }
+    }
+
+    /// The tangent `Δ`'s unknowns' rows from `dz/dx` (once per linearisation; only second
+    /// derivatives read `Δ`).
+    fn fill_tangent(&mut self) {
+        if self.tangent_ready {
+            return;
+        }
+        for c in 0..self.shape.x() {
+            for r in 0..self.z_columns.len() {
+                self.tangent[(self.z_columns[r], c)] = self.dz(r, c);
+            }
+        }
+        self.tangent_ready = true;
     }
 
     /// `R_zᵀ`'s factor, for the adjoint of a contraction (made once per linearisation).
@@ -714,7 +768,7 @@ impl Linearisation {
     /// from the tangent's `q₂` rows, `dλ/dx` from its `λ` rows, `dp₂/dx = P Δ`.
     fn first_into(&self, out: &mut StepDerivatives) {
         let sh = &self.shape;
-        let (nd, m) = (sh.nd(), sh.m);
+        let (nd, m, k) = (sh.nd(), sh.m, self.solved.len());
         use StepInput::*;
         for b in [Q1, P1, U1, K2] {
             let (c0, wc) = sh.x_block(b);
@@ -733,16 +787,41 @@ impl Linearisation {
             fit(p2, nd);
             fit(lambda, m);
             for c in 0..wc {
-                for (r, &i) in sh.dynamic.iter().enumerate() {
-                    q2[(r, c)] = self.tangent[(sh.w_q2() + i, c0 + c)];
-                    p2[(r, c)] = self.dp2[(r, c0 + c)];
-                }
-                for s in 0..m {
-                    lambda[(s, c)] = self.tangent[(sh.w_lambda() + s, c0 + c)];
+                // Column c of the block: a solved column as it is, or an input's.
+                let (s, scale, own) = match self.source(c0 + c) {
+                    Some(Source::Solved(s)) => (s, 1.0, None),
+                    Some(Source::Input(s, r)) => (s, sh.left, Some(r)),
+                    None => {
+                        q2.column_mut(c).fill(0.0);
+                        p2.column_mut(c).fill(0.0);
+                        lambda.column_mut(c).fill(0.0);
+                        continue;
+                    }
+                };
+                let strided = |from: &[f64], rows: usize, to: &mut [f64]| {
+                    for (r, o) in to.iter_mut().enumerate().take(rows) {
+                        *o = scale * from[r * k + s];
+                    }
+                };
+                strided(&self.rhs, nd, q2.column_mut(c).as_mut_slice());
+                strided(&self.dp2, nd, p2.column_mut(c).as_mut_slice());
+                strided(&self.rhs[nd * k..], m, lambda.column_mut(c).as_mut_slice());
+                if let Some(r) = own {
+                    p2[(r, c)] += sh.plus;
                 }
             }
         }
     }
+}
+
+/// Where a column of `x` is found among the solved ones ([`Linearisation::source`]).
+#[derive(Clone, Copy, Debug)]
+enum Source {
+    /// Solved column `s`.
+    Solved(usize),
+    /// `left` times solved column `s` (the `p₁` column of dynamic row `r`), plus `plus` on
+    /// `p₂`'s row `r`.
+    Input(usize, usize),
 }
 
 impl StepDerivatives {
