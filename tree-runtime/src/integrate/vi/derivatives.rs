@@ -139,7 +139,7 @@ impl Shape {
 
 /// What the step's Jacobians are built from, over a scalar: the continuous terms at the
 /// quadrature point (`L_qq`, `L_q̇q`, `M`, `F_q`, `F_q̇`, row-major n × n), `Dh(q₁)`,
-/// `D²h(q₁)` (m × n × n), `Dh(q₂)` and `λ`.
+/// `Σ_s λ_s D²h_s(q₁)` (n × n, [`contract`]) and `Dh(q₂)`.
 struct StepTerms<'a, T> {
     lqq: &'a [T],
     lvq: &'a [T],
@@ -147,9 +147,19 @@ struct StepTerms<'a, T> {
     fq: &'a [T],
     fv: &'a [T],
     dh1: &'a [T],
-    d2h1: &'a [T],
+    lambda_d2h1: &'a [T],
     dh2: &'a [T],
-    lambda: &'a [T],
+}
+
+/// `out = Σ_s λ_s D²h_s` over the constraint equations (`d2h`: m symmetric n × n blocks, one
+/// after the other): the multipliers' term of `∂r/∂q₁`, formed once per linearisation.
+fn contract<T: Scalar>(lambda: &[T], d2h: &[T], out: &mut [T]) {
+    out.fill(T::zero());
+    for (&l, block) in lambda.iter().zip(d2h.chunks_exact(out.len())) {
+        for (o, &x) in out.iter_mut().zip(block) {
+            *o += l * x;
+        }
+    }
 }
 
 /// `J = ∂R/∂w` (rows × w) and `P = ∂p₂/∂w` (n_d × w), row-major, from the step's terms:
@@ -178,11 +188,7 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
             };
             let f1 = by_q1_q * st.fq[ij] + by_q1_v * st.fv[ij];
             let f2 = by_q2_q * st.fq[ij] + by_q2_v * st.fv[ij];
-            let mut multiplier = T::zero();
-            for s in 0..m {
-                multiplier += st.lambda[s] * st.d2h1[(s * n + i) * n + j];
-            }
-            row[j] = second(&d1d1, ij, ji) + c(sh.left) * f1 + c(dt) * multiplier;
+            row[j] = second(&d1d1, ij, ji) + c(sh.left) * f1 + c(dt) * st.lambda_d2h1[ij];
             row[sh.w_q2() + j] = second(&d2d1, ij, ji) + c(sh.left) * f2;
             // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁.
             prow[j] = second(&d2d1, ji, ij) + c(sh.plus) * f1;
@@ -508,30 +514,41 @@ where
         if m > 0 {
             cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
         }
+        // Row-major copies: L_qq and M are symmetric (their column-major storage is their
+        // row-major one); L_q̇q and the force derivatives are transposed.
         let t = &self.terms;
-        for i in 0..n {
-            for j in 0..n {
-                let ij = i * n + j;
-                lin.lqq[ij] = t.d2l_dq_dq[(i, j)];
-                lin.lvq[ij] = t.d2l_ddq_dq[(i, j)];
-                lin.mass[ij] = t.mass[(i, j)];
-                // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
-                (lin.fq[ij], lin.fv[ij]) = match t.force_derivatives {
-                    Sparsity::Zero => (0.0, 0.0),
-                    Sparsity::Diagonal if i == j => (0.0, t.dforce_ddq[(i, i)]),
-                    Sparsity::Diagonal => (0.0, 0.0),
-                    Sparsity::Dense => (t.dforce_dq[(i, j)], t.dforce_ddq[(i, j)]),
-                };
+        lin.lqq.copy_from_slice(t.d2l_dq_dq.as_slice());
+        lin.mass.copy_from_slice(t.mass.as_slice());
+        row_major_into(t.d2l_ddq_dq.as_slice(), n, &mut lin.lvq);
+        // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
+        match t.force_derivatives {
+            Sparsity::Zero => {
+                lin.fq.fill(0.0);
+                lin.fv.fill(0.0);
+            }
+            Sparsity::Diagonal => {
+                lin.fq.fill(0.0);
+                lin.fv.fill(0.0);
+                for i in 0..n {
+                    lin.fv[i * n + i] = t.dforce_ddq[(i, i)];
+                }
+            }
+            Sparsity::Dense => {
+                row_major_into(t.dforce_dq.as_slice(), n, &mut lin.fq);
+                row_major_into(t.dforce_ddq.as_slice(), n, &mut lin.fv);
             }
         }
+        lin.lambda_d2h1.fill(0.0);
         for s in 0..m {
             lin.lambda[s] = self.lambda[s];
             for i in 0..n {
                 lin.dh1[s * n + i] = self.dh1[(s, i)];
                 lin.dh2[s * n + i] = self.constraint_terms.dh[(s, i)];
-                for j in 0..n {
-                    lin.d2h1[(s * n + i) * n + j] = lin.c1.d2h[s][(i, j)];
-                }
+            }
+            // D²h_s is symmetric: its column-major storage is its row-major one.
+            let l = self.lambda[s];
+            for (o, &x) in lin.lambda_d2h1.iter_mut().zip(lin.c1.d2h[s].as_slice()) {
+                *o += l * x;
             }
         }
         lin.q1.copy_from_slice(q1.as_slice());
@@ -553,9 +570,9 @@ pub(crate) struct Linearisation {
     mass: Vec<f64>,
     fq: Vec<f64>,
     fv: Vec<f64>,
-    /// `Dh(q₁)`, `D²h(q₁)`, `Dh(q₂)` row-major, and λ.
+    /// `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)`, `Dh(q₂)` row-major, and λ.
     dh1: Vec<f64>,
-    d2h1: Vec<f64>,
+    lambda_d2h1: Vec<f64>,
     dh2: Vec<f64>,
     lambda: Vec<f64>,
     /// The constraints at `q₁` up to `D²h`.
@@ -625,7 +642,7 @@ impl Linearisation {
             fq: vec![0.0; n * n],
             fv: vec![0.0; n * n],
             dh1: vec![0.0; m * n],
-            d2h1: vec![0.0; m * n * n],
+            lambda_d2h1: vec![0.0; n * n],
             dh2: vec![0.0; m * n],
             lambda: vec![0.0; m],
             c1: ConstraintTerms::zeros(m, n),
@@ -663,9 +680,8 @@ impl Linearisation {
             fq: &self.fq,
             fv: &self.fv,
             dh1: &self.dh1,
-            d2h1: &self.d2h1,
+            lambda_d2h1: &self.lambda_d2h1,
             dh2: &self.dh2,
-            lambda: &self.lambda,
         };
         jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
         // R_z, column-major, factored (R_zᵀ only when a contraction asks for it).
@@ -845,6 +861,15 @@ impl StepDerivatives {
     }
 }
 
+/// `out` = the n × n matrix stored column-major in `a`, stored row-major.
+fn row_major_into(a: &[f64], n: usize, out: &mut [f64]) {
+    for (i, row) in out.chunks_exact_mut(n).enumerate() {
+        for (j, o) in row.iter_mut().enumerate() {
+            *o = a[j * n + i];
+        }
+    }
+}
+
 /// A singular Newton matrix at a converged step (constraints that became dependent).
 fn singular(step: usize, t: f64) -> SimError {
     SimError::SingularJacobian {
@@ -868,6 +893,8 @@ struct DualJacobians {
     q2: Vec<Dual>,
     rest: Vec<Dual>,
     lambda: Vec<Dual>,
+    /// `Σ_s λ_s D²h_s(q₁)` over duals.
+    lambda_d2h1: Vec<Dual>,
     /// `J`, `P` over duals (row-major): their `.d` are `D_j J`, `D_j P`.
     jac: Vec<Dual>,
     pjac: Vec<Dual>,
@@ -892,6 +919,7 @@ impl DualJacobians {
             q2: zeros(n),
             rest: zeros(n),
             lambda: zeros(m),
+            lambda_d2h1: zeros(n * n),
             jac: zeros(sh.rows() * sh.w()),
             pjac: zeros(sh.nd() * sh.w()),
             adjoint: vec![0.0; sh.w()],
@@ -924,6 +952,11 @@ impl DualJacobians {
         for s in 0..m {
             self.lambda[s] = Dual::new(lin.lambda[s], dir[sh.w_lambda() + s]);
         }
+        contract(
+            &self.lambda,
+            self.at_q1.field(Field::D2h),
+            &mut self.lambda_d2h1,
+        );
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
         let terms = StepTerms {
             lqq: t.field(Field::D2lDqDq),
@@ -932,9 +965,8 @@ impl DualJacobians {
             fq: t.field(Field::DforceDq),
             fv: t.field(Field::DforceDdq),
             dh1: c1.field(Field::Dh),
-            d2h1: c1.field(Field::D2h),
+            lambda_d2h1: &self.lambda_d2h1,
             dh2: c2.field(Field::Dh),
-            lambda: &self.lambda,
         };
         jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
     }
