@@ -8,7 +8,9 @@
 //! of `J` for the unknowns `z = (q₂_d, λ)` (the Newton matrix). Then:
 //!
 //! * first order: `dz/dx = −R_z⁻¹ R_x`; the tangent `Δ = dw/dx` stacks the identity on the
-//!   `x` coordinates and `dz/dx` on the unknowns; `dp₂/dx = P Δ`;
+//!   `x` coordinates and `dz/dx` on the unknowns; `dp₂/dx = P Δ`. Only the `q₁`, `p₁`, `k₂`
+//!   columns are solved for: an input's column of `R_x` is `left` times its variable's `p₁`
+//!   column, so its derivatives are that column's scaled (plus `plus` on `p₂`'s own row);
 //! * second order, along each direction `j` of `x`: the derivative `D_j J` of the Jacobian
 //!   along the tangent `Δ_j` (the same Jacobian evaluated over dual numbers seeded with
 //!   `Δ_j`: third derivatives of `L`, `D³h`, the forces' second derivatives, all exact),
