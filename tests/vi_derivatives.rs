@@ -66,24 +66,33 @@ fn step(
     )
 }
 
+/// The model's start on its constraints and moving (its kinematic variables at their
+/// prescription, 0.3 of its initial velocity, projected), its momentum, and an input value
+/// per input: `(q₁, p₁, u)`.
+fn moving_start(
+    sys: &mut TreeSystem,
+    settings: ViSettings,
+) -> (Vector<Dyn>, Vector<Dyn>, Vec<f64>) {
+    let (mut q1, dq1) = sys.initial_state();
+    let mut motion = ModelMotions::of(sys);
+    for k in (0..sys.dof()).filter(|&i| sys.is_kinematic(i)) {
+        q1[k] = motion.kinematic(k, 0.0)[0];
+    }
+    let mut dq1 = dq1 * 0.3;
+    let split = tree_mech::runtime::dynamics::Split::of(sys);
+    project_initial_state(sys, &split, &mut q1, &mut dq1).unwrap();
+    let mut vi = MidpointVi::new(sys, settings);
+    let p1 = vi.initial_momentum(sys, &q1, &dq1);
+    let u = (0..sys.input_count()).map(|k| 0.5 + k as f64).collect();
+    (q1, p1, u)
+}
+
 fn check(model: &Model, settings: ViSettings, what: &str) {
     let mut sys = TreeSystem::new(model).unwrap();
     let n = sys.dof();
     let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-    let (q1, dq1) = sys.initial_state();
-    let mut q1 = q1;
-    let mut motion = ModelMotions::of(&sys);
-    for &k in &kinematic {
-        q1[k] = motion.kinematic(k, 0.0)[0];
-    }
-    // On the constraints, moving.
-    let mut dq1 = dq1 * 0.3;
-    let split = tree_mech::runtime::dynamics::Split::of(&sys);
-    project_initial_state(&mut sys, &split, &mut q1, &mut dq1).unwrap();
-    let mut vi = MidpointVi::new(&sys, settings);
-    let p1 = vi.initial_momentum(&mut sys, &q1, &dq1);
-    let u: Vec<f64> = (0..sys.input_count()).map(|k| 0.5 + k as f64).collect();
+    let (q1, p1, u) = moving_start(&mut sys, settings);
     let nk = kinematic.len();
     let (base, mut vi) = step(&mut sys, settings, &q1, &p1, &u, &vec![0.0; nk], &[]);
     let lambda0 = base.lambda.clone();
@@ -472,17 +481,7 @@ fn derivatives_reuse_the_steps_last_evaluation() {
             continue;
         }
         let mut sys = TreeSystem::new(&model).unwrap();
-        let (mut q1, dq1) = sys.initial_state();
-        let mut motion = ModelMotions::of(&sys);
-        for k in (0..sys.dof()).filter(|&i| sys.is_kinematic(i)) {
-            q1[k] = motion.kinematic(k, 0.0)[0];
-        }
-        let mut dq1 = dq1 * 0.3;
-        let split = tree_mech::runtime::dynamics::Split::of(&sys);
-        project_initial_state(&mut sys, &split, &mut q1, &mut dq1).unwrap();
-        let mut vi = MidpointVi::new(&sys, settings);
-        let p1 = vi.initial_momentum(&mut sys, &q1, &dq1);
-        let u: Vec<f64> = (0..sys.input_count()).map(|k| 0.5 + k as f64).collect();
+        let (q1, p1, u) = moving_start(&mut sys, settings);
         let nk = (0..sys.dof()).filter(|&i| sys.is_kinematic(i)).count();
         let first = |sys: &mut TreeSystem, derivatives: bool| {
             let settings = ViSettings {
