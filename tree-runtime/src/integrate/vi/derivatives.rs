@@ -384,6 +384,19 @@ where
             .unwrap_or_else(|| DualJacobians::new(&sh, cx.sys));
         let mut g = vec![0.0; rows];
         for j in 0..x {
+            if let Some(from) = lin.input_direction(j) {
+                // An input's direction moves J and P as `left` times its variable's p₁
+                // direction (or not at all): its columns are that one's, scaled.
+                let scale = |h: &mut DMatrix<f64>| {
+                    for i in 0..x {
+                        h[(i, j)] = from.map_or(0.0, |s| sh.left * h[(i, s)]);
+                    }
+                };
+                second.q2.iter_mut().for_each(scale);
+                second.p2.iter_mut().for_each(scale);
+                second.lambda.iter_mut().for_each(scale);
+                continue;
+            }
             duals.along(cx.sys, lin, j);
             // For each i: G = D_jJ Δ_i, z_ij = −R_z⁻¹ G, p₂,ij = P_z z_ij + D_jP Δ_i.
             for i in 0..x {
@@ -454,6 +467,14 @@ where
             .take()
             .unwrap_or_else(|| DualJacobians::new(&lin.shape, cx.sys));
         for j in 0..x {
+            if let Some(from) = lin.input_direction(j) {
+                // As in `second_derivatives`: an input's column is its variable's p₁ one,
+                // scaled by `left`.
+                for i in 0..x {
+                    out[(i, j)] = from.map_or(0.0, |s| lin.shape.left * out[(i, s)]);
+                }
+                continue;
+            }
             duals.along(cx.sys, lin, j);
             // c_j = μᵀ D_jJ + w_pᵀ D_jP, then column j = Δᵀ c_j.
             duals.adjoint(&lin.column, w.p2.as_slice());
@@ -749,6 +770,22 @@ impl Linearisation {
             Some(Source::Input(s, _)) => self.shape.left * self.rhs[r * k + s],
             None => 0.0,
         }
+    }
+
+    /// For a direction `j` of `x` that is an input's: `Some(the p₁ direction it follows, if
+    /// its variable is dynamic)`. `J` and `P` depend on `w` only through `q₁`, `q₂` and `λ`,
+    /// where an input's tangent is `left` times its variable's `p₁` tangent, so their
+    /// derivatives along it are that direction's, scaled by `left`. `None` for other
+    /// directions.
+    fn input_direction(&self, j: usize) -> Option<Option<usize>> {
+        let (u0, nu) = self.shape.x_block(StepInput::U1);
+        if !(u0..u0 + nu).contains(&j) {
+            return None;
+        }
+        Some(match self.source(j) {
+            Some(Source::Input(s, _)) => Some(s),
+            _ => None,
+        })
     }
 
     /// The tangent `Δ`'s unknowns' rows from `dz/dx` (once per linearisation; only second
