@@ -407,13 +407,16 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
     let terms_ty = quote!(::tree_mech::runtime::Terms<::tree_mech::runtime::nalgebra::Const<#n>>);
     let constraint_ty = quote!(::tree_mech::runtime::ConstraintTerms);
-    let dual_ty = quote!(::tree_mech::runtime::dual::Dual);
     let (f64_terms, f64_constraints, generic) = (
-        Flavour::F64 { out_ty: &terms_ty },
+        Flavour::F64 {
+            out_ty: &terms_ty,
+            scratch: true,
+        },
         Flavour::F64 {
             out_ty: &constraint_ty,
+            scratch: true,
         },
-        Flavour::Generic { scalar: &dual_ty },
+        Flavour::Generic,
     );
     let lagrangian: Evaluation = kernel::evaluate;
     let constraints: Evaluation = kernel::constraints;
@@ -437,6 +440,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         &var_names,
         Flavour::F64 {
             out_ty: &quote!([::tree_mech::runtime::Pose]),
+            scratch: false,
         },
     );
     let dc_dynamics = c_dynamics

@@ -20,12 +20,17 @@ pub struct Program {
 #[derive(Clone, Copy)]
 pub enum Flavour<'a> {
     /// `f64` throughout; outputs assigned to their targets (`out.mass[(0, 1)] = …`) in a
-    /// storage of type `out_ty`.
-    F64 { out_ty: &'a TokenStream },
+    /// storage of type `out_ty`, which keeps the scratch (`out.scratch`, a
+    /// `tree_runtime::outputs::Scratch`) if `scratch`, else the scratch is a local array.
+    F64 {
+        out_ty: &'a TokenStream,
+        scratch: bool,
+    },
     /// Helpers generic over `S: Scalar`, outputs handed to a `Sink<S>`
     /// (`out.add(Output::Mass(0, 1), …)`; the targets are `Output` expressions), called
-    /// from a body that instantiates `S` as `scalar`.
-    Generic { scalar: &'a TokenStream },
+    /// from a body whose outputs (`tree_runtime::dual::DualOutputs`) instantiate `S` and keep
+    /// the scratch.
+    Generic,
 }
 
 /// A constant as a token: `1.5f64`, `(-1.5f64)`.
@@ -176,7 +181,7 @@ impl Program {
     /// `flavour`'s number type; `variables` names the model's variables (the statements
     /// reading them are named after them).
     pub fn emit(&self, prefix: &str, variables: &[&str], flavour: Flavour) -> Emitted {
-        let generic = matches!(flavour, Flavour::Generic { .. });
+        let generic = matches!(flavour, Flavour::Generic);
         let dof = variables.len();
         let names = Names::of(&self.nodes, variables);
         let n = self.nodes.len();
@@ -243,13 +248,13 @@ impl Program {
             quote!(#[inline(never)])
         };
         let (ty, signature_of) = match flavour {
-            Flavour::F64 { out_ty } => (
+            Flavour::F64 { out_ty, .. } => (
                 quote!(f64),
                 Box::new(
                     move |name: &Ident| quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty)),
                 ) as Box<dyn Fn(&Ident) -> TokenStream>,
             ),
-            Flavour::Generic { .. } => (
+            Flavour::Generic => (
                 quote!(S),
                 Box::new(move |name: &Ident| {
                     quote!(fn #name<S: ::tree_mech::runtime::scalar::Scalar>(
@@ -291,17 +296,25 @@ impl Program {
                     #stmts
                 }
             });
-            body.extend(quote!(Self::#name(q, dq, &mut s, out);));
+            body.extend(quote!(Self::#name(q, dq, s, out);));
         }
-        let zero = match flavour {
-            Flavour::F64 { .. } => quote!(0.0f64),
-            Flavour::Generic { scalar } => {
-                quote!(<#scalar as ::tree_mech::runtime::scalar::Scalar>::zero())
-            }
-        };
-        let body = quote! {
-            let mut s = [#zero; #slots];
-            #body
+        // The values passed between functions: the outputs' scratch (allocated once, never
+        // cleared: each slot is written before it is read), or a local array.
+        let body = match flavour {
+            Flavour::F64 { scratch: false, .. } => quote! {
+                let s = &mut [0.0f64; #slots];
+                #body
+            },
+            _ if slots == 0 => quote! {
+                let s = &mut [];
+                #body
+            },
+            _ => quote! {
+                let mut scratch = ::core::mem::take(&mut out.scratch);
+                let s = scratch.array::<#slots>();
+                #body
+                out.scratch = scratch;
+            },
         };
         Emitted {
             functions,

@@ -4,7 +4,7 @@
 
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
-use crate::outputs::{Field, Index, Output, Sink};
+use crate::outputs::{Field, Index, Output, Scratch, Sink};
 use crate::scalar::Scalar;
 
 /// `v + d·ε`.
@@ -106,6 +106,9 @@ pub struct DualOutputs {
     n: usize,
     /// One buffer per [`Field`], in its declaration order.
     fields: Vec<Vec<Dual>>,
+    /// Generated code's storage between its functions (not part of the outputs).
+    #[doc(hidden)]
+    pub scratch: Scratch<Dual>,
 }
 
 /// Every field, in declaration order (so `field as usize` indexes it).
@@ -144,6 +147,7 @@ impl DualOutputs {
                 .iter()
                 .map(|&f| vec![Dual::default(); size(f)])
                 .collect(),
+            scratch: Scratch::default(),
         }
     }
 

@@ -135,3 +135,37 @@ impl Output {
         }
     }
 }
+
+/// Storage the code `tree_model!` generates keeps between evaluations: the values its
+/// functions pass to one another (a generated evaluation is cut into functions of a few
+/// hundred statements). It lives in the outputs an evaluation fills, so it is allocated once,
+/// on first use, and never cleared: every entry is written before it is read. It is not part
+/// of the outputs' value (equal whatever it holds).
+#[derive(Clone, Default)]
+pub struct Scratch<T>(Vec<T>);
+
+impl<T: Copy + Default> Scratch<T> {
+    /// The first `K` entries as an array, grown (once) to hold them.
+    #[inline]
+    pub fn array<const K: usize>(&mut self) -> &mut [T; K] {
+        if self.0.len() < K {
+            self.0.resize(K, T::default());
+        }
+        match self.0.first_chunk_mut() {
+            Some(array) => array,
+            None => unreachable!("the scratch was just grown to {K} entries"),
+        }
+    }
+}
+
+impl<T> PartialEq for Scratch<T> {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl<T> std::fmt::Debug for Scratch<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Scratch({} entries)", self.0.len())
+    }
+}

@@ -8,7 +8,7 @@ use tree_model::Motion;
 
 use crate::dual::{Dual, DualOutputs};
 pub use crate::order::Order;
-use crate::outputs::{Field, Index, Output, Sink};
+use crate::outputs::{Field, Index, Output, Scratch, Sink};
 use crate::se3::Pose;
 
 /// A vector over the system's configuration variables.
@@ -44,6 +44,9 @@ where
     /// Which entries of `dforce_dq`/`dforce_ddq` the last evaluation may have written; all
     /// others are zero (consumers and `clear` skip them).
     pub force_derivatives: Sparsity,
+    /// Generated code's storage between its functions (not part of the terms' value).
+    #[doc(hidden)]
+    pub scratch: Scratch<f64>,
 }
 
 /// Where a pair of matrices may be non-zero.
@@ -75,6 +78,7 @@ where
             dforce_dq: Matrix::zeros_generic(n, n),
             dforce_ddq: Matrix::zeros_generic(n, n),
             force_derivatives: Sparsity::Zero,
+            scratch: Scratch::default(),
         }
     }
 
@@ -185,6 +189,9 @@ pub struct ConstraintTerms {
     pub dh_dot: DVector<f64>,
     /// `D²h_r = ∂²h_r/∂q²` for each row (at `Order::Full`).
     pub d2h: Vec<DMatrix<f64>>,
+    /// Generated code's storage between its functions (not part of the terms' value).
+    #[doc(hidden)]
+    pub scratch: Scratch<f64>,
 }
 
 impl ConstraintTerms {
@@ -195,6 +202,7 @@ impl ConstraintTerms {
             dh: DMatrix::zeros(rows, n),
             dh_dot: DVector::zeros(rows),
             d2h: vec![DMatrix::zeros(n, n); rows],
+            scratch: Scratch::default(),
         }
     }
 
