@@ -672,10 +672,11 @@ where
         for &i in &self.split.kinematic {
             q_next[i] = cx.motion.kinematic(i, t + dt)[0];
         }
-        // With derivatives to follow, exact Newton with second-order checks: the check that
-        // converges leaves the terms the derivatives need at the solution.
+        // With derivatives to follow, every check is of second order: the check that
+        // converges leaves the terms the derivatives need at the solution (and a refactored
+        // Jacobian needs no evaluation of its own).
         let derivatives = self.settings.derivatives;
-        let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep && !derivatives;
+        let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep;
         let mut factored = false;
         let mut last_residual = f64::INFINITY;
         let mut iterations = 0;
@@ -719,10 +720,15 @@ where
             }
             // Relative residual and violation: both independent of the masses.
             let combined = relative + violation;
-            if !fresh && combined > 0.5 * last_residual {
+            // With second-order checks the Jacobian here is already evaluated: refactor it
+            // unless the chord, contracting as it did last iteration, converges next.
+            let chord_converges = combined * (combined / last_residual) <= self.settings.tolerance;
+            if !fresh && (combined > 0.5 * last_residual || (derivatives && !chord_converges)) {
                 // The reused Jacobian has stopped paying: evaluate it here.
-                self.residual(cx, q, p, q_next, true);
-                relative = self.relative_residual();
+                if !derivatives {
+                    self.residual(cx, q, p, q_next, true);
+                    relative = self.relative_residual();
+                }
                 refactor = true;
             }
             if refactor {

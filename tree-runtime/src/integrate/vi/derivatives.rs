@@ -31,7 +31,7 @@ use crate::context::StepContext;
 use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
-use crate::integrate::discrete::{DiscreteLagrangian, SecondSlot, Slots};
+use crate::integrate::discrete::{DiscreteLagrangian, Slots};
 use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
@@ -140,12 +140,15 @@ impl Shape {
 }
 
 /// What the step's Jacobians are built from, over a scalar: the continuous terms at the
-/// quadrature point (`L_qq`, `L_q̇q`, `M`, `F_q`, `F_q̇`, row-major n × n), `Dh(q₁)`,
-/// `Σ_s λ_s D²h_s(q₁)` (n × n, [`contract`]) and `Dh(q₂)`.
+/// quadrature point (`L_qq`, `L_q̇q` and its transpose, `M`, `F_q`, `F_q̇`, row-major n × n;
+/// `forces`: whether `F_q`, `F_q̇` may be non-zero), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (n × n,
+/// [`contract`]) and `Dh(q₂)`.
 struct StepTerms<'a, T> {
     lqq: &'a [T],
     lvq: &'a [T],
+    lvq_t: &'a [T],
     mass: &'a [T],
+    forces: bool,
     fq: &'a [T],
     fv: &'a [T],
     dh1: &'a [T],
@@ -179,39 +182,60 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
     let c = T::constant;
     // Every entry this writes is written on every call; the others stay zero from the
     // buffers' making (so nothing is cleared here).
-    let (by_q1_q, by_q1_v, by_q2_q, by_q2_v) = (c(1.0 - a), c(-1.0 / dt), c(a), c(1.0 / dt));
     let [d1d1, d2d1, d2d2] = [Slots::D1D1, Slots::D2D1, Slots::D2D2].map(|s| sh.ld.slot::<T>(s));
+    let (cdt, left, plus) = (c(dt), c(sh.left), c(sh.plus));
     for (r, &i) in sh.dynamic.iter().enumerate() {
-        let (row, prow) = (&mut jac[r * w..(r + 1) * w], &mut pjac[r * w..(r + 1) * w]);
-        for j in 0..n {
-            let (ij, ji) = (i * n + j, j * n + i);
-            let second = |slot: &SecondSlot<T>, ij: usize, ji: usize| {
-                slot.at(st.lqq[ij], st.lvq[ij], st.lvq[ji], st.mass[ij])
-            };
-            let f1 = by_q1_q * st.fq[ij] + by_q1_v * st.fv[ij];
-            let f2 = by_q2_q * st.fq[ij] + by_q2_v * st.fv[ij];
-            row[j] = second(&d1d1, ij, ji) + c(sh.left) * f1 + c(dt) * st.lambda_d2h1[ij];
-            row[sh.w_q2() + j] = second(&d2d1, ij, ji) + c(sh.left) * f2;
-            // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁.
-            prow[j] = second(&d2d1, ji, ij) + c(sh.plus) * f1;
-            prow[sh.w_q2() + j] = second(&d2d2, ij, ji) + c(sh.plus) * f2;
+        // Row i of each n × n term (the transpose's row is the term's column).
+        fn row<T>(x: &[T], i: usize, n: usize) -> &[T] {
+            &x[i * n..(i + 1) * n]
         }
-        row[sh.w_p1() + r] = c(1.0);
+        let at = |x| row(x, i, n);
+        let (lqq, lvq, lvq_t, mass, l_d2h) = (
+            at(st.lqq),
+            at(st.lvq),
+            at(st.lvq_t),
+            at(st.mass),
+            at(st.lambda_d2h1),
+        );
+        let (by_q1, rest) = jac[r * w..(r + 1) * w].split_at_mut(n);
+        let (by_q2, rest) = rest.split_at_mut(n);
+        rest[r] = c(1.0);
+        let (p_by_q1, p_rest) = pjac[r * w..(r + 1) * w].split_at_mut(n);
+        let p_by_q2 = &mut p_rest[..n];
+        for j in 0..n {
+            let (qq, vq, vq_t, mm) = (lqq[j], lvq[j], lvq_t[j], mass[j]);
+            by_q1[j] = d1d1.at(qq, vq, vq_t, mm) + cdt * l_d2h[j];
+            by_q2[j] = d2d1.at(qq, vq, vq_t, mm);
+            // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁ (L_qq and M symmetric).
+            p_by_q1[j] = d2d1.at(qq, vq_t, vq, mm);
+            p_by_q2[j] = d2d2.at(qq, vq, vq_t, mm);
+        }
+        if st.forces {
+            // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt.
+            let (fq, fv) = (at(st.fq), at(st.fv));
+            let (q1_q, v1, q2_q) = (c(1.0 - a), c(1.0 / dt), c(a));
+            for j in 0..n {
+                let f1 = q1_q * fq[j] - v1 * fv[j];
+                let f2 = q2_q * fq[j] + v1 * fv[j];
+                by_q1[j] += left * f1;
+                by_q2[j] += left * f2;
+                p_by_q1[j] += plus * f1;
+                p_by_q2[j] += plus * f2;
+            }
+        }
         for (k, &v) in sh.inputs.iter().enumerate() {
             if v == i {
-                row[sh.w_u1() + k] = c(sh.left);
-                prow[sh.w_u1() + k] = c(sh.plus);
+                jac[r * w + sh.w_u1() + k] = left;
+                pjac[r * w + sh.w_u1() + k] = plus;
             }
         }
         for s in 0..m {
-            row[sh.w_lambda() + s] = c(dt) * st.dh1[s * n + i];
+            jac[r * w + sh.w_lambda() + s] = cdt * st.dh1[s * n + i];
         }
     }
     for s in 0..m {
         let row = &mut jac[(sh.nd() + s) * w..(sh.nd() + s + 1) * w];
-        for j in 0..n {
-            row[sh.w_q2() + j] = st.dh2[s * n + j];
-        }
+        row[sh.w_q2()..sh.w_q2() + n].copy_from_slice(&st.dh2[s * n..(s + 1) * n]);
     }
 }
 
@@ -543,12 +567,11 @@ where
         lin.lqq.copy_from_slice(t.d2l_dq_dq.as_slice());
         lin.mass.copy_from_slice(t.mass.as_slice());
         row_major_into(t.d2l_ddq_dq.as_slice(), n, &mut lin.lvq);
+        lin.lvq_t.copy_from_slice(t.d2l_ddq_dq.as_slice());
         // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
+        lin.forces = t.force_derivatives != Sparsity::Zero;
         match t.force_derivatives {
-            Sparsity::Zero => {
-                lin.fq.fill(0.0);
-                lin.fv.fill(0.0);
-            }
+            Sparsity::Zero => {}
             Sparsity::Diagonal => {
                 lin.fq.fill(0.0);
                 lin.fv.fill(0.0);
@@ -590,7 +613,10 @@ pub(crate) struct Linearisation {
     /// The continuous terms at the quadrature point, row-major n × n.
     lqq: Vec<f64>,
     lvq: Vec<f64>,
+    lvq_t: Vec<f64>,
     mass: Vec<f64>,
+    /// Whether the model has forces with derivatives (`fq`, `fv` are read only then).
+    forces: bool,
     fq: Vec<f64>,
     fv: Vec<f64>,
     /// `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)`, `Dh(q₂)` row-major, and λ.
@@ -661,7 +687,9 @@ impl Linearisation {
         Linearisation {
             lqq: vec![0.0; n * n],
             lvq: vec![0.0; n * n],
+            lvq_t: vec![0.0; n * n],
             mass: vec![0.0; n * n],
+            forces: false,
             fq: vec![0.0; n * n],
             fv: vec![0.0; n * n],
             dh1: vec![0.0; m * n],
@@ -699,7 +727,9 @@ impl Linearisation {
         let terms = StepTerms {
             lqq: &self.lqq,
             lvq: &self.lvq,
+            lvq_t: &self.lvq_t,
             mass: &self.mass,
+            forces: self.forces,
             fq: &self.fq,
             fv: &self.fv,
             dh1: &self.dh1,
@@ -841,8 +871,16 @@ impl Linearisation {
             fit(q2, nd);
             fit(p2, nd);
             fit(lambda, m);
+            if b != U1 {
+                // Solved columns c0.. (after the inputs: less nu) as they are, transposed.
+                let s0 = if b == K2 { c0 - sh.nu() } else { c0 };
+                transpose_into(&self.rhs, k, s0, q2.as_mut_slice(), nd);
+                transpose_into(&self.dp2, k, s0, p2.as_mut_slice(), nd);
+                transpose_into(&self.rhs[nd * k..], k, s0, lambda.as_mut_slice(), m);
+                continue;
+            }
             for c in 0..wc {
-                // Column c of the block: a solved column as it is, or an input's.
+                // Column c of the input block: left times its variable's p₁ column.
                 let (s, scale, own) = match self.source(c0 + c) {
                     Some(Source::Solved(s)) => (s, 1.0, None),
                     Some(Source::Input(s, r)) => (s, sh.left, Some(r)),
@@ -901,6 +939,19 @@ impl StepDerivatives {
 }
 
 /// `out` = the n × n matrix stored column-major in `a`, stored row-major.
+/// `to` (column-major, `rows` rows) = the `rows × (to.len()/rows)` block of the row-major
+/// `from` (row stride `k`) starting at column `s0`.
+fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize) {
+    if rows == 0 {
+        return;
+    }
+    for (c, column) in to.chunks_exact_mut(rows).enumerate() {
+        for (r, o) in column.iter_mut().enumerate() {
+            *o = from[r * k + s0 + c];
+        }
+    }
+}
+
 fn row_major_into(a: &[f64], n: usize, out: &mut [f64]) {
     for (i, row) in out.chunks_exact_mut(n).enumerate() {
         for (j, o) in row.iter_mut().enumerate() {
@@ -934,6 +985,8 @@ struct DualJacobians {
     lambda: Vec<Dual>,
     /// `Σ_s λ_s D²h_s(q₁)` over duals.
     lambda_d2h1: Vec<Dual>,
+    /// `L_q̇q` transposed (row-major).
+    lvq_t: Vec<Dual>,
     /// `J`, `P` over duals (row-major): their `.d` are `D_j J`, `D_j P`.
     jac: Vec<Dual>,
     pjac: Vec<Dual>,
@@ -959,6 +1012,7 @@ impl DualJacobians {
             rest: zeros(n),
             lambda: zeros(m),
             lambda_d2h1: zeros(n * n),
+            lvq_t: zeros(n * n),
             jac: zeros(sh.rows() * sh.w()),
             pjac: zeros(sh.nd() * sh.w()),
             adjoint: vec![0.0; sh.w()],
@@ -997,10 +1051,18 @@ impl DualJacobians {
             &mut self.lambda_d2h1,
         );
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
+        let lvq = t.field(Field::D2lDdqDq);
+        for i in 0..n {
+            for j in 0..n {
+                self.lvq_t[i * n + j] = lvq[j * n + i];
+            }
+        }
         let terms = StepTerms {
             lqq: t.field(Field::D2lDqDq),
-            lvq: t.field(Field::D2lDdqDq),
+            lvq,
+            lvq_t: &self.lvq_t,
             mass: t.field(Field::Mass),
+            forces: lin.forces,
             fq: t.field(Field::DforceDq),
             fv: t.field(Field::DforceDdq),
             dh1: c1.field(Field::Dh),
