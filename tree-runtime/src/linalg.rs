@@ -250,7 +250,19 @@ pub fn mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: 
         b.nrows() == p && c.nrows() == m && c.ncols() == n,
         "mul_into: shapes"
     );
-    let (a, b, c) = (a.as_slice(), b.as_slice(), c.as_mut_slice());
+    mul_core(
+        c.as_mut_slice(),
+        a.as_slice(),
+        b.as_slice(),
+        (m, n, p),
+        beta,
+    );
+}
+
+/// [`mul_into`] on slices (`C` m × n, `A` m × p, `B` p × n), compiled also for AVX and chosen
+/// at run time by what the CPU has (`multiversion`; each entry's sum in the same order).
+#[multiversion::multiversion(targets("x86_64+avx"))]
+fn mul_core(c: &mut [f64], a: &[f64], b: &[f64], (m, n, p): (usize, usize, usize), beta: f64) {
     for j in 0..n {
         let cj = &mut c[j * m..(j + 1) * m];
         if beta == 0.0 {
@@ -308,26 +320,54 @@ pub fn tr_mul_into_symmetric(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix
 }
 
 /// `C = Aᵀ B + β C`, only the entries `i ≤ j + 3` of each block of four columns when `upper`.
+/// Entry `(i, j)` is column i of A against column j of B over the rows where A's column is
+/// not zero (its first to last non-zero entry): the step Jacobians' memory rows and columns
+/// are structural zeros, which cost nothing.
 fn tr_mul_core(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64, upper: bool) {
     let (m, n, p) = (a.ncols(), b.ncols(), a.nrows());
     assert!(
         b.nrows() == p && c.nrows() == m && c.ncols() == n,
         "tr_mul_into: shapes"
     );
-    let (a, b, c) = (a.as_slice(), b.as_slice(), c.as_mut_slice());
+    tr_mul_slices(
+        c.as_mut_slice(),
+        a.as_slice(),
+        b.as_slice(),
+        (m, n, p),
+        beta,
+        upper,
+    );
+}
+
+/// [`tr_mul_core`] on slices (`C` m × n, `A` p × m, `B` p × n), compiled also for AVX and
+/// chosen at run time (as [`mul_core`]).
+#[multiversion::multiversion(targets("x86_64+avx"))]
+fn tr_mul_slices(
+    c: &mut [f64],
+    a: &[f64],
+    b: &[f64],
+    (m, n, p): (usize, usize, usize),
+    beta: f64,
+    upper: bool,
+) {
     let store = |c: &mut [f64], at: usize, s: f64| {
         c[at] = if beta == 0.0 { s } else { s + beta * c[at] };
     };
-    // Four columns of B at a time: each column of A is read once for four entries of C, in
-    // sixteen independent partial sums (four per entry) that the compiler vectorises.
-    let mut j = 0;
-    while j + 4 <= n {
-        let bj: [&[f64]; 4] = std::array::from_fn(|l| &b[(j + l) * p..(j + l + 1) * p]);
-        let rows = if upper { m.min(j + 4) } else { m };
-        for i in 0..rows {
-            let ai = &a[i * p..(i + 1) * p];
+    let blocks = n / 4 * 4;
+    for i in 0..m {
+        let column = &a[i * p..(i + 1) * p];
+        let lo = column.iter().position(|&x| x != 0.0).unwrap_or(p);
+        let hi = column.iter().rposition(|&x| x != 0.0).map_or(lo, |r| r + 1);
+        let ai = &column[lo..hi];
+        // Four columns of B at a time: A's column is read once for four entries of C, in
+        // sixteen independent partial sums (four per entry) that the compiler vectorises.
+        for j in (0..blocks).step_by(4) {
+            if upper && i >= j + 4 {
+                continue;
+            }
+            let bj: [&[f64]; 4] = std::array::from_fn(|l| &b[(j + l) * p + lo..(j + l) * p + hi]);
             let mut acc = [[0.0f64; 4]; 4];
-            let chunks = p / 4 * 4;
+            let chunks = ai.len() / 4 * 4;
             for k in (0..chunks).step_by(4) {
                 for (col, sums) in bj.iter().zip(acc.iter_mut()) {
                     for l in 0..4 {
@@ -336,18 +376,16 @@ fn tr_mul_core(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f
                 }
             }
             for (l, (col, sums)) in bj.iter().zip(&acc).enumerate() {
-                let tail: f64 = (chunks..p).map(|k| ai[k] * col[k]).sum();
+                let tail: f64 = (chunks..ai.len()).map(|k| ai[k] * col[k]).sum();
                 let s = (sums[0] + sums[1]) + (sums[2] + sums[3]) + tail;
                 store(c, (j + l) * m + i, s);
             }
         }
-        j += 4;
-    }
-    for j in j..n {
-        let bj = &b[j * p..(j + 1) * p];
-        let rows = if upper { m.min(j + 1) } else { m };
-        for i in 0..rows {
-            store(c, j * m + i, dot(&a[i * p..(i + 1) * p], bj));
+        for j in blocks..n {
+            if upper && i > j {
+                continue;
+            }
+            store(c, j * m + i, dot(ai, &b[j * p + lo..j * p + hi]));
         }
     }
 }
@@ -419,5 +457,20 @@ mod tests {
         let mut c = c0.clone();
         tr_mul_into_symmetric(&mut c, &a, &wa, 1.0);
         assert!((&c - (a.transpose() * &wa + &c0)).amax() < 1e-13);
+        // Columns of A with leading and trailing zeros, and one all zero (the sums run over
+        // each column's non-zero span only).
+        let a = DMatrix::from_fn(11, 6, |i, j| match j {
+            0 => 0.0,
+            _ if i < j || i + j > 13 => 0.0,
+            _ => ((i * 6 + j) as f64 * 0.7).sin(),
+        });
+        let c0 = DMatrix::from_fn(6, 9, |i, j| (i * j) as f64);
+        let mut c = c0.clone();
+        tr_mul_into(&mut c, &a, &b, 1.0);
+        assert!((&c - (a.transpose() * &b + &c0)).amax() < 1e-13);
+        let wa = &w * &a;
+        let mut c = DMatrix::from_element(6, 6, f64::NAN);
+        tr_mul_into_symmetric(&mut c, &a, &wa, 0.0);
+        assert!((&c - a.transpose() * &wa).amax() < 1e-13);
     }
 }

@@ -422,7 +422,7 @@ struct Backward {
     hxx: DMatrix<f64>,
     huu: DMatrix<f64>,
     hux: DMatrix<f64>,
-    /// `V_xx A`, `V_xx B`, `Q_uu K`, `Q_uu k`, and `V_xx` before symmetrising.
+    /// `V_xx A`, `V_xx B`, `Y = ½Q_uuK + Q_ux`, `Q_uu k`, and `Z = KᵀY`.
     vxx_a: DMatrix<f64>,
     vxx_b: DMatrix<f64>,
     quu_gain: DMatrix<f64>,
@@ -531,15 +531,17 @@ where
         bw.vx.gemv_tr(1.0, gain, &bw.quu_k, 1.0);
         bw.vx.gemv_tr(1.0, gain, &bw.qu, 1.0);
         bw.vx.gemv_tr(1.0, &bw.qux, kk, 1.0);
+        // KᵀQ_uuK + KᵀQ_ux + Q_uxᵀK = Z + Zᵀ with Z = KᵀY, Y = ½Q_uuK + Q_ux: one product
+        // over the controls instead of three.
         mul_into(&mut bw.quu_gain, &bw.quu, gain, 0.0);
-        bw.v.copy_from(&bw.qxx);
-        tr_mul_into(&mut bw.v, gain, &bw.quu_gain, 1.0);
-        tr_mul_into(&mut bw.v, gain, &bw.qux, 1.0);
-        tr_mul_into(&mut bw.v, &bw.qux, gain, 1.0);
+        bw.quu_gain.scale_mut(0.5);
+        bw.quu_gain += &bw.qux;
+        tr_mul_into(&mut bw.v, gain, &bw.quu_gain, 0.0);
         let nx = bw.v.nrows();
         for i in 0..nx {
             for j in 0..nx {
-                bw.vxx[(i, j)] = 0.5 * (bw.v[(i, j)] + bw.v[(j, i)]);
+                bw.vxx[(i, j)] =
+                    0.5 * (bw.qxx[(i, j)] + bw.qxx[(j, i)]) + (bw.v[(i, j)] + bw.v[(j, i)]);
             }
         }
     }

@@ -22,9 +22,12 @@ use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric};
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]
 enum Term {
+    /// Only the entries of `(q, q̇)` with a non-zero weight (`entries`, indices into the
+    /// stacked `(q, q̇)`): the others add nothing to the cost or its derivatives.
     State {
         q_ref: DVector<f64>,
         dq_ref: DVector<f64>,
+        entries: Vec<usize>,
         weight: DVector<f64>,
     },
     Control {
@@ -111,14 +114,20 @@ impl TaskCost {
                     dq_ref,
                     q_weight,
                     dq_weight,
-                } => Term::State {
-                    q_ref: DVector::from_column_slice(q_ref),
-                    dq_ref: DVector::from_column_slice(dq_ref),
-                    weight: DVector::from_iterator(
-                        q_weight.len() + dq_weight.len(),
-                        q_weight.iter().chain(dq_weight).copied(),
-                    ),
-                },
+                } => {
+                    let stacked: Vec<f64> = q_weight.iter().chain(dq_weight).copied().collect();
+                    let entries: Vec<usize> =
+                        (0..stacked.len()).filter(|&i| stacked[i] != 0.0).collect();
+                    Term::State {
+                        q_ref: DVector::from_column_slice(q_ref),
+                        dq_ref: DVector::from_column_slice(dq_ref),
+                        weight: DVector::from_iterator(
+                            entries.len(),
+                            entries.iter().map(|&i| stacked[i]),
+                        ),
+                        entries,
+                    }
+                }
                 CostTerm::Control { weight, about } => Term::Control {
                     weight: DVector::from_column_slice(weight),
                     about: *about,
@@ -283,7 +292,7 @@ impl At<'_> {
     ) {
         let (nx, nu, n) = (knot.x.len(), self.controls.len(), knot.q.len());
         let rows = match term {
-            Term::State { .. } => 2 * n,
+            Term::State { entries, .. } => entries.len(),
             Term::Control { .. } | Term::ControlRate { .. } => nu,
             Term::Frame { .. } | Term::Orientation { .. } => 3,
         };
@@ -293,14 +302,22 @@ impl At<'_> {
             res.ju.fill(0.0);
         }
         match term {
-            Term::State { q_ref, dq_ref, .. } => {
-                for i in 0..n {
-                    res.r[i] = knot.q[i] - q_ref[i];
-                    res.r[n + i] = knot.dq[i] - dq_ref[i];
-                }
-                if jac {
-                    res.jx.rows_mut(0, n).copy_from(&knot.q_x);
-                    res.jx.rows_mut(n, n).copy_from(&knot.dq_x);
+            Term::State {
+                q_ref,
+                dq_ref,
+                entries,
+                ..
+            } => {
+                for (k, &e) in entries.iter().enumerate() {
+                    let (value, jacobian) = if e < n {
+                        (knot.q[e] - q_ref[e], &knot.q_x)
+                    } else {
+                        (knot.dq[e - n] - dq_ref[e - n], &knot.dq_x)
+                    };
+                    res.r[k] = value;
+                    if jac {
+                        res.jx.row_mut(k).copy_from(&jacobian.row(e % n));
+                    }
                 }
             }
             Term::Control { about, .. } => {
@@ -382,7 +399,7 @@ impl Cost for TaskCost {
         let n = self.model.variables.len();
         Needs {
             velocity: all().any(|t| match t {
-                Term::State { weight, .. } => weight.rows(n, n).iter().any(|w| *w != 0.0),
+                Term::State { entries, .. } => entries.iter().any(|&e| e >= n),
                 _ => false,
             }),
             gravity: all().any(|t| {
