@@ -540,19 +540,22 @@ where
                     return Err(singular());
                 }
                 if derivatives {
-                    // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇.
+                    // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇; dq/dx
+                    // and dq̇_k/dx select one column each (set above), so the products are
+                    // lookups.
                     self.sys.lagrangian(q, dq, Order::Dynamics, terms);
                     let m = &terms.mass;
                     for (r, &i) in l.dynamic.iter().enumerate() {
-                        for c in 0..nx {
-                            let mut s = if c == nd + r { 1.0 } else { 0.0 };
-                            for j in 0..n {
-                                s -= terms.d2l_ddq_dq[(i, j)] * out.q_x[(j, c)];
+                        let row = &mut rhs[r * nx..(r + 1) * nx];
+                        row.fill(0.0);
+                        row[nd + r] = 1.0;
+                        for (c, column) in l.x_column.iter().enumerate() {
+                            if let Some(StepColumn::Q1(j)) = *column {
+                                row[c] -= terms.d2l_ddq_dq[(i, j)];
+                                if l.kinematic.contains(&j) {
+                                    row[c + 1] -= m[(i, j)];
+                                }
                             }
-                            for &j in &l.kinematic {
-                                s -= m[(i, j)] * out.dq_x[(j, c)];
-                            }
-                            rhs[r * nx + c] = s;
                         }
                     }
                     lu_solve_packed_rows(mdd, nd, pivots, rhs, nx);
@@ -581,12 +584,11 @@ where
                     let i = self.sys.input_variable(kin);
                     out.gravity[c] = -terms.dl_dq[i];
                     if derivatives {
-                        for col in 0..nx {
-                            let mut s = 0.0;
-                            for j in 0..n {
-                                s -= terms.d2l_dq_dq[(i, j)] * out.q_x[(j, col)];
+                        // dq/dx selects one column per variable.
+                        for (col, column) in l.x_column.iter().enumerate() {
+                            if let Some(StepColumn::Q1(j)) = *column {
+                                out.gravity_x[(c, col)] = -terms.d2l_dq_dq[(i, j)];
                             }
-                            out.gravity_x[(c, col)] = s;
                         }
                     }
                 }
