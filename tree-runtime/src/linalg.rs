@@ -129,7 +129,9 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
 /// Solves `A X = B` for `k` right-hand sides at once with the factors from
 /// [`lu_factor_packed`]: `b` holds `B` row-major (`n × k`, row i at `i·k`) and becomes `X`.
 /// Each elimination updates a whole row of right-hand sides (one contiguous pass), where `k`
-/// calls of [`lu_solve_packed`] would walk the factor `k` times.
+/// calls of [`lu_solve_packed`] would walk the factor `k` times. Compiled also for AVX and
+/// chosen at run time (as [`mul_into`]'s kernel).
+#[multiversion::multiversion(targets("x86_64+avx"))]
 pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64], k: usize) {
     let b = &mut b[..n * k];
     for (j, &p) in pivots[..n].iter().enumerate() {
@@ -191,7 +193,8 @@ fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
 }
 
 /// LU with partial pivoting on column-major storage; `swapped(j, p)` is told that row p was
-/// swapped into row j.
+/// swapped into row j. Compiled also for AVX and chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx"))]
 fn lu_core_factor(
     a: &mut [f64],
     n: usize,
