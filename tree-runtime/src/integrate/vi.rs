@@ -134,7 +134,9 @@ pub struct ViSettings {
     pub max_subdivisions: usize,
     /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): Newton
     /// checks convergence with second-order evaluations, so the derivatives find the terms at
-    /// the solution already evaluated instead of evaluating them again.
+    /// the solution already evaluated instead of evaluating them again. With
+    /// [`JacobianUpdate::OncePerStep`] the chord refactors the Jacobian its check evaluated
+    /// whenever the chord, contracting as it last did, would not converge at the next check.
     pub derivatives: bool,
 }
 
