@@ -286,6 +286,15 @@ fn mul_core(c: &mut [f64], a: &[f64], b: &[f64], (m, n, p): (usize, usize, usize
     }
 }
 
+/// `(s₀ + s₁) + (s₂ + s₃)`: four lanes' partial sums added. Kept out of line so that the
+/// compiler vectorises the sums' lanes (one vector per column of [`tr_mul_slices`]'s block)
+/// rather than across columns for the sake of this last addition, which costs shuffles in
+/// every iteration.
+#[inline(never)]
+fn lanes_sum(s: &[f64; 4]) -> f64 {
+    (s[0] + s[1]) + (s[2] + s[3])
+}
+
 /// `x · y` in four independent partial sums (the compiler vectorises them; one running sum
 /// would wait on each addition).
 fn dot(x: &[f64], y: &[f64]) -> f64 {
@@ -369,18 +378,27 @@ fn tr_mul_slices(
                 continue;
             }
             let bj: [&[f64]; 4] = std::array::from_fn(|l| &b[(j + l) * p + lo..(j + l) * p + hi]);
-            let mut acc = [[0.0f64; 4]; 4];
-            let chunks = ai.len() / 4 * 4;
-            for k in (0..chunks).step_by(4) {
-                for (col, sums) in bj.iter().zip(acc.iter_mut()) {
+            let quads = ai.len() / 4;
+            let (a4, a_tail) = ai.split_at(4 * quads);
+            let [b0, b1, b2, b3] = bj.map(|col| col.split_at(4 * quads));
+            fn quad(s: &[f64]) -> std::slice::ChunksExact<'_, f64> {
+                s.chunks_exact(4)
+            }
+            let columns = quad(b0.0).zip(quad(b1.0)).zip(quad(b2.0)).zip(quad(b3.0));
+            let [mut s0, mut s1, mut s2, mut s3] = [[0.0f64; 4]; 4];
+            for (x, (((y0, y1), y2), y3)) in quad(a4).zip(columns) {
+                // Lane l of column c's partial sums takes the k ≡ l (mod 4) terms: each
+                // column's four lanes are one vector.
+                for (sums, y) in [(&mut s0, y0), (&mut s1, y1), (&mut s2, y2), (&mut s3, y3)] {
                     for l in 0..4 {
-                        sums[l] += ai[k + l] * col[k + l];
+                        sums[l] += x[l] * y[l];
                     }
                 }
             }
-            for (l, (col, sums)) in bj.iter().zip(&acc).enumerate() {
-                let tail: f64 = (chunks..ai.len()).map(|k| ai[k] * col[k]).sum();
-                let s = (sums[0] + sums[1]) + (sums[2] + sums[3]) + tail;
+            let acc = [s0, s1, s2, s3];
+            for (l, (tail, sums)) in [b0.1, b1.1, b2.1, b3.1].iter().zip(&acc).enumerate() {
+                let tail: f64 = a_tail.iter().zip(tail.iter()).map(|(x, y)| x * y).sum();
+                let s = lanes_sum(sums) + tail;
                 store(c, (j + l) * m + i, s);
             }
         }
