@@ -5,7 +5,7 @@
 
 mod common;
 
-use nalgebra::{DMatrix, Dyn};
+use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dyn};
 use tree_mech::integrate::{
     project_initial_state, Forcing, MidpointVi, StepContext, StepCovector, StepDerivatives,
     StepInput, StepOutput, StepSecondDerivatives, ViSettings,
@@ -68,11 +68,15 @@ fn step(
 
 /// The model's start on its constraints and moving (its kinematic variables at their
 /// prescription, 0.3 of its initial velocity, projected), its momentum, and an input value
-/// per input: `(q₁, p₁, u)`.
-fn moving_start(
-    sys: &mut TreeSystem,
+/// per input: `(q₁, q̇₁, p₁, u)`.
+#[allow(clippy::type_complexity)] // the start's four parts, named at each use
+fn moving_start<S: System>(
+    sys: &mut S,
     settings: ViSettings,
-) -> (Vector<Dyn>, Vector<Dyn>, Vec<f64>) {
+) -> (Vector<S::N>, Vector<S::N>, Vector<S::N>, Vec<f64>)
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let (mut q1, dq1) = sys.initial_state();
     let mut motion = ModelMotions::of(sys);
     for k in (0..sys.dof()).filter(|&i| sys.is_kinematic(i)) {
@@ -84,7 +88,7 @@ fn moving_start(
     let mut vi = MidpointVi::new(sys, settings);
     let p1 = vi.initial_momentum(sys, &q1, &dq1);
     let u = (0..sys.input_count()).map(|k| 0.5 + k as f64).collect();
-    (q1, p1, u)
+    (q1, dq1, p1, u)
 }
 
 fn check(model: &Model, settings: ViSettings, what: &str) {
@@ -92,7 +96,7 @@ fn check(model: &Model, settings: ViSettings, what: &str) {
     let n = sys.dof();
     let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
     let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-    let (q1, p1, u) = moving_start(&mut sys, settings);
+    let (q1, _, p1, u) = moving_start(&mut sys, settings);
     let nk = kinematic.len();
     let (base, mut vi) = step(&mut sys, settings, &q1, &p1, &u, &vec![0.0; nk], &[]);
     let lambda0 = base.lambda.clone();
@@ -425,18 +429,10 @@ fn compiled_and_interpreted_second_derivatives_agree() {
         macro_rules! go {
             ($sys:expr) => {{
                 let sys = $sys;
-                let n = sys.dof();
-                let (mut q1, dq1) = sys.initial_state();
+                let (q1, dq1, p1, _) = moving_start(sys, settings);
                 let mut motion = ModelMotions::of(sys);
-                let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-                for &k in &kinematic {
-                    q1[k] = motion.kinematic(k, 0.0)[0];
-                }
-                let mut dq1 = dq1 * 0.3;
-                let split = tree_mech::runtime::dynamics::Split::of(sys);
-                project_initial_state(sys, &split, &mut q1, &mut dq1).unwrap();
                 let mut vi = MidpointVi::new(sys, settings);
-                let p1 = vi.initial_momentum(sys, &q1, &dq1);
+                vi.predict_from(&dq1);
                 let (mut q, mut p, mut next) = (q1.clone(), p1.clone(), q1.clone());
                 let mut force = NoForce;
                 let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.05);
@@ -481,7 +477,7 @@ fn derivatives_reuse_the_steps_last_evaluation() {
             continue;
         }
         let mut sys = TreeSystem::new(&model).unwrap();
-        let (q1, p1, u) = moving_start(&mut sys, settings);
+        let (q1, _, p1, u) = moving_start(&mut sys, settings);
         let nk = (0..sys.dof()).filter(|&i| sys.is_kinematic(i)).count();
         let first = |sys: &mut TreeSystem, derivatives: bool| {
             let settings = ViSettings {
