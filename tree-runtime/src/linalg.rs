@@ -365,41 +365,40 @@ fn tr_mul_slices(
     let store = |c: &mut [f64], at: usize, s: f64| {
         c[at] = if beta == 0.0 { s } else { s + beta * c[at] };
     };
+    fn quads(s: &[f64]) -> std::slice::ChunksExact<'_, f64> {
+        s.chunks_exact(4)
+    }
     let blocks = n / 4 * 4;
     for i in 0..m {
         let column = &a[i * p..(i + 1) * p];
         let lo = column.iter().position(|&x| x != 0.0).unwrap_or(p);
         let hi = column.iter().rposition(|&x| x != 0.0).map_or(lo, |r| r + 1);
         let ai = &column[lo..hi];
+        let (a4, a_tail) = ai.split_at(ai.len() / 4 * 4);
         // Four columns of B at a time: A's column is read once for four entries of C, in
-        // sixteen independent partial sums (four per entry) that the compiler vectorises.
+        // sixteen independent partial sums (lane l of a column's sums takes the terms
+        // k ≡ l mod 4: one vector per column) that the compiler vectorises.
         for j in (0..blocks).step_by(4) {
             if upper && i >= j + 4 {
                 continue;
             }
-            let bj: [&[f64]; 4] = std::array::from_fn(|l| &b[(j + l) * p + lo..(j + l) * p + hi]);
-            let quads = ai.len() / 4;
-            let (a4, a_tail) = ai.split_at(4 * quads);
-            let [b0, b1, b2, b3] = bj.map(|col| col.split_at(4 * quads));
-            fn quad(s: &[f64]) -> std::slice::ChunksExact<'_, f64> {
-                s.chunks_exact(4)
-            }
-            let columns = quad(b0.0).zip(quad(b1.0)).zip(quad(b2.0)).zip(quad(b3.0));
-            let [mut s0, mut s1, mut s2, mut s3] = [[0.0f64; 4]; 4];
-            for (x, (((y0, y1), y2), y3)) in quad(a4).zip(columns) {
-                // Lane l of column c's partial sums takes the k ≡ l (mod 4) terms: each
-                // column's four lanes are one vector.
-                for (sums, y) in [(&mut s0, y0), (&mut s1, y1), (&mut s2, y2), (&mut s3, y3)] {
+            let [b0, b1, b2, b3] =
+                std::array::from_fn(|l| b[(j + l) * p + lo..(j + l) * p + hi].split_at(a4.len()));
+            let columns = quads(b0.0)
+                .zip(quads(b1.0))
+                .zip(quads(b2.0))
+                .zip(quads(b3.0));
+            let mut acc = [[0.0f64; 4]; 4];
+            for (x, (((y0, y1), y2), y3)) in quads(a4).zip(columns) {
+                for (sums, y) in acc.iter_mut().zip([y0, y1, y2, y3]) {
                     for l in 0..4 {
                         sums[l] += x[l] * y[l];
                     }
                 }
             }
-            let acc = [s0, s1, s2, s3];
-            for (l, (tail, sums)) in [b0.1, b1.1, b2.1, b3.1].iter().zip(&acc).enumerate() {
-                let tail: f64 = a_tail.iter().zip(tail.iter()).map(|(x, y)| x * y).sum();
-                let s = lanes_sum(sums) + tail;
-                store(c, (j + l) * m + i, s);
+            for (l, (sums, (_, tail))) in acc.iter().zip([b0, b1, b2, b3]).enumerate() {
+                let tail: f64 = a_tail.iter().zip(tail).map(|(x, y)| x * y).sum();
+                store(c, (j + l) * m + i, lanes_sum(sums) + tail);
             }
         }
         for j in blocks..n {

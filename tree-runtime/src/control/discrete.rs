@@ -545,16 +545,20 @@ where
                     // lookups.
                     self.sys.lagrangian(q, dq, Order::Dynamics, terms);
                     let m = &terms.mass;
-                    for (r, &i) in l.dynamic.iter().enumerate() {
-                        let row = &mut rhs[r * nx..(r + 1) * nx];
-                        row.fill(0.0);
-                        row[nd + r] = 1.0;
-                        for (c, column) in l.x_column.iter().enumerate() {
-                            if let Some(StepColumn::Q1(j)) = *column {
-                                row[c] -= terms.d2l_ddq_dq[(i, j)];
-                                if l.kinematic.contains(&j) {
-                                    row[c + 1] -= m[(i, j)];
-                                }
+                    let rhs = &mut rhs[..nd * nx];
+                    rhs.fill(0.0);
+                    for r in 0..nd {
+                        rhs[r * nx + nd + r] = 1.0;
+                    }
+                    for (c, column) in l.x_column.iter().enumerate() {
+                        let Some(StepColumn::Q1(j)) = *column else {
+                            continue;
+                        };
+                        let kinematic = l.kinematic.contains(&j);
+                        for (r, &i) in l.dynamic.iter().enumerate() {
+                            rhs[r * nx + c] -= terms.d2l_ddq_dq[(i, j)];
+                            if kinematic {
+                                rhs[r * nx + c + 1] -= m[(i, j)];
                             }
                         }
                     }

@@ -726,7 +726,8 @@ where
             // unless the chord, contracting as it did last iteration, converges next.
             let chord_converges = combined * (combined / last_residual) <= self.settings.tolerance;
             if !fresh && (combined > 0.5 * last_residual || (derivatives && !chord_converges)) {
-                // The reused Jacobian has stopped paying: evaluate it here.
+                // The reused Jacobian has stopped paying: evaluate it here (a second-order
+                // check already has).
                 if !derivatives {
                     self.residual(cx, q, p, q_next, true);
                     relative = self.relative_residual();

@@ -184,11 +184,11 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
     // buffers' making (so nothing is cleared here).
     let [d1d1, d2d1, d2d2] = [Slots::D1D1, Slots::D2D1, Slots::D2D2].map(|s| sh.ld.slot::<T>(s));
     let (cdt, left, plus) = (c(dt), c(sh.left), c(sh.plus));
+    // Row i of an n × n term (the transpose's row is the term's column).
+    fn row<T>(x: &[T], i: usize, n: usize) -> &[T] {
+        &x[i * n..(i + 1) * n]
+    }
     for (r, &i) in sh.dynamic.iter().enumerate() {
-        // Row i of each n × n term (the transpose's row is the term's column).
-        fn row<T>(x: &[T], i: usize, n: usize) -> &[T] {
-            &x[i * n..(i + 1) * n]
-        }
         let at = |x| row(x, i, n);
         let (lqq, lvq, lvq_t, mass, l_d2h) = (
             at(st.lqq),
@@ -880,28 +880,23 @@ impl Linearisation {
                 continue;
             }
             for c in 0..wc {
-                // Column c of the input block: left times its variable's p₁ column.
-                let (s, scale, own) = match self.source(c0 + c) {
-                    Some(Source::Solved(s)) => (s, 1.0, None),
-                    Some(Source::Input(s, r)) => (s, sh.left, Some(r)),
-                    None => {
-                        q2.column_mut(c).fill(0.0);
-                        p2.column_mut(c).fill(0.0);
-                        lambda.column_mut(c).fill(0.0);
-                        continue;
-                    }
+                // Column c of the input block: left times its variable's p₁ column (plus
+                // `plus` on p₂'s own row), zero for an input on no dynamic variable.
+                let Some(Source::Input(s, own)) = self.source(c0 + c) else {
+                    q2.column_mut(c).fill(0.0);
+                    p2.column_mut(c).fill(0.0);
+                    lambda.column_mut(c).fill(0.0);
+                    continue;
                 };
                 let strided = |from: &[f64], rows: usize, to: &mut [f64]| {
                     for (r, o) in to.iter_mut().enumerate().take(rows) {
-                        *o = scale * from[r * k + s];
+                        *o = sh.left * from[r * k + s];
                     }
                 };
                 strided(&self.rhs, nd, q2.column_mut(c).as_mut_slice());
                 strided(&self.dp2, nd, p2.column_mut(c).as_mut_slice());
                 strided(&self.rhs[nd * k..], m, lambda.column_mut(c).as_mut_slice());
-                if let Some(r) = own {
-                    p2[(r, c)] += sh.plus;
-                }
+                p2[(own, c)] += sh.plus;
             }
         }
     }
@@ -938,7 +933,6 @@ impl StepDerivatives {
     }
 }
 
-/// `out` = the n × n matrix stored column-major in `a`, stored row-major.
 /// `to` (column-major, `rows` rows) = the `rows × (to.len()/rows)` block of the row-major
 /// `from` (row stride `k`) starting at column `s0`.
 fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize) {
@@ -952,7 +946,8 @@ fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize
     }
 }
 
-fn row_major_into(a: &[f64], n: usize, out: &mut [f64]) {
+/// `out` = the n × n matrix stored column-major in `a`, stored row-major (its transpose).
+fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
     for (i, row) in out.chunks_exact_mut(n).enumerate() {
         for (j, o) in row.iter_mut().enumerate() {
             *o = a[j * n + i];
@@ -1052,11 +1047,7 @@ impl DualJacobians {
         );
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
         let lvq = t.field(Field::D2lDdqDq);
-        for i in 0..n {
-            for j in 0..n {
-                self.lvq_t[i * n + j] = lvq[j * n + i];
-            }
-        }
+        row_major_into(lvq, n, &mut self.lvq_t);
         let terms = StepTerms {
             lqq: t.field(Field::D2lDqDq),
             lvq,
