@@ -415,3 +415,78 @@ fn mismatched_problems_are_refused_with_a_sentence() {
     let e = err(&good, &x0, u, &loose);
     assert!(e.contains("must be finite and non-negative"), "{e}");
 }
+
+/// A knot's velocity and gravity compensation by the state (`dq_x`, `gravity_x`) against
+/// central differences of the knot itself, on a pole whose cart is a kinematic control: the
+/// VI's velocity `q̇_d = M_dd⁻¹(p_d − M_dk q̇_k)` depends on the cart's velocity (the
+/// controls' memory) through `M_dk`, and the pole's input compensates gravity.
+#[test]
+fn knot_derivatives_match_finite_differences() {
+    use tree_mech::control::{Knot, Needs};
+    let text = r#"
+name = "kinematic-cart"
+[[frame]]
+name = "cart"
+tx = "x"
+mass = 1.0
+[[frame]]
+name = "pivot"
+parent = "cart"
+ry = "theta"
+[[frame]]
+name = "pole"
+parent = "pivot"
+tz = 0.5
+mass = 0.3
+inertia = [0.006, 0.006, 0.0005]
+[variables.x]
+kinematic = true
+[variables.theta]
+q0 = 0.7
+[[input]]
+name = "hold"
+variable = "theta"
+"#;
+    let m = model::from_toml_str(text, None).unwrap();
+    let cart = m.variable_index("x").unwrap();
+    let controls = vec![Control::Input(0), Control::Kinematic(cart)];
+    let sys = TreeSystem::new(&m).unwrap();
+    let mut d = DiscreteSystem::vi(sys, ViSettings::default(), 0.01, 0.0, controls).unwrap();
+    let (q0, mut dq0) = d.sys.initial_state();
+    dq0[cart] = 0.8;
+    dq0[m.variable_index("theta").unwrap()] = -0.4;
+    let x = d.state_of(&q0, &dq0, &[0.3, 0.1]);
+    let needs = Needs {
+        velocity: true,
+        gravity: true,
+    };
+    let mut knot = Knot::empty();
+    d.knot(1, x.as_slice(), &mut knot, true, needs).unwrap();
+    let (dq_x, gravity_x) = (knot.dq_x.clone(), knot.gravity_x.clone());
+    assert!(
+        dq_x.amax() > 0.1 && gravity_x.amax() > 0.1,
+        "the derivatives are not trivial: {dq_x} {gravity_x}"
+    );
+    let h = 1e-6;
+    for c in 0..x.len() {
+        let mut at = |s: f64| {
+            let mut y = x.clone();
+            y[c] += s * h;
+            d.knot(1, y.as_slice(), &mut knot, false, needs).unwrap();
+            (knot.dq.clone(), knot.gravity.clone())
+        };
+        let ((dq_p, g_p), (dq_m, g_m)) = (at(1.0), at(-1.0));
+        let fd_dq = (dq_p - dq_m) / (2.0 * h);
+        let fd_g = (g_p - g_m) / (2.0 * h);
+        assert!(
+            (&fd_dq - dq_x.column(c)).amax() < 1e-6 * dq_x.amax(),
+            "∂q̇/∂x column {c}: {fd_dq} against {}",
+            dq_x.column(c)
+        );
+        assert!(
+            (&fd_g - gravity_x.column(c)).amax() < 1e-6 * gravity_x.amax(),
+            "∂g/∂x column {c}: {fd_g} against {}",
+            gravity_x.column(c)
+        );
+    }
+}
