@@ -206,6 +206,51 @@ fn ilqr_and_ddp_lower_the_cost_every_iteration_within_the_limits() {
     }
 }
 
+/// The iLQR optimum of the limited cart problem is a KKT point of the true cost: at every knot
+/// the exact gradient `∂J/∂u_k` (the adjoint recursion) vanishes on a free control and points
+/// out of the box on a control at a bound. The solve starts with the limits only clamped in
+/// the forward pass and ends with the box QP; without that last phase the gradient at the
+/// clamped knots is what stops it.
+#[test]
+fn the_limited_optimum_is_a_kkt_point_of_the_true_cost() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/cart.toml");
+    let m = model::from_toml_file(path).unwrap();
+    let sol = cart_problem(TreeSystem::new(&m).unwrap(), Solver::Ilqr);
+    let mut dynamics = DiscreteSystem::new(
+        TreeSystem::new(&m).unwrap(),
+        ViSettings::default(),
+        0.02,
+        0.0,
+    )
+    .unwrap();
+    let mut cost = common::cart_to_half_metre(0.02);
+    let u0 = vec![DVector::zeros(1); sol.u.len()];
+    let (_, start) = cost_gradient(&mut dynamics, &mut cost, &sol.x[0], &u0).unwrap();
+    let scale = start.iter().fold(0.0f64, |s, g| s.max(g.amax()));
+    let (_, gradient) = cost_gradient(&mut dynamics, &mut cost, &sol.x[0], &sol.u).unwrap();
+    let (mut free, mut bound) = (0, 0);
+    for (k, (u, g)) in sol.u.iter().zip(&gradient).enumerate() {
+        let (u, g) = (u[0], g[0] / scale);
+        if u >= 2.0 - 1e-9 {
+            bound += 1;
+            assert!(
+                g < 1e-4,
+                "knot {k}: at the upper bound, the gradient {g} points inside"
+            );
+        } else if u <= -2.0 + 1e-9 {
+            bound += 1;
+            assert!(
+                g > -1e-4,
+                "knot {k}: at the lower bound, the gradient {g} points inside"
+            );
+        } else {
+            free += 1;
+            assert!(g.abs() < 1e-4, "knot {k}: a free control's gradient is {g}");
+        }
+    }
+    assert!(free > 0 && bound > 0, "{free} free and {bound} bound knots");
+}
+
 #[test]
 fn compiled_and_interpreted_iterates_agree() {
     let a = cart_problem(Cart, Solver::Ilqr);

@@ -2,10 +2,10 @@
 //! rollout; a backward pass `Q_x = ℓ_x + AᵀV_x`, `Q_u = ℓ_u + BᵀV_x`,
 //! `Q_xx = ℓ_xx + AᵀV_xxA`, `Q_uu = ℓ_uu + BᵀV_xxB + μI`, `Q_ux = ℓ_ux + BᵀV_xxA` (DDP adds
 //! the step's second derivatives contracted with `V_x`); the control QP solved by projected
-//! Newton within the limits (box-DDP: clamped controls get no feedback); a forward pass with
-//! a backtracking line search on the true cost; Levenberg–Marquardt `μ` raised when `Q_uu` is
-//! not positive definite, no step length lowers the cost or the accepted one is under ¼,
-//! lowered after a longer accepted step.
+//! Newton within the limits (box-DDP: clamped controls get no feedback) once the solve is
+//! near its optimum, and without them, clamped in the forward pass, until then (`BoxPhase`); a forward pass with a backtracking line search on the true cost;
+//! Levenberg–Marquardt `μ` raised when `Q_uu` is not positive definite, no step length lowers
+//! the cost or the accepted one is under ¼, lowered after a longer accepted step.
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
@@ -54,6 +54,23 @@ impl Default for IlqrSettings {
             mu: 1e-6,
         }
     }
+}
+
+/// How the backward pass treats the controls' box limits (docs/derivations.md §10, "Limits
+/// in two phases"). The box QP's policy — clamped controls get no feedback — is right near
+/// the plan it was computed on; a long step moves the states away from where the clamps were
+/// decided, and controls held at a bound then no longer react to the state (the UR5 reach's
+/// first full box step: a cost 65× the start's). So a solve starts `Clamped` (the
+/// unconstrained `k`, `K`, the controls clamped in the forward pass, where the clamps are
+/// decided at the states actually reached) and goes `Boxed` for good once a step is shorter
+/// than ½ or none is accepted: from there the box QP gives the constrained Newton step, and
+/// `max |k|` vanishes at a constrained optimum.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum BoxPhase {
+    /// Unconstrained gains; limits only by clamping in the forward pass.
+    Clamped,
+    /// The box QP's gains.
+    Boxed,
 }
 
 /// One iteration's record.
@@ -182,8 +199,17 @@ where
         history.push(it);
     };
     let mut converged = false;
+    let mut phase = BoxPhase::Clamped;
     for _ in 0..settings.max_iterations {
-        let Some(gradient) = backward(dynamics, cost, &x, &u, &mut work, mu, settings)? else {
+        let pass = Pass {
+            solver: settings.solver,
+            mu,
+            limits: match phase {
+                BoxPhase::Clamped => None,
+                BoxPhase::Boxed => settings.limits.as_ref(),
+            },
+        };
+        let Some(gradient) = backward(dynamics, cost, &x, &u, &mut work, &pass)? else {
             // Some Q_uu + μI is not positive definite: regularise more.
             mu = (mu * 10.0).max(1e-6);
             if mu > 1e10 {
@@ -217,6 +243,9 @@ where
                 }
             }
             alpha *= 0.5;
+        }
+        if accepted < 0.5 {
+            phase = BoxPhase::Boxed;
         }
         if accepted == 0.0 {
             mu = (mu * 10.0).max(1e-6);
@@ -457,16 +486,24 @@ impl Backward {
     }
 }
 
-/// The backward pass: fills the gains and feed-forward terms; returns `max |k|`, or `None`
-/// when some `Q_uu + μI` is not positive definite (docs/derivations.md §10).
+/// One backward pass's choices: the solver, the regularisation and the limits its control QP
+/// keeps (none in the clamped phase).
+struct Pass<'a> {
+    solver: Solver,
+    mu: f64,
+    limits: Option<&'a Limits>,
+}
+
+/// The backward pass: fills the gains and feed-forward terms, within the pass's limits;
+/// returns `max |k|`, or `None` when some `Q_uu + μI` is not positive definite
+/// (docs/derivations.md §10).
 fn backward<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
     x: &[DVector<f64>],
     u: &[DVector<f64>],
     work: &mut Work,
-    mu: f64,
-    settings: &IlqrSettings,
+    pass: &Pass,
 ) -> Result<Option<f64>, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -496,7 +533,7 @@ where
         tr_mul_into_symmetric(&mut bw.quu, b, &bw.vxx_b, 1.0);
         bw.qux.copy_from(&bw.d.lux);
         tr_mul_into(&mut bw.qux, b, &bw.vxx_a, 1.0);
-        if settings.solver == Solver::Ddp {
+        if pass.solver == Solver::Ddp {
             dynamics.contracted(
                 k,
                 x[k].as_slice(),
@@ -514,13 +551,12 @@ where
         // The regularised Q_uu + μI, in huu (free after the DDP terms are added).
         bw.huu.copy_from(&bw.quu);
         for c in 0..bw.huu.nrows() {
-            bw.huu[(c, c)] += mu;
+            bw.huu[(c, c)] += pass.mu;
         }
         let (kk, gain) = (&mut work.k[k], &mut work.gain[k]);
-        let limits = settings.limits.as_ref();
         if !bw
             .qp
-            .solve(&bw.huu, &bw.qu, &bw.qux, &u[k], limits, kk, gain)
+            .solve(&bw.huu, &bw.qu, &bw.qux, &u[k], pass.limits, kk, gain)
         {
             return Ok(None);
         }
