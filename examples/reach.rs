@@ -15,20 +15,32 @@ tree_model!(pub struct Ur5 from "models/ur5.urdf");
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (task, model) =
         model::read_task(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))?;
-    let res = solve_task(
+    // Five solves from the same guess, the best time kept (tools/reference/crocoddyl_reach.py
+    // times Crocoddyl the same way).
+    let mut res = solve_task(
         Ur5::new(),
         &task,
         &model,
         &TaskOptions::default(),
         &mut |_| {},
     )?;
+    for _ in 1..5 {
+        let again = solve_task(
+            Ur5::new(),
+            &task,
+            &model,
+            &TaskOptions::default(),
+            &mut |_| {},
+        )?;
+        res.solve_seconds = res.solve_seconds.min(again.solve_seconds);
+    }
     let sol = &res.solution;
     let tool = model.frame_index("ee_link").ok_or("no ee_link")?;
     let end = model.origins(res.q[task.knots].as_slice())[tool];
     println!(
-        "planned in {} iterations ({:.3} s, compiled): cost {:.4e}, tool ends at ({:.4}, {:.4}, {:.4}) m",
+        "planned in {} iterations ({:.1} ms, best of 5 solves, compiled): cost {:.4e}, tool ends at ({:.4}, {:.4}, {:.4}) m",
         sol.history.len(),
-        res.solve_seconds,
+        res.solve_seconds * 1e3,
         sol.cost,
         end[0],
         end[1],
