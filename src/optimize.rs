@@ -274,7 +274,7 @@ fn write_outputs(
     }
     if let Some(file) = &files.gains {
         let gains = json!({
-            "note": "u = u_plan[k] + K[k] (x − x_plan[k]) near the plan; x = (q_d, p_d or q̇_d, the controls' memory)",
+            "note": "u = u_plan[k] + K[k] (x − x_plan[k]) near the plan; x = (q_d, p_d or q̇_d, the controls' memory: inputs' previous values only with a control_rate term, kinematic controls' value and velocity)",
             "controls": controls,
             "u_plan": sol.u.iter().map(|u| u.as_slice().to_vec()).collect::<Vec<_>>(),
             "x_plan": sol.x.iter().map(|x| x.as_slice().to_vec()).collect::<Vec<_>>(),

@@ -504,6 +504,7 @@ variable = "theta"
     let needs = Needs {
         velocity: true,
         gravity: true,
+        ..Needs::default()
     };
     let mut knot = Knot::empty();
     d.knot(1, x.as_slice(), &mut knot, true, needs).unwrap();

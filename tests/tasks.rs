@@ -18,8 +18,14 @@ tree_model!(struct CartPole from "models/cartpole.toml");
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
-/// A task on tests/models/trep-vi.toml using every kind of term.
-fn every_term(controls: &str, integrator: &str) -> String {
+/// A task on tests/models/trep-vi.toml using every kind of term (`control_rate` only with
+/// `rate`).
+fn every_term(controls: &str, integrator: &str, rate: bool) -> String {
+    let rate = if rate {
+        "[[cost]]\nkind = \"control_rate\"\nweight = 0.001"
+    } else {
+        ""
+    };
     format!(
         r#"
 model = "trep-vi.toml"
@@ -39,9 +45,7 @@ kind = "control"
 weight = 0.05
 about = "gravity"
 
-[[cost]]
-kind = "control_rate"
-weight = 0.001
+{rate}
 
 [[cost]]
 kind = "frame"
@@ -74,9 +78,13 @@ dq_weight = 5.0
     )
 }
 
-fn gradient_matches(controls: &str, integrator: &str) {
+/// The adjoint gradient of the total cost against central differences; without `rate`, the
+/// state leaves the inputs' memory out (a kinematic control's memory then sits right after
+/// the momenta).
+fn gradient_matches(controls: &str, integrator: &str, rate: bool) {
     let base = Path::new(ROOT).join("tests/models");
-    let (task, model) = task_from_str(&every_term(controls, integrator), None, &base).unwrap();
+    let text = every_term(controls, integrator, rate);
+    let (task, model) = task_from_str(&text, None, &base).unwrap();
     let sys = TreeSystem::new(&model).unwrap();
     let tight = ViSettings {
         tolerance: 1e-15,
@@ -86,7 +94,8 @@ fn gradient_matches(controls: &str, integrator: &str) {
     let mut dynamics = match integrator {
         "vi" => DiscreteSystem::vi(sys, tight, task.dt, 0.0, task.controls.clone()).unwrap(),
         _ => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()).unwrap(),
-    };
+    }
+    .with_input_memory(rate);
     let mut cost = TaskCost::new(&task, &model);
     let q0 = DVector::from_column_slice(&task.q0);
     let dq0 = DVector::from_column_slice(&task.dq0);
@@ -127,12 +136,45 @@ fn gradient_matches(controls: &str, integrator: &str) {
 
 #[test]
 fn every_cost_term_has_its_exact_gradient_through_the_vi_with_a_kinematic_control() {
-    gradient_matches(r#"["torque", "hand_y"]"#, "vi");
+    gradient_matches(r#"["torque", "hand_y"]"#, "vi", true);
+}
+
+#[test]
+fn without_the_inputs_memory_every_other_term_keeps_its_exact_gradient() {
+    gradient_matches(r#"["torque", "hand_y"]"#, "vi", false);
+    gradient_matches(r#"["torque"]"#, "rk4", false);
+}
+
+/// A `control_rate` term on an input needs the state to remember it: refused, not read as 0.
+#[test]
+fn a_rate_cost_on_a_system_that_forgets_its_inputs_is_refused() {
+    let base = Path::new(ROOT).join("tests/models");
+    let text = every_term(r#"["torque"]"#, "vi", true);
+    let (task, model) = task_from_str(&text, None, &base).unwrap();
+    let sys = TreeSystem::new(&model).unwrap();
+    let mut dynamics = DiscreteSystem::vi(
+        sys,
+        ViSettings::default(),
+        task.dt,
+        0.0,
+        task.controls.clone(),
+    )
+    .unwrap()
+    .with_input_memory(false);
+    let mut cost = TaskCost::new(&task, &model);
+    let q0 = DVector::from_column_slice(&task.q0);
+    let dq0 = DVector::from_column_slice(&task.dq0);
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let u = vec![DVector::zeros(1); task.knots];
+    let err = cost_gradient(&mut dynamics, &mut cost, &x0, &u)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("does not remember"), "{err}");
 }
 
 #[test]
 fn every_cost_term_has_its_exact_gradient_through_rk4() {
-    gradient_matches(r#"["torque"]"#, "rk4");
+    gradient_matches(r#"["torque"]"#, "rk4", true);
 }
 
 fn read(task: &str) -> (model::Task, model::Model) {
@@ -160,20 +202,22 @@ fn the_cartpole_swings_up_and_lqr_holds_it_there() {
     for (a, b) in compiled.solution.u.iter().zip(&res.solution.u) {
         assert!((a - b).amax() < 1e-9, "{a} vs {b}");
     }
-    // LQR at the top from where the plan ends: it stays upright for 4 s.
+    // LQR at the top from where the plan ends (the task's state: no input memory, as no
+    // `control_rate` term reads it): it stays upright for 4 s.
     let mut dynamics = DiscreteSystem::new(
         TreeSystem::new(&m).unwrap(),
         ViSettings::default(),
         task.dt,
         0.0,
     )
-    .unwrap();
-    let (mut a, mut b) = (DMatrix::zeros(5, 5), DMatrix::zeros(5, 1));
-    let mut x2 = [0.0; 5];
+    .unwrap()
+    .with_input_memory(false);
+    let (mut a, mut b) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+    let mut x2 = [0.0; 4];
     dynamics
-        .step(0, &[0.0; 5], &[0.0], &mut x2, Some((&mut a, &mut b)))
+        .step(0, &[0.0; 4], &[0.0], &mut x2, Some((&mut a, &mut b)))
         .unwrap();
-    let qw = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 10.0, 0.1, 0.1, 0.0]));
+    let qw = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 10.0, 0.1, 0.1]));
     let lqr = dare(&a, &b, &qw, &(DMatrix::identity(1, 1) * 0.1)).unwrap();
     let mut x = res.solution.x[n].clone();
     for k in 0..200 {

@@ -42,6 +42,10 @@ pub struct Needs {
     pub velocity: bool,
     /// [`Knot::gravity`] and [`Knot::gravity_x`].
     pub gravity: bool,
+    /// [`Knot::previous`] of inputs: the state must remember them
+    /// ([`DiscreteSystem::with_input_memory`](super::DiscreteSystem::with_input_memory)); the
+    /// optimiser refuses a system that does not.
+    pub input_memory: bool,
 }
 
 /// A cost over a horizon: user costs implement this with their derivatives. Each term is

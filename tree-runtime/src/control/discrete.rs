@@ -3,8 +3,9 @@
 //!
 //! The state is `x = (q_d, v_d, m)`: the dynamic variables' configuration, their momentum
 //! `p_d` (VI) or velocity `q̇_d` (RK4), and a memory `m` of the controls — for each input
-//! its previous value (what a `control_rate` term differences against), for each kinematic
-//! control its value and velocity `(ρ_k − ρ_{k−1})/Δt` at the knot (trep's `(q_k, v_k)`).
+//! its previous value (what a `control_rate` term differences against; left out with
+//! [`DiscreteSystem::with_input_memory`] when no cost reads it), for each kinematic control
+//! its value and velocity `(ρ_k − ρ_{k−1})/Δt` at the knot (trep's `(q_k, v_k)`).
 //! The controls `u_k` are the chosen inputs, held over step k, and the chosen kinematic
 //! variables' values at knot `k + 1` (trep's ρ), linear in time over the step; every other
 //! input is zero and every other kinematic variable follows its prescription.
@@ -87,8 +88,10 @@ struct Layout {
     controls: Vec<Control>,
     dynamic: Vec<usize>,
     kinematic: Vec<usize>,
-    /// Per control, its memory's first slot in `x`.
-    memory: Vec<usize>,
+    /// Per control, its memory's first slot in `x` (None: an input not remembered).
+    memory: Vec<Option<usize>>,
+    /// Whether inputs are remembered.
+    input_memory: bool,
     /// The state's size.
     states: usize,
     /// Per entry of `x`, the step input it is (None: a velocity or input memory, which the
@@ -99,7 +102,12 @@ struct Layout {
 }
 
 impl Layout {
-    fn new(dynamic: Vec<usize>, kinematic: Vec<usize>, controls: Vec<Control>) -> Self {
+    fn new(
+        dynamic: Vec<usize>,
+        kinematic: Vec<usize>,
+        controls: Vec<Control>,
+        input_memory: bool,
+    ) -> Self {
         let nd = dynamic.len();
         let mut x_column: Vec<Option<StepColumn>> = dynamic
             .iter()
@@ -108,13 +116,16 @@ impl Layout {
             .collect();
         let (mut memory, mut u_column) = (Vec::new(), Vec::new());
         for c in &controls {
-            memory.push(x_column.len());
             match *c {
                 Control::Input(k) => {
-                    x_column.push(None);
+                    memory.push(input_memory.then_some(x_column.len()));
+                    if input_memory {
+                        x_column.push(None);
+                    }
                     u_column.push(StepColumn::U1(k));
                 }
                 Control::Kinematic(i) => {
+                    memory.push(Some(x_column.len()));
                     x_column.extend([Some(StepColumn::Q1(i)), None]);
                     let at = kinematic
                         .iter()
@@ -125,6 +136,7 @@ impl Layout {
             }
         }
         Layout {
+            input_memory,
             states: x_column.len(),
             controls,
             dynamic,
@@ -155,8 +167,8 @@ impl Layout {
             [q[i], dq[i], _] = motion.kinematic(i, t);
         }
         for (c, control) in self.controls.iter().enumerate() {
-            if let Control::Kinematic(i) = *control {
-                (q[i], dq[i]) = (x[self.memory[c]], x[self.memory[c] + 1]);
+            if let (Control::Kinematic(i), Some(at)) = (*control, self.memory[c]) {
+                (q[i], dq[i]) = (x[at], x[at + 1]);
             }
         }
     }
@@ -181,10 +193,11 @@ pub struct Knot {
     pub gravity: DVector<f64>,
     /// `∂g/∂x` (controls × states).
     pub gravity_x: DMatrix<f64>,
-    /// Per control: its previous value (the memory part of `x`).
+    /// Per control: its previous value (the memory part of `x`; 0 for an input the state
+    /// does not remember).
     pub previous: DVector<f64>,
-    /// Where each control's previous value sits in `x`.
-    pub previous_at: Vec<usize>,
+    /// Where each control's previous value sits in `x` (None: an input not remembered).
+    pub previous_at: Vec<Option<usize>>,
 }
 
 impl Knot {
@@ -368,13 +381,29 @@ where
         };
         Ok(DiscreteSystem {
             motion: ModelMotions::of(&sys),
-            layout: Layout::new(dynamic, kinematic, controls),
+            layout: Layout::new(dynamic, kinematic, controls, true),
             buf,
             method,
             dt,
             t0,
             sys,
         })
+    }
+
+    /// Whether the state remembers each input's previous value (as built: yes).
+    pub fn has_input_memory(&self) -> bool {
+        self.layout.input_memory
+    }
+
+    /// With `keep = false`, the state leaves out the inputs' memory: `x` is `2 n_d` plus the
+    /// kinematic controls' value and velocity, and [`Knot::previous`] is 0 on inputs. For
+    /// costs that do not difference inputs against their previous values (no `control_rate`
+    /// on an input), a smaller state makes every backward-pass product cheaper.
+    pub fn with_input_memory(mut self, keep: bool) -> Self {
+        let l = &self.layout;
+        let (dynamic, kinematic) = (l.dynamic.clone(), l.kinematic.clone());
+        self.layout = Layout::new(dynamic, kinematic, l.controls.clone(), keep);
+        self
     }
 
     /// The state's size: `2 n_d` plus the controls' memory.
@@ -421,12 +450,10 @@ where
             x[nd + r] = v[i];
         }
         for (c, control) in l.controls.iter().enumerate() {
+            let Some(at) = l.memory[c] else { continue };
             match *control {
-                Control::Input(_) => x[l.memory[c]] = previous.get(c).copied().unwrap_or(0.0),
-                Control::Kinematic(i) => {
-                    x[l.memory[c]] = q[i];
-                    x[l.memory[c] + 1] = dq[i];
-                }
+                Control::Input(_) => x[at] = previous.get(c).copied().unwrap_or(0.0),
+                Control::Kinematic(i) => (x[at], x[at + 1]) = (q[i], dq[i]),
             }
         }
         x
@@ -479,7 +506,7 @@ where
         dq.fill(0.0);
         l.place(&mut self.motion, self.t0 + k as f64 * self.dt, x, q, dq);
         for c in 0..nu {
-            out.previous[c] = x[l.memory[c]];
+            out.previous[c] = l.memory[c].map_or(0.0, |at| x[at]);
         }
         if derivatives {
             out.q_x.fill(0.0);
@@ -645,7 +672,10 @@ where
         for (c, control) in l.controls.iter().enumerate() {
             match *control {
                 Control::Input(kin) => b.inputs[kin] = u[c],
-                Control::Kinematic(i) => b.controlled.push((i, x[l.memory[c]], u[c])),
+                Control::Kinematic(i) => {
+                    let at = l.memory[c].expect("kinematic controls are remembered");
+                    b.controlled.push((i, x[at], u[c]))
+                }
             }
         }
         let controlled = std::mem::take(&mut b.controlled);
@@ -724,7 +754,7 @@ where
             }
             // The memory: inputs remember their value, kinematic controls value and velocity.
             for (c, control) in l.controls.iter().enumerate() {
-                let at = l.memory[c];
+                let Some(at) = l.memory[c] else { continue };
                 x2[at] = u[c];
                 if let Control::Kinematic(_) = control {
                     x2[at + 1] = (u[c] - x[at]) / dt;
@@ -865,7 +895,7 @@ fn read_jacobians(l: &Layout, d: &StepDerivatives, a: &mut DMatrix<f64>, bm: &mu
 /// velocity `(ρ − c)/Δt`.
 fn memory_jacobians(l: &Layout, dt: f64, a: &mut DMatrix<f64>, bm: &mut DMatrix<f64>) {
     for (c, control) in l.controls.iter().enumerate() {
-        let at = l.memory[c];
+        let Some(at) = l.memory[c] else { continue };
         bm[(at, c)] = 1.0;
         if let Control::Kinematic(_) = control {
             bm[(at + 1, c)] = 1.0 / dt;

@@ -134,7 +134,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
-    check(nx, nu, cost, x0, &u)?;
+    check(dynamics, cost, x0, &u)?;
     let settled = |x: f64| x.is_finite() && x >= 0.0;
     if !(settled(settings.cost_tolerance)
         && settled(settings.gradient_tolerance)
@@ -310,16 +310,25 @@ struct Work {
     backward: Backward,
 }
 
-/// Refuses a problem whose sizes do not fit the dynamics: `x0` of `nx` entries, at least one
-/// knot, every `u_k` of `nu`, and a cost that fits.
-fn check(
-    nx: usize,
-    nu: usize,
+/// Refuses a problem that does not fit the dynamics: `x0` of `nx` entries, at least one
+/// knot, every `u_k` of `nu`, a cost that fits, and a state that remembers the inputs when
+/// the cost reads their previous values.
+fn check<S: System>(
+    dynamics: &DiscreteSystem<S>,
     cost: &dyn Cost,
     x0: &DVector<f64>,
     u: &[DVector<f64>],
-) -> Result<(), SimError> {
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (nx, nu) = (dynamics.states(), dynamics.controls());
     let bad = |m: String| Err(SimError::InvalidInput(m));
+    if cost.needs().input_memory && !dynamics.has_input_memory() {
+        return bad(
+            "the cost differences inputs against their previous values, but the state does not remember them (DiscreteSystem::with_input_memory)".into(),
+        );
+    }
     if x0.len() != nx {
         return bad(format!(
             "the start state has {} entries; the system's state has {nx}",
@@ -354,7 +363,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
-    check(nx, nu, cost, x0, u)?;
+    check(dynamics, cost, x0, u)?;
     let mut work = Work {
         a: vec![DMatrix::zeros(nx, nx); n],
         b: vec![DMatrix::zeros(nx, nu); n],

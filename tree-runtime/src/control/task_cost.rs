@@ -345,7 +345,9 @@ impl At<'_> {
                     res.r[c] = (u[c] - knot.previous[c]) / self.dt;
                     if jac {
                         res.ju[(c, c)] = 1.0 / self.dt;
-                        res.jx[(c, knot.previous_at[c])] = -1.0 / self.dt;
+                        if let Some(at) = knot.previous_at[c] {
+                            res.jx[(c, at)] = -1.0 / self.dt;
+                        }
                     }
                 }
             }
@@ -411,6 +413,11 @@ impl Cost for TaskCost {
                     }
                 )
             }) && self.controls.iter().any(|c| matches!(c, Control::Input(_))),
+            input_memory: self
+                .running
+                .iter()
+                .any(|t| matches!(t, Term::ControlRate { .. }))
+                && self.controls.iter().any(|c| matches!(c, Control::Input(_))),
         }
     }
 

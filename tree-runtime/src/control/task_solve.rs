@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
-use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
+use tree_model::{Control, CostTerm, Model, Task, TaskIntegrator, TaskSolver};
 
 use super::cost::Needs;
 use super::discrete::{DiscreteSystem, Knot};
@@ -46,12 +46,13 @@ pub struct TaskOptions {
     pub max_iterations: Option<usize>,
 }
 
-/// The discretised system of `task` on `sys`.
+/// The discretised system of `task` on `sys` (remembering inputs only when a `control_rate`
+/// term reads them).
 pub fn task_system<S: System>(sys: S, task: &Task) -> Result<DiscreteSystem<S>, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    match task.integrator {
+    let dynamics = match task.integrator {
         TaskIntegrator::Vi => DiscreteSystem::vi(
             sys,
             ViSettings::default(),
@@ -60,7 +61,13 @@ where
             task.controls.clone(),
         ),
         TaskIntegrator::Rk4 => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()),
-    }
+    }?;
+    // Inputs are remembered only for a `control_rate` term to difference against.
+    let rate = task
+        .running
+        .iter()
+        .any(|t| matches!(t, CostTerm::ControlRate { .. }));
+    Ok(dynamics.with_input_memory(rate))
 }
 
 /// Solves `task` (read with `model`) on `sys` (that model, compiled or interpreted),
@@ -142,7 +149,7 @@ where
     let mut knot = Knot::empty();
     let needs = Needs {
         velocity: true,
-        gravity: false,
+        ..Needs::default()
     };
     let (mut q, mut dq, mut lambda, mut violation) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
