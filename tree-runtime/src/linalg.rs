@@ -171,6 +171,25 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
     }
 }
 
+/// `C += A D` for row-major `C` (rows of `k`) and `D` (row `s` at `s·k`), where row `r` of `A`
+/// is row `r` of the row-major `a` (rows of `w`) read at the columns `cols` (column `s` of `A`
+/// is `a`'s column `cols[s]`): each row of `C` gains a combination of `D`'s rows, zero
+/// coefficients skipped. Compiled also for AVX and chosen at run time (as [`mul_into`]'s
+/// kernel).
+#[multiversion::multiversion(targets("x86_64+avx"))]
+pub fn combine_rows(c: &mut [f64], k: usize, a: &[f64], w: usize, cols: &[usize], d: &[f64]) {
+    for (out, arow) in c.chunks_exact_mut(k).zip(a.chunks_exact(w)) {
+        for (s, &col) in cols.iter().enumerate() {
+            let coefficient = arow[col];
+            if coefficient != 0.0 {
+                for (o, x) in out.iter_mut().zip(&d[s * k..(s + 1) * k]) {
+                    *o += coefficient * x;
+                }
+            }
+        }
+    }
+}
+
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors.
 fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
     for j in 0..n {
@@ -192,6 +211,24 @@ fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
     }
 }
 
+/// `max |x|` in four lanes (which the compiler vectorises; a NaN entry is skipped, and then
+/// caught as a non-finite pivot).
+fn largest_magnitude(x: &[f64]) -> f64 {
+    let mut lanes = [0.0f64; 4];
+    let chunks = x.chunks_exact(4);
+    let tail = chunks
+        .remainder()
+        .iter()
+        .fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
+    for c in chunks {
+        for l in 0..4 {
+            let v = c[l].abs();
+            lanes[l] = if v > lanes[l] { v } else { lanes[l] };
+        }
+    }
+    lanes.iter().fold(tail, |m, &v| if v > m { v } else { m })
+}
+
 /// LU with partial pivoting on column-major storage; `swapped(j, p)` is told that row p was
 /// swapped into row j. Compiled also for AVX and chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx"))]
@@ -200,10 +237,7 @@ fn lu_core_factor(
     n: usize,
     mut swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
-    let scale = a
-        .iter()
-        .fold(0.0f64, |m, x| m.max(x.abs()))
-        .max(f64::MIN_POSITIVE);
+    let scale = largest_magnitude(a).max(f64::MIN_POSITIVE);
     for j in 0..n {
         // Pivot: the largest entry of column j at or below the diagonal.
         let col = &a[j * n..(j + 1) * n];
@@ -448,6 +482,35 @@ mod tests {
     }
 
     /// The loop products equal nalgebra's, with and without accumulation, transposed or not.
+    /// `combine_rows` is `C + A D` with `A` read at chosen columns of a wider row-major matrix;
+    /// `largest_magnitude` finds the largest entry wherever it sits (any length, NaN skipped).
+    #[test]
+    fn row_combination_and_largest_magnitude() {
+        let (rows, w, k) = (3, 6, 5);
+        let a: Vec<f64> = (0..rows * w).map(|x| (x as f64 * 0.7).sin()).collect();
+        let d: Vec<f64> = (0..4 * k).map(|x| (x as f64 * 1.3).cos()).collect();
+        let cols = [4, 0, 5, 2];
+        let mut c: Vec<f64> = (0..rows * k).map(|x| x as f64).collect();
+        let start = c.clone();
+        combine_rows(&mut c, k, &a, w, &cols, &d);
+        for r in 0..rows {
+            for j in 0..k {
+                let sum: f64 = (0..4).map(|s| a[r * w + cols[s]] * d[s * k + j]).sum();
+                assert!((c[r * k + j] - start[r * k + j] - sum).abs() < 1e-14);
+            }
+        }
+        for len in 1..11 {
+            for at in 0..len {
+                let mut x: Vec<f64> = (0..len).map(|i| 0.1 * i as f64).collect();
+                x[at] = -7.0;
+                if at + 1 < len {
+                    x[at + 1] = f64::NAN;
+                }
+                assert_eq!(largest_magnitude(&x), 7.0, "length {len}, at {at}");
+            }
+        }
+    }
+
     #[test]
     fn loop_products_equal_nalgebras() {
         let a = DMatrix::from_fn(4, 3, |i, j| ((i * 3 + j) as f64).sin());

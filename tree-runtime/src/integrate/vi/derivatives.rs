@@ -32,7 +32,7 @@ use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
-use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
+use crate::linalg::{combine_rows, lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
 use crate::system::{ConstraintTerms, Order, Sparsity, System, Vector};
@@ -756,23 +756,23 @@ impl Linearisation {
             }
         }
         lu_solve_packed_rows(&self.factor, rows, &self.pivots, &mut self.rhs, k);
-        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z),
-        // a row at a time: P_x's row, then each dz/dx row (contiguous in `rhs`) scaled.
+        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z):
+        // P_x's rows, then each dz/dx row (contiguous in `rhs`) scaled into them.
         for r in 0..nd {
             let prow = &self.pjac[r * w..(r + 1) * w];
             let out = &mut self.dp2[r * k..(r + 1) * k];
             for (o, &xc) in out.iter_mut().zip(&self.solved) {
                 *o = prow[xc];
             }
-            for (rz, &zc) in self.z_columns[..nd].iter().enumerate() {
-                let coefficient = prow[zc];
-                if coefficient != 0.0 {
-                    for (o, dz) in out.iter_mut().zip(&self.rhs[rz * k..(rz + 1) * k]) {
-                        *o += coefficient * dz;
-                    }
-                }
-            }
         }
+        combine_rows(
+            &mut self.dp2[..nd * k],
+            k,
+            &self.pjac[..nd * w],
+            w,
+            &self.z_columns[..nd],
+            &self.rhs,
+        );
         Ok(())
     }
 
