@@ -132,11 +132,12 @@ pub struct ViSettings {
     pub forcing: Forcing,
     /// When Newton fails, retry the step as two half steps, recursively, this deep (0: never).
     pub max_subdivisions: usize,
-    /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): Newton
-    /// checks convergence with second-order evaluations, so the derivatives find the terms at
-    /// the solution already evaluated instead of evaluating them again. With
-    /// [`JacobianUpdate::OncePerStep`] the chord refactors the Jacobian its check evaluated
-    /// whenever the chord, contracting as it last did, would not converge at the next check.
+    /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): a Newton
+    /// check expected to converge is of second order, so the derivatives find the terms at
+    /// the solution already evaluated instead of evaluating them again (one expected to fail
+    /// is of first order; a first-order check that converges is followed by one second-order
+    /// evaluation). With [`JacobianUpdate::OncePerStep`] the chord refactors the Jacobian
+    /// whenever the chord, contracting as it last did, would not converge within two checks.
     pub derivatives: bool,
 }
 
@@ -674,13 +675,14 @@ where
         for &i in &self.split.kinematic {
             q_next[i] = cx.motion.kinematic(i, t + dt)[0];
         }
-        // With derivatives to follow, every check is of second order: the check that
-        // converges leaves the terms the derivatives need at the solution (and a refactored
-        // Jacobian needs no evaluation of its own).
+        // With derivatives to follow, a check expected to converge is of second order: it
+        // leaves the terms the derivatives need at the solution, and a Jacobian to refactor.
+        // One expected to fail is of first order (docs/derivations.md, "Predictor and chord").
         let derivatives = self.settings.derivatives;
         let reuse = self.settings.jacobian == JacobianUpdate::OncePerStep;
         let mut factored = false;
         let mut last_residual = f64::INFINITY;
+        let mut expect_converged = false;
         let mut iterations = 0;
         loop {
             let fresh = !(reuse && factored);
@@ -689,7 +691,12 @@ where
             // evaluate the Jacobian only if the check fails (the last full evaluation of a
             // step was otherwise thrown away).
             let check_first = fresh && last_residual <= CHECK_FIRST_BELOW && !derivatives;
-            self.residual(cx, q, p, q_next, derivatives || (fresh && !check_first));
+            let full = if derivatives {
+                fresh || expect_converged
+            } else {
+                fresh && !check_first
+            };
+            self.residual(cx, q, p, q_next, full);
             let (residual, violation) = self.residual_norms();
             let mut relative = self.relative_residual();
             if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
@@ -703,6 +710,10 @@ where
             if relative <= self.settings.tolerance
                 && violation <= self.settings.constraint_tolerance
             {
+                if derivatives && !full {
+                    // Converged on a first-order check: the derivatives' terms at the solution.
+                    self.residual(cx, q, p, q_next, true);
+                }
                 break;
             }
             if iterations >= self.settings.max_iterations {
@@ -722,18 +733,28 @@ where
             }
             // Relative residual and violation: both independent of the masses.
             let combined = relative + violation;
-            // With second-order checks the Jacobian here is already evaluated: refactor it
-            // unless the chord, contracting as it did last iteration, converges next.
-            let chord_converges = combined * (combined / last_residual) <= self.settings.tolerance;
+            // The chord, contracting as it did last iteration: its residual one and two
+            // checks on. With derivatives to follow, refactor unless it converges within two
+            // (first-order checks until then, a refactor costs a second-order evaluation).
+            let rate = combined / last_residual;
+            let chord_next = combined * rate;
+            let chord_converges = chord_next * rate <= self.settings.tolerance;
             if !fresh && (combined > 0.5 * last_residual || (derivatives && !chord_converges)) {
                 // The reused Jacobian has stopped paying: evaluate it here (a second-order
                 // check already has).
-                if !derivatives {
+                if !full {
                     self.residual(cx, q, p, q_next, true);
                     relative = self.relative_residual();
                 }
                 refactor = true;
             }
+            // Whether the next check converges: after an exact Newton update from within
+            // CHECK_FIRST_BELOW, quadratically; after a chord update, by its contraction.
+            expect_converged = if refactor {
+                combined <= CHECK_FIRST_BELOW
+            } else {
+                chord_next <= self.settings.tolerance
+            };
             if refactor {
                 self.factor(cx.sys, step, t)?;
                 factored = true;
