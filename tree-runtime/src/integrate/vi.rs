@@ -135,8 +135,8 @@ pub struct ViSettings {
     /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): a Newton
     /// check expected to converge is of second order, so the derivatives find the terms at
     /// the solution already evaluated instead of evaluating them again (one expected to fail
-    /// is of first order; a first-order check that converges is followed by one second-order
-    /// evaluation). With [`JacobianUpdate::OncePerStep`] the chord refactors the Jacobian
+    /// is of first order; after a first-order check that converges, the derivatives evaluate
+    /// the terms themselves). With [`JacobianUpdate::OncePerStep`] the chord refactors the Jacobian
     /// whenever the chord, contracting as it last did, would not converge within two checks.
     pub derivatives: bool,
 }
@@ -710,10 +710,6 @@ where
             if relative <= self.settings.tolerance
                 && violation <= self.settings.constraint_tolerance
             {
-                if derivatives && !full {
-                    // Converged on a first-order check: the derivatives' terms at the solution.
-                    self.residual(cx, q, p, q_next, true);
-                }
                 break;
             }
             if iterations >= self.settings.max_iterations {
