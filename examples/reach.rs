@@ -17,22 +17,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         model::read_task(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))?;
     // Five solves from the same guess, the best time kept (tools/reference/crocoddyl_reach.py
     // times Crocoddyl the same way).
-    let mut res = solve_task(
-        Ur5::new(),
-        &task,
-        &model,
-        &TaskOptions::default(),
-        &mut |_| {},
-    )?;
-    for _ in 1..5 {
-        let again = solve_task(
+    let solve = || {
+        solve_task(
             Ur5::new(),
             &task,
             &model,
             &TaskOptions::default(),
             &mut |_| {},
-        )?;
-        res.solve_seconds = res.solve_seconds.min(again.solve_seconds);
+        )
+    };
+    let mut res = solve()?;
+    for _ in 1..5 {
+        res.solve_seconds = res.solve_seconds.min(solve()?.solve_seconds);
     }
     let sol = &res.solution;
     let tool = model.frame_index("ee_link").ok_or("no ee_link")?;
