@@ -284,6 +284,38 @@ fn the_ur5_reaches_within_a_millimetre() {
     }
 }
 
+/// DDP on the shipped reach converges to iLQR's optimum in a handful of iterations: where its
+/// full model is indefinite (far from the optimum) a pass takes the Gauss–Newton one instead
+/// of a regularisation large enough to hide it (without that: 65 iterations, not converged).
+#[test]
+fn ddp_converges_on_the_reach_to_the_ilqr_optimum() {
+    let (task, m) = read("tasks/ur5-reach.toml");
+    let ddp = TaskOptions {
+        solver: Some(model::TaskSolver::Ddp),
+        ..TaskOptions::default()
+    };
+    let res = solve_task(TreeSystem::new(&m).unwrap(), &task, &m, &ddp, &mut |_| {}).unwrap();
+    let ilqr = solve_task(
+        TreeSystem::new(&m).unwrap(),
+        &task,
+        &m,
+        &TaskOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    let iterations = res.solution.history.len();
+    assert!(
+        res.solution.converged,
+        "not converged in {iterations} iterations"
+    );
+    assert!(iterations <= 12, "{iterations} iterations");
+    let (a, b) = (res.solution.cost, ilqr.solution.cost);
+    assert!(
+        (a - b).abs() < 1e-6 * b,
+        "DDP's cost {a} against iLQR's {b}"
+    );
+}
+
 /// Every mistake in a task file is a sentence with its line.
 #[test]
 fn task_file_errors_name_the_problem_and_line() {

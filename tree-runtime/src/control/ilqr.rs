@@ -4,8 +4,10 @@
 //! the step's second derivatives contracted with `V_x`); the control QP solved by projected
 //! Newton within the limits (box-DDP: clamped controls get no feedback) once the solve is
 //! near its optimum, and without them, clamped in the forward pass, until then (`BoxPhase`); a forward pass with a backtracking line search on the true cost;
-//! Levenberg–Marquardt `μ` raised when `Q_uu` is not positive definite, no step length lowers
-//! the cost or the accepted one is under ¼, lowered after a longer accepted step.
+//! Levenberg–Marquardt `μ` raised when `Q_uu` is not positive definite (for DDP: when even
+//! the Gauss–Newton model's is not, which a pass falls back to when the full one's is not),
+//! no step length lowers the cost or the accepted one is under ¼, lowered after a longer
+//! accepted step.
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
@@ -209,7 +211,18 @@ where
                 BoxPhase::Boxed => settings.limits.as_ref(),
             },
         };
-        let Some(gradient) = backward(dynamics, cost, &x, &u, &mut work, &pass)? else {
+        let mut gradient = backward(dynamics, cost, &x, &u, &mut work, &pass)?;
+        if gradient.is_none() && pass.solver == Solver::Ddp {
+            // DDP's model is indefinite here (the step's curvature contracted with V_x, far
+            // from the optimum): this pass takes the Gauss–Newton model at the same μ rather
+            // than a μ large enough to hide it, which would turn the steps into a crawl.
+            let gauss_newton = Pass {
+                solver: Solver::Ilqr,
+                ..pass
+            };
+            gradient = backward(dynamics, cost, &x, &u, &mut work, &gauss_newton)?;
+        }
+        let Some(gradient) = gradient else {
             // Some Q_uu + μI is not positive definite: regularise more.
             mu = (mu * 10.0).max(1e-6);
             if mu > 1e10 {
