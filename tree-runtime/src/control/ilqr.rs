@@ -3,11 +3,11 @@
 //! `Q_xx = ℓ_xx + AᵀV_xxA`, `Q_uu = ℓ_uu + BᵀV_xxB + μI`, `Q_ux = ℓ_ux + BᵀV_xxA` (DDP adds
 //! the step's second derivatives contracted with `V_x`); the control QP solved by projected
 //! Newton within the limits (box-DDP: clamped controls get no feedback) once the solve is
-//! near its optimum, and without them, clamped in the forward pass, until then (`BoxPhase`); a forward pass with a backtracking line search on the true cost;
-//! Levenberg–Marquardt `μ` raised when `Q_uu` is not positive definite (for DDP: when even
-//! the Gauss–Newton model's is not, which a pass falls back to when the full one's is not),
-//! no step length lowers the cost or the accepted one is under ¼, lowered after a longer
-//! accepted step.
+//! near its optimum, and without them, clamped in the forward pass, until then (`BoxPhase`);
+//! a forward pass with a backtracking line search on the true cost; Levenberg–Marquardt `μ`
+//! raised when `Q_uu` is not positive definite (for DDP: when even the Gauss–Newton model's
+//! is not, which a pass falls back to when the full one's is not), no step length lowers the
+//! cost or the accepted one is under ¼, lowered after a longer accepted step.
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
