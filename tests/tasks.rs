@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use tree_mech::control::{
-    cost_gradient, dare, solve_task, Control, DiscreteSystem, TaskCost, TaskOptions,
+    cost_gradient, dare, solve_task, Control, DiscreteSystem, TaskCost, TaskOptions, TaskResult,
 };
 use tree_mech::integrate::ViSettings;
 use tree_mech::model::{self, task_from_str};
@@ -177,6 +177,11 @@ fn every_cost_term_has_its_exact_gradient_through_rk4() {
     gradient_matches(r#"["torque"]"#, "rk4", true);
 }
 
+/// `task` solved on `m` interpreted.
+fn interpreted(task: &model::Task, m: &model::Model, options: &TaskOptions) -> TaskResult {
+    solve_task(TreeSystem::new(m).unwrap(), task, m, options, &mut |_| {}).unwrap()
+}
+
 fn read(task: &str) -> (model::Task, model::Model) {
     model::read_task(Path::new(ROOT).join(task)).unwrap()
 }
@@ -294,15 +299,8 @@ fn ddp_converges_on_the_reach_to_the_ilqr_optimum() {
         solver: Some(model::TaskSolver::Ddp),
         ..TaskOptions::default()
     };
-    let res = solve_task(TreeSystem::new(&m).unwrap(), &task, &m, &ddp, &mut |_| {}).unwrap();
-    let ilqr = solve_task(
-        TreeSystem::new(&m).unwrap(),
-        &task,
-        &m,
-        &TaskOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let res = interpreted(&task, &m, &ddp);
+    let ilqr = interpreted(&task, &m, &TaskOptions::default());
     let iterations = res.solution.history.len();
     assert!(
         res.solution.converged,
@@ -506,14 +504,7 @@ fn a_solved_task_reports_the_constraint_violation_at_every_knot() {
     let base = Path::new(ROOT).join("tests/models");
     let text = "model = \"trep-vi.toml\"\ndt = 0.02\nknots = 5\n[[cost]]\nkind = \"control\"\nweight = 1.0\n";
     let (task, m) = task_from_str(text, None, &base).unwrap();
-    let res = solve_task(
-        TreeSystem::new(&m).unwrap(),
-        &task,
-        &m,
-        &TaskOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
+    let res = interpreted(&task, &m, &TaskOptions::default());
     let origins = m.origins(&task.q0);
     let (tip, hand) = (
         m.frame_index("tip").unwrap(),
