@@ -154,6 +154,15 @@ pub struct Task {
 }
 
 impl Task {
+    /// Whether a running `control_rate` term differences an input against its previous value
+    /// (so the optimiser's state must remember the inputs).
+    pub fn reads_previous_inputs(&self) -> bool {
+        self.running
+            .iter()
+            .any(|t| matches!(t, CostTerm::ControlRate { .. }))
+            && self.controls.iter().any(|c| matches!(c, Control::Input(_)))
+    }
+
     /// The name of control `c` (an input's or a kinematic variable's).
     pub fn control_name<'m>(&self, model: &'m Model, c: usize) -> &'m str {
         match self.controls[c] {

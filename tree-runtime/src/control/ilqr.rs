@@ -339,7 +339,7 @@ where
     let bad = |m: String| Err(SimError::InvalidInput(m));
     if cost.needs().input_memory && !dynamics.has_input_memory() {
         return bad(
-            "the cost differences inputs against their previous values, but the state does not remember them (DiscreteSystem::with_input_memory)".into(),
+            "the cost differences inputs against their previous values (a `control_rate` term), but the system's state does not remember them: build it with `with_input_memory(true)`".into(),
         );
     }
     if x0.len() != nx {

@@ -99,6 +99,8 @@ pub struct TaskCost {
     start: DVector<f64>,
     running: Vec<Term>,
     terminal: Vec<Term>,
+    /// A `control_rate` term reads inputs' previous values ([`Task::reads_previous_inputs`]).
+    reads_previous_inputs: bool,
     scratch: Scratch,
 }
 
@@ -172,6 +174,7 @@ impl TaskCost {
             controls: task.controls.clone(),
             running: task.running.iter().map(place).collect(),
             terminal: task.terminal.iter().map(place).collect(),
+            reads_previous_inputs: task.reads_previous_inputs(),
             scratch: Scratch {
                 running: vec![Residual::default(); task.running.len()],
                 terminal: vec![Residual::default(); task.terminal.len()],
@@ -413,11 +416,7 @@ impl Cost for TaskCost {
                     }
                 )
             }) && self.controls.iter().any(|c| matches!(c, Control::Input(_))),
-            input_memory: self
-                .running
-                .iter()
-                .any(|t| matches!(t, Term::ControlRate { .. }))
-                && self.controls.iter().any(|c| matches!(c, Control::Input(_))),
+            input_memory: self.reads_previous_inputs,
         }
     }
 

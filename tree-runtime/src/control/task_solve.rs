@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
-use tree_model::{Control, CostTerm, Model, Task, TaskIntegrator, TaskSolver};
+use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
 
 use super::cost::Needs;
 use super::discrete::{DiscreteSystem, Knot};
@@ -62,12 +62,7 @@ where
         ),
         TaskIntegrator::Rk4 => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()),
     }?;
-    // Inputs are remembered only for a `control_rate` term to difference against.
-    let rate = task
-        .running
-        .iter()
-        .any(|t| matches!(t, CostTerm::ControlRate { .. }));
-    Ok(dynamics.with_input_memory(rate))
+    Ok(dynamics.with_input_memory(task.reads_previous_inputs()))
 }
 
 /// Solves `task` (read with `model`) on `sys` (that model, compiled or interpreted),

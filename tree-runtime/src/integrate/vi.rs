@@ -136,8 +136,9 @@ pub struct ViSettings {
     /// check expected to converge is of second order, so the derivatives find the terms at
     /// the solution already evaluated instead of evaluating them again (one expected to fail
     /// is of first order; after a first-order check that converges, the derivatives evaluate
-    /// the terms themselves). With [`JacobianUpdate::OncePerStep`] the chord refactors the Jacobian
-    /// whenever the chord, contracting as it last did, would not converge within two checks.
+    /// the terms themselves). With [`JacobianUpdate::OncePerStep`] the chord refactors the
+    /// Jacobian whenever the chord, contracting as it last did, would not converge within
+    /// two checks.
     pub derivatives: bool,
 }
 
