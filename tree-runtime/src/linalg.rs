@@ -211,8 +211,8 @@ fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
     }
 }
 
-/// `max |x|` in four lanes (which the compiler vectorises; a NaN entry is skipped, and then
-/// caught as a non-finite pivot).
+/// `max |x|` in four lanes (which the compiler vectorises); a NaN entry is skipped, as the
+/// `f64::max` fold this replaces skipped it.
 fn largest_magnitude(x: &[f64]) -> f64 {
     let mut lanes = [0.0f64; 4];
     let chunks = x.chunks_exact(4);
