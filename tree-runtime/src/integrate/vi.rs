@@ -119,8 +119,10 @@ pub struct ViSettings {
     /// Newton stops when every dynamic row of the residual is below `tolerance` relative to
     /// that row's momentum scale (the sum of its terms' magnitudes, see
     /// [`MidpointVi::relative_residual`]) and every `|h_r(q₂)|` is below
-    /// `constraint_tolerance`, or when an update is below the rounding of q (the residual then
-    /// sits at its floor). Relative, so a model in grams or in tonnes converges alike.
+    /// `constraint_tolerance`, or when the residual sits at its rounding floor: an update below
+    /// the rounding of q, or an exact Newton update that fails to halve a residual already
+    /// within `√tolerance` (docs/derivations.md §7, "The rounding floor"). Relative, so a model
+    /// in grams or in tonnes converges alike.
     pub tolerance: f64,
     /// Newton's tolerance on `max |h(q₂)|`.
     pub constraint_tolerance: f64,
@@ -684,6 +686,10 @@ where
         let mut factored = false;
         let mut last_residual = f64::INFINITY;
         let mut expect_converged = false;
+        // Whether the last update solved with a Jacobian factored at its own iterate, and the
+        // smallest residual of the checks before this one.
+        let mut exact_update = false;
+        let mut smallest = f64::INFINITY;
         let mut iterations = 0;
         loop {
             let fresh = !(reuse && factored);
@@ -730,6 +736,19 @@ where
             }
             // Relative residual and violation: both independent of the masses.
             let combined = relative + violation;
+            // An exact Newton update squares a small residual; one that left it above half the
+            // smallest so far found the residual at its rounding floor, where it wanders with
+            // each update's rounding. The floor is set by sums that cancel inside a row (a
+            // light limb hanging at rest: its row's terms are far smaller than the torques
+            // summed into them), which a short step can hold above the tolerance; Newton
+            // cannot improve on such a point.
+            if exact_update
+                && combined > 0.5 * smallest
+                && combined <= self.settings.tolerance.sqrt()
+            {
+                break;
+            }
+            smallest = smallest.min(combined);
             // The chord, contracting as it did last iteration: its residual one and two
             // checks on. With derivatives to follow, refactor unless it converges within two
             // (first-order checks until then, a refactor costs a second-order evaluation).
@@ -756,6 +775,7 @@ where
                 self.factor(cx.sys, step, t)?;
                 factored = true;
             }
+            exact_update = refactor;
             last_residual = relative + violation;
             iterations += 1;
             self.newton_update(cx.sys, step, t)?;
