@@ -93,7 +93,11 @@ where
     best
 }
 
-fn main() {
+fn main() -> std::process::ExitCode {
+    tree_mech::run_main(example)
+}
+
+fn example() -> Result<(), Box<dyn std::error::Error>> {
     let modes = [
         ("generated, Jacobian reused", None),
         ("generated (tree_model!)", None),
@@ -133,8 +137,9 @@ fn main() {
         rows.push((n, times));
     }
     let labels: Vec<&str> = modes.iter().map(|m| m.0).collect();
-    plot(&rows, &labels, "docs/fig3.png").unwrap();
+    plot(&rows, &labels, "docs/fig3.png")?;
     println!("\nplot: docs/fig3.png");
+    Ok(())
 }
 
 fn plot(

@@ -22,7 +22,11 @@ tree_model! {
     variable slide { damping = 0.2; }
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> std::process::ExitCode {
+    tree_mech::run_main(example)
+}
+
+fn example() -> Result<(), Box<dyn std::error::Error>> {
     let mut sys = SlidingDoublePendulum::new();
     let (q0, dq0) = sys.initial_state();
     let options = SimOptions {

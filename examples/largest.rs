@@ -6,7 +6,11 @@
 tree_mech::tree_model!(struct Pendulum40 from "benches/models/pendulum-40.toml");
 tree_mech::tree_model!(struct Humanoid from "models/humanoid.toml");
 
-fn main() {
+fn main() -> std::process::ExitCode {
+    tree_mech::run_main(example)
+}
+
+fn example() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "pendulum-40: {} variables, {} statements per full evaluation",
         Pendulum40::DOF,
@@ -17,4 +21,5 @@ fn main() {
         Humanoid::DOF,
         Humanoid::STATEMENTS
     );
+    Ok(())
 }

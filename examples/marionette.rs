@@ -36,7 +36,11 @@ impl Prescription for WalkForward {
     }
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> std::process::ExitCode {
+    tree_mech::run_main(example)
+}
+
+fn example() -> Result<(), Box<dyn std::error::Error>> {
     let mut sys = Marionette::new();
     let (q0, dq0) = sys.initial_state();
     let mut strings = WalkForward {

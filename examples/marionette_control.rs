@@ -11,7 +11,11 @@ use tree_mech::tree_model;
 
 tree_model!(pub struct Marionette from "models/marionette.toml");
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> std::process::ExitCode {
+    tree_mech::run_main(example)
+}
+
+fn example() -> Result<(), Box<dyn std::error::Error>> {
     let (task, model) = model::read_task(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/tasks/marionette-wave.toml"

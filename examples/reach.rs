@@ -12,7 +12,11 @@ use tree_mech::{tree_model, System};
 
 tree_model!(pub struct Ur5 from "models/ur5.urdf");
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> std::process::ExitCode {
+    tree_mech::run_main(example)
+}
+
+fn example() -> Result<(), Box<dyn std::error::Error>> {
     let (task, model) =
         model::read_task(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))?;
     // Five solves from the same guess, the best time kept (tools/reference/crocoddyl_reach.py

@@ -42,3 +42,53 @@ pub use tree_runtime::{
     control, integrate, ConstraintTerms, GeneralizedForce, NoForce, Order, PaperEvaluation,
     PaperSystem, SimError, System, Terms, Trajectory, TreeSystem,
 };
+
+/// Runs a program's `main` the way a command-line tool should end: an error is printed to
+/// stderr as its sentence (`error: …`, not its `Debug` form) with a failing exit code, and a
+/// closed standard output (`… | head`) ends the process quietly instead of panicking in
+/// `println!` (Rust ignores `SIGPIPE`; this restores its default disposition, on Unix). The
+/// examples' `main`, before any thread starts:
+///
+/// ```no_run
+/// fn main() -> std::process::ExitCode {
+///     tree_mech::run_main(example)
+/// }
+///
+/// fn example() -> Result<(), Box<dyn std::error::Error>> {
+///     let model = tree_mech::model::from_toml_file("models/pendulum.toml")?;
+///     println!("{} variables", model.variables.len());
+///     Ok(())
+/// }
+/// ```
+pub fn run_main(
+    main: impl FnOnce() -> Result<(), Box<dyn std::error::Error>>,
+) -> std::process::ExitCode {
+    quiet_on_closed_stdout();
+    match main() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// Restores `SIGPIPE`'s default disposition (on Unix; elsewhere nothing): a write to a closed
+/// standard output then ends the process quietly, as for other command-line tools, instead
+/// of a panic in `println!`. [`run_main`] calls it; call it first in a `main` of your own.
+#[cfg(unix)]
+pub fn quiet_on_closed_stdout() {
+    extern "C" {
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: restoring the default disposition of one signal, before any thread starts.
+    unsafe {
+        signal(SIGPIPE, SIG_DFL);
+    }
+}
+
+/// Restores `SIGPIPE`'s default disposition (on Unix; elsewhere nothing).
+#[cfg(not(unix))]
+pub fn quiet_on_closed_stdout() {}

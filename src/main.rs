@@ -239,26 +239,8 @@ enum Command {
     },
 }
 
-/// Lets a closed stdout (`tree-mech check … | head`) end the process quietly, as it does
-/// for other command-line tools, instead of a panic in `println!`.
-#[cfg(unix)]
-fn default_sigpipe() {
-    extern "C" {
-        fn signal(signum: i32, handler: usize) -> usize;
-    }
-    const SIGPIPE: i32 = 13;
-    const SIG_DFL: usize = 0;
-    // SAFETY: restoring the default disposition of one signal before any thread starts.
-    unsafe {
-        signal(SIGPIPE, SIG_DFL);
-    }
-}
-
-#[cfg(not(unix))]
-fn default_sigpipe() {}
-
 fn main() -> ExitCode {
-    default_sigpipe();
+    tree_mech::quiet_on_closed_stdout();
     let cli = Cli::parse();
     let source = Source {
         urdf: model::UrdfOptions {
