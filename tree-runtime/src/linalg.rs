@@ -237,7 +237,6 @@ fn lu_core_factor(
     n: usize,
     mut swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
-    let scale = largest_magnitude(a).max(f64::MIN_POSITIVE);
     for j in 0..n {
         // Pivot: the largest entry of column j at or below the diagonal.
         let col = &a[j * n..(j + 1) * n];
@@ -248,6 +247,10 @@ fn lu_core_factor(
             }
         }
         let pivot = col[p];
+        // Singular when the pivot is lost in the rounding of its own column (U's part
+        // above included): relative per column, so an unknown in other units (a multiplier
+        // scaled by Δt beside momenta over Δt) is not taken for a singular one.
+        let scale = largest_magnitude(col).max(f64::MIN_POSITIVE);
         if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
             return Err(j);
         }

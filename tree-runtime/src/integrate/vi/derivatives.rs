@@ -466,7 +466,7 @@ where
         F: GeneralizedForce<N>,
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
-        lin.factor_transposed(cx.index, cx.t)?;
+        (lin.factor_transposed()).map_err(|c| singular(cx, &lin.shape, c))?;
         lin.fill_tangent();
         let sh = &lin.shape;
         let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
@@ -600,7 +600,7 @@ where
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
         let lin = self.linearisation.insert(lin);
-        lin.solve(cx.index, cx.t)?;
+        lin.solve().map_err(|c| singular(cx, &lin.shape, c))?;
         Ok(lin)
     }
 }
@@ -721,7 +721,8 @@ impl Linearisation {
 
     /// From the terms the step left (at its solution), the Jacobians, `R_z`'s factor, the
     /// tangent `Δ` and `dp₂/dx` (docs/derivations.md §9).
-    fn solve(&mut self, step: usize, t: f64) -> Result<(), SimError> {
+    /// On a singular `R_z`, the unknown (its column) whose pivot vanished.
+    fn solve(&mut self) -> Result<(), usize> {
         let sh = &self.shape;
         let (rows, w, nd) = (sh.rows(), sh.w(), sh.nd());
         let terms = StepTerms {
@@ -744,8 +745,7 @@ impl Linearisation {
             }
         }
         self.transposed = false;
-        lu_factor_packed(&mut self.factor, rows, &mut self.pivots)
-            .map_err(|_| singular(step, t))?;
+        lu_factor_packed(&mut self.factor, rows, &mut self.pivots)?;
         self.tangent_ready = false;
         // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve.
         let k = self.solved.len();
@@ -833,7 +833,7 @@ impl Linearisation {
     }
 
     /// `R_zᵀ`'s factor, for the adjoint of a contraction (made once per linearisation).
-    fn factor_transposed(&mut self, step: usize, t: f64) -> Result<(), SimError> {
+    fn factor_transposed(&mut self) -> Result<(), usize> {
         if self.transposed {
             return Ok(());
         }
@@ -843,8 +843,8 @@ impl Linearisation {
                 self.factor_t[r * rows + c] = self.jac[r * w + zc];
             }
         }
-        lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t)
-            .map_err(|_| singular(step, t))?;
+        // Its pivots' rows are R_z's columns: a failing one is an unknown's equation.
+        lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t)?;
         self.transposed = true;
         Ok(())
     }
@@ -956,11 +956,21 @@ fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
 }
 
 /// A singular Newton matrix at a converged step (constraints that became dependent).
-fn singular(step: usize, t: f64) -> SimError {
+/// `R_z` singular at unknown `c` (`q₂`'s dynamic variables, then the multipliers), while
+/// linearising the step of `cx`.
+fn singular<S, F, P>(cx: &StepContext<S, F, P>, sh: &Shape, c: usize) -> SimError
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let variable = match sh.dynamic.get(c) {
+        Some(&i) => cx.sys.variable_name(i).to_string(),
+        None => format!("λ of constraint `{}`", cx.sys.constraint_name(c - sh.nd())),
+    };
     SimError::SingularJacobian {
-        step,
-        t,
-        variable: "the step's Newton matrix, for its derivatives".into(),
+        step: cx.index,
+        t: cx.t,
+        variable,
     }
 }
 
