@@ -4,8 +4,9 @@
 use std::path::Path;
 
 use serde_json::{json, Value};
-use tree_mech::integrate::Forcing;
+use tree_mech::integrate::{project_initial_state, Forcing};
 use tree_mech::nalgebra::DMatrix;
+use tree_mech::runtime::dynamics::Split;
 use tree_mech::runtime::report::{self, Entry, Explicit};
 use tree_mech::System;
 
@@ -74,7 +75,13 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
             .collect()
     };
     let (dynamic, kinematic) = (pick(false), pick(true));
-    let (q0, dq0) = sys.initial_state();
+    // The model's own start is taken as `simulate` takes it: projected onto the constraints.
+    let (mut q0, mut dq0) = sys.initial_state();
+    if request.q.is_none() && request.dq.is_none() {
+        let split = Split::of(&sys);
+        project_initial_state(&mut sys, &split, &mut q0, &mut dq0)
+            .map_err(|e| format!("the model's start: {e}"))?;
+    }
     let q = request
         .q
         .map_or(Ok(q0), |s| parse_vector(s, n, "q", &names))?;

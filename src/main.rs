@@ -197,10 +197,12 @@ enum Command {
     Linearize {
         /// Model file (TOML, or URDF by its .urdf extension).
         model: PathBuf,
-        /// Configuration, comma-separated, in variable order (default: the model's q0).
+        /// Configuration, comma-separated, in variable order (default: the model's q0; with
+        /// neither --q nor --dq, the start projected onto the constraints as simulate takes
+        /// it).
         #[arg(long, allow_hyphen_values = true)]
         q: Option<String>,
-        /// Velocity, comma-separated (default: the model's dq0).
+        /// Velocity, comma-separated (default: the model's dq0, projected with q0).
         #[arg(long, allow_hyphen_values = true)]
         dq: Option<String>,
         /// Inputs, comma-separated in input order (default: zero).

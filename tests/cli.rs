@@ -923,3 +923,28 @@ fn optimize_solves_a_task_and_writes_every_output() {
     ]);
     assert!(!ok && stderr.contains("same file"), "{stderr}");
 }
+
+/// A model whose start is off its constraints (tests/models/elements.toml: `wall` by 0.35) is
+/// linearised from that start projected onto them, as `simulate` starts it; a step from a
+/// configuration the user gives off the constraints fails with a sentence naming the
+/// constraint and the gap, not Newton's failure alone.
+#[test]
+fn linearize_steps_from_the_start_on_the_constraints() {
+    let (ok, stdout, stderr) =
+        tree_mech(&["linearize", "tests/models/elements.toml", "--dt", "0.01"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("\"vi\""), "{stdout}");
+    let (ok, _, stderr) = tree_mech(&[
+        "linearize",
+        "tests/models/elements.toml",
+        "--dt",
+        "0.01",
+        "--q",
+        "0.2,0,0.3,0,0.33,1.2,0.9",
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("off constraint `wall` by") && stderr.contains("on the constraints"),
+        "{stderr}"
+    );
+}

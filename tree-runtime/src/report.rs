@@ -10,7 +10,7 @@ use crate::dynamics::{ModelMotions, NoForce, Prescription};
 use crate::error::SimError;
 use crate::integrate::{Forcing, MidpointVi, StepInput, StepOutput, ViSettings};
 use crate::linearize::{continuous_derivatives, explicit_step_derivatives, DORMAND_PRINCE, RK4};
-use crate::system::{System, Vector};
+use crate::system::{ConstraintTerms, Order, System, Vector};
 
 /// One named value.
 #[derive(Clone, Debug, PartialEq)]
@@ -84,6 +84,20 @@ where
 {
     let mut motion = ModelMotions::of(sys);
     linearize_with(sys, q, dq, request, &mut motion)
+}
+
+/// The constraint `q` violates most, and by how much, when that is more than rounding
+/// (`|h| > 10⁻⁹`, model units).
+fn off_the_constraints<S: System<N = Dyn>>(sys: &mut S, q: &Vector<Dyn>) -> Option<(String, f64)>
+where
+    DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
+{
+    let m = sys.constraint_count();
+    let mut c = ConstraintTerms::zeros(m, q.len());
+    let zero = sys.zero_vector();
+    sys.constraints(q, &zero, Order::First, &mut c);
+    let worst = (0..m).max_by(|&a, &b| c.h[a].abs().total_cmp(&c.h[b].abs()))?;
+    (c.h[worst].abs() > 1e-9).then(|| (sys.constraint_name(worst).to_string(), c.h[worst]))
 }
 
 /// [`linearize`] with the kinematic variables' `[q, q̇, q̈]` from `motion`.
@@ -192,8 +206,18 @@ where
     let (mut q2, mut p2, mut next) = (q.clone(), p1.clone(), q.clone());
     cx.dt = dt;
     let failed = |e: SimError| SimError::InvalidInput(format!("the VI step: {e}"));
-    vi.step(cx.at(0, t), &mut q2, &mut p2, &mut next)
-        .map_err(failed)?;
+    if let Err(e) = vi.step(cx.at(0, t), &mut q2, &mut p2, &mut next) {
+        return Err(off_the_constraints(cx.sys, &q).map_or_else(
+            || failed(e.clone()),
+            |(name, h)| {
+                SimError::InvalidInput(format!(
+                    "the VI step: {e}; the configuration is off constraint `{name}` by {h:e}, \
+                     which the step must close within Δt: linearise at a configuration on the \
+                     constraints (simulate projects its start onto them)"
+                ))
+            },
+        ));
+    }
     let (s, second) = if request.second_order {
         let (s, second) = vi
             .second_derivatives(cx.at(0, t), &q, &p1, &q2)
