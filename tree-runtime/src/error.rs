@@ -138,11 +138,11 @@ impl fmt::Display for SimError {
         match self {
             SimError::SingularMassMatrix { step, t, variable, pivot } => write!(
                 f,
-                "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`)"
+                "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`)", t = Seconds(*t)
             ),
             SimError::SingularConstraints { step, t, constraint } => write!(
                 f,
-                "step {step} (t = {t}): the constraint Jacobian has lost rank at constraint `{constraint}` (redundant or degenerate constraints)"
+                "step {step} (t = {t}): the constraint Jacobian has lost rank at constraint `{constraint}` (redundant or degenerate constraints)", t = Seconds(*t)
             ),
             SimError::Unsatisfiable { constraint, violation } => write!(
                 f,
@@ -154,28 +154,43 @@ impl fmt::Display for SimError {
             ),
             SimError::SingularJacobian { step, t, variable } => write!(
                 f,
-                "step {step} (t = {t}): variational integrator Newton matrix is singular (at variable `{variable}`)"
+                "step {step} (t = {t}): variational integrator Newton matrix is singular (at variable `{variable}`)", t = Seconds(*t)
             ),
             SimError::NewtonFailed { step, t, iterations, residual, violation } => write!(
                 f,
-                "step {step} (t = {t}): Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e})"
+                "step {step} (t = {t}): Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e}): the step may be too long for the motion here; lower --dt", t = Seconds(*t)
             ),
             SimError::StepTooCoarse { step, t, dt, variable, turn } => write!(
                 f,
-                "step {step} (t = {t}): `{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt"
+                "step {step} (t = {t}): `{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt", t = Seconds(*t)
             ),
             SimError::NonFinite { step, t, what } => {
-                write!(f, "step {step} (t = {t}): {what} is not finite")
+                write!(f, "step {step} (t = {t}): {what} is not finite", t = Seconds(*t))
             }
             SimError::StepSizeTooSmall { step, t, dt } => {
-                write!(f, "step {step} (t = {t}): adaptive step size {dt:e} is too small")
+                write!(f, "step {step} (t = {t}): adaptive step size {dt:e} is too small", t = Seconds(*t))
             }
             SimError::StepBudget { step, t, dt, needed, max_steps } => write!(
                 f,
-                "step {step} (t = {t}): the adaptive step size fell to {dt:.3e} s, so the run would need about {needed:.2e} steps, more than its budget of {max_steps}: the model is stiff here; use --integrator vi (or rk4 with a small --dt), or raise --max-steps"
+                "step {step} (t = {t}): the adaptive step size fell to {dt:.3e} s, so the run would need about {needed:.2e} steps, more than its budget of {max_steps}: the model is stiff here; use --integrator vi (or rk4 with a small --dt), or raise --max-steps", t = Seconds(*t)
             ),
             SimError::InvalidInput(m) | SimError::Unsupported(m) => f.write_str(m),
         }
+    }
+}
+
+/// A time in seconds as the messages print it: to 12 decimals, trailing zeros dropped (a
+/// subdivided step's `0.5624999999999999` reads `0.5625`).
+struct Seconds(f64);
+
+impl fmt::Display for Seconds {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0 != 0.0 && self.0.abs() < 1e-6 {
+            return write!(f, "{:e}", self.0);
+        }
+        let text = format!("{:.12}", self.0);
+        let text = text.trim_end_matches('0').trim_end_matches('.');
+        f.write_str(if text == "-0" { "0" } else { text })
     }
 }
 
@@ -188,3 +203,18 @@ impl fmt::Debug for SimError {
 }
 
 impl std::error::Error for SimError {}
+
+#[cfg(test)]
+mod tests {
+    use super::Seconds;
+
+    #[test]
+    fn times_print_without_rounding_noise() {
+        let show = |t: f64| Seconds(t).to_string();
+        assert_eq!(show(0.5624999999999999), "0.5625");
+        assert_eq!(show(0.0), "0");
+        assert_eq!(show(12.25), "12.25");
+        assert_eq!(show(3e-7), "3e-7");
+        assert_eq!(show(-0.1), "-0.1");
+    }
+}
