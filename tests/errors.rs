@@ -410,6 +410,6 @@ fn errors_print_as_sentences_also_through_debug() {
     };
     assert_eq!(
         format!("{err:?}"),
-        "step 3 (t = 0.03): the energy E = T + V (inf) is not finite"
+        "step 3 (t = 0.03): the energy E = T + V (inf) is not finite (the run diverged: lower --dt)"
     );
 }

@@ -165,7 +165,12 @@ impl fmt::Display for SimError {
                 "step {step} (t = {t}): `{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt", t = Seconds(*t)
             ),
             SimError::NonFinite { step, t, what } => {
-                write!(f, "step {step} (t = {t}): {what} is not finite", t = Seconds(*t))
+                write!(f, "step {step} (t = {t}): {what} is not finite", t = Seconds(*t))?;
+                // Finite at the start and not after: the run diverged.
+                if *step > 0 {
+                    f.write_str(" (the run diverged: lower --dt)")?;
+                }
+                Ok(())
             }
             SimError::StepSizeTooSmall { step, t, dt } => {
                 write!(f, "step {step} (t = {t}): adaptive step size {dt:e} is too small", t = Seconds(*t))
