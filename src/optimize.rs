@@ -109,15 +109,17 @@ pub fn run(r: Request) -> Result<(), String> {
         }),
         max_iterations: r.max_iterations,
     };
-    if !r.quiet {
-        println!(
-            "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}",
-            "iter", "cost", "step", "μ", "max |k|"
-        );
-    }
     let mut count = 0;
     let mut print = |it: &Iteration| {
         count += 1;
+        // The header with the first iteration: a task refused while setting up prints
+        // nothing on stdout.
+        if !r.quiet && count == 1 {
+            println!(
+                "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}",
+                "iter", "cost", "step", "μ", "max |k|"
+            );
+        }
         if !r.quiet {
             println!(
                 "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}",

@@ -922,6 +922,25 @@ fn optimize_solves_a_task_and_writes_every_output() {
         "tasks/cartpole-swingup.toml",
     ]);
     assert!(!ok && stderr.contains("same file"), "{stderr}");
+    // Refused while setting up the solve: the error alone, no iteration table begun.
+    let tight = dir.join("tight.toml");
+    let reach =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))
+            .unwrap()
+            .replace(
+                "../models/",
+                concat!(env!("CARGO_MANIFEST_DIR"), "/models/"),
+            );
+    std::fs::write(
+        &tight,
+        format!("{reach}\n[limits]\nshoulder_lift_joint = [-1.0, 1.0]\n"),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = tree_mech(&["optimize", tight.to_str().unwrap()]);
+    assert!(
+        !ok && stderr.contains("exclude") && stdout.is_empty(),
+        "{stdout}{stderr}"
+    );
 }
 
 /// A model whose start is off its constraints (tests/models/elements.toml: `wall` by 0.35) is
