@@ -37,7 +37,8 @@ fn a_singular_mass_matrix_is_an_error_naming_the_step() {
         let msg = err.to_string();
         assert!(
             msg.starts_with("step 0 (t = 0)")
-                && msg.contains("mass matrix is not positive definite"),
+                && msg.contains("mass matrix is not positive definite")
+                && msg.contains("gimbal lock"),
             "{msg}"
         );
     }

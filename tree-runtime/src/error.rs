@@ -138,7 +138,7 @@ impl fmt::Display for SimError {
         match self {
             SimError::SingularMassMatrix { step, t, variable, pivot } => write!(
                 f,
-                "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`)", t = Seconds(*t)
+                "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`): a variable that moves no mass, or a singular configuration where two variables move alike (rotations whose axes line up: a gimbal lock)", t = Seconds(*t)
             ),
             SimError::SingularConstraints { step, t, constraint } => write!(
                 f,
