@@ -634,6 +634,9 @@ pub(crate) struct Linearisation {
     /// column, since `∂R/∂u_k = left·∂R/∂p₁` there and `∂p₂/∂p₁ = 0`).
     z_columns: Vec<usize>,
     solved: Vec<usize>,
+    /// `solved` as runs of consecutive columns `(first column of w, first solved index,
+    /// length)`: the right-hand sides are gathered a run at a time.
+    solved_runs: Vec<(usize, usize, usize)>,
     /// Each input's variable as a dynamic row (its `p₁` column), if it is dynamic.
     input_rows: Vec<Option<usize>>,
     /// `R_z`'s LU factor (column-major, packed) and its pivots; `R_zᵀ`'s likewise.
@@ -684,6 +687,13 @@ impl Linearisation {
             tangent[(xc, c)] = 1.0;
         }
         let ks = solved.len();
+        let mut solved_runs: Vec<(usize, usize, usize)> = Vec::new();
+        for (c, &xc) in solved.iter().enumerate() {
+            match solved_runs.last_mut() {
+                Some((from, _, len)) if *from + *len == xc => *len += 1,
+                _ => solved_runs.push((xc, c, 1)),
+            }
+        }
         Linearisation {
             lqq: vec![0.0; n * n],
             lvq: vec![0.0; n * n],
@@ -701,6 +711,7 @@ impl Linearisation {
             pjac: vec![0.0; nd * w],
             z_columns,
             solved,
+            solved_runs,
             input_rows,
             factor: vec![0.0; rows * rows],
             pivots: vec![0; rows],
@@ -751,8 +762,11 @@ impl Linearisation {
         let k = self.solved.len();
         for r in 0..rows {
             let row = &self.jac[r * w..(r + 1) * w];
-            for (c, &xc) in self.solved.iter().enumerate() {
-                self.rhs[r * k + c] = -row[xc];
+            let out = &mut self.rhs[r * k..(r + 1) * k];
+            for &(from, to, len) in &self.solved_runs {
+                for (o, &x) in out[to..to + len].iter_mut().zip(&row[from..from + len]) {
+                    *o = -x;
+                }
             }
         }
         lu_solve_packed_rows(&self.factor, rows, &self.pivots, &mut self.rhs, k);
@@ -761,8 +775,8 @@ impl Linearisation {
         for r in 0..nd {
             let prow = &self.pjac[r * w..(r + 1) * w];
             let out = &mut self.dp2[r * k..(r + 1) * k];
-            for (o, &xc) in out.iter_mut().zip(&self.solved) {
-                *o = prow[xc];
+            for &(from, to, len) in &self.solved_runs {
+                out[to..to + len].copy_from_slice(&prow[from..from + len]);
             }
         }
         combine_rows(
