@@ -176,6 +176,7 @@ fn contract<T: Scalar>(lambda: &[T], d2h: &[T], out: &mut [T]) {
 ///   `∂p₂ᵢ/∂u_k = plus·B`,
 ///
 /// with `∂F/∂q₁ = (1−α)F_q − F_q̇/Δt`, `∂F/∂q₂ = αF_q + F_q̇/Δt` (F at `(q_α, v)`).
+#[inline(always)]
 fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut [T]) {
     let (n, m, w) = (sh.n, sh.m, sh.w());
     let (a, dt) = (sh.ld.alpha, sh.ld.dt);
@@ -237,6 +238,13 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
         let row = &mut jac[(sh.nd() + s) * w..(sh.nd() + s + 1) * w];
         row[sh.w_q2()..sh.w_q2() + n].copy_from_slice(&st.dh2[s * n..(s + 1) * n]);
     }
+}
+
+/// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (as
+/// `linalg`'s kernels; the same operations in the same order on every CPU).
+#[multiversion::multiversion(targets("x86_64+avx"))]
+fn jacobians_f64(sh: &Shape, st: &StepTerms<f64>, jac: &mut [f64], pjac: &mut [f64]) {
+    jacobians(sh, st, jac, pjac);
 }
 
 /// The step's first derivatives as blocks (trep's `q2_dq1` …). Rows: the dynamic variables
@@ -748,7 +756,7 @@ impl Linearisation {
             lambda_d2h1: &self.lambda_d2h1,
             dh2: &self.dh2,
         };
-        jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
+        jacobians_f64(sh, &terms, &mut self.jac, &mut self.pjac);
         // R_z, column-major, factored (R_zᵀ only when a contraction asks for it).
         for (c, &zc) in self.z_columns.iter().enumerate() {
             for r in 0..rows {
