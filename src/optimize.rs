@@ -5,7 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use serde_json::json;
-use tree_mech::control::{solve_task, Iteration, TaskOptions, TaskResult, TaskSolver};
+use tree_mech::control::{
+    solve_task, BoxPhase, Iteration, Solver, TaskOptions, TaskResult, TaskSolver,
+};
 use tree_mech::model::{self, Model, Task};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::trajectory::{CsvStream, Sample};
@@ -116,13 +118,24 @@ pub fn run(r: Request) -> Result<(), String> {
         // nothing on stdout.
         if !r.quiet && count == 1 {
             println!(
-                "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}",
-                "iter", "cost", "step", "μ", "max |k|"
+                "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}  {:>5}  {:>6}",
+                "iter", "cost", "step", "μ", "max |k|", "model", "limits"
             );
         }
         if !r.quiet {
+            // The backward pass's model (DDP's full one, or Gauss–Newton) and how it took
+            // the limits (clamped in the forward pass, or the box QP).
+            let model = match it.model {
+                Solver::Ddp => "ddp",
+                Solver::Ilqr => "gn",
+            };
+            let limits = match it.limits {
+                None => "—",
+                Some(BoxPhase::Clamped) => "clamp",
+                Some(BoxPhase::Boxed) => "box",
+            };
             println!(
-                "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}",
+                "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}  {model:>5}  {limits:>6}",
                 it.cost, it.step, it.mu, it.gradient
             );
         }

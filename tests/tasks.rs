@@ -7,7 +7,8 @@
 use std::path::Path;
 
 use tree_mech::control::{
-    cost_gradient, dare, solve_task, Control, DiscreteSystem, TaskCost, TaskOptions, TaskResult,
+    cost_gradient, dare, solve_task, BoxPhase, Control, DiscreteSystem, Solver, TaskCost,
+    TaskOptions, TaskResult,
 };
 use tree_mech::integrate::ViSettings;
 use tree_mech::model::{self, task_from_str};
@@ -312,6 +313,17 @@ fn ddp_converges_on_the_reach_to_the_ilqr_optimum() {
         (a - b).abs() < 1e-6 * b,
         "DDP's cost {a} against iLQR's {b}"
     );
+    // Each iteration says which model its pass used: Gauss–Newton far from the optimum, the
+    // full one near it; and how it took the UR5's effort limits (clamped from the guess).
+    let history = &res.solution.history;
+    assert_eq!(history[0].model, Solver::Ilqr);
+    assert_eq!(history[iterations - 1].model, Solver::Ddp);
+    assert_eq!(history[0].limits, Some(BoxPhase::Clamped));
+    assert!(ilqr
+        .solution
+        .history
+        .iter()
+        .all(|it| it.model == Solver::Ilqr));
 }
 
 /// Every mistake in a task file is a sentence with its line.

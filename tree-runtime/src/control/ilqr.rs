@@ -68,7 +68,7 @@ impl Default for IlqrSettings {
 /// than ½ or none is accepted: from there the box QP gives the constrained Newton step, and
 /// `max |k|` vanishes at a constrained optimum.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum BoxPhase {
+pub enum BoxPhase {
     /// Unconstrained gains; limits only by clamping in the forward pass.
     Clamped,
     /// The box QP's gains.
@@ -86,6 +86,11 @@ pub struct Iteration {
     pub mu: f64,
     /// The largest feed-forward entry `max |k|`.
     pub gradient: f64,
+    /// The model the backward pass used: [`Solver::Ddp`]'s full one, or the Gauss–Newton
+    /// model ([`Solver::Ilqr`]: iLQR's, and DDP's where its full model was indefinite).
+    pub model: Solver,
+    /// With limits, how the pass treated them (`None` without limits).
+    pub limits: Option<BoxPhase>,
 }
 
 /// The optimised trajectory and its controller.
@@ -190,12 +195,15 @@ where
     let (mut x_new, mut u_new) = (x.clone(), u.clone());
     let mut mu = settings.mu;
     let mut history = Vec::with_capacity(settings.max_iterations);
-    let mut record = |cost: f64, step: f64, mu: f64, gradient: f64| {
+    let has_limits = settings.limits.is_some();
+    let mut record = |cost: f64, step: f64, mu: f64, gradient: f64, pass: (Solver, BoxPhase)| {
         let it = Iteration {
             cost,
             step,
             mu,
             gradient,
+            model: pass.0,
+            limits: has_limits.then_some(pass.1),
         };
         report(&it);
         history.push(it);
@@ -212,6 +220,7 @@ where
             },
         };
         let mut gradient = backward(dynamics, cost, &x, &u, &mut work, &pass)?;
+        let mut model = pass.solver;
         if gradient.is_none() && pass.solver == Solver::Ddp {
             // DDP's model is indefinite here (the step's curvature contracted with V_x, far
             // from the optimum): this pass takes the Gauss–Newton model at the same μ rather
@@ -221,7 +230,9 @@ where
                 ..pass
             };
             gradient = backward(dynamics, cost, &x, &u, &mut work, &gauss_newton)?;
+            model = Solver::Ilqr;
         }
+        let used = (model, phase);
         let Some(gradient) = gradient else {
             // Some Q_uu + μI is not positive definite: regularise more.
             mu = (mu * 10.0).max(1e-6);
@@ -232,7 +243,7 @@ where
         };
         if gradient < settings.gradient_tolerance {
             converged = true;
-            record(total, 0.0, mu, gradient);
+            record(total, 0.0, mu, gradient, used);
             break;
         }
         // Forward pass: the first step length that lowers the true cost.
@@ -262,7 +273,7 @@ where
         }
         if accepted == 0.0 {
             mu = (mu * 10.0).max(1e-6);
-            record(total, 0.0, mu, gradient);
+            record(total, 0.0, mu, gradient, used);
             if mu > 1e10 {
                 break;
             }
@@ -291,7 +302,7 @@ where
         } else {
             (mu * 0.1).max(1e-12)
         };
-        record(total, accepted, mu, gradient);
+        record(total, accepted, mu, gradient, used);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             converged = true;
             break;

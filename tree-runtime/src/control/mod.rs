@@ -16,7 +16,9 @@ pub mod task_solve;
 
 pub use cost::{Cost, Derivatives, Needs, QuadraticCost};
 pub use discrete::{DiscreteSystem, Knot};
-pub use ilqr::{cost_gradient, solve, solve_with, IlqrSettings, Iteration, Solution, Solver};
+pub use ilqr::{
+    cost_gradient, solve, solve_with, BoxPhase, IlqrSettings, Iteration, Solution, Solver,
+};
 pub use lqr::{dare, tvlqr, Lqr};
 pub use task_cost::TaskCost;
 pub use task_solve::{solve_task, task_system, TaskOptions, TaskResult};
