@@ -60,13 +60,18 @@ where
     assert!(worst < 1e-9, "{what}: q differs from trep's by {worst:e}");
 }
 
-#[test]
-fn the_puppet_moves_as_trep_moves_it_interpreted() {
+/// The Puppet read at run time from its TOML file.
+fn interpreted_puppet() -> TreeSystem {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/tools/reference/trep-puppet.toml"
     );
-    let mut sys = TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap();
+    TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap()
+}
+
+#[test]
+fn the_puppet_moves_as_trep_moves_it_interpreted() {
+    let mut sys = interpreted_puppet();
     check(&mut sys, "interpreted");
 }
 
@@ -106,11 +111,7 @@ where
 
 #[test]
 fn the_puppet_steps_from_rest_at_short_steps_interpreted() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tools/reference/trep-puppet.toml"
-    );
-    let mut sys = TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap();
+    let mut sys = interpreted_puppet();
     short_steps_converge(&mut sys, "interpreted");
 }
 
