@@ -6,8 +6,9 @@ use std::path::Path;
 use serde_json::{json, Value};
 use tree_mech::integrate::{project_initial_state, Forcing};
 use tree_mech::nalgebra::DMatrix;
-use tree_mech::runtime::dynamics::Split;
+use tree_mech::runtime::dynamics::{prescribe, Split};
 use tree_mech::runtime::report::{self, Entry, Explicit};
+use tree_mech::runtime::ModelMotions;
 use tree_mech::System;
 
 use crate::{parse_list, parse_vector, Source};
@@ -75,10 +76,20 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
             .collect()
     };
     let (dynamic, kinematic) = (pick(false), pick(true));
-    // The model's own start is taken as `simulate` takes it: projected onto the constraints.
+    // The model's own start is taken as `simulate` takes it: its kinematic variables at their
+    // prescription (here at --t), then projected onto the constraints.
     let (mut q0, mut dq0) = sys.initial_state();
     if request.q.is_none() && request.dq.is_none() {
         let split = Split::of(&sys);
+        let mut motion = ModelMotions::of(&sys);
+        prescribe(
+            &split.kinematic,
+            &mut motion,
+            request.t,
+            &mut q0,
+            &mut dq0,
+            None,
+        );
         project_initial_state(&mut sys, &split, &mut q0, &mut dq0)
             .map_err(|e| format!("the model's start: {e}"))?;
     }

@@ -45,7 +45,8 @@ pub enum SimError {
         step: usize,
         /// The simulated time then.
         t: f64,
-        /// The unknown (a variable, or a constraint's λ) whose pivot vanished.
+        /// The unknown whose pivot vanished, as the message names it: ``variable `x` `` or
+        /// ``the λ of constraint `c` ``.
         variable: String,
     },
     /// Newton did not reach the tolerance on the discrete Euler–Lagrange residual.
@@ -154,7 +155,7 @@ impl fmt::Display for SimError {
             ),
             SimError::SingularJacobian { step, t, variable } => write!(
                 f,
-                "step {step} (t = {t}): variational integrator Newton matrix is singular (at variable `{variable}`)", t = Seconds(*t)
+                "step {step} (t = {t}): variational integrator Newton matrix is singular (at {variable})", t = Seconds(*t)
             ),
             SimError::NewtonFailed { step, t, iterations, residual, violation } => write!(
                 f,

@@ -86,8 +86,12 @@ where
     linearize_with(sys, q, dq, request, &mut motion)
 }
 
-/// The constraint `q` violates most, and by how much, when that is more than rounding
-/// (`|h| > 10⁻⁹`, model units).
+/// A violation a typed-in configuration can carry without being the cause of a failed step
+/// (model units): below it, a failed step's message does not point at the constraints.
+const OFF_THE_CONSTRAINTS: f64 = 1e-9;
+
+/// The constraint `q` violates most, and by how much, when that is more than
+/// [`OFF_THE_CONSTRAINTS`].
 fn off_the_constraints<S: System<N = Dyn>>(sys: &mut S, q: &Vector<Dyn>) -> Option<(String, f64)>
 where
     DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
@@ -97,7 +101,8 @@ where
     let zero = sys.zero_vector();
     sys.constraints(q, &zero, Order::First, &mut c);
     let worst = (0..m).max_by(|&a, &b| c.h[a].abs().total_cmp(&c.h[b].abs()))?;
-    (c.h[worst].abs() > 1e-9).then(|| (sys.constraint_name(worst).to_string(), c.h[worst]))
+    (c.h[worst].abs() > OFF_THE_CONSTRAINTS)
+        .then(|| (sys.constraint_name(worst).to_string(), c.h[worst]))
 }
 
 /// [`linearize`] with the kinematic variables' `[q, q̇, q̈]` from `motion`.

@@ -499,7 +499,7 @@ where
             SimError::SingularJacobian {
                 step,
                 t,
-                variable: sys.variable_name(dynamic[c]).to_string(),
+                variable: format!("variable `{}`", sys.variable_name(dynamic[c])),
             }
         })?;
         let (packed, pivots) = (self.factors.as_slice(), self.pivots.as_slice());
@@ -568,7 +568,7 @@ where
             SimError::SingularJacobian {
                 step,
                 t,
-                variable: format!("λ of constraint `{}`", sys.constraint_name(r)),
+                variable: format!("the λ of constraint `{}`", sys.constraint_name(r)),
             }
         })?;
         for s in 0..m {

@@ -865,7 +865,8 @@ impl Linearisation {
                 self.factor_t[r * rows + c] = self.jac[r * w + zc];
             }
         }
-        // Its pivots' rows are R_z's columns: a failing one is an unknown's equation.
+        // Column c of R_zᵀ is row c of R_z, the equation of dynamic variable c (or of
+        // constraint c − n_d): a failure there is named as that unknown's.
         lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t)?;
         self.transposed = true;
         Ok(())
@@ -977,17 +978,19 @@ fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
     }
 }
 
-/// A singular Newton matrix at a converged step (constraints that became dependent).
-/// `R_z` singular at unknown `c` (`q₂`'s dynamic variables, then the multipliers), while
-/// linearising the step of `cx`.
+/// `R_z` singular at a converged step (constraints that became dependent), at unknown `c`
+/// (`q₂`'s dynamic variables, then the multipliers), while linearising the step of `cx`.
 fn singular<S, F, P>(cx: &StepContext<S, F, P>, sh: &Shape, c: usize) -> SimError
 where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let variable = match sh.dynamic.get(c) {
-        Some(&i) => cx.sys.variable_name(i).to_string(),
-        None => format!("λ of constraint `{}`", cx.sys.constraint_name(c - sh.nd())),
+        Some(&i) => format!("variable `{}`", cx.sys.variable_name(i)),
+        None => format!(
+            "the λ of constraint `{}`",
+            cx.sys.constraint_name(c - sh.nd())
+        ),
     };
     SimError::SingularJacobian {
         step: cx.index,
