@@ -2,9 +2,13 @@
 //! fixed-size system stays on the stack and an interpreted one reuses its buffers. They work
 //! on the column-major storage directly (`a[j * n + i]` is row i, column j).
 
-use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dim};
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
 use crate::system::{Matrix, Vector};
+
+mod products;
+
+pub use products::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
 
 /// Solves `A x = b` for symmetric positive definite `A` by Cholesky, overwriting the lower
 /// triangle of `a` with the factor and `b` with `x`. On failure returns the pivot index and
@@ -280,173 +284,6 @@ fn lu_core_factor(
     Ok(())
 }
 
-/// `C = A B + β C` for column-major dense matrices, by plain loops: no allocation (nalgebra's
-/// `gemm` hands large products to `matrixmultiply`, which allocates packing buffers per
-/// call). For the dense products of a control problem's backward pass; a zero entry of `B`
-/// skips its column of `A` (so `0 · ∞` counts as 0 there).
-pub fn mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    let (m, n, p) = (a.nrows(), b.ncols(), a.ncols());
-    assert!(
-        b.nrows() == p && c.nrows() == m && c.ncols() == n,
-        "mul_into: shapes"
-    );
-    mul_core(
-        c.as_mut_slice(),
-        a.as_slice(),
-        b.as_slice(),
-        (m, n, p),
-        beta,
-    );
-}
-
-/// [`mul_into`] on slices (`C` m × n, `A` m × p, `B` p × n), compiled also for AVX and chosen
-/// at run time by what the CPU has (`multiversion`; each entry's sum in the same order).
-#[multiversion::multiversion(targets("x86_64+avx"))]
-fn mul_core(c: &mut [f64], a: &[f64], b: &[f64], (m, n, p): (usize, usize, usize), beta: f64) {
-    for j in 0..n {
-        let cj = &mut c[j * m..(j + 1) * m];
-        if beta == 0.0 {
-            cj.fill(0.0);
-        } else if beta != 1.0 {
-            cj.iter_mut().for_each(|x| *x *= beta);
-        }
-        for k in 0..p {
-            let bkj = b[j * p + k];
-            // Structural zeros of B (the step Jacobians' memory blocks) cost nothing.
-            if bkj == 0.0 {
-                continue;
-            }
-            for (x, &aik) in cj.iter_mut().zip(&a[k * m..(k + 1) * m]) {
-                *x += aik * bkj;
-            }
-        }
-    }
-}
-
-/// `(s₀ + s₁) + (s₂ + s₃)`: four lanes' partial sums added. Kept out of line so that the
-/// compiler vectorises the sums' lanes (one vector per column of [`tr_mul_slices`]'s block)
-/// rather than across columns for the sake of this last addition, which costs shuffles in
-/// every iteration.
-#[inline(never)]
-fn lanes_sum(s: &[f64; 4]) -> f64 {
-    (s[0] + s[1]) + (s[2] + s[3])
-}
-
-/// `x · y` in four independent partial sums (the compiler vectorises them; one running sum
-/// would wait on each addition).
-fn dot(x: &[f64], y: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
-    let tail: f64 = xc
-        .remainder()
-        .iter()
-        .zip(yc.remainder())
-        .map(|(a, b)| a * b)
-        .sum();
-    for (a, b) in xc.zip(yc) {
-        for l in 0..4 {
-            acc[l] += a[l] * b[l];
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
-}
-
-/// `C = Aᵀ B + β C` by plain loops (see [`mul_into`]).
-pub fn tr_mul_into(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    tr_mul_core(c, a, b, beta, false);
-}
-
-/// [`tr_mul_into`] for a product known to be symmetric (`C`, `AᵀB` both symmetric, as
-/// `Aᵀ W A` with `B = W A`): the upper triangle computed, the lower mirrored — half the work.
-pub fn tr_mul_into_symmetric(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64) {
-    tr_mul_core(c, a, b, beta, true);
-    let m = c.nrows();
-    for j in 0..m {
-        for i in j + 1..m {
-            c[(i, j)] = c[(j, i)];
-        }
-    }
-}
-
-/// `C = Aᵀ B + β C`, only the entries `i ≤ j + 3` of each block of four columns when `upper`.
-/// Entry `(i, j)` is column i of A against column j of B over the rows where A's column is
-/// not zero (its first to last non-zero entry): the step Jacobians' memory rows and columns
-/// are structural zeros, which cost nothing.
-fn tr_mul_core(c: &mut DMatrix<f64>, a: &DMatrix<f64>, b: &DMatrix<f64>, beta: f64, upper: bool) {
-    let (m, n, p) = (a.ncols(), b.ncols(), a.nrows());
-    assert!(
-        b.nrows() == p && c.nrows() == m && c.ncols() == n,
-        "tr_mul_into: shapes"
-    );
-    tr_mul_slices(
-        c.as_mut_slice(),
-        a.as_slice(),
-        b.as_slice(),
-        (m, n, p),
-        beta,
-        upper,
-    );
-}
-
-/// [`tr_mul_core`] on slices (`C` m × n, `A` p × m, `B` p × n), compiled also for AVX and
-/// chosen at run time (as [`mul_core`]).
-#[multiversion::multiversion(targets("x86_64+avx"))]
-fn tr_mul_slices(
-    c: &mut [f64],
-    a: &[f64],
-    b: &[f64],
-    (m, n, p): (usize, usize, usize),
-    beta: f64,
-    upper: bool,
-) {
-    let store = |c: &mut [f64], at: usize, s: f64| {
-        c[at] = if beta == 0.0 { s } else { s + beta * c[at] };
-    };
-    fn quads(s: &[f64]) -> std::slice::ChunksExact<'_, f64> {
-        s.chunks_exact(4)
-    }
-    let blocks = n / 4 * 4;
-    for i in 0..m {
-        let column = &a[i * p..(i + 1) * p];
-        let lo = column.iter().position(|&x| x != 0.0).unwrap_or(p);
-        let hi = column.iter().rposition(|&x| x != 0.0).map_or(lo, |r| r + 1);
-        let ai = &column[lo..hi];
-        let (a4, a_tail) = ai.split_at(ai.len() / 4 * 4);
-        // Four columns of B at a time: A's column is read once for four entries of C, in
-        // sixteen independent partial sums (lane l of a column's sums takes the terms
-        // k ≡ l mod 4: one vector per column) that the compiler vectorises.
-        for j in (0..blocks).step_by(4) {
-            if upper && i >= j + 4 {
-                continue;
-            }
-            let [b0, b1, b2, b3] =
-                std::array::from_fn(|l| b[(j + l) * p + lo..(j + l) * p + hi].split_at(a4.len()));
-            let columns = quads(b0.0)
-                .zip(quads(b1.0))
-                .zip(quads(b2.0))
-                .zip(quads(b3.0));
-            let mut acc = [[0.0f64; 4]; 4];
-            for (x, (((y0, y1), y2), y3)) in quads(a4).zip(columns) {
-                for (sums, y) in acc.iter_mut().zip([y0, y1, y2, y3]) {
-                    for l in 0..4 {
-                        sums[l] += x[l] * y[l];
-                    }
-                }
-            }
-            for (l, (sums, (_, tail))) in acc.iter().zip([b0, b1, b2, b3]).enumerate() {
-                let tail: f64 = a_tail.iter().zip(tail).map(|(x, y)| x * y).sum();
-                store(c, (j + l) * m + i, lanes_sum(sums) + tail);
-            }
-        }
-        for j in blocks..n {
-            if upper && i > j {
-                continue;
-            }
-            store(c, j * m + i, dot(ai, &b[j * p + lo..j * p + hi]));
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -484,7 +321,6 @@ mod tests {
         }
     }
 
-    /// The loop products equal nalgebra's, with and without accumulation, transposed or not.
     /// `combine_rows` is `C + A D` with `A` read at chosen columns of a wider row-major matrix;
     /// `largest_magnitude` finds the largest entry wherever it sits (any length, NaN skipped).
     #[test]
@@ -512,51 +348,5 @@ mod tests {
                 assert_eq!(largest_magnitude(&x), 7.0, "length {len}, at {at}");
             }
         }
-    }
-
-    #[test]
-    fn loop_products_equal_nalgebras() {
-        let a = DMatrix::from_fn(4, 3, |i, j| ((i * 3 + j) as f64).sin());
-        let b = DMatrix::from_fn(3, 5, |i, j| ((i * 5 + j) as f64).cos());
-        let at = a.transpose();
-        let c0 = DMatrix::from_fn(4, 5, |i, j| (i + 2 * j) as f64);
-        let mut c = c0.clone();
-        mul_into(&mut c, &a, &b, 0.5);
-        assert!((&c - (&a * &b + &c0 * 0.5)).amax() < 1e-14);
-        let mut c = c0.clone();
-        tr_mul_into(&mut c, &at, &b, 1.0);
-        assert!((&c - (&a * &b + &c0)).amax() < 1e-14);
-        let mut c = DMatrix::from_element(4, 5, f64::NAN);
-        mul_into(&mut c, &a, &b, 0.0);
-        assert!((&c - &a * &b).amax() < 1e-14, "β = 0 overwrites");
-        // Long enough for the blocked, chunked path (and its tails).
-        let a = DMatrix::from_fn(11, 6, |i, j| ((i * 6 + j) as f64 * 0.7).sin());
-        let b = DMatrix::from_fn(11, 9, |i, j| ((i * 9 + j) as f64 * 0.3).cos());
-        let c0 = DMatrix::from_fn(6, 9, |i, j| (i * j) as f64);
-        let mut c = c0.clone();
-        tr_mul_into(&mut c, &a, &b, 2.0);
-        assert!((&c - (a.transpose() * &b + &c0 * 2.0)).amax() < 1e-13);
-        // A symmetric product AᵀWA, upper triangle and mirror.
-        let w = DMatrix::from_fn(11, 11, |i, j| 1.0 / (1.0 + i as f64 + j as f64));
-        let wa = &w * &a;
-        let c0 = DMatrix::from_fn(6, 6, |i, j| (i * j) as f64);
-        let mut c = c0.clone();
-        tr_mul_into_symmetric(&mut c, &a, &wa, 1.0);
-        assert!((&c - (a.transpose() * &wa + &c0)).amax() < 1e-13);
-        // Columns of A with leading and trailing zeros, and one all zero (the sums run over
-        // each column's non-zero span only).
-        let a = DMatrix::from_fn(11, 6, |i, j| match j {
-            0 => 0.0,
-            _ if i < j || i + j > 13 => 0.0,
-            _ => ((i * 6 + j) as f64 * 0.7).sin(),
-        });
-        let c0 = DMatrix::from_fn(6, 9, |i, j| (i * j) as f64);
-        let mut c = c0.clone();
-        tr_mul_into(&mut c, &a, &b, 1.0);
-        assert!((&c - (a.transpose() * &b + &c0)).amax() < 1e-13);
-        let wa = &w * &a;
-        let mut c = DMatrix::from_element(6, 6, f64::NAN);
-        tr_mul_into_symmetric(&mut c, &a, &wa, 0.0);
-        assert!((&c - a.transpose() * &wa).amax() < 1e-13);
     }
 }

@@ -16,7 +16,7 @@ use crate::context::StepContext;
 use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
-use crate::linalg::{lu_factor_packed, lu_solve_packed, mul_into};
+use crate::linalg::{lu_factor_packed, lu_solve_packed, mul_into, Packing};
 use crate::outputs::Output;
 use crate::system::{Order, System, Vector};
 
@@ -369,6 +369,8 @@ where
     vs: Vector<N>,
     q2: Vector<N>,
     dq2: Vector<N>,
+    /// The factors of the stages' products, packed.
+    packing: Packing,
 }
 
 impl<N: nalgebra::Dim> ExplicitStepWorkspace<N>
@@ -398,6 +400,7 @@ where
             vs: sys.zero_vector(),
             q2: sys.zero_vector(),
             dq2: sys.zero_vector(),
+            packing: Packing::default(),
         }
     }
 }
@@ -500,9 +503,9 @@ where
         }
         ws.b.fill(0.0);
         ws.b.view_mut((nd, 0), (nd, nu)).copy_from(&d.qdd_du);
-        mul_into(&mut ws.kx[s], &ws.a, &ws.ix, 0.0);
+        mul_into(&mut ws.kx[s], &ws.a, &ws.ix, 0.0, &mut ws.packing);
         ws.ku[s].copy_from(&ws.b);
-        mul_into(&mut ws.ku[s], &ws.a, &ws.iu, 1.0);
+        mul_into(&mut ws.ku[s], &ws.a, &ws.iu, 1.0, &mut ws.packing);
         add_scaled(&mut out.x2_dx1, tableau.b[s] * h, &ws.kx[s]);
         add_scaled(&mut out.x2_du1, tableau.b[s] * h, &ws.ku[s]);
         // This stage's rates.

@@ -15,7 +15,7 @@ use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::{DiscreteSystem, Knot};
 use super::qp::{ControlQp, Limits};
 use crate::error::SimError;
-use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric};
+use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
 use crate::system::System;
 
 /// Which second-order model of the dynamics the backward pass uses.
@@ -492,6 +492,8 @@ struct Backward {
     v: DMatrix<f64>,
     x2: Vec<f64>,
     qp: ControlQp,
+    /// The factors of the dense products, packed.
+    packing: Packing,
 }
 
 impl Backward {
@@ -515,6 +517,7 @@ impl Backward {
             v: DMatrix::zeros(nx, nx),
             x2: vec![0.0; nx],
             qp: ControlQp::new(nu),
+            packing: Packing::default(),
         }
     }
 }
@@ -553,19 +556,19 @@ where
         cost.running(k, &work.knot, &u[k], Some(&mut bw.d));
         let (a, b) = (&work.a[k], &work.b[k]);
         // Q_x = ℓ_x + AᵀV_x, Q_u = ℓ_u + BᵀV_x, Q_xx = ℓ_xx + AᵀV_xxA, Q_uu = ℓ_uu + BᵀV_xxB,
-        // Q_ux = ℓ_ux + BᵀV_xxA (products by plain loops: nalgebra's gemm allocates).
+        // Q_ux = ℓ_ux + BᵀV_xxA (our blocked products: nalgebra's gemm allocates).
         bw.qx.copy_from(&bw.d.lx);
         bw.qx.gemv_tr(1.0, a, &bw.vx, 1.0);
         bw.qu.copy_from(&bw.d.lu);
         bw.qu.gemv_tr(1.0, b, &bw.vx, 1.0);
-        mul_into(&mut bw.vxx_a, &bw.vxx, a, 0.0);
-        mul_into(&mut bw.vxx_b, &bw.vxx, b, 0.0);
+        mul_into(&mut bw.vxx_a, &bw.vxx, a, 0.0, &mut bw.packing);
+        mul_into(&mut bw.vxx_b, &bw.vxx, b, 0.0, &mut bw.packing);
         bw.qxx.copy_from(&bw.d.lxx);
-        tr_mul_into_symmetric(&mut bw.qxx, a, &bw.vxx_a, 1.0);
+        tr_mul_into_symmetric(&mut bw.qxx, a, &bw.vxx_a, 1.0, &mut bw.packing);
         bw.quu.copy_from(&bw.d.luu);
-        tr_mul_into_symmetric(&mut bw.quu, b, &bw.vxx_b, 1.0);
+        tr_mul_into_symmetric(&mut bw.quu, b, &bw.vxx_b, 1.0, &mut bw.packing);
         bw.qux.copy_from(&bw.d.lux);
-        tr_mul_into(&mut bw.qux, b, &bw.vxx_a, 1.0);
+        tr_mul_into(&mut bw.qux, b, &bw.vxx_a, 1.0, &mut bw.packing);
         if pass.solver == Solver::Ddp {
             dynamics.contracted(
                 k,
@@ -602,10 +605,10 @@ where
         bw.vx.gemv_tr(1.0, &bw.qux, kk, 1.0);
         // KᵀQ_uuK + KᵀQ_ux + Q_uxᵀK = Z + Zᵀ with Z = KᵀY, Y = ½Q_uuK + Q_ux: one product
         // over the controls instead of three.
-        mul_into(&mut bw.quu_gain, &bw.quu, gain, 0.0);
+        mul_into(&mut bw.quu_gain, &bw.quu, gain, 0.0, &mut bw.packing);
         bw.quu_gain.scale_mut(0.5);
         bw.quu_gain += &bw.qux;
-        tr_mul_into(&mut bw.v, gain, &bw.quu_gain, 0.0);
+        tr_mul_into(&mut bw.v, gain, &bw.quu_gain, 0.0, &mut bw.packing);
         let nx = bw.v.nrows();
         for i in 0..nx {
             for j in 0..nx {

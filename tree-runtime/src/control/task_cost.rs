@@ -17,7 +17,7 @@ use super::discrete::Knot;
 use super::frames::{
     frame_jacobians, log_so3, right_jacobian_inverse, world_poses, world_poses_into,
 };
-use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric};
+use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
 
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]
@@ -87,6 +87,8 @@ struct Scratch {
     jw: DMatrix<f64>,
     running: Vec<Residual>,
     terminal: Vec<Residual>,
+    /// The factors of the dense products, packed.
+    packing: Packing,
 }
 
 /// The cost of a [`Task`] on its model.
@@ -208,6 +210,7 @@ impl TaskCost {
             jw,
             running,
             terminal,
+            packing,
         } = &mut self.scratch;
         let (terms, residuals) = match u {
             Some(_) => (&self.running, running),
@@ -240,29 +243,38 @@ impl TaskCost {
         };
         let mut total = 0.0;
         for (term, res) in terms.iter().zip(residuals.iter_mut()) {
-            at.residual(term, knot, u, poses, jac, (&mut *jp, &mut *jw), res);
+            at.residual(
+                term,
+                knot,
+                u,
+                poses,
+                jac,
+                (&mut *jp, &mut *jw, &mut *packing),
+                res,
+            );
             let w = Self::weight(term);
             for i in 0..res.r.len() {
                 res.wr[i] = scale * w[i] * res.r[i];
                 total += 0.5 * res.wr[i] * res.r[i];
             }
             if let Some(d) = d.as_mut() {
-                for i in 0..res.r.len() {
-                    let sw = scale * w[i];
-                    for c in 0..res.jx.ncols() {
-                        res.wjx[(i, c)] = sw * res.jx[(i, c)];
-                    }
-                    for c in 0..res.ju.ncols() {
-                        res.wju[(i, c)] = sw * res.ju[(i, c)];
+                // Each row scaled by s w_i, walked column by column (the storage's order).
+                let rows = res.r.len().max(1);
+                for (scaled, jac) in [(&mut res.wjx, &res.jx), (&mut res.wju, &res.ju)] {
+                    let columns = scaled.as_mut_slice().chunks_exact_mut(rows);
+                    for (out, column) in columns.zip(jac.as_slice().chunks_exact(rows)) {
+                        for ((o, &x), &wi) in out.iter_mut().zip(column).zip(w.as_slice()) {
+                            *o = scale * wi * x;
+                        }
                     }
                 }
                 d.lx.gemv_tr(1.0, &res.jx, &res.wr, 1.0);
-                tr_mul_into_symmetric(&mut d.lxx, &res.jx, &res.wjx, 1.0);
+                tr_mul_into_symmetric(&mut d.lxx, &res.jx, &res.wjx, 1.0, packing);
                 // State, frame and orientation residuals do not read the controls.
                 if matches!(term, Term::Control { .. } | Term::ControlRate { .. }) {
                     d.lu.gemv_tr(1.0, &res.ju, &res.wr, 1.0);
-                    tr_mul_into_symmetric(&mut d.luu, &res.ju, &res.wju, 1.0);
-                    tr_mul_into(&mut d.lux, &res.ju, &res.wjx, 1.0);
+                    tr_mul_into_symmetric(&mut d.luu, &res.ju, &res.wju, 1.0, packing);
+                    tr_mul_into(&mut d.lux, &res.ju, &res.wjx, 1.0, packing);
                 }
             }
         }
@@ -290,7 +302,7 @@ impl At<'_> {
         u: Option<&DVector<f64>>,
         poses: &[(Matrix3<f64>, Vector3<f64>)],
         jac: bool,
-        frame_jac: (&mut DMatrix<f64>, &mut DMatrix<f64>),
+        frame_jac: (&mut DMatrix<f64>, &mut DMatrix<f64>, &mut Packing),
         res: &mut Residual,
     ) {
         let (nx, nu, n) = (knot.x.len(), self.controls.len(), knot.q.len());
@@ -357,9 +369,9 @@ impl At<'_> {
             Term::Frame { frame, target, .. } => {
                 res.r.copy_from(&(poses[*frame].1 - target));
                 if jac {
-                    let (jp, jw) = frame_jac;
+                    let (jp, jw, packing) = frame_jac;
                     frame_jacobians(self.model, poses, *frame, jp, jw);
-                    mul_into(&mut res.jx, jp, &knot.q_x, 0.0);
+                    mul_into(&mut res.jx, jp, &knot.q_x, 0.0, packing);
                 }
             }
             Term::Orientation { frame, target, .. } => {
@@ -367,7 +379,7 @@ impl At<'_> {
                 let phi = log_so3(&(target.transpose() * rf));
                 res.r.copy_from(&phi);
                 if jac {
-                    let (jp, jw) = frame_jac;
+                    let (jp, jw, packing) = frame_jac;
                     frame_jacobians(self.model, poses, *frame, jp, jw);
                     // J_r⁻¹(φ) R_fᵀ J_ω (the body-frame angular Jacobian), into `jp`.
                     let m = right_jacobian_inverse(&phi) * rf.transpose();
@@ -376,7 +388,7 @@ impl At<'_> {
                             jp[(i, c)] = (0..3).map(|k| m[(i, k)] * jw[(k, c)]).sum();
                         }
                     }
-                    mul_into(&mut res.jx, jp, &knot.q_x, 0.0);
+                    mul_into(&mut res.jx, jp, &knot.q_x, 0.0, packing);
                 }
             }
         }
