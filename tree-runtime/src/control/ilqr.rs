@@ -516,7 +516,7 @@ impl Backward {
             quu_k: DVector::zeros(nu),
             v: DMatrix::zeros(nx, nx),
             x2: vec![0.0; nx],
-            qp: ControlQp::new(nu),
+            qp: ControlQp::new(nu, nx),
             packing: Packing::default(),
         }
     }

@@ -4,7 +4,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::linalg::{cholesky_backward, cholesky_factor_packed, cholesky_forward};
+use crate::linalg::{
+    cholesky_backward, cholesky_factor_packed, cholesky_forward, cholesky_solve_rows,
+};
 
 /// Box limits per control `(lo, hi)`.
 pub(crate) type Limits = (DVector<f64>, DVector<f64>);
@@ -23,13 +25,15 @@ pub(crate) struct ControlQp {
     /// `H` on the free controls, factored (column-major, packed), and a right-hand side.
     factor: Vec<f64>,
     rhs: Vec<f64>,
+    /// The free rows of `Q_ux` (row by row), solved into the gain's.
+    rows: Vec<f64>,
     /// The bounds shifted by `u`.
     lo: Vec<f64>,
     hi: Vec<f64>,
 }
 
 impl ControlQp {
-    pub(crate) fn new(nu: usize) -> Self {
+    pub(crate) fn new(nu: usize, nx: usize) -> Self {
         ControlQp {
             x: vec![0.0; nu],
             y: vec![0.0; nu],
@@ -38,6 +42,7 @@ impl ControlQp {
             idx: Vec::with_capacity(nu),
             factor: vec![0.0; nu * nu],
             rhs: vec![0.0; nu],
+            rows: vec![0.0; nu * nx],
             lo: vec![0.0; nu],
             hi: vec![0.0; nu],
         }
@@ -119,13 +124,18 @@ impl ControlQp {
         if limits.is_some() && !self.factor_free(h) {
             return false;
         }
-        for col in 0..nx {
-            for (r, &c) in self.idx.iter().enumerate() {
-                self.rhs[r] = qux[(c, col)];
+        // Every column of the gain at once: the free rows of Q_ux, solved by rows.
+        let nf = self.idx.len();
+        let rows = &mut self.rows[..nf * nx];
+        for (row, &c) in rows.chunks_exact_mut(nx.max(1)).zip(&self.idx) {
+            for (col, x) in row.iter_mut().enumerate() {
+                *x = qux[(c, col)];
             }
-            self.solve_free();
-            for (r, &c) in self.idx.iter().enumerate() {
-                gain[(c, col)] = -self.rhs[r];
+        }
+        cholesky_solve_rows(&self.factor[..nf * nf], nf, rows, nx);
+        for (row, &c) in rows.chunks_exact(nx.max(1)).zip(&self.idx) {
+            for (col, &x) in row.iter().enumerate() {
+                gain[(c, col)] = -x;
             }
         }
         true

@@ -324,14 +324,21 @@ impl At<'_> {
                 ..
             } => {
                 for (k, &e) in entries.iter().enumerate() {
-                    let (value, jacobian) = if e < n {
-                        (knot.q[e] - q_ref[e], &knot.q_x)
+                    res.r[k] = if e < n {
+                        knot.q[e] - q_ref[e]
                     } else {
-                        (knot.dq[e - n] - dq_ref[e - n], &knot.dq_x)
+                        knot.dq[e - n] - dq_ref[e - n]
                     };
-                    res.r[k] = value;
-                    if jac {
-                        res.jx.row_mut(k).copy_from(&jacobian.row(e % n));
+                }
+                // Row k of J_x is row e_k of q_x (or of q̇_x), gathered column by column.
+                if jac && !entries.is_empty() {
+                    let (q_x, dq_x) = (knot.q_x.as_slice(), knot.dq_x.as_slice());
+                    let columns = res.jx.as_mut_slice().chunks_exact_mut(entries.len());
+                    for (c, out) in columns.enumerate() {
+                        let (q_c, dq_c) = (&q_x[c * n..(c + 1) * n], &dq_x[c * n..(c + 1) * n]);
+                        for (o, &e) in out.iter_mut().zip(entries) {
+                            *o = if e < n { q_c[e] } else { dq_c[e - n] };
+                        }
                     }
                 }
             }
