@@ -46,9 +46,24 @@ fn model_error(py: Python<'_>, e: &CoreModelError) -> PyErr {
     err
 }
 
+/// A run's error message with the command line's options named as this package's keyword
+/// arguments (`lower --dt` reads `lower dt`).
+fn in_python_terms(e: &SimError) -> String {
+    [
+        ("--integrator vi", "integrator=\"vi\""),
+        ("--max-steps", "max_steps"),
+        ("--duration", "duration"),
+        ("--dt", "dt"),
+    ]
+    .iter()
+    .fold(e.to_string(), |m, (flag, argument)| {
+        m.replace(flag, argument)
+    })
+}
+
 /// A `SimulationError` with `step` set.
 fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
-    let err = SimulationError::new_err(e.to_string());
+    let err = SimulationError::new_err(in_python_terms(e));
     let _ = err.value(py).setattr("step", e.step());
     err
 }
@@ -746,7 +761,7 @@ impl Model {
                     }
                     errors.push(None);
                 }
-                Err(e) => errors.push(Some(e.to_string())),
+                Err(e) => errors.push(Some(in_python_terms(e))),
             }
         }
         Ok(Rollouts {

@@ -98,6 +98,15 @@ def test_a_failed_run_names_its_step():
     assert err.value.step is not None and err.value.step <= 10
 
 
+def test_errors_name_keyword_arguments_not_command_line_options():
+    m = tm.load(str(ROOT / "models/double-pendulum.toml"))
+    with pytest.raises(tm.SimulationError, match="lower dt") as err:
+        m.simulate(1.0, 0.1, dq0=[1000.0, 0.0])
+    assert "--" not in str(err.value)
+    out = m.rollouts(np.zeros((1, 2)), np.array([[1000.0, 0.0]]), duration=1.0, dt=0.1)
+    assert "lower dt" in out.errors[0] and "--" not in out.errors[0]
+
+
 def test_rollouts_equal_single_runs_whatever_the_threads():
     m = tm.load(CART)
     rng = np.random.default_rng(7)

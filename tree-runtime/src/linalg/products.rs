@@ -5,10 +5,10 @@
 //! left in tiles of 8 rows and the right in blocks of 4 columns, each `k`-major, so that a
 //! tile of `C` (8 × 4) sums over the shared dimension with its 32 running sums in eight
 //! vector registers — per `k`, two loads of the left factor and four of the right feed 32
-//! multiply-adds (an axpy loop loads and stores `C` at every step, and ran at about a
-//! quarter of this rate). Each tile sums only over the span of `k` where both its packed
-//! factors are not zero, first to last: the step Jacobians' memory blocks and a cost's
-//! unread entries cost nothing.
+//! multiply-adds (an axpy loop loads and stores `C` at every step: the backward pass's
+//! products ran several times slower so). Each tile sums only over the span of `k` where
+//! both its packed factors are not zero, first to last: the step Jacobians' memory blocks
+//! and a cost's unread entries cost nothing.
 //!
 //! Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time
 //! (`multiversion`); a fused sum rounds once per term, so the last bits depend on the CPU.
@@ -75,7 +75,7 @@ impl Packing {
                         }
                     }
                 }
-                // Row r of the tile is column i0 + r of Aᵀ's transpose: one contiguous read.
+                // Entry (k, r) of the tile is entry k of the given A's column i0 + r.
                 Left::Transposed => transpose_into(tile, ROWS, a, p, i0, m),
             }
             self.left_spans.push(nonzero_span(tile, ROWS));
