@@ -132,7 +132,9 @@ pub fn accelerations(
             continue;
         }
         let c = art.bias_acceleration[k];
-        let (mut inertia, mut bias) = (art.inertia[k], art.bias[k]);
+        let mut bias = art.bias[k];
+        // Articulated in place (the outward sweep reads only the columns and pivots).
+        let inertia = &mut art.inertia[k];
         if let Joint::Variable(i) = f.joint {
             if kinematic[i] {
                 let mut a = c;
@@ -166,7 +168,7 @@ pub fn accelerations(
         let Some(p) = f.parent else { continue };
         let local = &ws.local[k];
         let (mut i_up, mut p_up) = (
-            local.inertia_to_parent(&inertia),
+            local.inertia_to_parent(inertia),
             local.wrench_to_parent(&bias),
         );
         if let Some(pre) = &f.pre {

@@ -432,51 +432,75 @@ impl<S: Scalar> LocalTransform<S> {
     }
 
     /// `Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`: a child-frame spatial inertia seen from the parent (the
-    /// composite-body step).
+    /// composite-body step). Each primitive's case has its axes as constants, so the
+    /// interpreted system runs straight-line code as the compiled one does.
     #[inline(always)]
     pub fn inertia_to_parent(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
-        let k = self.kind.axis();
-        if self.kind.is_rotation() {
-            // Blocks become R B Rᵀ; R mixes the two axes other than k.
-            let (u, w) = ((k + 1) % 3, (k + 2) % 3);
-            let (c, s) = (self.a, self.b);
-            let rot = |b: &[[S; 3]; 3]| {
-                let mut r = *b;
-                for col in 0..3 {
-                    r[u][col] = c * b[u][col] - s * b[w][col];
-                    r[w][col] = s * b[u][col] + c * b[w][col];
-                }
-                let t = r;
-                for row in 0..3 {
-                    r[row][u] = c * t[row][u] - s * t[row][w];
-                    r[row][w] = s * t[row][u] + c * t[row][w];
-                }
-                r
-            };
-            SpatialInertia {
-                vv: rot(&i.vv),
-                vw: rot(&i.vw),
-                ww: rot(&i.ww),
-            }
-        } else {
-            // With A = [[I, −p̂], [0, I]]: vv' = vv, vw' = vw − vv p̂,
-            // ww' = ww + p̂ vw − (p̂ vv) p̂ − vwᵀ p̂.
-            let d = self.a;
-            let vw = sub3(&i.vw, &mul_skew(&i.vv, k, d));
-            let vw_t = transpose3(&i.vw);
-            let pvv = skew_mul(k, d, &i.vv);
-            let mut ww = i.ww;
-            let a = skew_mul(k, d, &i.vw);
-            let b = mul_skew(&pvv, k, d);
-            let e = mul_skew(&vw_t, k, d);
-            for r in 0..3 {
-                for c in 0..3 {
-                    ww[r][c] += a[r][c] - b[r][c] - e[r][c];
-                }
-            }
-            SpatialInertia { vv: i.vv, vw, ww }
+        match self.kind {
+            PrimitiveKind::Rx => self.inertia_rotated::<1, 2>(i),
+            PrimitiveKind::Ry => self.inertia_rotated::<2, 0>(i),
+            PrimitiveKind::Rz => self.inertia_rotated::<0, 1>(i),
+            PrimitiveKind::Tx => self.inertia_shifted::<0>(i),
+            PrimitiveKind::Ty => self.inertia_shifted::<1>(i),
+            PrimitiveKind::Tz => self.inertia_shifted::<2>(i),
         }
     }
+
+    /// [`Self::inertia_to_parent`] for a rotation mixing axes `U` and `W`: each block becomes
+    /// `R B Rᵀ`.
+    #[inline(always)]
+    fn inertia_rotated<const U: usize, const W: usize>(
+        &self,
+        i: &SpatialInertia<S>,
+    ) -> SpatialInertia<S> {
+        let (c, s) = (self.a, self.b);
+        SpatialInertia {
+            vv: rotate_block::<S, U, W>(&i.vv, c, s),
+            vw: rotate_block::<S, U, W>(&i.vw, c, s),
+            ww: rotate_block::<S, U, W>(&i.ww, c, s),
+        }
+    }
+
+    /// [`Self::inertia_to_parent`] for a translation along axis `K`: with
+    /// `A = [[I, −p̂], [0, I]]`, `vv' = vv`, `vw' = vw − vv p̂`,
+    /// `ww' = ww + p̂ vw − (p̂ vv) p̂ − vwᵀ p̂`.
+    #[inline(always)]
+    fn inertia_shifted<const K: usize>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
+        let d = self.a;
+        let vw = sub3(&i.vw, &mul_skew(&i.vv, K, d));
+        let vw_t = transpose3(&i.vw);
+        let pvv = skew_mul(K, d, &i.vv);
+        let mut ww = i.ww;
+        let a = skew_mul(K, d, &i.vw);
+        let b = mul_skew(&pvv, K, d);
+        let e = mul_skew(&vw_t, K, d);
+        for r in 0..3 {
+            for c in 0..3 {
+                ww[r][c] += a[r][c] - b[r][c] - e[r][c];
+            }
+        }
+        SpatialInertia { vv: i.vv, vw, ww }
+    }
+}
+
+/// `R B Rᵀ` for the rotation by `(c, s)` that mixes axes `U` and `W`.
+#[inline(always)]
+fn rotate_block<S: Scalar, const U: usize, const W: usize>(
+    b: &[[S; 3]; 3],
+    c: S,
+    s: S,
+) -> [[S; 3]; 3] {
+    let mut r = *b;
+    for col in 0..3 {
+        r[U][col] = c * b[U][col] - s * b[W][col];
+        r[W][col] = s * b[U][col] + c * b[W][col];
+    }
+    let t = r;
+    for row in 0..3 {
+        r[row][U] = c * t[row][U] - s * t[row][W];
+        r[row][W] = s * t[row][U] + c * t[row][W];
+    }
+    r
 }
 
 /// `d ê_k M`: the cross-product matrix of `d e_k` times `M`.
