@@ -22,7 +22,7 @@ use tree_mech::integrate::{
 use tree_mech::model;
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::evaluation::evaluate_state;
-use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Prescription, Vector};
+use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Prescription, Seconds, Vector};
 use tree_mech::{NoForce, PaperEvaluation, PaperSystem, SimError, System, Trajectory, TreeSystem};
 
 #[derive(Parser)]
@@ -711,9 +711,10 @@ fn run_simulate<S: System<N = Dyn>>(
         "variables"
     };
     println!(
-        "Simulated `{name}` ({} {variables}) for {t_end} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
+        "Simulated `{name}` ({} {variables}) for {} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
          Energy went from {} to {} J ({energy}).{constrained}{}{}{}",
         sys.dof(),
+        Seconds(t_end),
         summary.steps,
         wall.as_secs_f64(),
         num(e0),

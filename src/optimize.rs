@@ -11,7 +11,7 @@ use tree_mech::control::{
 use tree_mech::model::{self, Model, Task};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::trajectory::{CsvStream, Sample};
-use tree_mech::runtime::{Pose, Vector};
+use tree_mech::runtime::{Pose, Seconds, Vector};
 use tree_mech::{Order, System, Terms, Trajectory, TreeSystem};
 
 use crate::animate;
@@ -140,7 +140,9 @@ pub fn run(r: Request) -> Result<(), String> {
             );
         }
     };
-    let result = solve_task(sys, &task, &model, &options, &mut print).map_err(|e| e.to_string())?;
+    // The step is the task file's `dt`, not a command-line option.
+    let result = solve_task(sys, &task, &model, &options, &mut print)
+        .map_err(|e| e.to_string().replace("--dt", "the task's `dt`"))?;
     write_outputs(&r.task, &task, &model, &result, files)
 }
 
@@ -311,7 +313,7 @@ fn write_outputs(
         },
         path.display(),
         n,
-        task.dt,
+        Seconds(task.dt),
         match task.integrator {
             model::TaskIntegrator::Vi => "VI",
             model::TaskIntegrator::Rk4 => "RK4",

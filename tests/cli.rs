@@ -941,6 +941,41 @@ fn optimize_solves_a_task_and_writes_every_output() {
         !ok && stderr.contains("exclude") && stdout.is_empty(),
         "{stdout}{stderr}"
     );
+    // A step so long that the initial guess's cost overflows: an error naming the knot and
+    // the task's `dt` (not an exit 0 with `cost inf`, a null in the JSON and NaN energies).
+    let swingup = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tasks/cartpole-swingup.toml"
+    ))
+    .unwrap()
+    .replace(
+        "../models/",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/models/"),
+    )
+    .replace("dt = 0.02", "dt = 1e300");
+    let huge = dir.join("huge.toml");
+    std::fs::write(&huge, swingup).unwrap();
+    let (json, csv) = (dir.join("huge.json"), dir.join("huge.csv"));
+    let (ok, stdout, stderr) = tree_mech(&[
+        "optimize",
+        huge.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(!ok, "{stdout}");
+    assert!(
+        stderr
+            .contains("step 1 (t = 1e300): the cost of the initial guess rolled out is not finite")
+            && stderr.contains("lower the task's `dt`")
+            && !stderr.contains("--dt"),
+        "{stderr}"
+    );
+    assert!(
+        !json.exists() && !csv.exists(),
+        "no outputs from a failed solve"
+    );
 }
 
 /// A model whose start is off its constraints (tests/models/elements.toml: `wall` by 0.35) is

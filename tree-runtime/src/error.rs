@@ -185,13 +185,16 @@ impl fmt::Display for SimError {
     }
 }
 
-/// A time in seconds as the messages print it: to 12 decimals, trailing zeros dropped (a
-/// subdivided step's `0.5624999999999999` reads `0.5625`).
-struct Seconds(f64);
+/// A time in seconds as the messages and summaries print it: to 12 decimals, trailing zeros
+/// dropped (a subdivided step's `0.5624999999999999` reads `0.5625`); below a microsecond
+/// and from 10⁹ s on, in exponent form (`3e-7`, `1e300`, never three hundred digits).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Seconds(pub f64);
 
 impl fmt::Display for Seconds {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.0 != 0.0 && self.0.abs() < 1e-6 {
+        let x = self.0.abs();
+        if !self.0.is_finite() || (x != 0.0 && !(1e-6..1e9).contains(&x)) {
             return write!(f, "{:e}", self.0);
         }
         let text = format!("{:.12}", self.0);
@@ -222,5 +225,8 @@ mod tests {
         assert_eq!(show(12.25), "12.25");
         assert_eq!(show(3e-7), "3e-7");
         assert_eq!(show(-0.1), "-0.1");
+        assert_eq!(show(1e300), "1e300");
+        assert_eq!(show(123456789.5), "123456789.5");
+        assert_eq!(show(2.5e9), "2.5e9");
     }
 }

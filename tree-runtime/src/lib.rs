@@ -84,7 +84,7 @@ pub use tree_model;
 #[cfg(feature = "simulate")]
 pub use {
     dynamics::{Baumgarte, Dynamics, GeneralizedForce, ModelMotions, NoForce, Prescription},
-    error::SimError,
+    error::{Seconds, SimError},
     interpreted::TreeSystem,
     reference::{PaperEvaluation, PaperSystem},
     system::{ConstraintTerms, Matrix, System, Terms, Vector},

@@ -454,6 +454,10 @@ where
         }
         dynamics.knot(k, x[k].as_slice(), &mut work.knot, false, work.needs)?;
         total += cost.running(k, &work.knot, &u[k], None);
+        // A forward pass's non-finite cost rejects its step; the start's has no fallback.
+        if policy.is_none() && !total.is_finite() {
+            return Err(not_finite(dynamics, k));
+        }
         let (head, tail) = x.split_at_mut(k + 1);
         let jac = jacobians.then(|| (&mut work.a[k], &mut work.b[k]));
         dynamics.step(
@@ -467,7 +471,24 @@ where
         work.lambda[k].extend_from_slice(dynamics.multipliers());
     }
     dynamics.knot(n, x[n].as_slice(), &mut work.knot, false, work.needs)?;
-    Ok(total + cost.terminal(&work.knot, None))
+    let total = total + cost.terminal(&work.knot, None);
+    if policy.is_none() && !total.is_finite() {
+        return Err(not_finite(dynamics, n));
+    }
+    Ok(total)
+}
+
+/// The error of a starting rollout whose cost stops being finite at knot `k` (a motion too
+/// fast for the step, or a cost that overflows).
+fn not_finite<S: System>(dynamics: &DiscreteSystem<S>, k: usize) -> SimError
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    SimError::NonFinite {
+        step: k,
+        t: dynamics.t0 + k as f64 * dynamics.dt,
+        what: "the cost of the initial guess rolled out".into(),
+    }
 }
 
 /// The backward pass's buffers (sized once per solve): the value function `V_x`, `V_xx`,
