@@ -43,6 +43,12 @@ fn rollouts_equal_single_runs_bitwise_whatever_the_thread_count() {
     let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 1.0);
     let starts = starts(9);
     let one = rollouts(&sys, &starts, &options, 1).unwrap();
+    // A mistyped thread count is refused with a sentence, not started.
+    let refused = rollouts(&sys, &starts, &options, 1_000_000).unwrap_err();
+    assert!(
+        refused.to_string().contains("1000000 threads asked for"),
+        "{refused}"
+    );
     for threads in [2, 3, 0] {
         let many = rollouts(&sys, &starts, &options, threads).unwrap();
         for (a, b) in one.iter().zip(&many) {

@@ -72,6 +72,17 @@ fn bad(message: impl Into<String>) -> PyErr {
     PyValueError::new_err(message.into())
 }
 
+/// `every` (record every k-th step) is at least 1: a `ValueError` for the whole call, not an
+/// error per rollout.
+fn check_every(every: usize) -> PyResult<()> {
+    match every {
+        0 => Err(bad(
+            "every must be at least 1 (every k-th step is recorded)",
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// A model read at run time, with its interpreted system.
 #[pyclass(module = "tree_mech", frozen)]
 struct Model {
@@ -467,6 +478,7 @@ impl Model {
         max_steps: usize,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Trajectory> {
+        check_every(every)?;
         let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
         let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
         let inputs = self.schedule(u, dt)?;
@@ -649,6 +661,7 @@ impl Model {
         every: usize,
         models: Option<Vec<PyRef<'_, Model>>>,
     ) -> PyResult<Rollouts> {
+        check_every(every)?;
         let (q0, dq0) = (q0.as_array(), dq0.as_array());
         let (batch, n) = (q0.nrows(), self.n());
         if q0.ncols() != n || dq0.shape() != q0.shape() {

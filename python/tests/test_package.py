@@ -107,6 +107,20 @@ def test_errors_name_keyword_arguments_not_command_line_options():
     assert "lower dt" in out.errors[0] and "--" not in out.errors[0]
 
 
+def test_bad_batch_arguments_fail_the_call_with_a_sentence():
+    m = tm.load(str(ROOT / "models/double-pendulum.toml"))
+    zeros = np.zeros((2, 2))
+    with pytest.raises(ValueError, match="every must be at least 1"):
+        m.rollouts(zeros, zeros, 1.0, 0.01, every=0)
+    with pytest.raises(ValueError, match="every must be at least 1"):
+        m.simulate(1.0, 0.01, every=0)
+    # A mistyped thread count is refused, not started (a million threads would hang).
+    with pytest.raises(tm.SimulationError, match="threads asked for"):
+        m.rollouts(zeros, zeros, 0.1, 0.01, threads=10**6)
+    with pytest.raises(tm.SimulationError, match=r"shorter than one step of 1e300 s"):
+        m.simulate(1.0, 1e300)
+
+
 def test_rollouts_equal_single_runs_whatever_the_threads():
     m = tm.load(CART)
     rng = np.random.default_rng(7)

@@ -97,7 +97,18 @@ where
     }))
 }
 
+/// The most threads a batch starts per core: more only add switching, and a mistyped count
+/// (a million) would try to start that many.
+const THREADS_PER_CORE: usize = 8;
+
 fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let most = (THREADS_PER_CORE * cores).max(64);
+    if threads > most {
+        return Err(SimError::InvalidInput(format!(
+            "{threads} threads asked for, on {cores} cores: give at most {most} (or 0 for one per core)"
+        )));
+    }
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

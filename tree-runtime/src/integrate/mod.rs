@@ -24,7 +24,7 @@ use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 use crate::dynamics::{
     prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription,
 };
-use crate::error::SimError;
+use crate::error::{Seconds, SimError};
 use crate::system::{Order, System, Terms, Vector};
 use crate::trajectory::{Sample, Trajectory};
 
@@ -110,13 +110,13 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
     if !(o.dt > 0.0 && o.dt.is_finite()) {
         return Err(SimError::InvalidInput(format!(
             "time step must be positive, got {}",
-            o.dt
+            Seconds(o.dt)
         )));
     }
     if !(o.duration > 0.0 && o.duration.is_finite()) {
         return Err(SimError::InvalidInput(format!(
             "duration must be positive, got {} s",
-            o.duration
+            Seconds(o.duration)
         )));
     }
     if o.every == 0 {
@@ -165,7 +165,8 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
     if steps < 1.0 && !matches!(o.method, Method::Rk45(_)) {
         return Err(SimError::InvalidInput(format!(
             "the duration {} s is shorter than one step of {} s: nothing would be simulated",
-            o.duration, o.dt
+            Seconds(o.duration),
+            Seconds(o.dt)
         )));
     }
     Ok(steps as usize)
