@@ -127,3 +127,23 @@ def test_errors_are_plain():
     with pytest.raises(ValueError, match="call step first"):
         mvi.q2_dq1()
     assert trep.__version__ == "v1.0.2"
+
+
+def test_a_failed_step_leaves_the_integrator_where_it_was():
+    s = trep.System()
+    f = trep.Frame(s.world_frame, trep.RX, "theta", name="pivot")
+    trep.Frame(f, trep.TZ, -1.0, name="bob", mass=1.0)
+    trep.potentials.Gravity(s)
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, [0.5], 0.01, [0.5])
+    fresh = trep.MidpointVI(s)
+    fresh.initialize_from_configs(0.0, [0.5], 0.01, [0.5])
+    # A t2 before t1, a NaN, then a good step: the good one is a fresh integrator's.
+    for bad in (0.0, 0.01, float("nan")):
+        with pytest.raises(ValueError, match="t2 must come after t1"):
+            mvi.step(bad)
+        assert (mvi.t1, mvi.t2) == (0.0, 0.01)
+    mvi.step(0.02)
+    fresh.step(0.02)
+    assert (mvi.t1, mvi.t2) == (0.01, 0.02)
+    assert np.array_equal(mvi.q2, fresh.q2) and np.array_equal(mvi.p2, fresh.p2)

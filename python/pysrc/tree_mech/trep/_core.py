@@ -989,11 +989,20 @@ class MidpointVI:
         ``k2`` at its end; returns Newton's iterations."""
         u1 = self._vec(u1, self.nu, "u1")
         k2 = self._vec(k2, self.nk, "k2")
+        # A step that fails (a bad t2, Newton's failure) leaves the integrator where it was,
+        # so the caller can retry from t1 with another t2.
+        kept = (self._q1, self._p1, self.t1, self._u1, self.t2, self._k2, self._derivs,
+                self._q2, self._p2, self._lam)
         self._q1, self._p1, self.t1 = self._q2.copy(), self._p2.copy(), self.t2
         self._u1, self.t2 = u1, float(t2)
         self._k2 = k2
         self._derivs = None
-        self._solve(0)
+        try:
+            self._solve(0)
+        except BaseException:
+            (self._q1, self._p1, self.t1, self._u1, self.t2, self._k2, self._derivs,
+             self._q2, self._p2, self._lam) = kept
+            raise
         return self._iterations
 
     def _solve(self, order: int) -> None:
