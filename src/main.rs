@@ -165,10 +165,18 @@ enum Command {
         /// Constant inputs `u`, comma-separated in the model's input order.
         #[arg(long, allow_hyphen_values = true, conflicts_with = "inputs")]
         u: Option<String>,
-        /// Inputs over time: a CSV with a column `t` and one per input (by name), each row in
+        /// Inputs over time: a CSV with a column `t` and one per input (by name, or
+        /// `u_<name>` as simulate's and optimize's CSVs name it: a plan replays), each row in
         /// force from its time to the next row's (held over every step that starts in it).
         #[arg(long)]
         inputs: Option<PathBuf>,
+        /// Start configuration, comma-separated in variable order (default: the model's q0;
+        /// kinematic entries follow their prescription; projected onto the constraints).
+        #[arg(long, allow_hyphen_values = true)]
+        q0: Option<String>,
+        /// Start velocity, comma-separated in variable order (default: the model's dq0).
+        #[arg(long, allow_hyphen_values = true)]
+        dq0: Option<String>,
         /// How the interpreted system evaluates: composite sweeps (fastest), the paper's
         /// per-mass sums with caching, or without caching (the paper's Fig. 3 comparison).
         #[arg(long, value_enum, default_value = "sweeps")]
@@ -272,6 +280,8 @@ fn main() -> ExitCode {
             max_steps,
             u,
             inputs,
+            q0,
+            dq0,
             evaluation,
         } => {
             let method = match integrator {
@@ -310,6 +320,7 @@ fn main() -> ExitCode {
                 };
                 let model = source.model(&model)?;
                 outputs.inputs = input_schedule(&model, u.as_deref(), inputs.as_deref())?;
+                outputs.start = [q0, dq0];
                 let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
                 match evaluation {
                     EvaluationArg::Sweeps => {
@@ -461,6 +472,8 @@ struct Outputs {
     camera: animate::CameraMode,
     /// The inputs over the run.
     inputs: InputSchedule,
+    /// `--q0`, `--dq0` as given (None: the model's).
+    start: [Option<String>; 2],
 }
 
 impl Outputs {
@@ -494,6 +507,7 @@ impl Outputs {
             animate,
             camera: animate::CameraMode::default(),
             inputs: InputSchedule::default(),
+            start: [None, None],
         })
     }
 }
@@ -514,8 +528,18 @@ fn run_simulate<S: System<N = Dyn>>(
         animate: animate_path,
         camera,
         inputs,
+        start: [q0_given, dq0_given],
     } = outputs;
-    let (q0, dq0) = sys.initial_state();
+    let (mut q0, mut dq0) = sys.initial_state();
+    let names: Vec<String> = (0..sys.dof())
+        .map(|i| sys.variable_name(i).to_string())
+        .collect();
+    if let Some(text) = &q0_given {
+        q0 = parse_vector(text, sys.dof(), "q0", &names)?;
+    }
+    if let Some(text) = &dq0_given {
+        dq0 = parse_vector(text, sys.dof(), "dq0", &names)?;
+    }
     let bar = ProgressBar::new(1000);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {percent:>3}% t = {msg} s  ({elapsed})")
@@ -524,9 +548,6 @@ fn run_simulate<S: System<N = Dyn>>(
     let duration = options.duration.max(f64::MIN_POSITIVE);
     let start = Instant::now();
     let mut last_tick = 0;
-    let names: Vec<String> = (0..sys.dof())
-        .map(|i| sys.variable_name(i).to_string())
-        .collect();
     let constraints: Vec<String> = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
@@ -771,11 +792,25 @@ fn input_schedule(
     let t_column = column("t").ok_or_else(|| format!("`{shown}`:1: no column `t`"))?;
     let columns: Vec<usize> = names
         .iter()
-        .map(|n| column(n).ok_or_else(|| format!("`{shown}`:1: no column for input `{n}`")))
+        // `u_<name>` is how simulate's and optimize's CSVs name it (beside a variable that may
+        // bear the input's own name, a joint's): where it is there, it is the input.
+        .map(|n| {
+            column(&format!("u_{n}"))
+                .or_else(|| column(n))
+                .ok_or_else(|| format!("`{shown}`:1: no column for input `{n}` (or `u_{n}`)"))
+        })
         .collect::<Result<_, _>>()?;
-    let mut rows = Vec::new();
+    let mut rows: Vec<(f64, Vec<f64>)> = Vec::new();
     for (i, line) in lines {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != header.len() {
+            return Err(format!(
+                "`{shown}`:{}: {} fields where the header has {}",
+                i + 1,
+                fields.len(),
+                header.len()
+            ));
+        }
         let number = |c: usize| -> Result<f64, String> {
             fields
                 .get(c)
@@ -790,6 +825,14 @@ fn input_schedule(
                 })
         };
         let t = number(t_column)?;
+        if let Some(&(before, _)) = rows.last() {
+            if t <= before {
+                return Err(format!(
+                    "`{shown}`:{}: time {t} must be later than the row before ({before})",
+                    i + 1
+                ));
+            }
+        }
         let u = columns
             .iter()
             .map(|&c| number(c))

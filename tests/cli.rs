@@ -685,6 +685,101 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
         !ok && stderr.contains("model `pendulum` has no inputs"),
         "{stderr}"
     );
+    // Malformed rows name their line: a field too many, a time going back.
+    for (text, expected) in [
+        (
+            "t,push\n0,1,2\n",
+            "u.csv`:2: 3 fields where the header has 2",
+        ),
+        (
+            "t,push\n0,1\n\n0.5,2\n0.3,1\n",
+            "u.csv`:5: time 0.3 must be later than the row before (0.5)",
+        ),
+    ] {
+        std::fs::write(&schedule, text).unwrap();
+        let (ok, _, stderr) = tree_mech(&[
+            "simulate",
+            "tests/models/cart.toml",
+            "--inputs",
+            schedule.to_str().unwrap(),
+        ]);
+        assert!(!ok && stderr.contains(expected), "{stderr}");
+    }
+}
+
+/// An optimal plan replays: `optimize --out` writes the controls as `u_<input>` beside the
+/// joints' own columns (the UR5's inputs bear its joints' names), `simulate --inputs` reads
+/// those and `--q0` starts where the task starts, and the run ends where the plan does.
+#[test]
+fn an_optimal_plan_replays_in_simulate() {
+    let dir = scratch("replay");
+    let task = dir.join("reach.toml");
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))
+            .unwrap()
+            .replace(
+                "../models/",
+                concat!(env!("CARGO_MANIFEST_DIR"), "/models/"),
+            );
+    assert!(text
+        .contains("q = { shoulder_lift_joint = -1.2, elbow_joint = 1.5, wrist_1_joint = -1.0 }"));
+    std::fs::write(&task, text).unwrap();
+    let (plan, json, replay) = (
+        dir.join("plan.csv"),
+        dir.join("plan.json"),
+        dir.join("replay.csv"),
+    );
+    let (ok, _, stderr) = tree_mech(&[
+        "optimize",
+        task.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        plan.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/ur5.urdf",
+        "--inputs",
+        plan.to_str().unwrap(),
+        "--q0",
+        "0,-1.2,1.5,-1.0,0,0",
+        "--dq0",
+        "0,0,0,0,0,0",
+        "--dt",
+        "0.01",
+        "--duration",
+        "1",
+        "--out",
+        replay.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let text = std::fs::read_to_string(&replay).unwrap();
+    let last: Vec<f64> = text
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|x| x.parse().unwrap())
+        .collect();
+    for (i, q) in summary["q_final"].as_array().unwrap().iter().enumerate() {
+        let q = q.as_f64().unwrap();
+        assert!(
+            (last[1 + i] - q).abs() < 1e-9,
+            "joint {i}: {} against the plan's {q}",
+            last[1 + i]
+        );
+    }
+    // --q0 is checked as --q is.
+    let (ok, _, stderr) = tree_mech(&["simulate", "models/ur5.urdf", "--q0", "1,2"]);
+    assert!(
+        !ok && stderr.contains("--q0 has 2 values; the model has 6 variables"),
+        "{stderr}"
+    );
 }
 
 /// The last CSV row of `simulate tests/models/cart.toml ARGS --out csv`, as numbers.
