@@ -354,6 +354,14 @@ fn scratch(name: &str) -> std::path::PathBuf {
     dir
 }
 
+/// A shipped task file's text with its model path made absolute (to be written elsewhere).
+fn shipped_task(name: &str) -> String {
+    let root = env!("CARGO_MANIFEST_DIR");
+    std::fs::read_to_string(format!("{root}/tasks/{name}.toml"))
+        .unwrap()
+        .replace("../models/", &format!("{root}/models/"))
+}
+
 #[test]
 fn outputs_never_overwrite_the_model_or_each_other_and_are_checked_before_the_run() {
     let dir = scratch("paths");
@@ -714,13 +722,7 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
 fn an_optimal_plan_replays_in_simulate() {
     let dir = scratch("replay");
     let task = dir.join("reach.toml");
-    let text =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))
-            .unwrap()
-            .replace(
-                "../models/",
-                concat!(env!("CARGO_MANIFEST_DIR"), "/models/"),
-            );
+    let text = shipped_task("ur5-reach");
     assert!(text
         .contains("q = { shoulder_lift_joint = -1.2, elbow_joint = 1.5, wrist_1_joint = -1.0 }"));
     std::fs::write(&task, text).unwrap();
@@ -1019,13 +1021,7 @@ fn optimize_solves_a_task_and_writes_every_output() {
     assert!(!ok && stderr.contains("same file"), "{stderr}");
     // Refused while setting up the solve: the error alone, no iteration table begun.
     let tight = dir.join("tight.toml");
-    let reach =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml"))
-            .unwrap()
-            .replace(
-                "../models/",
-                concat!(env!("CARGO_MANIFEST_DIR"), "/models/"),
-            );
+    let reach = shipped_task("ur5-reach");
     std::fs::write(
         &tight,
         format!("{reach}\n[limits]\nshoulder_lift_joint = [-1.0, 1.0]\n"),
@@ -1038,16 +1034,7 @@ fn optimize_solves_a_task_and_writes_every_output() {
     );
     // A step so long that the initial guess's cost overflows: an error naming the knot and
     // the task's `dt` (not an exit 0 with `cost inf`, a null in the JSON and NaN energies).
-    let swingup = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tasks/cartpole-swingup.toml"
-    ))
-    .unwrap()
-    .replace(
-        "../models/",
-        concat!(env!("CARGO_MANIFEST_DIR"), "/models/"),
-    )
-    .replace("dt = 0.02", "dt = 1e300");
+    let swingup = shipped_task("cartpole-swingup").replace("dt = 0.02", "dt = 1e300");
     let huge = dir.join("huge.toml");
     std::fs::write(&huge, swingup).unwrap();
     let (json, csv) = (dir.join("huge.json"), dir.join("huge.csv"));
