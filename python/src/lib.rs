@@ -2,10 +2,12 @@
 //! models read at run time, numpy arrays in and out, long calls without the GIL. The
 //! package's `tree_mech/__init__.py` re-exports it with docs and type stubs.
 
+mod numbers;
+
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::ndarray::{Array1, Array2, Array3, Ix1, Ix2};
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -22,6 +24,8 @@ use tree_mech::runtime::evaluation::{evaluate_state, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
 use tree_mech::runtime::Vector;
 use tree_mech::{SimError, System, Trajectory as CoreTrajectory, TreeSystem};
+
+use numbers::Numbers;
 
 pyo3::create_exception!(
     _native,
@@ -111,7 +115,7 @@ impl Model {
     fn vector(
         &self,
         what: &str,
-        given: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        given: Option<Numbers<'_, Ix1>>,
         default: impl Fn(usize) -> f64,
     ) -> PyResult<Vector<Dyn>> {
         let n = self.n();
@@ -398,11 +402,11 @@ impl Model {
     fn evaluate<'py>(
         &self,
         py: Python<'py>,
-        q: Option<PyArrayLike1<f64, AllowTypeChange>>,
-        dq: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
         t: f64,
-        u: Option<PyArrayLike1<f64, AllowTypeChange>>,
-        ddq: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        u: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
@@ -466,8 +470,8 @@ impl Model {
         duration: f64,
         dt: f64,
         integrator: &str,
-        q0: Option<PyArrayLike1<f64, AllowTypeChange>>,
-        dq0: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        q0: Option<Numbers<'_, Ix1>>,
+        dq0: Option<Numbers<'_, Ix1>>,
         u: Option<&Bound<'_, PyAny>>,
         every: usize,
         alpha: f64,
@@ -538,17 +542,17 @@ impl Model {
     fn linearize<'py>(
         &self,
         py: Python<'py>,
-        q: Option<PyArrayLike1<f64, AllowTypeChange>>,
-        dq: Option<PyArrayLike1<f64, AllowTypeChange>>,
-        u: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        u: Option<Numbers<'_, Ix1>>,
         t: f64,
         dt: Option<f64>,
-        p: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        p: Option<Numbers<'_, Ix1>>,
         integrator: &str,
         forcing: &str,
         alpha: f64,
         second_order: bool,
-        ddq: Option<PyArrayLike1<f64, AllowTypeChange>>,
+        ddq: Option<Numbers<'_, Ix1>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let ddq = ddq
             .map(|a| self.vector("ddq", Some(a), |_| 0.0))
@@ -651,8 +655,8 @@ impl Model {
     fn rollouts(
         &self,
         py: Python<'_>,
-        q0: PyArrayLike2<f64, AllowTypeChange>,
-        dq0: PyArrayLike2<f64, AllowTypeChange>,
+        q0: Numbers<'_, Ix2>,
+        dq0: Numbers<'_, Ix2>,
         duration: f64,
         dt: f64,
         integrator: &str,
@@ -852,12 +856,12 @@ impl VariationalStepper {
         &mut self,
         py: Python<'py>,
         t1: f64,
-        q1: PyArrayLike1<f64, AllowTypeChange>,
-        p1: PyArrayLike1<f64, AllowTypeChange>,
+        q1: Numbers<'_, Ix1>,
+        p1: Numbers<'_, Ix1>,
         t2: f64,
-        u1: PyArrayLike1<f64, AllowTypeChange>,
-        k2: PyArrayLike1<f64, AllowTypeChange>,
-        lam: PyArrayLike1<f64, AllowTypeChange>,
+        u1: Numbers<'_, Ix1>,
+        k2: Numbers<'_, Ix1>,
+        lam: Numbers<'_, Ix1>,
         order: u8,
     ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
         let n = self.sys.dof();
@@ -978,9 +982,9 @@ impl VariationalStepper {
         &mut self,
         py: Python<'py>,
         t1: f64,
-        q1: PyArrayLike1<f64, AllowTypeChange>,
+        q1: Numbers<'_, Ix1>,
         t2: f64,
-        q2: PyArrayLike1<f64, AllowTypeChange>,
+        q2: Numbers<'_, Ix1>,
     ) -> PyResult<Py<PyAny>> {
         let n = self.sys.dof();
         let (q1, q2) = (q1.as_array().to_vec(), q2.as_array().to_vec());

@@ -121,6 +121,17 @@ def test_bad_batch_arguments_fail_the_call_with_a_sentence():
         m.simulate(1.0, 1e300)
 
 
+def test_an_array_of_the_wrong_dimensions_is_refused_in_a_sentence():
+    m = tm.load(str(ROOT / "models/double-pendulum.toml"))
+    with pytest.raises(TypeError, match="expected a 2-D array of numbers, got a 3-D one"):
+        m.rollouts(np.zeros((2, 2, 1)), np.zeros((2, 2)), 1.0, 0.01)
+    with pytest.raises(TypeError, match="expected a 1-D array of numbers, got a 2-D one"):
+        m.simulate(1.0, 0.01, q0=[[0.1, 0.2]])
+    # Not numbers at all: numpy's own message stands.
+    with pytest.raises(ValueError, match="could not convert"):
+        m.evaluate(q=["a", 0.0])
+
+
 def test_rollouts_equal_single_runs_whatever_the_threads():
     m = tm.load(CART)
     rng = np.random.default_rng(7)
