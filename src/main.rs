@@ -448,7 +448,22 @@ fn parse_baumgarte(text: Option<&str>) -> Result<Baumgarte, String> {
 /// (17.451901, not 17.451901000000003).
 fn tidy(x: f64) -> String {
     let rounded: f64 = format!("{x:.11e}").parse().unwrap_or(x);
-    format!("{rounded}")
+    format!("{}", Given(rounded))
+}
+
+/// A number a model gives, as `check` prints it: Rust's shortest form where that is short,
+/// exponent form from 10¹⁵ and below 10⁻⁶ (a stiffness of `1e300`, not three hundred digits).
+struct Given(f64);
+
+impl std::fmt::Display for Given {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0.abs();
+        if x == 0.0 || (1e-6..1e15).contains(&x) {
+            write!(f, "{}", self.0)
+        } else {
+            write!(f, "{:e}", self.0)
+        }
+    }
 }
 
 /// A number for the summary: plain when moderate, scientific when huge or tiny.
@@ -978,7 +993,9 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
     }
     println!(
         "gravity: [{}, {}, {}]",
-        model.gravity[0], model.gravity[1], model.gravity[2]
+        Given(model.gravity[0]),
+        Given(model.gravity[1]),
+        Given(model.gravity[2])
     );
     println!("{} frames, {} variables:", model.frames.len(), sys.dof());
     for v in &model.variables {
@@ -990,28 +1007,44 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
             None => "sets a constraint length".to_string(),
         };
         let how = match &v.motion {
-            None => format!("dynamic, damping = {}", v.damping),
+            None => format!("dynamic, damping = {}", Given(v.damping)),
             Some(model::Motion::Steady { q0, dq0 }) => {
-                format!("kinematic, held at q0 = {q0} moving at {dq0}")
+                format!(
+                    "kinematic, held at q0 = {} moving at {}",
+                    Given(*q0),
+                    Given(*dq0)
+                )
             }
             Some(model::Motion::Sine {
                 offset,
                 amplitude,
                 frequency,
                 phase,
-            }) => format!("kinematic, {offset} + {amplitude}·sin(2π·{frequency}·t + {phase})"),
+            }) => format!(
+                "kinematic, {} + {}·sin(2π·{}·t + {})",
+                Given(*offset),
+                Given(*amplitude),
+                Given(*frequency),
+                Given(*phase)
+            ),
             Some(model::Motion::Spline(s)) => {
                 let (a, b) = s.span();
-                format!("kinematic, spline through samples on [{a}, {b}] s")
+                format!(
+                    "kinematic, spline through samples on [{}, {}] s",
+                    Given(a),
+                    Given(b)
+                )
             }
         };
         let limits = v
             .limits
-            .map(|[lo, hi]| format!("; limits [{lo}, {hi}] (not enforced)"))
+            .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
             .unwrap_or_default();
         println!(
             "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}{limits}",
-            v.name, v.q0, v.dq0
+            v.name,
+            Given(v.q0),
+            Given(v.dq0)
         );
     }
     if !model.constraints.is_empty() {
@@ -1020,7 +1053,7 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
             let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
             let what = match &c.kind {
                 model::ConstraintKind::Distance { length } => match length {
-                    model::Parameter::Constant(l) => format!("distance {l}"),
+                    model::Parameter::Constant(l) => format!("distance {}", Given(*l)),
                     model::Parameter::Variable(i) => {
                         format!("distance `{}`", model.variables[*i].name)
                     }
@@ -1041,7 +1074,7 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
         for u in &model.inputs {
             let limits = u
                 .limits
-                .map(|[lo, hi]| format!("; limits [{lo}, {hi}] (not enforced)"))
+                .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
                 .unwrap_or_default();
             println!(
                 "  {:<20} on `{}`{limits}",
@@ -1053,18 +1086,25 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
         match s.kind {
             model::SpringKind::Frames([a, b]) => println!(
                 "spring between `{}` and `{}`: k = {}, rest = {}",
-                model.frames[a].name, model.frames[b].name, s.stiffness, s.rest
+                model.frames[a].name,
+                model.frames[b].name,
+                Given(s.stiffness),
+                Given(s.rest)
             ),
             model::SpringKind::Variable(i) => println!(
                 "spring on `{}`: k = {}, rest = {}",
-                model.variables[i].name, s.stiffness, s.rest
+                model.variables[i].name,
+                Given(s.stiffness),
+                Given(s.rest)
             ),
         }
     }
     for d in &model.dampers {
         println!(
             "damper between `{}` and `{}`: c = {}",
-            model.frames[d.frames[0]].name, model.frames[d.frames[1]].name, d.damping
+            model.frames[d.frames[0]].name,
+            model.frames[d.frames[1]].name,
+            Given(d.damping)
         );
     }
     let masses: Vec<_> = model.frames.iter().filter(|f| f.mass.is_some()).collect();

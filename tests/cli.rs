@@ -134,6 +134,20 @@ fn constrained_models_report_constraints_everywhere() {
             "missing `{expected}` in:\n{stdout}"
         );
     }
+    // Extreme values read in exponent form, not as three hundred digits.
+    let dir = scratch("check");
+    let stiff = dir.join("stiff.toml");
+    let text = std::fs::read_to_string("tests/models/elements.toml")
+        .unwrap()
+        .replace("stiffness = 5.0", "stiffness = 1e300")
+        .replace("damping = 0.7", "damping = 2.5e-9");
+    std::fs::write(&stiff, text).unwrap();
+    let (ok, stdout, _) = tree_mech(&["check", stiff.to_str().unwrap()]);
+    assert!(ok);
+    assert!(
+        stdout.contains("spring on `bend`: k = 1e300, rest = 0.1") && stdout.contains("c = 2.5e-9"),
+        "{stdout}"
+    );
 }
 
 #[test]
