@@ -85,6 +85,7 @@ where
     }
     assert_eq!(generated.frame_count(), interpreted.frame_count());
     let mut rng = Rng::new(seed);
+    let mut taken = 0;
     for _ in 0..10 {
         let mut q = generated.zero_vector();
         let mut dq = generated.zero_vector();
@@ -136,6 +137,48 @@ where
                 }
             }
         }
+        // q̈ by the articulated-body algorithm (elements' forces included): the compiled one
+        // is the interpreted one unrolled, and both take or decline a state alike.
+        let (mut tau, mut qdd_g) = (generated.zero_vector(), generated.zero_vector());
+        for i in 0..n {
+            tau[i] = rng.uniform() - 0.5;
+            qdd_g[i] = rng.uniform() - 0.5; // read for kinematic variables only
+        }
+        let mut qdd_t = to_dyn::<S>(&qdd_g);
+        let mut own_g = tree_mech::Terms::zeros(generated.dim());
+        let mut own_t = tree_mech::Terms::<Dyn>::zeros(Dyn(n));
+        let took_g = generated.articulated_acceleration(&q, &dq, &tau, &mut qdd_g, &mut own_g);
+        let took_t = interpreted.articulated_acceleration(
+            &to_dyn::<S>(&q),
+            &to_dyn::<S>(&dq),
+            &to_dyn::<S>(&tau),
+            &mut qdd_t,
+            &mut own_t,
+        );
+        assert_eq!(
+            took_g, took_t,
+            "{}: articulated-body step taken",
+            model.name
+        );
+        if took_g {
+            taken += 1;
+            for i in 0..n {
+                // The model's own forces come back as the energy balance reads them.
+                assert!(
+                    close(own_g.force[i], own_t.force[i], 1e-12)
+                        && close(own_g.dl_dq[i], own_t.dl_dq[i], 1e-12),
+                    "{}: the model's own force on {i}",
+                    model.name
+                );
+                assert!(
+                    close(qdd_g[i], qdd_t[i], 1e-12),
+                    "{}: articulated q̈[{i}] {} vs {}",
+                    model.name,
+                    qdd_g[i],
+                    qdd_t[i]
+                );
+            }
+        }
         let mut pg = vec![Pose::IDENTITY; generated.frame_count()];
         let mut pt = pg.clone();
         generated.poses(&q, &mut pg);
@@ -149,6 +192,11 @@ where
             }
         }
     }
+    assert!(
+        taken > 0 || !model.constraints.is_empty(),
+        "{}: the articulated-body step was never taken",
+        model.name
+    );
     // Whole trajectories.
     let (q0, dq0) = generated.initial_state();
     for method in [Method::Vi(ViSettings::default()), Method::Rk4] {

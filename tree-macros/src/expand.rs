@@ -6,6 +6,7 @@ use std::collections::HashMap;
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote};
 use tree_model::{ModelSpec, ParameterSpec, Value};
+use tree_runtime::articulated::{self, Articulated};
 use tree_runtime::kernel::{self, Kernel};
 use tree_runtime::outputs::{Index, Output, Sink};
 use tree_runtime::plan::TreePlan;
@@ -104,6 +105,62 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
         out.values
     });
     Traced { nodes, outputs }
+}
+
+/// The articulated-body step traced as the interpreted system runs it: the elements' forces
+/// (`kernel::elements_at`, its outward sweep included) added to `τ`, then
+/// `articulated::accelerations` — each dynamic variable's `q̈`, pivot and pivot scale into
+/// an `ArticulatedIo`. `None` with constraints (their multipliers need the KKT system) or a
+/// dynamic variable the algorithm cannot resolve: the default then solves with `M`.
+fn articulated_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Program> {
+    if plan.rows > 0 || !articulated::resolvable(plan, kinematic) {
+        return None;
+    }
+    let n = plan.dof();
+    let (nodes, outputs) = trace::record(|| {
+        let q: Vec<Term> = (0..n).map(trace::q).collect();
+        let dq: Vec<Term> = (0..n).map(trace::dq).collect();
+        let mut k = Kernel::<Term>::new(plan);
+        let mut own = Recorder::default();
+        kernel::elements_at(plan, &mut k, &q, &dq, &mut own);
+        let own_term = |at: Output| {
+            own.slots
+                .get(&at)
+                .map_or(Term::Const(0.0), |&s| own.values[s].1)
+        };
+        // τ + F + ∂L/∂q of the elements, in the interpreted system's order.
+        let tau: Vec<Term> = (0..n)
+            .map(|i| trace::tau(i) + own_term(Output::Force(i)) + own_term(Output::DlDq(i)))
+            .collect();
+        let mut qdd: Vec<Term> = (0..n)
+            .map(|i| match kinematic[i] {
+                true => trace::kinematic_qdd(i),
+                false => Term::Const(0.0),
+            })
+            .collect();
+        let mut art = Articulated::<Term>::new(plan);
+        articulated::accelerations(plan, &k.tree, &mut art, &dq, &tau, kinematic, &mut qdd);
+        let mut outputs = Vec::new();
+        for i in 0..n {
+            for (at, field) in [
+                (Output::Force(i), quote!(force)),
+                (Output::DlDq(i), quote!(dl_dq)),
+            ] {
+                if let Some(&s) = own.slots.get(&at) {
+                    outputs.push((quote!(out.#field[#i]), own.values[s].1));
+                }
+            }
+        }
+        for (i, f) in plan.variable_frames.iter().enumerate() {
+            if let (false, Some(f)) = (kinematic[i], *f) {
+                outputs.push((quote!(out.qdd[#i]), qdd[i]));
+                outputs.push((quote!(out.pivot[#i]), art.pivot[f]));
+                outputs.push((quote!(out.pivot_scale[#i]), art.pivot_scale[f]));
+            }
+        }
+        outputs
+    });
+    Some(Program { nodes, outputs })
 }
 
 /// Every frame's pose, traced.
@@ -497,6 +554,53 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let mark_force_derivatives = sparsity
         .map(|s| quote!(out.force_derivatives = ::tree_mech::runtime::system::Sparsity::#s;));
     let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+    let articulated = articulated_program(&plan, &kinematic).map(|program| {
+        program.emit(
+            "__articulated",
+            &var_names,
+            Flavour::F64 {
+                out_ty: &quote!(::tree_mech::runtime::articulated::ArticulatedIo<#n>),
+                scratch: false,
+            },
+        )
+    });
+    let articulated_functions = articulated.as_ref().map(|e| e.functions.clone());
+    let articulated_method = articulated.as_ref().map(|e| {
+        let body = &e.body;
+        quote! {
+            fn articulated_acceleration(
+                &mut self,
+                q: &::tree_mech::runtime::Vector<Self::N>,
+                dq: &::tree_mech::runtime::Vector<Self::N>,
+                tau: &::tree_mech::runtime::Vector<Self::N>,
+                qdd: &mut ::tree_mech::runtime::Vector<Self::N>,
+                own: &mut ::tree_mech::runtime::Terms<Self::N>,
+            ) -> bool {
+                let mut io = ::tree_mech::runtime::articulated::ArticulatedIo::<#n>::default();
+                io.tau.copy_from_slice(tau.as_slice());
+                io.qdd_in.copy_from_slice(qdd.as_slice());
+                {
+                    let out = &mut io;
+                    let q: &[f64; #n] = &q.data.0[0];
+                    let dq: &[f64; #n] = &dq.data.0[0];
+                    #body
+                }
+                // The model's own forces, as the interpreted system leaves them.
+                own.force.as_mut_slice().copy_from_slice(&io.force);
+                own.dl_dq.as_mut_slice().copy_from_slice(&io.dl_dq);
+                let held = (0..#n).all(|i| {
+                    Self::KINEMATIC[i]
+                        || !::tree_mech::runtime::articulated::lost(io.pivot[i], io.pivot_scale[i])
+                });
+                if held {
+                    for i in (0..#n).filter(|&i| !Self::KINEMATIC[i]) {
+                        qdd[i] = io.qdd[i];
+                    }
+                }
+                held
+            }
+        }
+    });
     let full_path = file
         .as_ref()
         .map(|(full, shown)| (full.to_string_lossy().into_owned(), shown.clone()));
@@ -573,6 +677,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             }
 
             #(#functions)*
+            #articulated_functions
         }
 
         impl ::tree_mech::runtime::System for #name {
@@ -672,6 +777,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                     ::tree_mech::runtime::Order::Full => { #full_body #mark_force_derivatives }
                 }
             }
+
+            #articulated_method
 
             fn poses(
                 &mut self,

@@ -104,7 +104,7 @@ impl Names {
 
 fn operands(node: &Node) -> Vec<Term> {
     match *node {
-        Node::Q(_) | Node::Dq(_) => vec![],
+        Node::Q(_) | Node::Dq(_) | Node::Tau(_) | Node::KinematicQdd(_) => vec![],
         Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => vec![a, b],
         Node::Neg(a) | Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Recip(a) => vec![a],
     }
@@ -115,6 +115,8 @@ fn expression(node: &Node, names: &Names, generic: bool) -> TokenStream {
     match *node {
         Node::Q(i) => quote!(q[#i]),
         Node::Dq(i) => quote!(dq[#i]),
+        Node::Tau(i) => quote!(out.tau[#i]),
+        Node::KinematicQdd(i) => quote!(out.qdd_in[#i]),
         Node::Add(a, b) => {
             let (a, b) = (term(a), term(b));
             quote!(#a + #b)

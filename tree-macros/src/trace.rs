@@ -33,6 +33,10 @@ impl fmt::Debug for Term {
 pub enum Node {
     Q(usize),
     Dq(usize),
+    /// The generalized force on variable i (the articulated-body step's input `out.tau[i]`).
+    Tau(usize),
+    /// A kinematic variable's prescribed acceleration (`out.qdd_in[i]`).
+    KinematicQdd(usize),
     Add(Term, Term),
     Sub(Term, Term),
     Mul(Term, Term),
@@ -70,6 +74,8 @@ fn key(node: &Node) -> NodeKey {
     match *node {
         Node::Q(i) => (0, (false, i as u64), none),
         Node::Dq(i) => (1, (false, i as u64), none),
+        Node::Tau(i) => (10, (false, i as u64), none),
+        Node::KinematicQdd(i) => (11, (false, i as u64), none),
         Node::Add(a, b) => {
             let (x, y) = ordered(a, b);
             (2, x, y)
@@ -121,6 +127,16 @@ pub fn q(i: usize) -> Term {
 /// The input `q̇[i]`.
 pub fn dq(i: usize) -> Term {
     push(Node::Dq(i))
+}
+
+/// The input `τ[i]`, the generalized force on variable i.
+pub fn tau(i: usize) -> Term {
+    push(Node::Tau(i))
+}
+
+/// The input `q̈[i]` of a kinematic variable (its prescription).
+pub fn kinematic_qdd(i: usize) -> Term {
+    push(Node::KinematicQdd(i))
 }
 
 impl Add for Term {

@@ -16,30 +16,35 @@
 //!    upward acceleration of the base).
 
 use crate::plan::{Body, TreePlan};
+use crate::scalar::Scalar;
 use crate::se3::{component, cross, dot, inertia_times, zero6, SpatialInertia, Twist, Wrench};
 use crate::sweeps::Workspace;
 use tree_model::Joint;
 
-/// Per-frame storage of the algorithm (allocated once, reused).
+/// Per-frame storage of the algorithm (allocated once, reused), over any [`Scalar`]: `f64`
+/// for the interpreted system, traced by `tree_model!` into straight-line code.
 #[derive(Clone, Debug)]
-pub struct Articulated {
+pub struct Articulated<S: Scalar = f64> {
     /// Articulated inertia `I^A` of each subtree at its root.
-    inertia: Vec<SpatialInertia>,
+    inertia: Vec<SpatialInertia<S>>,
     /// Bias wrench `p^A`.
-    bias: Vec<Wrench>,
+    bias: Vec<Wrench<S>>,
     /// `U = I^A ξ` at a frame driven by a dynamic variable.
-    column: Vec<Wrench>,
+    column: Vec<Wrench<S>>,
     /// `D = ξ·U`.
-    pivot: Vec<f64>,
+    pub pivot: Vec<S>,
+    /// What `D` is judged against: the trace of `I^A`'s block along the primitive (angular
+    /// for a rotation, linear for a translation).
+    pub pivot_scale: Vec<S>,
     /// `u = τ − ξ·p^A`.
-    force: Vec<f64>,
+    force: Vec<S>,
     /// The velocity-product acceleration `c`.
-    bias_acceleration: Vec<Twist>,
+    bias_acceleration: Vec<Twist<S>>,
     /// Each frame's acceleration.
-    acceleration: Vec<Twist>,
+    acceleration: Vec<Twist<S>>,
 }
 
-impl Articulated {
+impl<S: Scalar> Articulated<S> {
     /// Buffers sized for `plan`.
     pub fn new(plan: &TreePlan) -> Self {
         let nf = plan.frames.len();
@@ -47,8 +52,9 @@ impl Articulated {
             inertia: vec![SpatialInertia::default(); nf],
             bias: vec![zero6(); nf],
             column: vec![zero6(); nf],
-            pivot: vec![0.0; nf],
-            force: vec![0.0; nf],
+            pivot: vec![S::zero(); nf],
+            pivot_scale: vec![S::zero(); nf],
+            force: vec![S::zero(); nf],
             bias_acceleration: vec![zero6(); nf],
             acceleration: vec![zero6(); nf],
         }
@@ -57,7 +63,7 @@ impl Articulated {
 
 /// `v ×* w = (ω × f, v × f + ω × τ)`: the rate of change of a momentum `w = (f, τ)` carried by
 /// a body moving with twist `v = (v, ω)` (body-frame Newton–Euler).
-fn cross_force(v: &Twist, w: &Wrench) -> Wrench {
+fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
     let (lin, ang) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
     let (f, tau) = ([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
     let a = cross(&ang, &f);
@@ -66,7 +72,7 @@ fn cross_force(v: &Twist, w: &Wrench) -> Wrench {
     [a[0], a[1], a[2], b[0] + e[0], b[1] + e[1], b[2] + e[2]]
 }
 
-fn add6(a: &mut [f64; 6], b: &[f64; 6]) {
+fn add6<S: Scalar>(a: &mut [S; 6], b: &[S; 6]) {
     for (x, y) in a.iter_mut().zip(b) {
         *x += *y;
     }
@@ -75,30 +81,33 @@ fn add6(a: &mut [f64; 6], b: &[f64; 6]) {
 /// Whether a pivot `D` is too small to divide by: not positive, or lost to rounding against
 /// the articulated inertia it came from (the mass matrix's Cholesky uses the same relative
 /// threshold). Then the caller solves with `M` instead, which reports the variable.
-fn lost(d: f64, scale: f64) -> bool {
+pub fn lost(d: f64, scale: f64) -> bool {
     !(d.is_finite() && d > 1e-13 * scale.abs().max(f64::MIN_POSITIVE))
+}
+
+/// Whether every dynamic variable moves a frame the sweeps visit (else it has no inertia and
+/// the algorithm cannot resolve it): known from the plan alone.
+pub fn resolvable(plan: &TreePlan, kinematic: &[bool]) -> bool {
+    let unresolved =
+        |(f, &k): (&Option<usize>, &bool)| !k && f.is_none_or(|f| !plan.frames[f].needed);
+    !plan.variable_frames.iter().zip(kinematic).any(unresolved)
 }
 
 /// `q̈` into `qdd` for every dynamic variable, by the articulated-body algorithm on the
 /// outward sweep `ws` at `(q, q̇)`: `tau` the generalized forces on every variable, `qdd`'s
-/// kinematic entries (`kinematic[i]`) their prescribed accelerations. Returns `false`, with
-/// `qdd`'s dynamic entries unspecified, when a pivot vanishes (a variable with no inertia
-/// below it along its axis) or a dynamic variable moves no frame with mass below it.
-pub fn accelerations(
+/// kinematic entries (`kinematic[i]`) their prescribed accelerations. Each dynamic
+/// variable's pivot `D` and its scale are left in `art.pivot`, `art.pivot_scale` (by frame)
+/// for the caller to judge ([`lost`]); a lost pivot makes `qdd` meaningless. Over any
+/// scalar, with no branch on a value, so that `tree_model!` unrolls it.
+pub fn accelerations<S: Scalar>(
     plan: &TreePlan,
-    ws: &Workspace<f64>,
-    art: &mut Articulated,
-    dq: &[f64],
-    tau: &[f64],
+    ws: &Workspace<S>,
+    art: &mut Articulated<S>,
+    dq: &[S],
+    tau: &[S],
     kinematic: &[bool],
-    qdd: &mut [f64],
-) -> bool {
-    // A dynamic variable that moves no frame, or no frame the sweeps visit, has no inertia.
-    let unresolved =
-        |(f, &k): (&Option<usize>, &bool)| !k && f.is_none_or(|f| !plan.frames[f].needed);
-    if plan.variable_frames.iter().zip(kinematic).any(unresolved) {
-        return false;
-    }
+    qdd: &mut [S],
+) {
     // The bodies' own inertias and bias wrenches.
     for (k, f) in plan.frames.iter().enumerate() {
         if !f.needed {
@@ -110,7 +119,10 @@ pub fn accelerations(
                 SpatialInertia::diagonal(mass, &moments),
                 inertia_times(mass, &moments, v),
             ),
-            Some(Body::Full { inertia, .. }) => (inertia, inertia.times(v)),
+            Some(Body::Full { inertia, .. }) => {
+                let inertia = inertia.constant::<S>();
+                (inertia, inertia.times(v))
+            }
             None => (SpatialInertia::default(), zero6()),
         };
         art.inertia[k] = inertia;
@@ -144,25 +156,23 @@ pub fn accelerations(
             } else {
                 let u_col = inertia.column(f.kind);
                 let d = component(&u_col, f.kind);
-                // D against the largest diagonal entry of its block (angular for a
-                // rotation, linear for a translation): at a singular configuration (gimbal
-                // lock) D falls to rounding while the other directions keep their inertia.
+                // D against its block's trace (angular for a rotation, linear for a
+                // translation): at a singular configuration (gimbal lock) D falls to
+                // rounding while the other directions keep their inertia.
                 let block = if f.kind.is_rotation() {
                     &inertia.ww
                 } else {
                     &inertia.vv
                 };
-                let scale = block[0][0].max(block[1][1]).max(block[2][2]);
-                if lost(d, scale) {
-                    return false;
-                }
+                art.pivot_scale[k] = block[0][0] + block[1][1] + block[2][2];
                 let u = tau[i] - component(&bias, f.kind);
+                let inverse = d.recip();
                 art.column[k] = u_col;
                 art.pivot[k] = d;
                 art.force[k] = u;
-                inertia.sub_outer(&u_col, 1.0 / d);
+                inertia.sub_outer(&u_col, inverse);
                 add6(&mut bias, &inertia.times(&c));
-                add6(&mut bias, &u_col.map(|x| x * (u / d)));
+                add6(&mut bias, &u_col.map(|x| x * (u * inverse)));
             }
         }
         let Some(p) = f.parent else { continue };
@@ -180,7 +190,7 @@ pub fn accelerations(
     }
     // Outward: accelerations from the base's `(−γ, 0)`.
     let g = plan.gravity;
-    let base = [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0];
+    let base = [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0].map(S::constant);
     for (k, f) in plan.frames.iter().enumerate() {
         if !f.needed {
             continue;
@@ -193,12 +203,83 @@ pub fn accelerations(
         add6(&mut a, &art.bias_acceleration[k]);
         if let Joint::Variable(i) = f.joint {
             if !kinematic[i] {
-                qdd[i] = (art.force[k] - dot(&art.column[k], &a)) / art.pivot[k];
+                qdd[i] = (art.force[k] - dot(&art.column[k], &a)) * art.pivot[k].recip();
             }
             let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
             a[axis] += qdd[i];
         }
         art.acceleration[k] = a;
     }
-    true
+}
+
+/// [`accelerations`] in `f64` with its pivots judged: `false` (and `qdd`'s dynamic entries
+/// unspecified) when a dynamic variable moves no frame with mass below it or a pivot is
+/// lost, the cases the caller solves with `M` instead.
+pub fn accelerations_checked(
+    plan: &TreePlan,
+    ws: &Workspace<f64>,
+    art: &mut Articulated,
+    dq: &[f64],
+    tau: &[f64],
+    kinematic: &[bool],
+    qdd: &mut [f64],
+) -> bool {
+    if !resolvable(plan, kinematic) {
+        return false;
+    }
+    accelerations(plan, ws, art, dq, tau, kinematic, qdd);
+    pivots_hold(plan, kinematic, |k| (art.pivot[k], art.pivot_scale[k]))
+}
+
+/// Whether every dynamic variable's pivot (`pivot(frame)` → `(D, scale)`) holds.
+pub fn pivots_hold(
+    plan: &TreePlan,
+    kinematic: &[bool],
+    pivot: impl Fn(usize) -> (f64, f64),
+) -> bool {
+    plan.variable_frames
+        .iter()
+        .zip(kinematic)
+        .filter(|(_, &k)| !k)
+        .filter_map(|(f, _)| *f)
+        .all(|k| {
+            let (d, scale) = pivot(k);
+            !lost(d, scale)
+        })
+}
+
+/// What the code `tree_model!` generates for [`accelerations`] reads and writes, on the stack:
+/// the generalized forces and the kinematic variables' prescribed accelerations in, every
+/// variable's `q̈` and each dynamic variable's pivot and its scale out (by variable).
+#[derive(Clone, Copy, Debug)]
+pub struct ArticulatedIo<const N: usize> {
+    /// `τ`, every variable's generalized force (inputs, springs and the model's forces).
+    pub tau: [f64; N],
+    /// The kinematic variables' prescribed `q̈` (other entries unread).
+    pub qdd_in: [f64; N],
+    /// The dynamic variables' `q̈` (other entries unwritten).
+    pub qdd: [f64; N],
+    /// Each dynamic variable's pivot `D`.
+    pub pivot: [f64; N],
+    /// What it is judged against ([`lost`]).
+    pub pivot_scale: [f64; N],
+    /// The model's own generalized forces (damping, dampers) and its springs' `∂L/∂q`, as
+    /// the system hands them back in `own.force`, `own.dl_dq`.
+    pub force: [f64; N],
+    /// See `force`.
+    pub dl_dq: [f64; N],
+}
+
+impl<const N: usize> Default for ArticulatedIo<N> {
+    fn default() -> Self {
+        ArticulatedIo {
+            tau: [0.0; N],
+            qdd_in: [0.0; N],
+            qdd: [0.0; N],
+            pivot: [0.0; N],
+            pivot_scale: [0.0; N],
+            force: [0.0; N],
+            dl_dq: [0.0; N],
+        }
+    }
 }

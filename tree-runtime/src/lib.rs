@@ -42,7 +42,8 @@ pub mod scalar;
 pub mod se3;
 #[doc(hidden)]
 pub mod sweeps;
-// Forward dynamics by the articulated-body algorithm (f64: the interpreted system's).
+// Forward dynamics by the articulated-body algorithm, over any scalar (the interpreted
+// system's in f64, unrolled by `tree_model!`).
 #[doc(hidden)]
 pub mod articulated;
 

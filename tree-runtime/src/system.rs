@@ -342,7 +342,8 @@ where
     /// left in `own.force` and `own.dl_dq` (the rest of `own` unspecified). Returns `false`
     /// when the system has no such algorithm, the model has constraints, or a pivot
     /// vanishes; the caller then solves `M q̈ = …` (which names a singular variable). The
-    /// default returns `false`.
+    /// default returns `false`; the interpreted system runs [`crate::articulated`], and
+    /// `tree_model!` unrolls the same code for a model without constraints.
     fn articulated_acceleration(
         &mut self,
         q: &Vector<Self::N>,

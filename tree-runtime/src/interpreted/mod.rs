@@ -214,7 +214,7 @@ impl System for TreeSystem {
         for (i, t) in self.tau.iter_mut().enumerate() {
             *t = tau[i] + own.force[i] + own.dl_dq[i];
         }
-        articulated::accelerations(
+        articulated::accelerations_checked(
             &self.plan,
             &self.kernel.tree,
             &mut self.articulated,
