@@ -39,6 +39,21 @@ impl Sink<Term> for Recorder {
     }
 }
 
+impl Recorder {
+    /// The value recorded for `at`, if anything contributed to it.
+    fn get(&self, at: Output) -> Option<Term> {
+        self.slots.get(&at).map(|&k| self.values[k].1)
+    }
+}
+
+/// The traced inputs `q` and `q̇` of a tree with `n` variables.
+fn state_inputs(n: usize) -> (Vec<Term>, Vec<Term>) {
+    (
+        (0..n).map(trace::q).collect(),
+        (0..n).map(trace::dq).collect(),
+    )
+}
+
 /// A traced evaluation: the tape and the value that lands in each output.
 struct Traced {
     nodes: Vec<trace::Node>,
@@ -97,8 +112,7 @@ type Evaluation = fn(&TreePlan, &mut Kernel<Term>, &[Term], &[Term], Order, &mut
 fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
     let n = plan.dof();
     let (nodes, outputs) = trace::record(|| {
-        let q: Vec<Term> = (0..n).map(trace::q).collect();
-        let dq: Vec<Term> = (0..n).map(trace::dq).collect();
+        let (q, dq) = state_inputs(n);
         let mut ws = Kernel::<Term>::new(plan);
         let mut out = Recorder::default();
         evaluation(plan, &mut ws, &q, &dq, order, &mut out);
@@ -118,16 +132,11 @@ fn articulated_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Program> {
     }
     let n = plan.dof();
     let (nodes, outputs) = trace::record(|| {
-        let q: Vec<Term> = (0..n).map(trace::q).collect();
-        let dq: Vec<Term> = (0..n).map(trace::dq).collect();
+        let (q, dq) = state_inputs(n);
         let mut k = Kernel::<Term>::new(plan);
         let mut own = Recorder::default();
         kernel::elements_at(plan, &mut k, &q, &dq, &mut own);
-        let own_term = |at: Output| {
-            own.slots
-                .get(&at)
-                .map_or(Term::Const(0.0), |&s| own.values[s].1)
-        };
+        let own_term = |at: Output| own.get(at).unwrap_or(Term::Const(0.0));
         // τ + F + ∂L/∂q of the elements, in the interpreted system's order.
         let tau: Vec<Term> = (0..n)
             .map(|i| trace::tau(i) + own_term(Output::Force(i)) + own_term(Output::DlDq(i)))
@@ -146,8 +155,8 @@ fn articulated_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Program> {
                 (Output::Force(i), quote!(force)),
                 (Output::DlDq(i), quote!(dl_dq)),
             ] {
-                if let Some(&s) = own.slots.get(&at) {
-                    outputs.push((quote!(out.#field[#i]), own.values[s].1));
+                if let Some(x) = own.get(at) {
+                    outputs.push((quote!(out.#field[#i]), x));
                 }
             }
         }
