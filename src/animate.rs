@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use crate::output::{drawing_error, OutputFile, Sentence};
 use plotters::style::{register_font, FontStyle};
 use tree_mech::model::{ConstraintKind, Joint, Model, SpringKind};
-use tree_mech::runtime::Pose;
+use tree_mech::runtime::{Pose, Seconds};
 
 use crate::plot::FONT;
 
@@ -440,10 +440,33 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
             .map_err(|x| e(&x))?;
     }
     root.draw(&Text::new(
-        format!("{}   t = {t:.2} s", model.name),
+        format!("{}   t = {} s", model.name, caption_time(t)),
         (12, 12),
         ("sans-serif", 18).into_font(),
     ))
     .map_err(|x| e(&x))?;
     Ok(())
+}
+
+/// The caption's time: two decimals, steady from frame to frame; past a million seconds as
+/// the messages print times (never hundreds of digits across the picture).
+fn caption_time(t: f64) -> String {
+    if t.abs() < 1e6 {
+        format!("{t:.2}")
+    } else {
+        Seconds(t).to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::caption_time;
+
+    #[test]
+    fn the_caption_time_is_short_at_any_size() {
+        assert_eq!(caption_time(0.125), "0.12");
+        assert_eq!(caption_time(12.0), "12.00");
+        assert_eq!(caption_time(1e300), "1e300");
+        assert_eq!(caption_time(2.5e9), "2.5e9");
+    }
 }

@@ -19,7 +19,7 @@ use tree_mech::integrate::{
     run_with_inputs, Forcing, InputSchedule, JacobianUpdate, Method, SimOptions, Tolerance,
     ViSettings,
 };
-use tree_mech::model;
+use tree_mech::model::{self, Given, Rounded};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::evaluation::evaluate_state;
 use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Prescription, Seconds, Vector};
@@ -444,25 +444,12 @@ fn parse_baumgarte(text: Option<&str>) -> Result<Baumgarte, String> {
     }
 }
 
-/// A sum without its rounding noise: 12 significant digits, written shortest
-/// (17.451901, not 17.451901000000003).
-fn tidy(x: f64) -> String {
-    let rounded: f64 = format!("{x:.11e}").parse().unwrap_or(x);
-    format!("{}", Given(rounded))
-}
-
-/// A number a model gives, as `check` prints it: Rust's shortest form where that is short,
-/// exponent form from 10¹⁵ and below 10⁻⁶ (a stiffness of `1e300`, not three hundred digits).
-struct Given(f64);
-
-impl std::fmt::Display for Given {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let x = self.0.abs();
-        if x == 0.0 || (1e-6..1e15).contains(&x) {
-            write!(f, "{}", self.0)
-        } else {
-            write!(f, "{:e}", self.0)
-        }
+/// `1 frame`, `2 frames`, `1 mass`, `3 masses`.
+fn counted(n: usize, noun: &str) -> String {
+    match (n, noun.ends_with('s')) {
+        (1, _) => format!("1 {noun}"),
+        (_, true) => format!("{n} {noun}es"),
+        (_, false) => format!("{n} {noun}s"),
     }
 }
 
@@ -997,7 +984,11 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
         Given(model.gravity[1]),
         Given(model.gravity[2])
     );
-    println!("{} frames, {} variables:", model.frames.len(), sys.dof());
+    println!(
+        "{}, {}:",
+        counted(model.frames.len(), "frame"),
+        counted(sys.dof(), "variable")
+    );
     for v in &model.variables {
         let drives = match v.frame {
             Some(f) => format!(
@@ -1048,7 +1039,7 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
         );
     }
     if !model.constraints.is_empty() {
-        println!("{} constraints:", model.constraints.len());
+        println!("{}:", counted(model.constraints.len(), "constraint"));
         for c in &model.constraints {
             let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
             let what = match &c.kind {
@@ -1070,7 +1061,10 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
         }
     }
     if !model.inputs.is_empty() {
-        println!("{} inputs (generalized forces u):", model.inputs.len());
+        println!(
+            "{} (generalized forces u):",
+            counted(model.inputs.len(), "input")
+        );
         for u in &model.inputs {
             let limits = u
                 .limits
@@ -1109,9 +1103,9 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
     }
     let masses: Vec<_> = model.frames.iter().filter(|f| f.mass.is_some()).collect();
     println!(
-        "{} masses, total mass {} kg:",
-        masses.len(),
-        tidy(model.total_mass())
+        "{}, total mass {} kg:",
+        counted(masses.len(), "mass"),
+        Rounded(model.total_mass(), 12)
     );
     for f in masses {
         let m = f.mass.unwrap();

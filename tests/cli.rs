@@ -140,12 +140,20 @@ fn constrained_models_report_constraints_everywhere() {
     let text = std::fs::read_to_string("tests/models/elements.toml")
         .unwrap()
         .replace("stiffness = 5.0", "stiffness = 1e300")
-        .replace("damping = 0.7", "damping = 2.5e-9");
+        .replace("damping = 0.7", "damping = 2.5e-9")
+        .replace("tz = 0.5\nmass = 1.0", "tz = -1e200\nmass = 1e250");
     std::fs::write(&stiff, text).unwrap();
     let (ok, stdout, _) = tree_mech(&["check", stiff.to_str().unwrap()]);
     assert!(ok);
     assert!(
         stdout.contains("spring on `bend`: k = 1e300, rest = 0.1") && stdout.contains("c = 2.5e-9"),
+        "{stdout}"
+    );
+    // The masses' list and the tree too (a length and a mass as given, not 200 digits).
+    assert!(
+        stdout.contains("total mass 1e250 kg")
+            && stdout.contains("tz(-1e200)  [m = 1e250, I = (")
+            && !stdout.contains("00000000000"),
         "{stdout}"
     );
 }
@@ -653,7 +661,7 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
     // check lists the input; eval takes --u.
     let (ok, stdout, _) = tree_mech(&["check", "tests/models/cart.toml"]);
     assert!(
-        ok && stdout.contains("1 inputs (generalized forces u):")
+        ok && stdout.contains("1 input (generalized forces u):")
             && stdout.contains("push                 on `x`; limits [-10, 10]"),
         "{stdout}"
     );

@@ -110,6 +110,14 @@ def test_errors_are_plain():
     trep.Frame(s.world_frame, trep.TX, "a", name="slider", mass=1.0)
     with pytest.raises(ValueError, match="expected 1 values"):
         s.q = [1.0, 2.0]
+    slider = s.get_frame("slider")
+    with pytest.raises(ValueError, match="frame `slider`: mass -1.0 must be finite and not negative"):
+        slider.set_mass(-1.0)
+    with pytest.raises(ValueError, match="frame `slider`: Izz nan must be finite"):
+        slider.set_mass(1.0, 0.1, 0.1, float("nan"))
+    with pytest.raises(ValueError, match="mass -2 must be"):
+        trep.Frame(slider, trep.TZ, 1.0, name="light", mass=-2)
+    assert slider.mass == 1.0 and s.nQ == 1 and len(slider.children) == 0
     with pytest.raises(ValueError, match="parameter must be a finite number or a config name"):
         trep.Frame(s.world_frame, trep.TZ, None, name="nowhere")
     with pytest.raises(ValueError, match="three finite numbers"):

@@ -41,6 +41,7 @@ mod error;
 mod lock;
 mod model;
 mod motion;
+mod number;
 mod primitive;
 mod source;
 mod spec;
@@ -57,6 +58,7 @@ pub use model::{
     SpringKind, Variable, DEFAULT_GRAVITY,
 };
 pub use motion::{CubicSpline, Motion};
+pub use number::{Given, Rounded};
 pub use primitive::{Primitive, PrimitiveKind, Value};
 pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{

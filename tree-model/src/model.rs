@@ -2,6 +2,7 @@
 //! order they first appear in the frame list.
 
 use crate::motion::Motion;
+use crate::number::Given;
 use crate::primitive::PrimitiveKind;
 
 /// Standard gravity along −Z, the default.
@@ -53,19 +54,17 @@ impl Mass {
 
     /// `m = …, I = (…)`, with the centre of mass and products of inertia when present.
     pub fn describe(&self) -> String {
-        let i = self.inertia6();
+        let [xx, yy, zz, xy, xz, yz] = self.inertia6().map(Given);
         let mut s = match self.diagonal() {
-            Some(d) => format!("m = {}, I = ({}, {}, {})", self.mass, d[0], d[1], d[2]),
+            Some(_) => format!("m = {}, I = ({xx}, {yy}, {zz})", Given(self.mass)),
             None => format!(
-                "m = {}, I = (xx {}, yy {}, zz {}, xy {}, xz {}, yz {})",
-                self.mass, i[0], i[1], i[2], i[3], i[4], i[5]
+                "m = {}, I = (xx {xx}, yy {yy}, zz {zz}, xy {xy}, xz {xz}, yz {yz})",
+                Given(self.mass)
             ),
         };
         if self.com != [0.0; 3] {
-            s += &format!(
-                ", com = ({}, {}, {})",
-                self.com[0], self.com[1], self.com[2]
-            );
+            let [x, y, z] = self.com.map(Given);
+            s += &format!(", com = ({x}, {y}, {z})");
         }
         s
     }
@@ -421,7 +420,7 @@ impl Model {
         }
         for (k, f) in self.frames.iter().enumerate() {
             let param = match f.joint {
-                Joint::Constant(x) => format!("{x}"),
+                Joint::Constant(x) => Given(x).to_string(),
                 Joint::Variable(i) => self.variables[i].name.clone(),
             };
             let mass = match f.mass {

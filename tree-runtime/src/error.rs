@@ -185,21 +185,16 @@ impl fmt::Display for SimError {
     }
 }
 
-/// A time in seconds as the messages and summaries print it: to 12 decimals, trailing zeros
-/// dropped (a subdivided step's `0.5624999999999999` reads `0.5625`); below a microsecond
-/// and from 10⁹ s on, in exponent form (`3e-7`, `1e300`, never three hundred digits).
+/// A time in seconds as the messages and summaries print it: to 12 significant digits,
+/// trailing zeros dropped (a subdivided step's `0.5624999999999999` reads `0.5625`); below a
+/// microsecond and from 10⁹ s on, in exponent form (`3e-7`, `1e300`, never three hundred
+/// digits). [`tree_model::Rounded`], named for what it prints.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Seconds(pub f64);
 
 impl fmt::Display for Seconds {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let x = self.0.abs();
-        if !self.0.is_finite() || (x != 0.0 && !(1e-6..1e9).contains(&x)) {
-            return write!(f, "{:e}", self.0);
-        }
-        let text = format!("{:.12}", self.0);
-        let text = text.trim_end_matches('0').trim_end_matches('.');
-        f.write_str(if text == "-0" { "0" } else { text })
+        tree_model::Rounded(self.0, 12).fmt(f)
     }
 }
 

@@ -11,6 +11,7 @@ potential, force, input or constraint added, a mass or a constant changed).
 from __future__ import annotations
 
 import json
+import math
 from typing import Any, Dict, List, Optional, Sequence, Union
 
 import numpy as np
@@ -92,6 +93,15 @@ class Config:
         self._system._state_changed()
 
 
+def _check_body(frame: str, mass: Any, Ixx: Any = 0.0, Iyy: Any = 0.0, Izz: Any = 0.0) -> None:
+    """A ``ValueError`` naming the frame when a body's mass or moment is negative or not
+    finite (before anything is changed)."""
+    for what, value in (("mass", mass), ("Ixx", Ixx), ("Iyy", Iyy), ("Izz", Izz)):
+        x = float(value)
+        if not math.isfinite(x) or x < 0.0:
+            raise ValueError(f"frame `{frame}`: {what} {value!r} must be finite and not negative")
+
+
 class Frame:
     """A coordinate frame: ``Frame(parent, trep.TX…trep.RZ, value or config name, name=,
     kinematic=, mass=)``. A number is a constant transform; a name makes a config (kinematic
@@ -127,6 +137,8 @@ class Frame:
         if not (isinstance(param, str) or number and np.isfinite(param)):
             raise ValueError(f"frame {name or '(unnamed)'}: the {transform} parameter must be a "
                              f"finite number or a config name, got {param!r}")
+        masses = tuple(mass) if isinstance(mass, (tuple, list)) else (mass,)
+        _check_body(name or "(unnamed)", *masses)
         parent._children.append(self)
         system._hold()
         try:
@@ -204,7 +216,10 @@ class Frame:
 
     def set_mass(self, mass: float, Ixx: float = 0.0, Iyy: float = 0.0,
                  Izz: float = 0.0) -> None:
-        """A rigid body at this frame's origin: mass and principal moments in its axes."""
+        """A rigid body at this frame's origin: mass and principal moments in its axes.
+        A negative or non-finite value is a ``ValueError`` here, where it is set (the model
+        would refuse it only at its next evaluation)."""
+        _check_body(self.name or "(unnamed)", mass, Ixx, Iyy, Izz)
         self._mass = float(mass)
         self._inertia = (float(Ixx), float(Iyy), float(Izz))
         self._system._structure_changed()
