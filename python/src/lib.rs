@@ -77,12 +77,52 @@ fn bad(message: impl Into<String>) -> PyErr {
 }
 
 /// `every` (record every k-th step) is at least 1: a `ValueError` for the whole call, not an
-/// error per rollout.
-fn check_every(every: usize) -> PyResult<()> {
-    match every {
-        0 => Err(bad(
-            "every must be at least 1 (every k-th step is recorded)",
-        )),
+/// error per rollout (and not Python's `OverflowError` for a negative one).
+fn check_every(every: i64) -> PyResult<usize> {
+    match usize::try_from(every) {
+        Ok(k) if k >= 1 => Ok(k),
+        _ => Err(bad(format!(
+            "every must be at least 1 (every k-th step is recorded), got {every}"
+        ))),
+    }
+}
+
+/// A count the caller gives (`max_steps`, `threads`) as a `usize`, or a `ValueError` naming it.
+fn count(what: &str, x: i64, least: usize) -> PyResult<usize> {
+    match usize::try_from(x) {
+        Ok(k) if k >= least => Ok(k),
+        _ => Err(bad(format!("{what} must be at least {least}, got {x}"))),
+    }
+}
+
+/// A `ValueError` naming the first entry of `values` that is not finite (`names[i]` says
+/// whose it is): states and inputs are numbers, and a NaN would otherwise surface later as a
+/// misleading failure of the dynamics.
+fn check_finite(what: &str, values: &[f64], names: &[String]) -> PyResult<()> {
+    match values.iter().position(|x| !x.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(bad(format!(
+            "{what}[{i}] (`{}`) is {}: every entry must be a finite number",
+            names.get(i).map_or("?", |n| n.as_str()),
+            values[i]
+        ))),
+    }
+}
+
+/// The number of steps of a run of `duration` at `dt` (as the integrators count them), which a
+/// per-step input array must match row for row.
+fn steps_of(duration: f64, dt: f64) -> Option<usize> {
+    let steps = (duration / dt).round();
+    (steps.is_finite() && steps >= 1.0 && steps <= 1e9).then_some(steps as usize)
+}
+
+/// Per-step inputs have one row a step: a different count (a mixed-up `dt`, a schedule for
+/// another horizon) is a `ValueError`, not inputs silently cut short or held.
+fn check_rows(rows: usize, duration: f64, dt: f64) -> PyResult<()> {
+    match steps_of(duration, dt) {
+        Some(steps) if steps != rows => Err(bad(format!(
+            "u has {rows} rows of inputs, one a step; the run has {steps} steps (duration / dt)"
+        ))),
         _ => Ok(()),
     }
 }
@@ -130,7 +170,9 @@ impl Model {
                         self.names().join(", ")
                     )));
                 }
-                Ok(Vector::<Dyn>::from_iterator(n, v.iter().copied()))
+                let v: Vec<f64> = v.iter().copied().collect();
+                check_finite(what, &v, &self.names())?;
+                Ok(Vector::<Dyn>::from_vec(v))
             }
         }
     }
@@ -138,6 +180,10 @@ impl Model {
     /// One number per variable, as a numpy array.
     fn per_variable(&self, py: Python<'_>, of: impl Fn(&model::Variable) -> f64) -> Py<PyAny> {
         vector(py, &self.model.variables.iter().map(of).collect::<Vec<_>>())
+    }
+
+    fn input_names(&self) -> Vec<String> {
+        self.model.inputs.iter().map(|u| u.name.clone()).collect()
     }
 
     fn names(&self) -> Vec<String> {
@@ -156,7 +202,12 @@ impl Model {
     }
 
     /// The inputs: none (zero), constant (inputs,), or per step (steps, inputs) at `dt`.
-    fn schedule(&self, u: Option<&Bound<'_, PyAny>>, dt: f64) -> PyResult<InputSchedule> {
+    fn schedule(
+        &self,
+        u: Option<&Bound<'_, PyAny>>,
+        duration: f64,
+        dt: f64,
+    ) -> PyResult<InputSchedule> {
         let width = self.model.inputs.len();
         let Some(u) = u else {
             return Ok(InputSchedule::default());
@@ -172,6 +223,7 @@ impl Model {
                     v.len()
                 )));
             }
+            check_finite("u", &v, &self.input_names())?;
             return Ok(InputSchedule::constant(v));
         }
         let a = u
@@ -184,6 +236,7 @@ impl Model {
                 a.ncols()
             )));
         }
+        check_rows(a.nrows(), duration, dt)?;
         let rows = (0..a.nrows())
             .map(|k| (k as f64 * dt, a.row(k).to_vec()))
             .collect();
@@ -473,19 +526,20 @@ impl Model {
         q0: Option<Numbers<'_, Ix1>>,
         dq0: Option<Numbers<'_, Ix1>>,
         u: Option<&Bound<'_, PyAny>>,
-        every: usize,
+        every: i64,
         alpha: f64,
         forcing: &str,
         newton_tol: Option<f64>,
         rtol: f64,
         atol: f64,
-        max_steps: usize,
+        max_steps: i64,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Trajectory> {
-        check_every(every)?;
+        let every = check_every(every)?;
+        let max_steps = count("max_steps", max_steps, 1)?;
         let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
         let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
-        let inputs = self.schedule(u, dt)?;
+        let inputs = self.schedule(u, duration, dt)?;
         let options = SimOptions {
             every,
             max_steps,
@@ -661,11 +715,12 @@ impl Model {
         dt: f64,
         integrator: &str,
         u: Option<&Bound<'_, PyAny>>,
-        threads: Option<usize>,
-        every: usize,
+        threads: Option<i64>,
+        every: i64,
         models: Option<Vec<PyRef<'_, Model>>>,
     ) -> PyResult<Rollouts> {
-        check_every(every)?;
+        let every = check_every(every)?;
+        let threads = threads.map(|k| count("threads", k, 1)).transpose()?;
         let (q0, dq0) = (q0.as_array(), dq0.as_array());
         let (batch, n) = (q0.nrows(), self.n());
         if q0.ncols() != n || dq0.shape() != q0.shape() {
@@ -688,9 +743,14 @@ impl Model {
                             a.shape()
                         )));
                     }
+                    let names = self.input_names();
                     (0..batch)
-                        .map(|b| InputSchedule::constant(a.row(b).to_vec()))
-                        .collect()
+                        .map(|b| {
+                            let row = a.row(b).to_vec();
+                            check_finite(&format!("u[{b}]"), &row, &names)?;
+                            Ok(InputSchedule::constant(row))
+                        })
+                        .collect::<PyResult<_>>()?
                 } else {
                     let a = u
                         .extract::<PyArrayLike3<f64, AllowTypeChange>>()
@@ -704,6 +764,7 @@ impl Model {
                             a.shape()
                         )));
                     }
+                    check_rows(a.shape()[1], duration, dt)?;
                     let mut out = Vec::with_capacity(batch);
                     for b in 0..batch {
                         let rows = (0..a.shape()[1])

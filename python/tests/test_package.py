@@ -114,6 +114,13 @@ def test_bad_batch_arguments_fail_the_call_with_a_sentence():
         m.rollouts(zeros, zeros, 1.0, 0.01, every=0)
     with pytest.raises(ValueError, match="every must be at least 1"):
         m.simulate(1.0, 0.01, every=0)
+    # Negative counts are a sentence naming the argument, not Python's OverflowError.
+    with pytest.raises(ValueError, match="every must be at least 1 .*, got -1"):
+        m.simulate(1.0, 0.01, every=-1)
+    with pytest.raises(ValueError, match="threads must be at least 1, got -2"):
+        m.rollouts(zeros, zeros, 1.0, 0.01, threads=-2)
+    with pytest.raises(ValueError, match="max_steps must be at least 1, got -5"):
+        m.simulate(1.0, 0.01, integrator="rk45", max_steps=-5)
     # A mistyped thread count is refused, not started (a million threads would hang).
     with pytest.raises(tm.SimulationError, match="threads asked for"):
         m.rollouts(zeros, zeros, 0.1, 0.01, threads=10**6)
@@ -285,3 +292,21 @@ def test_progress_is_reported_and_an_exception_in_it_stops_the_run():
     with pytest.raises(KeyError, match="enough"):
         m.simulate(2.0, 0.001, progress=stop)
     assert 0.5 < calls[-1] < 0.6
+
+
+def test_non_finite_states_and_inputs_and_mismatched_schedules_are_refused():
+    m = tm.load(CART)
+    # A NaN is named where it is given, not reported later as a failure of the dynamics.
+    with pytest.raises(ValueError, match=r"q\[1\] \(`\w+`\) is NaN: every entry must be a finite"):
+        m.evaluate(q=[0.0, np.nan])
+    with pytest.raises(ValueError, match=r"dq0\[0\] .* is inf"):
+        m.simulate(1.0, 0.01, dq0=[np.inf, 0.0])
+    with pytest.raises(ValueError, match=r"u\[0\] .* is NaN"):
+        m.simulate(1.0, 0.01, u=[np.nan])
+    with pytest.raises(ValueError, match=r"u\[1\]\[0\] .* is NaN"):
+        m.rollouts(np.zeros((2, 2)), np.zeros((2, 2)), 1.0, 0.01, u=np.array([[0.0], [np.nan]]))
+    # Inputs per step: one row a step, exactly (50 rows for a 100-step run is a mistake).
+    with pytest.raises(ValueError, match="u has 50 rows of inputs, one a step; the run has 100 steps"):
+        m.simulate(1.0, 0.01, u=np.zeros((50, 1)))
+    with pytest.raises(ValueError, match="u has 150 rows of inputs, one a step; the run has 100 steps"):
+        m.rollouts(np.zeros((2, 2)), np.zeros((2, 2)), 1.0, 0.01, u=np.zeros((2, 150, 1)))
