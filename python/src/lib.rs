@@ -113,7 +113,7 @@ fn check_finite(what: &str, values: &[f64], names: &[String]) -> PyResult<()> {
 /// per-step input array must match row for row.
 fn steps_of(duration: f64, dt: f64) -> Option<usize> {
     let steps = (duration / dt).round();
-    (steps.is_finite() && steps >= 1.0 && steps <= 1e9).then_some(steps as usize)
+    (1.0..=1e9).contains(&steps).then_some(steps as usize)
 }
 
 /// Per-step inputs have one row a step: a different count (a mixed-up `dt`, a schedule for
