@@ -57,6 +57,18 @@ fn main() {
         println!("interpreted_ms {i:.1}");
         return;
     }
+    // `cargo bench --bench marionette -- linearise`: trep's Puppet's trajectory linearised
+    // step by step, compiled and interpreted (what tools/reference/trep_linearize_bench.sh
+    // puts beside trep's `DSystem.linearize_trajectory`).
+    if std::env::args().any(|a| a == "linearise") {
+        let mut interpreted = TreeSystem::new(&TrepPuppet::model()).expect("valid model");
+        println!("compiled_us {:.2}", linearise_trajectory(&mut TrepPuppet));
+        println!(
+            "interpreted_us {:.2}",
+            linearise_trajectory(&mut interpreted)
+        );
+        return;
+    }
     println!("| 10 s, Δt = 0.01 | compiled [ms] | interpreted [ms] | interpreted / compiled | compiled per step [µs] | interpreted per step [µs] | Newton iterations / step |");
     println!("|---|---:|---:|---:|---:|---:|---:|");
     rows("marionette", &mut Marionette, &Marionette::model());
@@ -82,6 +94,25 @@ fn main() {
             derivatives(&mut TreeSystem::new(&model).unwrap()),
         );
     }
+    println!();
+    println!(
+        "| linearising a 1 s trajectory (Δt = 0.01), per step | compiled [µs] | interpreted [µs] |"
+    );
+    println!("|---|---:|---:|");
+    for (name, c, i) in [
+        (
+            "marionette",
+            linearise_trajectory(&mut Marionette),
+            linearise_trajectory(&mut TreeSystem::new(&Marionette::model()).unwrap()),
+        ),
+        (
+            "trep's Puppet",
+            linearise_trajectory(&mut TrepPuppet),
+            linearise_trajectory(&mut TreeSystem::new(&TrepPuppet::model()).unwrap()),
+        ),
+    ] {
+        println!("| {name} | {c:.1} | {i:.1} |");
+    }
 }
 
 /// Best mean µs of `f` over 5 batches of `calls`.
@@ -95,6 +126,55 @@ fn time_us(calls: usize, mut f: impl FnMut()) -> f64 {
         best = best.min(start.elapsed().as_secs_f64() * 1e6 / calls as f64);
     }
     best
+}
+
+/// Mean µs per step (best of 5) of linearising a 1 s VI trajectory from the model's start
+/// at Δt = 0.01, the task of trep's `DSystem.linearize_trajectory`: given each step's start
+/// `(q₁, p₁)`, its end `q₂` and its multipliers λ (a trajectory records them), the step's
+/// first derivatives — the model evaluated at the step (nothing cached from the step before),
+/// the Newton matrix factored and solved for every input direction, as iLQR's backward pass
+/// does (`DiscreteSystem::jacobians`). trep, whose state has no λ, takes each step again from
+/// its recorded end as a hint.
+fn linearise_trajectory<S: System>(sys: &mut S) -> f64
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    const DT: f64 = 0.01;
+    let (q0, dq0) = sys.initial_state();
+    let mut motion = ModelMotions::of(sys);
+    let settings = ViSettings {
+        derivatives: true,
+        ..ViSettings::default()
+    };
+    let mut vi = MidpointVi::new(sys, settings);
+    let p0 = vi.initial_momentum(sys, &q0, &dq0);
+    // The trajectory: 100 steps, (q_k, p_k) at every knot and each step's λ.
+    let (mut q, mut p, mut next) = (q0.clone(), p0.clone(), q0.clone());
+    let mut knots = vec![(q.clone(), p.clone())];
+    let mut lambdas = Vec::new();
+    for k in 0..100 {
+        let mut force = NoForce;
+        let mut cx = StepContext::new(sys, &mut force, &mut motion, DT);
+        cx.index = k;
+        cx.t = k as f64 * DT;
+        vi.step(&mut cx, &mut q, &mut p, &mut next)
+            .expect("the trajectory steps");
+        knots.push((q.clone(), p.clone()));
+        lambdas.push(vi.lambda.clone());
+    }
+    let mut first = StepDerivatives::empty();
+    time_us(1, || {
+        for k in 0..100 {
+            let ((q1, p1), (q2, _)) = (&knots[k], &knots[k + 1]);
+            vi.lambda.copy_from(&lambdas[k]);
+            let mut force = NoForce;
+            let mut cx = StepContext::new(sys, &mut force, &mut motion, DT);
+            cx.index = k;
+            cx.t = k as f64 * DT;
+            vi.derivatives_into(&mut cx, q1, p1, q2, &mut first)
+                .expect("the step's derivatives");
+        }
+    }) / 100.0
 }
 
 /// `[step, step + first derivatives, contracted second derivatives]` in µs, from the

@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Linearising a trajectory of trep's own Puppet, trep 1.0.2 against tree-mech side by side in
+# one run: trep's DSystem.linearize_trajectory over 100 steps at dt = 0.01 from rest (best of
+# 3, tools/reference/trep_linearize.py) and tree-mech's first derivatives of the same steps,
+# compiled by tree_model! and interpreted (best of 5, `cargo bench --bench marionette --
+# linearise`). Needs trep's Python 2.7 venv: TREP_PYTHON=/path/to/v27/bin/python.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+py=${TREP_PYTHON:?set TREP_PYTHON to trep\'s Python 2.7}
+cargo bench --bench marionette --no-run -q 2>/dev/null
+trep=$("$py" tools/reference/trep_linearize.py | awk '{print $2}')
+bench=$(cargo bench -q --bench marionette -- linearise)
+compiled=$(echo "$bench" | awk '/compiled_us/ {print $2}')
+interpreted=$(echo "$bench" | awk '/interpreted_us/ {print $2}')
+python3 -c "
+t, c, i = $trep * 1e3, $compiled, $interpreted
+print(f'trep linearize_trajectory {t:.0f} us a step')
+print(f'tree-mech compiled {c:.1f} us: {t / c:.1f}x; interpreted {i:.1f} us: {t / i:.1f}x')"
