@@ -1,6 +1,7 @@
 """trep 1.0.2's time to linearise a trajectory of its own Puppet: `DSystem.linearize_trajectory`
 over 100 midpoint-VI steps at dt = 0.01 from the Puppet at rest (the start
-`tools/reference/trep-puppet.toml` records), best of 3. Prints `trep_linearize_ms_per_step <t>`.
+`tools/reference/trep-puppet.toml` records), best of 10 passes. Prints
+`trep_linearize_ms_per_step <t>`.
 
 Run with trep's Python 2.7 (README, "Checked against trep"):
     v27/bin/python tools/reference/trep_linearize.py
@@ -45,7 +46,7 @@ def main():
     dsys = trep.discopt.DSystem(mvi, numpy.arange(STEPS + 1) * DT)
     X, U = dsys.build_trajectory(Q=Q, p=p, v=v, rho=rho)
     best = float('inf')
-    for _ in range(3):
+    for _ in range(10):
         start = time.time()
         A, B = dsys.linearize_trajectory(X, U)
         best = min(best, time.time() - start)

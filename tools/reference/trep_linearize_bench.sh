@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Linearising a trajectory of trep's own Puppet, trep 1.0.2 against tree-mech side by side in
 # one run: trep's DSystem.linearize_trajectory over 100 steps at dt = 0.01 from rest (best of
-# 3, tools/reference/trep_linearize.py) and tree-mech's first derivatives of the same steps,
-# compiled by tree_model! and interpreted (best of 5, `cargo bench --bench marionette --
+# 10 passes, tools/reference/trep_linearize.py) and tree-mech's first derivatives of the same steps,
+# compiled by tree_model! and interpreted (best of 30 passes, `cargo bench --bench marionette --
 # linearise`). Needs trep's Python 2.7 venv: TREP_PYTHON=/path/to/v27/bin/python.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
