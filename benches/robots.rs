@@ -1,5 +1,5 @@
 //! The URDF robots (UR5, Panda, Solo-12 with a floating base) against Pinocchio: tree-mech's
-//! mass matrix (an `Order::Dynamics` evaluation: L, ∂L, M and ∂²L/∂q̇∂q), q̈ (the library's
+//! mass matrix (`System::mass_matrix`: M(q) and L(q, 0), as CRBA gives M), q̈ (the library's
 //! dynamics), a full second-order evaluation, one VI step and one RK4 step, compiled and
 //! interpreted; beside them Pinocchio's CRBA, RNEA (nonlinear effects), ABA and ABA
 //! derivatives from `target/pinocchio-timing.json` when `tools/reference/pinocchio_bench.sh`
@@ -52,7 +52,7 @@ where
     let calls = 20_000;
     let mut terms = Terms::zeros(sys.dim());
     let mass = time_ns(calls, || {
-        sys.lagrangian(black_box(&q), black_box(&dq), Order::Dynamics, &mut terms);
+        sys.mass_matrix(black_box(&q), &mut terms);
         black_box(terms.mass[(0, 0)]);
     });
     let full = time_ns(calls, || {

@@ -137,6 +137,29 @@ where
                 }
             }
         }
+        // M(q) and L(q, 0) alone, garbage in the output beforehand overwritten.
+        let mut mass_g = tree_mech::Terms::zeros(generated.dim());
+        let mut mass_t = tree_mech::Terms::<Dyn>::zeros(Dyn(n));
+        mass_g.l = 1e9;
+        mass_g.mass.fill(1e9);
+        generated.mass_matrix(&q, &mut mass_g);
+        interpreted.mass_matrix(&to_dyn::<S>(&q), &mut mass_t);
+        assert!(
+            close(mass_g.l, mass_t.l, 1e-12),
+            "{}: L at rest",
+            model.name
+        );
+        for i in 0..n {
+            for j in 0..n {
+                assert!(
+                    close(mass_g.mass[(i, j)], mass_t.mass[(i, j)], 1e-12),
+                    "{}: mass_matrix M[{i}][{j}] {} vs {}",
+                    model.name,
+                    mass_g.mass[(i, j)],
+                    mass_t.mass[(i, j)]
+                );
+            }
+        }
         // q̈ by the articulated-body algorithm (elements' forces included): the compiled one
         // is the interpreted one unrolled, and both take or decline a state alike.
         let (mut tau, mut qdd_g) = (generated.zero_vector(), generated.zero_vector());

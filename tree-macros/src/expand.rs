@@ -486,6 +486,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     );
     let lagrangian: Evaluation = kernel::evaluate;
     let constraints: Evaluation = kernel::constraints;
+    // `M(q)` and `L(q, 0)` alone (`System::mass_matrix`): the sweeps at rest, no velocity.
+    let mass: Evaluation = |plan, k, q, _, _, out| kernel::mass(plan, k, q, out);
     // Every evaluation over f64; those the linearisations differentiate also generic (only
     // instantiated, over dual numbers, where a program differentiates this model).
     let [l_first, l_dynamics, l_full] =
@@ -493,6 +495,9 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let [c_first, c_dynamics, c_full] =
         [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, constraints));
     let first = l_first.assigning().emit("__first", &var_names, f64_terms);
+    let mass = traced(&plan, Order::Dynamics, mass)
+        .assigning()
+        .emit("__mass", &var_names, f64_terms);
     let dynamics = l_dynamics
         .assigning()
         .emit("__dynamics", &var_names, f64_terms);
@@ -524,6 +529,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         .emit("__c_full", &var_names, f64_constraints);
     let functions = [
         &first.functions,
+        &mass.functions,
         &dynamics.functions,
         &full.functions,
         &poses.functions,
@@ -548,8 +554,13 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let inputs = model.inputs.len();
     let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
     let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
-    let (first_body, dynamics_body, full_body, poses_body) =
-        (&first.body, &dynamics.body, &full.body, &poses.body);
+    let (first_body, dynamics_body, full_body, poses_body, mass_body) = (
+        &first.body,
+        &dynamics.body,
+        &full.body,
+        &poses.body,
+        &mass.body,
+    );
     let statements = full.statements;
     // Where the Full evaluation writes force derivatives (elements::forces): dampers fill
     // both matrices, per-variable damping only ∂F/∂q̇'s diagonal.
@@ -785,6 +796,18 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                     ::tree_mech::runtime::Order::Dynamics => { #dynamics_body }
                     ::tree_mech::runtime::Order::Full => { #full_body #mark_force_derivatives }
                 }
+            }
+
+            fn mass_matrix(
+                &mut self,
+                q: &::tree_mech::runtime::Vector<Self::N>,
+                out: &mut ::tree_mech::runtime::Terms<Self::N>,
+            ) {
+                out.clear(::tree_mech::runtime::Order::Dynamics);
+                let q: &[f64; #n] = &q.data.0[0];
+                // The traced sweeps read no velocity.
+                let dq = q;
+                #mass_body
             }
 
             #articulated_method
