@@ -1,7 +1,9 @@
 """trep 1.0.2's time to linearise a trajectory of its own Puppet: `DSystem.linearize_trajectory`
 over 100 midpoint-VI steps at dt = 0.01 from the Puppet at rest (the start
 `tools/reference/trep-puppet.toml` records), best of 10 passes. Prints
-`trep_linearize_ms_per_step <t>`.
+`trep_linearize_ms_per_step <t>`, and the three pieces of one iLQR iteration over those 100
+steps as the optimal-control issue counts them (simulate, linearize_trajectory,
+solve_tv_lqr; seconds, best of 10 each) and their sum.
 
 Run with trep's Python 2.7 (README, "Checked against trep"):
     v27/bin/python tools/reference/trep_linearize.py
@@ -39,19 +41,32 @@ def trajectory(s, mvi):
     return numpy.array(Q), numpy.array(p), numpy.array(v), numpy.array(rho)
 
 
+def best_of(passes, f):
+    best = float('inf')
+    for _ in range(passes):
+        start = time.time()
+        out = f()
+        best = min(best, time.time() - start)
+    return best, out
+
+
 def main():
     s = puppet()
     mvi = trep.MidpointVI(s)
-    Q, p, v, rho = trajectory(s, mvi)
+    simulated, (Q, p, v, rho) = best_of(10, lambda: trajectory(s, mvi))
     dsys = trep.discopt.DSystem(mvi, numpy.arange(STEPS + 1) * DT)
     X, U = dsys.build_trajectory(Q=Q, p=p, v=v, rho=rho)
-    best = float('inf')
-    for _ in range(10):
-        start = time.time()
-        A, B = dsys.linearize_trajectory(X, U)
-        best = min(best, time.time() - start)
+    linearised, (A, B) = best_of(10, lambda: dsys.linearize_trajectory(X, U))
     assert A.shape[0] == STEPS and numpy.isfinite(A).all() and numpy.isfinite(B).all()
-    print('trep_linearize_ms_per_step %.4f' % (best / STEPS * 1e3))
+    # The time-varying LQR along it (unit weights), the third piece of one iLQR iteration.
+    eye_x, eye_u = numpy.eye(dsys.nX), numpy.eye(dsys.nU)
+    lqr, _ = best_of(10, lambda: trep.discopt.dlqr.solve_tv_lqr(
+        A, B, lambda k: eye_x, lambda k: eye_u))
+    print('trep_linearize_ms_per_step %.4f' % (linearised / STEPS * 1e3))
+    print('trep_simulate_s %.4f' % simulated)
+    print('trep_linearize_s %.4f' % linearised)
+    print('trep_tv_lqr_s %.4f' % lqr)
+    print('trep_iteration_s %.4f' % (simulated + linearised + lqr))
 
 
 if __name__ == '__main__':

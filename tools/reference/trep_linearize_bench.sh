@@ -8,7 +8,9 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 py=${TREP_PYTHON:?set TREP_PYTHON to trep\'s Python 2.7}
 cargo bench --bench marionette --no-run -q 2>/dev/null
-trep=$("$py" tools/reference/trep_linearize.py | awk '{print $2}')
+times=$("$py" tools/reference/trep_linearize.py)
+echo "$times"
+trep=$(echo "$times" | awk '/trep_linearize_ms_per_step/ {print $2}')
 bench=$(cargo bench -q --bench marionette -- linearise)
 compiled=$(echo "$bench" | awk '/compiled_us/ {print $2}')
 interpreted=$(echo "$bench" | awk '/interpreted_us/ {print $2}')
