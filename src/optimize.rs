@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::json;
 use tree_mech::control::{
-    solve_task, BoxPhase, Iteration, Solver, TaskOptions, TaskResult, TaskSolver,
+    solve_task, BoxPhase, Iteration, Solver, Stop, TaskOptions, TaskResult, TaskSolver, MAX_MU,
 };
 use tree_mech::model::{self, Model, Task};
 use tree_mech::nalgebra::Dyn;
@@ -278,6 +278,7 @@ fn write_outputs(
     if let Some(file) = &files.json {
         let summary = json!({
             "converged": converged,
+            "stopped": sol.stop.name(),
             "iterations": sol.history.len(),
             "cost": sol.cost,
             "q_final": res.q[n].as_slice(),
@@ -322,8 +323,19 @@ fn write_outputs(
         res.solve_seconds,
         sol.cost,
     );
-    if !converged {
-        println!("The best trajectory found is written; raise --max-iterations to go on.");
+    match sol.stop {
+        Stop::Converged => {}
+        Stop::IterationLimit => {
+            println!("The best trajectory found is written; raise --max-iterations to go on.")
+        }
+        Stop::Regularisation => println!(
+            "The solver stopped: its regularisation passed {:e} before the local model gave a \
+             step that lowers the cost. The regularisation is added as \
+             is, so weights that make the cost's curvature enormous (this cost is {:.3e}) \
+             defeat it: scale the task's weights down together (the optimum does not \
+             change). The best trajectory found is written.",
+            MAX_MU, sol.cost
+        ),
     }
     for file in [
         files.out,

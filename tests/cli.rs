@@ -1002,6 +1002,7 @@ fn optimize_solves_a_task_and_writes_every_output() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(summary["converged"], true);
+    assert_eq!(summary["stopped"], "converged");
     let theta = summary["q_final"][1].as_f64().unwrap();
     assert!(theta.abs() < 0.02, "the pole ends at {theta}");
     for key in ["iterations", "cost", "dq_final", "frames", "solve_seconds"] {
@@ -1105,4 +1106,47 @@ fn linearize_steps_from_the_start_on_the_constraints() {
         stderr.contains("off constraint `wall` by") && stderr.contains("on the constraints"),
         "{stderr}"
     );
+}
+
+#[test]
+fn a_solve_that_stops_says_why() {
+    let dir = scratch("stops");
+    let run = |name: &str, text: &str, iterations: &str| {
+        let task = dir.join(format!("{name}.toml"));
+        let json = dir.join(format!("{name}.json"));
+        std::fs::write(&task, text).unwrap();
+        let (ok, stdout, stderr) = tree_mech(&[
+            "optimize",
+            task.to_str().unwrap(),
+            "--max-iterations",
+            iterations,
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        assert!(ok, "{stderr}");
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        (stdout, summary)
+    };
+    // Out of iterations: raising the limit is the way on.
+    let reach = shipped_task("ur5-reach").replace("knots = 100", "knots = 20");
+    let (stdout, summary) = run("short", &reach, "2");
+    assert!(
+        stdout.contains("Did not converge") && stdout.contains("raise --max-iterations"),
+        "{stdout}"
+    );
+    assert_eq!(summary["stopped"], "iteration limit");
+    // Weights so large that the regularisation cannot reach the cost's curvature: more
+    // iterations would not help, and the message says what would.
+    let heavy = reach.replace("weight = 1e5", "weight = 1e44");
+    assert_ne!(heavy, reach);
+    let (stdout, summary) = run("heavy", &heavy, "50");
+    assert!(
+        stdout.contains("regularisation passed 1e10")
+            && stdout.contains("scale the task's weights down together")
+            && !stdout.contains("raise --max-iterations"),
+        "{stdout}"
+    );
+    assert_eq!(summary["stopped"], "regularisation");
+    assert_eq!(summary["converged"], false);
 }

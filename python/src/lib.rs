@@ -1163,6 +1163,7 @@ fn optimize_text<'py>(
     let n = task.knots;
     let out = PyDict::new(py);
     out.set_item("converged", sol.converged)?;
+    out.set_item("stopped", sol.stop.name())?;
     out.set_item("iterations", sol.history.len())?;
     out.set_item("cost", sol.cost)?;
     out.set_item("solve_seconds", res.solve_seconds)?;

@@ -199,7 +199,7 @@ def test_long_calls_release_the_gil():
 def test_optimize_swings_the_cartpole_up_from_a_file_or_a_dict():
     path = ROOT / "tasks/cartpole-swingup.toml"
     plan = tm.optimize(str(path))
-    assert plan["converged"]
+    assert plan["converged"] and plan["stopped"] == "converged"
     assert abs(plan["q_final"][1]) < 0.02 and abs(plan["q_final"][0]) < 0.02
     assert plan["q"].shape == (126, 2) and plan["u"].shape == (125, 1)
     assert plan["K"].shape[0] == 125 and plan["K"].shape[1] == 1

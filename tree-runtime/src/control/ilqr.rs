@@ -93,6 +93,34 @@ pub struct Iteration {
     pub limits: Option<BoxPhase>,
 }
 
+/// Why [`solve`] stopped iterating.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// A convergence test was met: the cost decrease or the feed-forward change fell below
+    /// its tolerance.
+    Converged,
+    /// `max_iterations` ran out first.
+    IterationLimit,
+    /// The regularisation μ passed [`MAX_MU`] without a step that lowers the cost (or with
+    /// `Q_uu + μI` still not positive definite): the local model is not trusted any nearer.
+    /// μ is added as is, so a cost whose curvature dwarfs it (weights of 1e40) ends here.
+    Regularisation,
+}
+
+impl Stop {
+    /// As the summaries name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stop::Converged => "converged",
+            Stop::IterationLimit => "iteration limit",
+            Stop::Regularisation => "regularisation",
+        }
+    }
+}
+
+/// The regularisation past which [`solve`] stops ([`Stop::Regularisation`]).
+pub const MAX_MU: f64 = 1e10;
+
 /// The optimised trajectory and its controller.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Solution {
@@ -108,6 +136,8 @@ pub struct Solution {
     pub cost: f64,
     /// Whether a convergence test was met (otherwise the best trajectory found).
     pub converged: bool,
+    /// Why the iterations stopped.
+    pub stop: Stop,
     /// Every iteration.
     pub history: Vec<Iteration>,
 }
@@ -209,6 +239,7 @@ where
         history.push(it);
     };
     let mut converged = false;
+    let mut stop = Stop::IterationLimit;
     let mut phase = BoxPhase::Clamped;
     for _ in 0..settings.max_iterations {
         let pass = Pass {
@@ -236,13 +267,15 @@ where
         let Some(gradient) = gradient else {
             // Some Q_uu + μI is not positive definite: regularise more.
             mu = (mu * 10.0).max(1e-6);
-            if mu > 1e10 {
+            if mu > MAX_MU {
+                stop = Stop::Regularisation;
                 break;
             }
             continue;
         };
         if gradient < settings.gradient_tolerance {
             converged = true;
+            stop = Stop::Converged;
             record(total, 0.0, mu, gradient, used);
             break;
         }
@@ -274,7 +307,8 @@ where
         if accepted == 0.0 {
             mu = (mu * 10.0).max(1e-6);
             record(total, 0.0, mu, gradient, used);
-            if mu > 1e10 {
+            if mu > MAX_MU {
+                stop = Stop::Regularisation;
                 break;
             }
             continue;
@@ -305,6 +339,7 @@ where
         record(total, accepted, mu, gradient, used);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             converged = true;
+            stop = Stop::Converged;
             break;
         }
     }
@@ -315,6 +350,7 @@ where
         u,
         cost: total,
         converged,
+        stop,
         history,
     })
 }

@@ -17,7 +17,8 @@ pub mod task_solve;
 pub use cost::{Cost, Derivatives, Needs, QuadraticCost};
 pub use discrete::{DiscreteSystem, Knot};
 pub use ilqr::{
-    cost_gradient, solve, solve_with, BoxPhase, IlqrSettings, Iteration, Solution, Solver,
+    cost_gradient, solve, solve_with, BoxPhase, IlqrSettings, Iteration, Solution, Solver, Stop,
+    MAX_MU,
 };
 pub use lqr::{dare, tvlqr, Lqr};
 pub use task_cost::TaskCost;
