@@ -305,6 +305,8 @@ def test_non_finite_states_and_inputs_and_mismatched_schedules_are_refused():
         m.simulate(1.0, 0.01, u=[np.nan])
     with pytest.raises(ValueError, match=r"u\[1\]\[0\] .* is NaN"):
         m.rollouts(np.zeros((2, 2)), np.zeros((2, 2)), 1.0, 0.01, u=np.array([[0.0], [np.nan]]))
+    with pytest.raises(tm.SimulationError, match=r"p\[0\] \(the momentum of `x`\) is NaN"):
+        m.linearize(dt=0.01, p=[np.nan, 0.0])
     # Inputs per step: one row a step, exactly (50 rows for a 100-step run is a mistake).
     with pytest.raises(ValueError, match="u has 50 rows of inputs, one a step; the run has 100 steps"):
         m.simulate(1.0, 0.01, u=np.zeros((50, 1)))

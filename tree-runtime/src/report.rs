@@ -196,10 +196,20 @@ where
     let mut p1 = vi.initial_momentum(cx.sys, &q, &dq);
     if let Some(p) = &request.p {
         if p.len() != dynamic.len() {
+            let noun = match dynamic.len() {
+                1 => "dynamic variable",
+                _ => "dynamic variables",
+            };
             return bad(format!(
-                "p has {} entries; the model has {} dynamic variables",
+                "p has {} entries; the model has {} {noun}",
                 p.len(),
                 dynamic.len()
+            ));
+        }
+        if let Some((c, x)) = p.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+            return bad(format!(
+                "p[{c}] (the momentum of `{}`) is {x}: every entry must be a finite number",
+                cx.sys.variable_name(dynamic[c])
             ));
         }
         for (c, &i) in dynamic.iter().enumerate() {
