@@ -213,15 +213,9 @@ mod tests {
     use super::Seconds;
 
     #[test]
-    fn times_print_without_rounding_noise() {
-        let show = |t: f64| Seconds(t).to_string();
-        assert_eq!(show(0.5624999999999999), "0.5625");
-        assert_eq!(show(0.0), "0");
-        assert_eq!(show(12.25), "12.25");
-        assert_eq!(show(3e-7), "3e-7");
-        assert_eq!(show(-0.1), "-0.1");
-        assert_eq!(show(1e300), "1e300");
-        assert_eq!(show(123456789.5), "123456789.5");
-        assert_eq!(show(2.5e9), "2.5e9");
+    fn times_print_as_rounded_numbers() {
+        // tree_model::Rounded's rules (tested there), named for a time.
+        assert_eq!(Seconds(0.5624999999999999).to_string(), "0.5625");
+        assert_eq!(Seconds(1e300).to_string(), "1e300");
     }
 }
