@@ -569,46 +569,59 @@ where
         if m > 0 {
             cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
         }
-        // Row-major copies: L_qq and M are symmetric (their column-major storage is their
-        // row-major one); L_q̇q and the force derivatives are transposed.
+        // The Jacobians read only the dynamic variables' rows of the n × n terms, row-major:
+        // L_qq, M (symmetric: their column-major storage is their row-major one) and L_q̇q's
+        // transpose are read in place; L_q̇q's own rows, the forces' derivatives and
+        // Σ_s λ_s D²h_s(q₁) are gathered for those rows only.
         let t = &self.terms;
-        lin.lqq.copy_from_slice(t.d2l_dq_dq.as_slice());
-        lin.mass.copy_from_slice(t.mass.as_slice());
-        row_major_into(t.d2l_ddq_dq.as_slice(), n, &mut lin.lvq);
-        lin.lvq_t.copy_from_slice(t.d2l_ddq_dq.as_slice());
+        let dynamic = &lin.shape.dynamic;
+        gather_rows(t.d2l_ddq_dq.as_slice(), n, dynamic, &mut lin.lvq);
         // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
         lin.forces = t.force_derivatives != Sparsity::Zero;
         match t.force_derivatives {
             Sparsity::Zero => {}
             Sparsity::Diagonal => {
-                lin.fq.fill(0.0);
-                lin.fv.fill(0.0);
-                for i in 0..n {
+                for &i in dynamic {
+                    lin.fq[i * n..(i + 1) * n].fill(0.0);
+                    lin.fv[i * n..(i + 1) * n].fill(0.0);
                     lin.fv[i * n + i] = t.dforce_ddq[(i, i)];
                 }
             }
             Sparsity::Dense => {
-                row_major_into(t.dforce_dq.as_slice(), n, &mut lin.fq);
-                row_major_into(t.dforce_ddq.as_slice(), n, &mut lin.fv);
+                gather_rows(t.dforce_dq.as_slice(), n, dynamic, &mut lin.fq);
+                gather_rows(t.dforce_ddq.as_slice(), n, dynamic, &mut lin.fv);
             }
         }
-        lin.lambda_d2h1.fill(0.0);
         for s in 0..m {
             lin.lambda[s] = self.lambda[s];
             for i in 0..n {
                 lin.dh1[s * n + i] = self.dh1[(s, i)];
                 lin.dh2[s * n + i] = self.constraint_terms.dh[(s, i)];
             }
-            // D²h_s is symmetric: its column-major storage is its row-major one.
-            let l = self.lambda[s];
-            for (o, &x) in lin.lambda_d2h1.iter_mut().zip(lin.c1.d2h[s].as_slice()) {
-                *o += l * x;
+        }
+        // D²h_s is symmetric: row i is its column-major column i.
+        for &i in dynamic {
+            let row = &mut lin.lambda_d2h1[i * n..(i + 1) * n];
+            row.fill(0.0);
+            for s in 0..m {
+                let l = self.lambda[s];
+                let d2h = &lin.c1.d2h[s].as_slice()[i * n..(i + 1) * n];
+                for (o, &x) in row.iter_mut().zip(d2h) {
+                    *o += l * x;
+                }
             }
         }
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
         let lin = self.linearisation.insert(lin);
-        lin.solve().map_err(|c| singular(cx, &lin.shape, c))?;
+        let t = &self.terms;
+        let in_place = (
+            t.d2l_dq_dq.as_slice(),
+            t.mass.as_slice(),
+            t.d2l_ddq_dq.as_slice(),
+        );
+        lin.solve(in_place)
+            .map_err(|c| singular(cx, &lin.shape, c))?;
         Ok(lin)
     }
 }
@@ -618,16 +631,14 @@ where
 #[derive(Clone, Debug)]
 pub(crate) struct Linearisation {
     shape: Shape,
-    /// The continuous terms at the quadrature point, row-major n × n.
-    lqq: Vec<f64>,
+    /// `L_q̇q` at the quadrature point, row-major n × n (the dynamic variables' rows).
     lvq: Vec<f64>,
-    lvq_t: Vec<f64>,
-    mass: Vec<f64>,
     /// Whether the model has forces with derivatives (`fq`, `fv` are read only then).
     forces: bool,
     fq: Vec<f64>,
     fv: Vec<f64>,
-    /// `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)`, `Dh(q₂)` row-major, and λ.
+    /// `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (the dynamic variables' rows), `Dh(q₂)` row-major,
+    /// and λ.
     dh1: Vec<f64>,
     lambda_d2h1: Vec<f64>,
     dh2: Vec<f64>,
@@ -703,10 +714,7 @@ impl Linearisation {
             }
         }
         Linearisation {
-            lqq: vec![0.0; n * n],
             lvq: vec![0.0; n * n],
-            lvq_t: vec![0.0; n * n],
-            mass: vec![0.0; n * n],
             forces: false,
             fq: vec![0.0; n * n],
             fv: vec![0.0; n * n],
@@ -741,14 +749,17 @@ impl Linearisation {
     /// From the terms the step left (at its solution), the Jacobians, `R_z`'s factor, the
     /// tangent `Δ` and `dp₂/dx` (docs/derivations.md §9).
     /// On a singular `R_z`, the unknown (its column) whose pivot vanished.
-    fn solve(&mut self) -> Result<(), usize> {
+    /// `L_qq`, `M` and `L_q̇q`'s transpose are the evaluation's row-major storage
+    /// (`in_place`), read where they are.
+    fn solve(&mut self, in_place: (&[f64], &[f64], &[f64])) -> Result<(), usize> {
+        let (lqq, mass, lvq_t) = in_place;
         let sh = &self.shape;
         let (rows, w, nd) = (sh.rows(), sh.w(), sh.nd());
         let terms = StepTerms {
-            lqq: &self.lqq,
+            lqq,
             lvq: &self.lvq,
-            lvq_t: &self.lvq_t,
-            mass: &self.mass,
+            lvq_t,
+            mass,
             forces: self.forces,
             fq: &self.fq,
             fv: &self.fv,
@@ -965,6 +976,16 @@ fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize
     for (c, column) in to.chunks_exact_mut(rows).enumerate() {
         for (r, o) in column.iter_mut().enumerate() {
             *o = from[r * k + s0 + c];
+        }
+    }
+}
+
+/// Rows `rows` of the n × n matrix stored column-major in `a`, into the same rows of the
+/// row-major `out` (other rows untouched).
+fn gather_rows(a: &[f64], n: usize, rows: &[usize], out: &mut [f64]) {
+    for &i in rows {
+        for (j, o) in out[i * n..(i + 1) * n].iter_mut().enumerate() {
+            *o = a[j * n + i];
         }
     }
 }
