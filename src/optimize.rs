@@ -329,12 +329,11 @@ fn write_outputs(
             println!("The best trajectory found is written; raise --max-iterations to go on.")
         }
         Stop::Regularisation => println!(
-            "The solver stopped: its regularisation passed {:e} before the local model gave a \
-             step that lowers the cost. The regularisation is added as \
-             is, so weights that make the cost's curvature enormous (this cost is {:.3e}) \
-             defeat it: scale the task's weights down together (the optimum does not \
-             change). The best trajectory found is written.",
-            MAX_MU, sol.cost
+            "The solver stopped: its regularisation passed {:e} (relative to the controls' \
+             curvature) before the local model gave a step that lowers the cost — the cost is \
+             not smooth enough about this trajectory for its quadratic model. The best \
+             trajectory found is written.",
+            MAX_MU
         ),
     }
     for file in [

@@ -6,7 +6,8 @@
 mod common;
 
 use tree_mech::control::{
-    cost_gradient, dare, solve, tvlqr, Control, DiscreteSystem, IlqrSettings, QuadraticCost, Solver,
+    cost_gradient, dare, solve, tvlqr, Control, Cost, Derivatives, DiscreteSystem, IlqrSettings,
+    Knot, QuadraticCost, Solver, Stop,
 };
 use tree_mech::integrate::{Forcing, ViSettings};
 use tree_mech::model;
@@ -535,4 +536,107 @@ variable = "theta"
             gravity_x.column(c)
         );
     }
+}
+
+/// The cart problem with every weight scaled by `scale`, unlimited, iLQR.
+fn scaled_cart(scale: f64) -> tree_mech::runtime::control::Solution {
+    let (dt, knots) = (0.02, 60);
+    let mut dynamics = DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap();
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let mut cost = common::cart_to_half_metre(dt);
+    for w in [
+        &mut cost.x_weight,
+        &mut cost.u_weight,
+        &mut cost.terminal_weight,
+    ] {
+        *w *= scale;
+    }
+    let options = IlqrSettings {
+        max_iterations: 60,
+        ..IlqrSettings::default()
+    };
+    solve(
+        &mut dynamics,
+        &mut cost,
+        &x0,
+        vec![DVector::zeros(1); knots],
+        &options,
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_task_in_other_units_takes_the_same_steps() {
+    // The regularisation is relative to the controls' curvature: weights scaled by 1e-30 or
+    // 1e30 (a cost in other units) give the same iterations and the same plan, where an
+    // absolute μ = 1e-6 would vanish against a curvature of 1e30 (and stop at once).
+    let plain = scaled_cart(1.0);
+    assert!(plain.converged && plain.stop == Stop::Converged);
+    for scale in [1e-30, 1e30] {
+        let other = scaled_cart(scale);
+        assert_eq!(other.stop, Stop::Converged, "scale {scale:e}");
+        assert_eq!(other.history.len(), plain.history.len(), "scale {scale:e}");
+        assert!(
+            (other.cost / scale - plain.cost).abs() <= 1e-9 * plain.cost,
+            "scale {scale:e}: cost {} against {}",
+            other.cost / scale,
+            plain.cost
+        );
+        for (a, b) in other.u.iter().zip(&plain.u) {
+            assert!((a - b).amax() <= 1e-9 * (1.0 + b.amax()), "scale {scale:e}");
+        }
+    }
+}
+
+/// A cost whose derivatives point the wrong way (its gradient negated): no step of the local
+/// model lowers it.
+struct Misleading(QuadraticCost);
+
+impl Cost for Misleading {
+    fn running(
+        &mut self,
+        k: usize,
+        x: &Knot,
+        u: &DVector<f64>,
+        d: Option<&mut Derivatives>,
+    ) -> f64 {
+        let has = d.is_some();
+        let mut d = d;
+        let v = self.0.running(k, x, u, d.as_deref_mut());
+        if let (true, Some(d)) = (has, d) {
+            d.lx.neg_mut();
+            d.lu.neg_mut();
+        }
+        v
+    }
+
+    fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64 {
+        let has = d.is_some();
+        let mut d = d;
+        let v = self.0.terminal(x, d.as_deref_mut());
+        if let (true, Some(d)) = (has, d) {
+            d.lx.neg_mut();
+        }
+        v
+    }
+}
+
+#[test]
+fn a_solve_whose_model_never_lowers_the_cost_stops_on_the_regularisation() {
+    let (dt, knots) = (0.02, 30);
+    let mut dynamics = DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap();
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let mut cost = Misleading(common::cart_to_half_metre(dt));
+    let options = IlqrSettings {
+        max_iterations: 100,
+        ..IlqrSettings::default()
+    };
+    let u0 = vec![DVector::zeros(1); knots];
+    let sol = solve(&mut dynamics, &mut cost, &x0, u0, &options).unwrap();
+    assert_eq!(sol.stop, Stop::Regularisation);
+    assert!(!sol.converged && sol.history.len() < 100);
+    // The start is kept: nothing lowered its cost.
+    assert!(sol.u.iter().all(|u| u[0] == 0.0));
 }

@@ -41,7 +41,8 @@ pub struct IlqrSettings {
     pub gradient_tolerance: f64,
     /// Box limits per control `[lo, hi]` (None: unbounded).
     pub limits: Option<(DVector<f64>, DVector<f64>)>,
-    /// The first regularisation.
+    /// The first regularisation, relative: each knot's `Q_uu` gains `μ s I` with `s` its
+    /// largest diagonal entry, so a cost in other units takes the same steps.
     pub mu: f64,
 }
 
@@ -101,9 +102,9 @@ pub enum Stop {
     Converged,
     /// `max_iterations` ran out first.
     IterationLimit,
-    /// The regularisation μ passed [`MAX_MU`] without a step that lowers the cost (or with
-    /// `Q_uu + μI` still not positive definite): the local model is not trusted any nearer.
-    /// μ is added as is, so a cost whose curvature dwarfs it (weights of 1e40) ends here.
+    /// The regularisation μ (relative to each knot's control curvature) passed [`MAX_MU`]
+    /// without a step that lowers the cost, or with `Q_uu + μ s I` still not positive
+    /// definite: the local model is not trusted any nearer.
     Regularisation,
 }
 
@@ -273,7 +274,10 @@ where
             }
             continue;
         };
-        if gradient < settings.gradient_tolerance {
+        // A small feed-forward is convergence only while the regularisation is small too: a
+        // large μ shrinks the step whatever the gradient (a model that keeps failing its
+        // line search), and that ends on the regularisation's ceiling instead.
+        if gradient < settings.gradient_tolerance && mu <= settings.mu.max(1e-6) {
             converged = true;
             stop = Stop::Converged;
             record(total, 0.0, mu, gradient, used);
@@ -641,10 +645,18 @@ where
             bw.quu += &bw.huu;
             bw.qux += &bw.hux;
         }
-        // The regularised Q_uu + μI, in huu (free after the DDP terms are added).
+        // The regularised Q_uu + μ s I, in huu (free after the DDP terms are added), with
+        // `s` the largest of Q_uu's diagonal: μ is relative, so a task whose weights are all
+        // scaled by any factor takes the same steps (a Q_uu of zero is regularised by μ).
         bw.huu.copy_from(&bw.quu);
+        let scale = (0..bw.huu.nrows()).fold(0.0f64, |s, c| s.max(bw.huu[(c, c)].abs()));
+        let scale = if scale > 0.0 && scale.is_finite() {
+            scale
+        } else {
+            1.0
+        };
         for c in 0..bw.huu.nrows() {
-            bw.huu[(c, c)] += pass.mu;
+            bw.huu[(c, c)] += pass.mu * scale;
         }
         let (kk, gain) = (&mut work.k[k], &mut work.gain[k]);
         if !bw
