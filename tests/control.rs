@@ -599,26 +599,22 @@ impl Cost for Misleading {
         k: usize,
         x: &Knot,
         u: &DVector<f64>,
-        d: Option<&mut Derivatives>,
+        mut d: Option<&mut Derivatives>,
     ) -> f64 {
-        let has = d.is_some();
-        let mut d = d;
-        let v = self.0.running(k, x, u, d.as_deref_mut());
-        if let (true, Some(d)) = (has, d) {
+        let value = self.0.running(k, x, u, d.as_deref_mut());
+        if let Some(d) = d {
             d.lx.neg_mut();
             d.lu.neg_mut();
         }
-        v
+        value
     }
 
-    fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64 {
-        let has = d.is_some();
-        let mut d = d;
-        let v = self.0.terminal(x, d.as_deref_mut());
-        if let (true, Some(d)) = (has, d) {
+    fn terminal(&mut self, x: &Knot, mut d: Option<&mut Derivatives>) -> f64 {
+        let value = self.0.terminal(x, d.as_deref_mut());
+        if let Some(d) = d {
             d.lx.neg_mut();
         }
-        v
+        value
     }
 }
 

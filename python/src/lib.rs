@@ -76,18 +76,9 @@ fn bad(message: impl Into<String>) -> PyErr {
     PyValueError::new_err(message.into())
 }
 
-/// `every` (record every k-th step) is at least 1: a `ValueError` for the whole call, not an
-/// error per rollout (and not Python's `OverflowError` for a negative one).
-fn check_every(every: i64) -> PyResult<usize> {
-    match usize::try_from(every) {
-        Ok(k) if k >= 1 => Ok(k),
-        _ => Err(bad(format!(
-            "every must be at least 1 (every k-th step is recorded), got {every}"
-        ))),
-    }
-}
-
-/// A count the caller gives (`max_steps`, `threads`) as a `usize`, or a `ValueError` naming it.
+/// A count the caller gives (`every`, `max_steps`, `threads`) as a `usize`, or a `ValueError`
+/// naming it — for the whole call, not an error per rollout, and not Python's
+/// `OverflowError` for a negative one.
 fn count(what: &str, x: i64, least: usize) -> PyResult<usize> {
     match usize::try_from(x) {
         Ok(k) if k >= least => Ok(k),
@@ -535,7 +526,7 @@ impl Model {
         max_steps: i64,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Trajectory> {
-        let every = check_every(every)?;
+        let every = count("every", every, 1)?;
         let max_steps = count("max_steps", max_steps, 1)?;
         let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
         let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
@@ -719,7 +710,7 @@ impl Model {
         every: i64,
         models: Option<Vec<PyRef<'_, Model>>>,
     ) -> PyResult<Rollouts> {
-        let every = check_every(every)?;
+        let every = count("every", every, 1)?;
         let threads = threads.map(|k| count("threads", k, 1)).transpose()?;
         let (q0, dq0) = (q0.as_array(), dq0.as_array());
         let (batch, n) = (q0.nrows(), self.n());

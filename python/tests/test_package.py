@@ -115,7 +115,7 @@ def test_bad_batch_arguments_fail_the_call_with_a_sentence():
     with pytest.raises(ValueError, match="every must be at least 1"):
         m.simulate(1.0, 0.01, every=0)
     # Negative counts are a sentence naming the argument, not Python's OverflowError.
-    with pytest.raises(ValueError, match="every must be at least 1 .*, got -1"):
+    with pytest.raises(ValueError, match="every must be at least 1, got -1"):
         m.simulate(1.0, 0.01, every=-1)
     with pytest.raises(ValueError, match="threads must be at least 1, got -2"):
         m.rollouts(zeros, zeros, 1.0, 0.01, threads=-2)

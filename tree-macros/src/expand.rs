@@ -608,9 +608,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 // The model's own forces, as the interpreted system leaves them.
                 own.force.as_mut_slice().copy_from_slice(&io.force);
                 own.dl_dq.as_mut_slice().copy_from_slice(&io.dl_dq);
-                let held = (0..#n).all(|i| {
-                    Self::KINEMATIC[i]
-                        || !::tree_mech::runtime::articulated::lost(io.pivot[i], io.pivot_scale[i])
+                let held = ::tree_mech::runtime::articulated::pivots_hold(&Self::KINEMATIC, |i| {
+                    (io.pivot[i], io.pivot_scale[i])
                 });
                 if held {
                     for i in (0..#n).filter(|&i| !Self::KINEMATIC[i]) {

@@ -81,7 +81,7 @@ fn add6<S: Scalar>(a: &mut [S; 6], b: &[S; 6]) {
 /// Whether a pivot `D` is too small to divide by: not positive, or lost to rounding against
 /// the articulated inertia it came from (the mass matrix's Cholesky uses the same relative
 /// threshold). Then the caller solves with `M` instead, which reports the variable.
-pub fn lost(d: f64, scale: f64) -> bool {
+fn lost(d: f64, scale: f64) -> bool {
     !(d.is_finite() && d > 1e-13 * scale.abs().max(f64::MIN_POSITIVE))
 }
 
@@ -97,7 +97,7 @@ pub fn resolvable(plan: &TreePlan, kinematic: &[bool]) -> bool {
 /// outward sweep `ws` at `(q, q̇)`: `tau` the generalized forces on every variable, `qdd`'s
 /// kinematic entries (`kinematic[i]`) their prescribed accelerations. Each dynamic
 /// variable's pivot `D` and its scale are left in `art.pivot`, `art.pivot_scale` (by frame)
-/// for the caller to judge ([`lost`]); a lost pivot makes `qdd` meaningless. Over any
+/// for the caller to judge ([`pivots_hold`]); a lost pivot makes `qdd` meaningless. Over any
 /// scalar, with no branch on a value, so that `tree_model!` unrolls it.
 pub fn accelerations<S: Scalar>(
     plan: &TreePlan,
@@ -228,24 +228,20 @@ pub fn accelerations_checked(
         return false;
     }
     accelerations(plan, ws, art, dq, tau, kinematic, qdd);
-    pivots_hold(plan, kinematic, |k| (art.pivot[k], art.pivot_scale[k]))
+    pivots_hold(kinematic, |i| {
+        let k = plan.variable_frames[i].expect("a resolvable variable drives a frame");
+        (art.pivot[k], art.pivot_scale[k])
+    })
 }
 
-/// Whether every dynamic variable's pivot (`pivot(frame)` → `(D, scale)`) holds.
-pub fn pivots_hold(
-    plan: &TreePlan,
-    kinematic: &[bool],
-    pivot: impl Fn(usize) -> (f64, f64),
-) -> bool {
-    plan.variable_frames
-        .iter()
-        .zip(kinematic)
-        .filter(|(_, &k)| !k)
-        .filter_map(|(f, _)| *f)
-        .all(|k| {
-            let (d, scale) = pivot(k);
-            !lost(d, scale)
-        })
+/// Whether every dynamic variable's pivot holds (`pivot(i)`: variable `i`'s `(D, scale)`,
+/// read only for dynamic variables): the one judgement of the interpreted system and of the
+/// code `tree_model!` generates.
+pub fn pivots_hold(kinematic: &[bool], pivot: impl Fn(usize) -> (f64, f64)) -> bool {
+    (0..kinematic.len()).filter(|&i| !kinematic[i]).all(|i| {
+        let (d, scale) = pivot(i);
+        !lost(d, scale)
+    })
 }
 
 /// What the code `tree_model!` generates for [`accelerations`] reads and writes, on the stack:
@@ -261,7 +257,7 @@ pub struct ArticulatedIo<const N: usize> {
     pub qdd: [f64; N],
     /// Each dynamic variable's pivot `D`.
     pub pivot: [f64; N],
-    /// What it is judged against ([`lost`]).
+    /// What it is judged against ([`pivots_hold`]).
     pub pivot_scale: [f64; N],
     /// The model's own generalized forces (damping, dampers) and its springs' `∂L/∂q`, as
     /// the system hands them back in `own.force`, `own.dl_dq`.

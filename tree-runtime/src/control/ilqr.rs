@@ -122,6 +122,11 @@ impl Stop {
 /// The regularisation past which [`solve`] stops ([`Stop::Regularisation`]).
 pub const MAX_MU: f64 = 1e10;
 
+/// μ after a step the model was not trusted for: ten times more, from at least 1e-6.
+fn raised(mu: f64) -> f64 {
+    (mu * 10.0).max(1e-6)
+}
+
 /// The optimised trajectory and its controller.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Solution {
@@ -135,7 +140,8 @@ pub struct Solution {
     pub feedforward: Vec<DVector<f64>>,
     /// The total cost.
     pub cost: f64,
-    /// Whether a convergence test was met (otherwise the best trajectory found).
+    /// Whether a convergence test was met (otherwise the best trajectory found): `stop` is
+    /// [`Stop::Converged`].
     pub converged: bool,
     /// Why the iterations stopped.
     pub stop: Stop,
@@ -239,7 +245,6 @@ where
         report(&it);
         history.push(it);
     };
-    let mut converged = false;
     let mut stop = Stop::IterationLimit;
     let mut phase = BoxPhase::Clamped;
     for _ in 0..settings.max_iterations {
@@ -266,8 +271,8 @@ where
         }
         let used = (model, phase);
         let Some(gradient) = gradient else {
-            // Some Q_uu + μI is not positive definite: regularise more.
-            mu = (mu * 10.0).max(1e-6);
+            // Some Q_uu + μ s I is not positive definite: regularise more.
+            mu = raised(mu);
             if mu > MAX_MU {
                 stop = Stop::Regularisation;
                 break;
@@ -278,7 +283,6 @@ where
         // large μ shrinks the step whatever the gradient (a model that keeps failing its
         // line search), and that ends on the regularisation's ceiling instead.
         if gradient < settings.gradient_tolerance && mu <= settings.mu.max(1e-6) {
-            converged = true;
             stop = Stop::Converged;
             record(total, 0.0, mu, gradient, used);
             break;
@@ -309,7 +313,7 @@ where
             phase = BoxPhase::Boxed;
         }
         if accepted == 0.0 {
-            mu = (mu * 10.0).max(1e-6);
+            mu = raised(mu);
             record(total, 0.0, mu, gradient, used);
             if mu > MAX_MU {
                 stop = Stop::Regularisation;
@@ -336,13 +340,12 @@ where
         }
         // A short step means the model was trusted too far: regularise more next time.
         mu = if accepted < 0.25 {
-            (mu * 10.0).max(1e-6)
+            raised(mu)
         } else {
             (mu * 0.1).max(1e-12)
         };
         record(total, accepted, mu, gradient, used);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
-            converged = true;
             stop = Stop::Converged;
             break;
         }
@@ -353,7 +356,7 @@ where
         x,
         u,
         cost: total,
-        converged,
+        converged: stop == Stop::Converged,
         stop,
         history,
     })

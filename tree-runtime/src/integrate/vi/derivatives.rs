@@ -575,7 +575,12 @@ where
         // Σ_s λ_s D²h_s(q₁) are gathered for those rows only.
         let t = &self.terms;
         let dynamic = &lin.shape.dynamic;
-        gather_rows(t.d2l_ddq_dq.as_slice(), n, dynamic, &mut lin.lvq);
+        gather_rows(
+            t.d2l_ddq_dq.as_slice(),
+            n,
+            dynamic.iter().copied(),
+            &mut lin.lvq,
+        );
         // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
         lin.forces = t.force_derivatives != Sparsity::Zero;
         match t.force_derivatives {
@@ -588,8 +593,18 @@ where
                 }
             }
             Sparsity::Dense => {
-                gather_rows(t.dforce_dq.as_slice(), n, dynamic, &mut lin.fq);
-                gather_rows(t.dforce_ddq.as_slice(), n, dynamic, &mut lin.fv);
+                gather_rows(
+                    t.dforce_dq.as_slice(),
+                    n,
+                    dynamic.iter().copied(),
+                    &mut lin.fq,
+                );
+                gather_rows(
+                    t.dforce_ddq.as_slice(),
+                    n,
+                    dynamic.iter().copied(),
+                    &mut lin.fv,
+                );
             }
         }
         for s in 0..m {
@@ -614,7 +629,6 @@ where
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
         let lin = self.linearisation.insert(lin);
-        let t = &self.terms;
         let in_place = (
             t.d2l_dq_dq.as_slice(),
             t.mass.as_slice(),
@@ -982,8 +996,8 @@ fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize
 
 /// Rows `rows` of the n × n matrix stored column-major in `a`, into the same rows of the
 /// row-major `out` (other rows untouched).
-fn gather_rows(a: &[f64], n: usize, rows: &[usize], out: &mut [f64]) {
-    for &i in rows {
+fn gather_rows<T: Copy>(a: &[T], n: usize, rows: impl IntoIterator<Item = usize>, out: &mut [T]) {
+    for i in rows {
         for (j, o) in out[i * n..(i + 1) * n].iter_mut().enumerate() {
             *o = a[j * n + i];
         }
@@ -992,11 +1006,7 @@ fn gather_rows(a: &[f64], n: usize, rows: &[usize], out: &mut [f64]) {
 
 /// `out` = the n × n matrix stored column-major in `a`, stored row-major (its transpose).
 fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
-    for (i, row) in out.chunks_exact_mut(n).enumerate() {
-        for (j, o) in row.iter_mut().enumerate() {
-            *o = a[j * n + i];
-        }
-    }
+    gather_rows(a, n, 0..n, out);
 }
 
 /// `R_z` singular at a converged step (constraints that became dependent), at unknown `c`
