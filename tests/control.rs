@@ -589,6 +589,88 @@ fn a_task_in_other_units_takes_the_same_steps() {
     }
 }
 
+/// The cart problem with the model written in units of `length` metres (`x`, the bob's
+/// offset and gravity divided by it; forces and momenta with it) and every weight converted,
+/// so the cost is the same function of the same motion: unlimited, iLQR.
+fn cart_in_units(length: f64) -> tree_mech::runtime::control::Solution {
+    let l = length;
+    let text = format!(
+        "name = \"cart\"\ngravity = [0.0, 0.0, {g:e}]\n\
+         [[frame]]\nname = \"cart\"\ntx = \"x\"\nmass = 1.0\n\
+         [[frame]]\nname = \"pivot\"\nparent = \"cart\"\nry = \"theta\"\n\
+         [[frame]]\nname = \"bob\"\nparent = \"pivot\"\ntz = {tz:e}\nmass = 0.2\n\
+         [variables.theta]\nq0 = 0.1\n\
+         [[input]]\nname = \"push\"\nvariable = \"x\"\n",
+        g = -9.81 / l,
+        tz = -0.5 / l
+    );
+    let m = model::from_toml_str(&text, None).unwrap();
+    let (dt, knots) = (0.02, 60);
+    let mut dynamics =
+        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt, 0.0).unwrap();
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let mut cost = common::cart_to_half_metre(dt);
+    // State (x, θ, p_x, p_θ, the push's memory): a length scales x, p_x and the push by 1/l,
+    // p_θ by 1/l², so their weights gain l², l², l⁴, l².
+    let per_entry = DVector::from_vec(vec![l * l, 1.0, l * l, l.powi(4), l * l]);
+    cost.x_weight.component_mul_assign(&per_entry);
+    cost.terminal_weight.component_mul_assign(&per_entry);
+    cost.x_ref[0] /= l;
+    cost.terminal_ref[0] /= l;
+    cost.u_weight *= l * l;
+    let options = IlqrSettings {
+        max_iterations: 60,
+        ..IlqrSettings::default()
+    };
+    solve(
+        &mut dynamics,
+        &mut cost,
+        &x0,
+        vec![DVector::zeros(1); knots],
+        &options,
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_model_in_other_units_stops_alike() {
+    // The convergence test is relative to the cost and in its units: the same cart in
+    // gigametres (its push in 10⁻⁹ N, every feed-forward below 10⁻⁸ from the start) or in
+    // nanometres takes the same iterations to the same plan, where a bound on max |k| in the
+    // controls' units stopped the first at iteration 0.
+    let plain = cart_in_units(1.0);
+    assert_eq!(plain.stop, Stop::Converged);
+    assert!(
+        plain.history.len() > 2,
+        "{} iterations",
+        plain.history.len()
+    );
+    for l in [1e9, 1e-9] {
+        let other = cart_in_units(l);
+        assert_eq!(other.stop, Stop::Converged, "length unit {l:e} m");
+        assert_eq!(
+            other.history.len(),
+            plain.history.len(),
+            "length unit {l:e} m"
+        );
+        assert!(
+            (other.cost - plain.cost).abs() <= 1e-8 * plain.cost,
+            "length unit {l:e} m: cost {} against {}",
+            other.cost,
+            plain.cost
+        );
+        for (a, b) in other.u.iter().zip(&plain.u) {
+            assert!(
+                (a[0] * l - b[0]).abs() <= 1e-7 * (1.0 + b[0].abs()),
+                "length unit {l:e} m: push {} N against {} N",
+                a[0] * l,
+                b[0]
+            );
+        }
+    }
+}
+
 /// A cost whose derivatives point the wrong way (its gradient negated): no step of the local
 /// model lowers it.
 struct Misleading(QuadraticCost);

@@ -37,8 +37,12 @@ pub struct IlqrSettings {
     pub max_iterations: usize,
     /// Converged when an accepted step lowers the cost by less than this, relative to it.
     pub cost_tolerance: f64,
-    /// Converged when the largest feed-forward change is below this.
-    pub gradient_tolerance: f64,
+    /// Converged, before a line search, when the full step is predicted to lower the cost by
+    /// less than this, relative to it: the local model's decrease `−Σ_k (k_kᵀQ_u + ½ k_kᵀQ_uu
+    /// k_k)` (Tassa, Erez, Todorov 2012, eq. (14)) is in the cost's units, so a task whose
+    /// controls or cost are in other units stops alike (a test on `max |k|` would read the
+    /// controls' units).
+    pub decrease_tolerance: f64,
     /// Box limits per control `[lo, hi]` (None: unbounded).
     pub limits: Option<(DVector<f64>, DVector<f64>)>,
     /// The first regularisation, relative: each knot's `Q_uu` gains `μ s I` with `s` its
@@ -52,7 +56,7 @@ impl Default for IlqrSettings {
             solver: Solver::Ilqr,
             max_iterations: 100,
             cost_tolerance: 1e-6,
-            gradient_tolerance: 1e-8,
+            decrease_tolerance: 1e-12,
             limits: None,
             mu: 1e-6,
         }
@@ -97,8 +101,8 @@ pub struct Iteration {
 /// Why [`solve`] stopped iterating.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stop {
-    /// A convergence test was met: the cost decrease or the feed-forward change fell below
-    /// its tolerance.
+    /// A convergence test was met: the cost decrease, or the decrease the local model predicts
+    /// for the full step, fell below its tolerance relative to the cost.
     Converged,
     /// `max_iterations` ran out first.
     IterationLimit,
@@ -181,12 +185,12 @@ where
     check(dynamics, cost, x0, &u)?;
     let settled = |x: f64| x.is_finite() && x >= 0.0;
     if !(settled(settings.cost_tolerance)
-        && settled(settings.gradient_tolerance)
+        && settled(settings.decrease_tolerance)
         && settled(settings.mu))
     {
         return Err(SimError::InvalidInput(format!(
-            "the optimiser's cost tolerance ({}), gradient tolerance ({}) and regularisation ({}) must be finite and non-negative",
-            settings.cost_tolerance, settings.gradient_tolerance, settings.mu
+            "the optimiser's cost tolerance ({}), decrease tolerance ({}) and regularisation ({}) must be finite and non-negative",
+            settings.cost_tolerance, settings.decrease_tolerance, settings.mu
         )));
     }
     if settings.solver == Solver::Ddp && !dynamics.is_vi() {
@@ -270,7 +274,7 @@ where
             model = Solver::Ilqr;
         }
         let used = (model, phase);
-        let Some(gradient) = gradient else {
+        let Some(Outcome { gradient, decrease }) = gradient else {
             // Some Q_uu + μ s I is not positive definite: regularise more.
             mu = raised(mu);
             if mu > MAX_MU {
@@ -279,10 +283,10 @@ where
             }
             continue;
         };
-        // A small feed-forward is convergence only while the regularisation is small too: a
-        // large μ shrinks the step whatever the gradient (a model that keeps failing its
-        // line search), and that ends on the regularisation's ceiling instead.
-        if gradient < settings.gradient_tolerance && mu <= settings.mu.max(1e-6) {
+        // A small predicted decrease is convergence only while the regularisation is small
+        // too: a large μ shrinks the step whatever the gradient (a model that keeps failing
+        // its line search), and that ends on the regularisation's ceiling instead.
+        if decrease <= settings.decrease_tolerance * total.abs() && mu <= settings.mu.max(1e-6) {
             stop = Stop::Converged;
             record(total, 0.0, mu, gradient, used);
             break;
@@ -594,9 +598,17 @@ struct Pass<'a> {
     limits: Option<&'a Limits>,
 }
 
+/// What a backward pass tells the iteration.
+struct Outcome {
+    /// The largest feed-forward entry `max |k|` (reported).
+    gradient: f64,
+    /// The cost decrease the local model predicts for the full step (the convergence test).
+    decrease: f64,
+}
+
 /// The backward pass: fills the gains and feed-forward terms, within the pass's limits;
-/// returns `max |k|`, or `None` when some `Q_uu + μI` is not positive definite
-/// (docs/derivations.md §10).
+/// returns `max |k|` and the predicted decrease, or `None` when some `Q_uu + μ s I` is not
+/// positive definite (docs/derivations.md §10).
 fn backward<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
@@ -604,7 +616,7 @@ fn backward<S: System>(
     u: &[DVector<f64>],
     work: &mut Work,
     pass: &Pass,
-) -> Result<Option<f64>, SimError>
+) -> Result<Option<Outcome>, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -614,7 +626,7 @@ where
     cost.terminal(&work.knot, Some(&mut bw.d));
     bw.vx.copy_from(&bw.d.lx);
     bw.vxx.copy_from(&bw.d.lxx);
-    let mut gradient = 0.0f64;
+    let (mut gradient, mut decrease) = (0.0f64, 0.0);
     for k in (0..n).rev() {
         dynamics.knot(k, x[k].as_slice(), &mut work.knot, true, work.needs)?;
         cost.running(k, &work.knot, &u[k], Some(&mut bw.d));
@@ -671,6 +683,7 @@ where
         gradient = gradient.max(kk.amax());
         // V_x = Q_x + KᵀQ_uu k + KᵀQ_u + Q_uxᵀk, V_xx = Q_xx + KᵀQ_uuK + KᵀQ_ux + Q_uxᵀK.
         bw.quu_k.gemv(1.0, &bw.quu, kk, 0.0);
+        decrease -= kk.dot(&bw.qu) + 0.5 * kk.dot(&bw.quu_k);
         bw.vx.copy_from(&bw.qx);
         bw.vx.gemv_tr(1.0, gain, &bw.quu_k, 1.0);
         bw.vx.gemv_tr(1.0, gain, &bw.qu, 1.0);
@@ -689,5 +702,5 @@ where
             }
         }
     }
-    Ok(Some(gradient))
+    Ok(Some(Outcome { gradient, decrease }))
 }
