@@ -693,11 +693,29 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
         ),
         (vec!["--u", "x"], "--u: `x` is not a finite number"),
         (vec!["--inputs", "missing.csv"], "cannot read `missing.csv`"),
+        // A push too large for the model: the overflow names the input behind it.
+        (
+            vec!["--u", "1e308"],
+            "step 0 (t = 0): discrete Euler–Lagrange residual, under the inputs push = 1e308, is not finite",
+        ),
+        (
+            vec!["--u", "-1e308", "--integrator", "rk4"],
+            "acceleration q̈, under the inputs push = -1e308, is not finite",
+        ),
     ] {
         let mut all = vec!["simulate", "tests/models/cart.toml", "--duration", "0.1"];
         all.extend(args.iter().copied());
         let (ok, _, stderr) = tree_mech(&all);
         assert!(!ok && stderr.contains(expected), "{args:?}: {stderr}");
+    }
+    for command in ["eval", "linearize"] {
+        let (ok, _, stderr) = tree_mech(&[command, "tests/models/cart.toml", "--u", "1e308"]);
+        assert!(
+            !ok && stderr.contains(
+                "at this state, acceleration q̈, under the inputs push = 1e308, is not finite"
+            ),
+            "{command}: {stderr}"
+        );
     }
     std::fs::write(&schedule, "t,pull\n0,1\n").unwrap();
     let (ok, _, stderr) = tree_mech(&[

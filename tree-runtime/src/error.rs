@@ -117,33 +117,69 @@ pub enum SimError {
 impl SimError {
     /// The step the error happened at, when it names one (0: the initial state).
     pub fn step(&self) -> Option<usize> {
+        self.when().map(|(step, _)| step)
+    }
+
+    /// The step and time the error happened at, when it names them.
+    pub fn when(&self) -> Option<(usize, f64)> {
         match self {
-            SimError::SingularMassMatrix { step, .. }
-            | SimError::SingularConstraints { step, .. }
-            | SimError::SingularJacobian { step, .. }
-            | SimError::NewtonFailed { step, .. }
-            | SimError::StepTooCoarse { step, .. }
-            | SimError::NonFinite { step, .. }
-            | SimError::StepSizeTooSmall { step, .. }
-            | SimError::StepBudget { step, .. } => Some(*step),
+            SimError::SingularMassMatrix { step, t, .. }
+            | SimError::SingularConstraints { step, t, .. }
+            | SimError::SingularJacobian { step, t, .. }
+            | SimError::NewtonFailed { step, t, .. }
+            | SimError::StepTooCoarse { step, t, .. }
+            | SimError::NonFinite { step, t, .. }
+            | SimError::StepSizeTooSmall { step, t, .. }
+            | SimError::StepBudget { step, t, .. } => Some((*step, *t)),
             SimError::Unsatisfiable { .. }
             | SimError::TooManySteps { .. }
             | SimError::InvalidInput(_)
             | SimError::Unsupported(_) => None,
         }
     }
+
+    /// A state or residual that stopped being finite while inputs `u` (named `names`) were in
+    /// force names them: an input too large for the model (a push of 1e308 N) overflows the
+    /// first step, and the message should point at it rather than at the residual alone.
+    pub fn under_inputs(self, names: &[String], u: &[f64]) -> SimError {
+        match self {
+            SimError::NonFinite { step, t, what } if u.iter().any(|&x| x != 0.0) => {
+                let list = names
+                    .iter()
+                    .zip(u)
+                    .map(|(name, &x)| format!("{name} = {}", tree_model::Given(x)))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                SimError::NonFinite {
+                    step,
+                    t,
+                    what: format!("{what}, under the inputs {list},"),
+                }
+            }
+            e => e,
+        }
+    }
+
+    /// The message as an evaluation at one given state reports it: without the step a run
+    /// would name (`at this state, the mass matrix is not positive definite …`).
+    pub fn at_this_state(&self) -> String {
+        format!("at this state, {}", Detail(self))
+    }
 }
 
-impl fmt::Display for SimError {
+/// What went wrong, without the step it went wrong at.
+struct Detail<'a>(&'a SimError);
+
+impl fmt::Display for Detail<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            SimError::SingularMassMatrix { step, t, variable, pivot } => write!(
+        match self.0 {
+            SimError::SingularMassMatrix { variable, pivot, .. } => write!(
                 f,
-                "step {step} (t = {t}): mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`): a variable that moves no mass, or a singular configuration where two variables move alike (rotations whose axes line up: a gimbal lock)", t = Seconds(*t)
+                "mass matrix is not positive definite (pivot {pivot:e} at variable `{variable}`): a variable that moves no mass, or a singular configuration where two variables move alike (rotations whose axes line up: a gimbal lock)"
             ),
-            SimError::SingularConstraints { step, t, constraint } => write!(
+            SimError::SingularConstraints { constraint, .. } => write!(
                 f,
-                "step {step} (t = {t}): the constraint Jacobian has lost rank at constraint `{constraint}` (redundant or degenerate constraints)", t = Seconds(*t)
+                "the constraint Jacobian has lost rank at constraint `{constraint}` (redundant or degenerate constraints)"
             ),
             SimError::Unsatisfiable { constraint, violation } => write!(
                 f,
@@ -153,35 +189,44 @@ impl fmt::Display for SimError {
                 f,
                 "the run needs {steps:.2e} steps, more than the limit of 1e9: lengthen --dt or shorten --duration"
             ),
-            SimError::SingularJacobian { step, t, variable } => write!(
+            SimError::SingularJacobian { variable, .. } => write!(
                 f,
-                "step {step} (t = {t}): variational integrator Newton matrix is singular (at {variable})", t = Seconds(*t)
+                "variational integrator Newton matrix is singular (at {variable})"
             ),
-            SimError::NewtonFailed { step, t, iterations, residual, violation } => write!(
+            SimError::NewtonFailed { iterations, residual, violation, .. } => write!(
                 f,
-                "step {step} (t = {t}): Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e}): the step may be too long for the motion here; lower --dt", t = Seconds(*t)
+                "Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e}): the step may be too long for the motion here; lower --dt"
             ),
-            SimError::StepTooCoarse { step, t, dt, variable, turn } => write!(
+            SimError::StepTooCoarse { dt, variable, turn, .. } => write!(
                 f,
-                "step {step} (t = {t}): `{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt", t = Seconds(*t)
+                "`{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt"
             ),
-            SimError::NonFinite { step, t, what } => {
-                write!(f, "step {step} (t = {t}): {what} is not finite", t = Seconds(*t))?;
+            SimError::NonFinite { step, what, .. } => {
+                write!(f, "{what} is not finite")?;
                 // Finite at the start and not after: the run diverged.
                 if *step > 0 {
                     f.write_str(" (the run diverged: lower --dt)")?;
                 }
                 Ok(())
             }
-            SimError::StepSizeTooSmall { step, t, dt } => {
-                write!(f, "step {step} (t = {t}): adaptive step size {dt:e} is too small", t = Seconds(*t))
+            SimError::StepSizeTooSmall { dt, .. } => {
+                write!(f, "adaptive step size {dt:e} is too small")
             }
-            SimError::StepBudget { step, t, dt, needed, max_steps } => write!(
+            SimError::StepBudget { dt, needed, max_steps, .. } => write!(
                 f,
-                "step {step} (t = {t}): the adaptive step size fell to {dt:.3e} s, so the run would need about {needed:.2e} steps, more than its budget of {max_steps}: the model is stiff here; use --integrator vi (or rk4 with a small --dt), or raise --max-steps", t = Seconds(*t)
+                "the adaptive step size fell to {dt:.3e} s, so the run would need about {needed:.2e} steps, more than its budget of {max_steps}: the model is stiff here; use --integrator vi (or rk4 with a small --dt), or raise --max-steps"
             ),
             SimError::InvalidInput(m) | SimError::Unsupported(m) => f.write_str(m),
         }
+    }
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some((step, t)) = self.when() {
+            write!(f, "step {step} (t = {t}): ", t = Seconds(t))?;
+        }
+        Detail(self).fmt(f)
     }
 }
 

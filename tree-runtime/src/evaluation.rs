@@ -80,11 +80,15 @@ where
     let mut qdd = sys.zero_vector();
     let mut dynamics = Dynamics::new(sys);
     let mut force = NoForce;
+    let names: Vec<String> = (0..sys.input_count())
+        .map(|k| sys.input_name(k).to_string())
+        .collect();
+    let inputs: &[f64] = u;
     let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
-    cx.u = u;
+    cx.u = inputs;
     dynamics
         .acceleration(cx.at(0, t), q, dq, &mut qdd)
-        .map_err(|e| SimError::InvalidInput(format!("at this state, {e}")))?;
+        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, inputs).at_this_state()))?;
     let mut constraints = ConstraintTerms::zeros(sys.constraint_count(), n);
     sys.constraints(q, dq, Order::First, &mut constraints);
     let energy = terms.energy(dq);

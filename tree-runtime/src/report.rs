@@ -137,10 +137,14 @@ where
         [q[k], dq[k], _] = motion.kinematic(k, t);
     }
     let mut force = NoForce;
+    let names: Vec<String> = (0..sys.input_count())
+        .map(|k| sys.input_name(k).to_string())
+        .collect();
+    let inputs: &[f64] = &request.u;
     let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
-    cx.u = &request.u;
+    cx.u = inputs;
     let d = continuous_derivatives(cx.at(0, t), &q, &dq)
-        .map_err(|e| SimError::InvalidInput(format!("at this state, {e}")))?;
+        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, inputs).at_this_state()))?;
     let continuous = vec![
         name("q", Entry::Vector(q.as_slice().to_vec())),
         name("dq", Entry::Vector(dq.as_slice().to_vec())),

@@ -291,6 +291,9 @@ where
         });
     }
     let moved = project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?;
+    let input_names: Vec<String> = (0..sys.input_count())
+        .map(|k| sys.input_name(k).to_string())
+        .collect();
     let mut rec = Recorder {
         summary: RunSummary {
             moved,
@@ -351,7 +354,11 @@ where
                 &mut dq,
             )
         }
-    }?;
+    }
+    .map_err(|e| {
+        let t = e.when().map_or(0.0, |(_, t)| t);
+        e.under_inputs(&input_names, inputs.at(t))
+    })?;
     Ok(rec.summary)
 }
 
