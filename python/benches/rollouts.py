@@ -4,8 +4,8 @@
     pip install ./python mujoco==4.0.0
     python python/benches/rollouts.py
 
-Models: the N-link pendulum of benches/models (1 kg point masses on 1 m links, every q0
-0.5 rad; in MuJoCo the same chain of hinges with 1 kg bodies whose inertia is 10⁻⁹ kg m²,
+Models: the N-link pendulums of benches/models, N = 8, 19 and 40 (1 kg point masses on 1 m
+links, every q0 0.5 rad; in MuJoCo the same chain of hinges with 1 kg bodies whose inertia is 10⁻⁹ kg m²,
 no contacts, no damping) and the UR5 (models/ur5.urdf; MuJoCo reads the same URDF with its
 meshes left out). Both at Δt = 0.01, a batch of 64 rollouts of 1000 steps, zero controls.
 tree-mech runs its midpoint VI and RK4; MuJoCo its default semi-implicit Euler and RK4.
@@ -25,6 +25,9 @@ import tree_mech as tm
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 BATCH, STEPS, DT = 64, 1000, 0.01
+# The chains measured: the 8-link one of the target, and longer ones to show how each side
+# grows with the chain (ours O(N) a stage for RK4; MuJoCo factors a dense chain's M).
+PENDULUMS = (8, 19, 40)
 
 
 def best(f, repeats=3):
@@ -78,17 +81,25 @@ def mujoco_rate(model: mujoco.MjModel, q0: np.ndarray, threads: int) -> float:
 
 def ours_rate(m: tm.Model, q0: np.ndarray, integrator: str, threads: int, every: int = 1) -> float:
     dq0 = np.zeros_like(q0)
-    seconds = best(
-        lambda: m.rollouts(q0, dq0, duration=STEPS * DT, dt=DT, integrator=integrator, threads=threads, every=every)
-    )
-    return BATCH * STEPS / seconds
+
+    def run():
+        out = m.rollouts(q0, dq0, duration=STEPS * DT, dt=DT, integrator=integrator, threads=threads, every=every)
+        # A rollout that stopped early would flatter the rate.
+        failed = [e for e in out.errors if e is not None]
+        assert not failed, failed[0]
+
+    return BATCH * STEPS / best(run)
 
 
 def main():
     rng = np.random.default_rng(1)
     rows = []
     for name, ours, theirs in [
-        ("8-link pendulum", tm.load(str(ROOT / "benches/models/pendulum-8.toml")), lambda i: mujoco.MjModel.from_xml_string(pendulum_mjcf(8, i))),
+        *[
+            (f"{n}-link pendulum", tm.load(str(ROOT / f"benches/models/pendulum-{n}.toml")),
+             lambda i, n=n: mujoco.MjModel.from_xml_string(pendulum_mjcf(n, i)))
+            for n in PENDULUMS
+        ],
         ("UR5", tm.load(str(ROOT / "models/ur5.urdf")), ur5_model),
     ]:
         n = len(ours.variables)
