@@ -63,9 +63,7 @@ pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String>
     let mut sys = source.system(path)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
-    let inputs: Vec<String> = (0..sys.input_count())
-        .map(|k| sys.input_name(k).to_string())
-        .collect();
+    let inputs: Vec<String> = sys.input_names();
     let constraints: Vec<String> = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();

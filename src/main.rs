@@ -553,9 +553,7 @@ fn run_simulate<S: System<N = Dyn>>(
     let constraints: Vec<String> = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
-    let input_names: Vec<String> = (0..sys.input_count())
-        .map(|k| sys.input_name(k).to_string())
-        .collect();
+    let input_names: Vec<String> = sys.input_names();
     let mut csv = match &out {
         Some(file) => {
             let shown = file.path().display();
@@ -905,9 +903,7 @@ fn run_eval(
     if !time.is_finite() {
         return Err(format!("--t: `{time}` is not a finite time"));
     }
-    let input_names: Vec<String> = (0..sys.input_count())
-        .map(|k| sys.input_name(k).to_string())
-        .collect();
+    let input_names: Vec<String> = sys.input_names();
     let u = match u {
         Some(text) => parse_list(text, input_names.len(), "u", &input_names, "inputs")?,
         None => vec![0.0; sys.input_count()],

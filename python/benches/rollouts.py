@@ -121,11 +121,16 @@ def main():
     calls = 2000
     evaluate = best(lambda: [m.evaluate() for _ in range(calls)]) / calls
     step = best(lambda: [m.simulate(DT, DT) for _ in range(calls)]) / calls
+    q, dq = m.q0, np.zeros_like(m.q0)
+    aba = best(lambda: [m.forward_dynamics(q, dq) for _ in range(calls)]) / calls
+    crba = best(lambda: [m.mass_matrix(q) for _ in range(calls)]) / calls
     print()
     print("| 8-link pendulum, one Python call | µs |")
     print("|---|---:|")
     print(f"| `Model.evaluate()` (L, M, every derivative, q̈, poses) | {evaluate * 1e6:.1f} |")
     print(f"| `Model.simulate(dt, dt)` (one VI step, both samples) | {step * 1e6:.1f} |")
+    print(f"| `Model.forward_dynamics(q, dq)` (q̈ alone) | {aba * 1e6:.1f} |")
+    print(f"| `Model.mass_matrix(q)` (M alone) | {crba * 1e6:.1f} |")
 
 
 if __name__ == "__main__":

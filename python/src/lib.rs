@@ -20,10 +20,11 @@ use tree_mech::integrate::{
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
-use tree_mech::runtime::evaluation::{evaluate_state, evaluate_state_with};
+use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
+use tree_mech::runtime::ModelMotions;
 use tree_mech::runtime::Vector;
-use tree_mech::{SimError, System, Trajectory as CoreTrajectory, TreeSystem};
+use tree_mech::{SimError, System, Terms, Trajectory as CoreTrajectory, TreeSystem};
 
 use numbers::Numbers;
 
@@ -175,6 +176,24 @@ impl Model {
 
     fn input_names(&self) -> Vec<String> {
         self.model.inputs.iter().map(|u| u.name.clone()).collect()
+    }
+
+    /// The inputs at one state: one finite value per input, or zeros.
+    fn input_vector(&self, given: Option<Numbers<'_, Ix1>>) -> PyResult<Vec<f64>> {
+        let width = self.model.inputs.len();
+        let Some(u) = given else {
+            return Ok(vec![0.0; width]);
+        };
+        let u = u.as_array().to_vec();
+        if u.len() != width {
+            return Err(bad(format!(
+                "u has {} entries; the model has {width} inputs ({})",
+                u.len(),
+                self.input_names().join(", ")
+            )));
+        }
+        check_finite("u", &u, &self.input_names())?;
+        Ok(u)
     }
 
     fn names(&self) -> Vec<String> {
@@ -454,7 +473,7 @@ impl Model {
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
-        let u: Vec<f64> = u.map_or_else(Vec::new, |u| u.as_array().to_vec());
+        let u = self.input_vector(u)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
         let e = match ddq {
             None => evaluate_state(&mut *sys, t, &q, &dq, &u),
@@ -500,6 +519,61 @@ impl Model {
         }
         out.set_item("body_velocities", velocities)?;
         Ok(out)
+    }
+
+    /// q̈ of the dynamic variables at one state — `evaluate()["qdd"]` alone (Pinocchio's
+    /// `aba`): by the articulated-body algorithm where the model has no constraints, without
+    /// the rest of an evaluation, for a loop that needs only the dynamics. `ddq` gives the
+    /// kinematic variables' accelerations (default: their prescription's).
+    #[pyo3(signature = (q=None, dq=None, t=0.0, u=None, ddq=None))]
+    fn forward_dynamics(
+        &self,
+        py: Python<'_>,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        t: f64,
+        u: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Py<PyAny>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
+        let u = self.input_vector(u)?;
+        let mut sys = self.sys.lock().expect("no panic holds the lock");
+        let (qdd, _) = match ddq {
+            None => {
+                let mut motion = ModelMotions::of(&*sys);
+                continuous_dynamics(&mut *sys, t, &q, &dq, &u, &mut motion)
+            }
+            Some(ddq) => {
+                let ddq = self.vector("ddq", Some(ddq), |_| 0.0)?;
+                let mut given = given_kinematics(&q, &dq, &ddq);
+                continuous_dynamics(&mut *sys, t, &q, &dq, &u, &mut given)
+            }
+        }
+        .map_err(|e| sim_error(py, &e))?;
+        let dynamic = self.model.dynamic();
+        Ok(vector(
+            py,
+            &dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>(),
+        ))
+    }
+
+    /// The mass matrix M(q), every variable (`evaluate()["M"]` alone; Pinocchio's `crba`).
+    #[pyo3(signature = (q=None))]
+    fn mass_matrix(&self, py: Python<'_>, q: Option<Numbers<'_, Ix1>>) -> PyResult<Py<PyAny>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let mut sys = self.sys.lock().expect("no panic holds the lock");
+        let mut terms = Terms::zeros(Dyn(self.n()));
+        sys.mass_matrix(&q, &mut terms);
+        if terms.mass.iter().any(|x| !x.is_finite()) {
+            return Err(bad(
+                "at this q, M is not finite (it overflowed a floating-point number)",
+            ));
+        }
+        Ok(matrix(
+            py,
+            &DMatrix::from_fn(self.n(), self.n(), |i, j| terms.mass[(i, j)]),
+        ))
     }
 
     /// Simulates from (q0, dq0) (default the model's) for `duration` s at step `dt`; `u`
@@ -604,14 +678,7 @@ impl Model {
             .transpose()?;
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
-        let inputs = self.model.inputs.len();
-        let u = u.map_or_else(|| vec![0.0; inputs], |u| u.as_array().to_vec());
-        if u.len() != inputs {
-            return Err(bad(format!(
-                "u has {} entries; the model has {inputs} inputs",
-                u.len()
-            )));
-        }
+        let u = self.input_vector(u)?;
         let request = ReportRequest {
             t,
             u,

@@ -312,3 +312,40 @@ def test_non_finite_states_and_inputs_and_mismatched_schedules_are_refused():
         m.simulate(1.0, 0.01, u=np.zeros((50, 1)))
     with pytest.raises(ValueError, match="u has 150 rows of inputs, one a step; the run has 100 steps"):
         m.rollouts(np.zeros((2, 2)), np.zeros((2, 2)), 1.0, 0.01, u=np.zeros((2, 150, 1)))
+
+
+def test_evaluate_linearize_and_forward_dynamics_refuse_bad_inputs_by_name():
+    m = tm.load(CART)
+    for call in (m.evaluate, m.forward_dynamics, m.linearize):
+        with pytest.raises(ValueError, match=r"u\[0\] \(`push`\) is NaN"):
+            call(u=[np.nan])
+        with pytest.raises(ValueError, match=r"u has 2 entries; the model has 1 inputs \(push\)"):
+            call(u=[1.0, 2.0])
+        # Finite but too large for the model: the overflow names the input behind it.
+        with pytest.raises(tm.SimulationError, match=r"under the inputs push = 1e308, is not finite"):
+            call(u=[1e308])
+
+
+def test_forward_dynamics_and_the_mass_matrix_alone_equal_the_evaluation():
+    rng = np.random.default_rng(3)
+    # Unconstrained (the articulated-body algorithm) and constrained (the KKT system).
+    for path in (CART, str(ROOT / "models/marionette.toml")):
+        m = tm.load(path)
+        n = len(m.variables)
+        for _ in range(3):
+            q = m.q0 + rng.uniform(-0.2, 0.2, n)
+            dq = rng.uniform(-1.0, 1.0, n)
+            u = rng.uniform(-1.0, 1.0, len(m.inputs))
+            e = m.evaluate(q, dq, t=0.3, u=u)
+            qdd = m.forward_dynamics(q, dq, t=0.3, u=u)
+            assert qdd.shape == (len(m.dynamic),) and qdd.dtype == np.float64
+            assert np.array_equal(qdd, e["qdd"]), path
+            M = m.mass_matrix(q)
+            assert M.shape == (n, n)
+            assert np.allclose(M, e["M"], rtol=1e-13, atol=1e-13 * np.abs(e["M"]).max()), path
+    # The cart pushed at rest, bob hanging: ẍ = F / m_cart (the massless rod takes none).
+    cart = tm.load(CART)
+    qdd = cart.forward_dynamics(q=[0.0, 0.0], dq=[0.0, 0.0], u=[1.2])
+    assert abs(qdd[0] - 1.2) < 1e-12
+    with pytest.raises(ValueError, match=r"q has 3 entries; the model has 2 variables"):
+        cart.mass_matrix([0.0, 0.0, 0.0])

@@ -62,37 +62,13 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let n = sys.dof();
-    if q.len() != n || dq.len() != n || !(u.is_empty() || u.len() == sys.input_count()) {
-        return Err(SimError::InvalidInput(format!(
-            "the state has {} positions, {} velocities and {} inputs; the system has {n} variables and {} inputs",
-            q.len(),
-            dq.len(),
-            u.len(),
-            sys.input_count()
-        )));
-    }
-    if !t.is_finite() {
-        return Err(SimError::InvalidInput(format!(
-            "the time {t} is not finite"
-        )));
-    }
+    let (qdd, lambda) = continuous_dynamics(sys, t, q, dq, u, motion)?;
     let terms = sys.evaluate(q, dq, Order::Full);
-    let mut qdd = sys.zero_vector();
-    let mut dynamics = Dynamics::new(sys);
-    let mut force = NoForce;
-    let names: Vec<String> = (0..sys.input_count())
-        .map(|k| sys.input_name(k).to_string())
-        .collect();
-    let inputs: &[f64] = u;
-    let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
-    cx.u = inputs;
-    dynamics
-        .acceleration(cx.at(0, t), q, dq, &mut qdd)
-        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, inputs).at_this_state()))?;
     let mut constraints = ConstraintTerms::zeros(sys.constraint_count(), n);
     sys.constraints(q, dq, Order::First, &mut constraints);
     let energy = terms.energy(dq);
-    let outputs: [(&str, &[f64]); 10] = [
+    // q̈ and λ were checked where they were solved for.
+    let outputs: [(&str, &[f64]); 9] = [
         ("L", std::slice::from_ref(&terms.l)),
         ("the energy", std::slice::from_ref(&energy)),
         ("dL_dq", terms.dl_dq.as_slice()),
@@ -100,7 +76,6 @@ where
         ("M", terms.mass.as_slice()),
         ("d2L_ddqdq", terms.d2l_ddq_dq.as_slice()),
         ("d2L_dqdq", terms.d2l_dq_dq.as_slice()),
-        ("qdd", qdd.as_slice()),
         ("h", constraints.h.as_slice()),
         ("dh_dq", constraints.dh.as_slice()),
     ];
@@ -118,8 +93,61 @@ where
         terms,
         energy,
         qdd,
-        lambda: dynamics.lambda.clone(),
+        lambda,
         constraints,
         poses,
     })
+}
+
+/// The continuous dynamics alone at `(t, q, q̇)` under inputs `u` (empty: zero), the kinematic
+/// variables' `[q, q̇, q̈]` from `motion`: `q̈` of every variable (kinematic ones their
+/// prescription's) and the multipliers `λ` (eq. (14)), by the articulated-body algorithm
+/// where the model has no constraints — what [`evaluate_state_with`] reports beside the rest,
+/// and the Python package's `Model.forward_dynamics` alone. Fails, naming it, when the
+/// state does not fit, the dynamics have no solution there, or `q̈` is not finite.
+pub fn continuous_dynamics<S: System, P: Prescription>(
+    sys: &mut S,
+    t: f64,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    u: &[f64],
+    motion: &mut P,
+) -> Result<(Vector<S::N>, DVector<f64>), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let n = sys.dof();
+    if q.len() != n || dq.len() != n || !(u.is_empty() || u.len() == sys.input_count()) {
+        return Err(SimError::InvalidInput(format!(
+            "the state has {} positions, {} velocities and {} inputs; the system has {n} variables and {} inputs",
+            q.len(),
+            dq.len(),
+            u.len(),
+            sys.input_count()
+        )));
+    }
+    if !t.is_finite() {
+        return Err(SimError::InvalidInput(format!(
+            "the time {t} is not finite"
+        )));
+    }
+    let mut qdd = sys.zero_vector();
+    let mut dynamics = Dynamics::new(sys);
+    let mut force = NoForce;
+    let names = sys.input_names();
+    let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
+    cx.u = u;
+    dynamics
+        .acceleration(cx.at(0, t), q, dq, &mut qdd)
+        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, u).at_this_state()))?;
+    if qdd
+        .iter()
+        .chain(dynamics.lambda.iter())
+        .any(|x| !x.is_finite())
+    {
+        return Err(SimError::InvalidInput(
+            "at this state, qdd is not finite (it overflowed a floating-point number)".into(),
+        ));
+    }
+    Ok((qdd, dynamics.lambda.clone()))
 }

@@ -137,9 +137,7 @@ where
         [q[k], dq[k], _] = motion.kinematic(k, t);
     }
     let mut force = NoForce;
-    let names: Vec<String> = (0..sys.input_count())
-        .map(|k| sys.input_name(k).to_string())
-        .collect();
+    let names: Vec<String> = sys.input_names();
     let inputs: &[f64] = &request.u;
     let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
     cx.u = inputs;

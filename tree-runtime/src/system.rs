@@ -302,6 +302,13 @@ where
     /// Name of input `k`.
     fn input_name(&self, k: usize) -> &str;
 
+    /// Every input's name, in `u`'s order.
+    fn input_names(&self) -> Vec<String> {
+        (0..self.input_count())
+            .map(|k| self.input_name(k).to_string())
+            .collect()
+    }
+
     /// The variable input `k` pushes on (the row of its column of `B`).
     fn input_variable(&self, k: usize) -> usize;
 

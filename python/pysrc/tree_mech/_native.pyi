@@ -51,6 +51,15 @@ class Model:
         u: Optional[ArrayLike] = None,
         ddq: Optional[ArrayLike] = None,
     ) -> dict: ...
+    def forward_dynamics(
+        self,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        t: float = 0.0,
+        u: Optional[ArrayLike] = None,
+        ddq: Optional[ArrayLike] = None,
+    ) -> npt.NDArray[np.float64]: ...
+    def mass_matrix(self, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
     def simulate(
         self,
         duration: float,

@@ -256,10 +256,7 @@ where
             "{} input values given a step; the system has {} inputs ({})",
             inputs.width(),
             sys.input_count(),
-            (0..sys.input_count())
-                .map(|k| sys.input_name(k))
-                .collect::<Vec<_>>()
-                .join(", ")
+            sys.input_names().join(", ")
         )));
     }
     let n = sys.dim();
@@ -291,9 +288,7 @@ where
         });
     }
     let moved = project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?;
-    let input_names: Vec<String> = (0..sys.input_count())
-        .map(|k| sys.input_name(k).to_string())
-        .collect();
+    let input_names: Vec<String> = sys.input_names();
     let mut rec = Recorder {
         summary: RunSummary {
             moved,
