@@ -7,8 +7,12 @@ use common::{interpreted, load, Rng};
 use nalgebra::Dyn;
 use tree_mech::integrate::{simulate, Method, SimOptions, StepContext, Tolerance, ViSettings};
 use tree_mech::model::{ModelBuilder, PrimitiveKind};
-use tree_mech::runtime::{Dynamics, Vector};
-use tree_mech::{NoForce, System, Trajectory, TreeSystem};
+use tree_mech::runtime::dynamics::inverse_dynamics;
+use tree_mech::runtime::evaluation::continuous_dynamics;
+use tree_mech::runtime::{Dynamics, ModelMotions, Prescription, Vector};
+use tree_mech::{
+    tree_model, ConstraintTerms, NoForce, Order, System, Terms, Trajectory, TreeSystem,
+};
 
 fn run(
     sys: &mut TreeSystem,
@@ -409,4 +413,71 @@ fn articulated_body_accelerations_equal_the_mass_matrix_solve() {
         used += 1;
     }
     assert!(used >= 8, "only {used} models without constraints");
+}
+
+tree_model!(struct Cart from "tests/models/cart.toml");
+
+/// `τ = ID(q, q̇, FD(q, q̇, u))` on the dynamic rows against the forces forward dynamics was
+/// given, `B u + Dhᵀλ` (docs/derivations.md §4's sign), at seeded random states of `sys`.
+fn inverse_undoes_forward<S: System>(sys: &mut S, label: &str)
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let n = sys.dof();
+    let mut rng = Rng::new(11);
+    let mut motion = ModelMotions::of(sys);
+    let (mut q, mut dq) = (sys.zero_vector(), sys.zero_vector());
+    let (mut tau, mut terms) = (sys.zero_vector(), Terms::zeros(sys.dim()));
+    let mut c = ConstraintTerms::zeros(sys.constraint_count(), n);
+    for s in 0..5 {
+        let t = 0.1 * s as f64;
+        let (q0, _) = sys.initial_state();
+        for i in 0..n {
+            q[i] = q0[i] + 0.3 * rng.uniform();
+            dq[i] = rng.uniform();
+            if sys.is_kinematic(i) {
+                [q[i], dq[i], _] = motion.kinematic(i, t);
+            }
+        }
+        let u: Vec<f64> = (0..sys.input_count())
+            .map(|_| 5.0 * rng.uniform())
+            .collect();
+        let (qdd, lambda) = continuous_dynamics(sys, t, &q, &dq, &u, &mut motion).unwrap();
+        inverse_dynamics(sys, &q, &dq, &qdd, &mut terms, &mut tau).unwrap();
+        sys.constraints(&q, &dq, Order::First, &mut c);
+        let mut given = vec![0.0; n];
+        for (k, &uk) in u.iter().enumerate() {
+            given[sys.input_variable(k)] += uk;
+        }
+        for (r, &l) in lambda.iter().enumerate() {
+            for (i, g) in given.iter_mut().enumerate() {
+                *g += c.dh[(r, i)] * l;
+            }
+        }
+        let scale =
+            terms.mass.amax() * qdd.amax() + given.iter().fold(1.0f64, |m, g| m.max(g.abs()));
+        for i in (0..n).filter(|&i| !sys.is_kinematic(i)) {
+            assert!(
+                (tau[i] - given[i]).abs() <= 1e-11 * scale,
+                "{label} state {s}: τ[{}] = {} against {}",
+                sys.variable_name(i),
+                tau[i],
+                given[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn inverse_dynamics_returns_the_forces_forward_dynamics_was_given() {
+    // Springs, a damper, damping, kinematic variables and constraints (elements.toml), and a
+    // cart pushed by an input, compiled and interpreted.
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/elements.toml");
+    let elements = tree_mech::model::from_toml_file(path).unwrap();
+    inverse_undoes_forward(&mut interpreted(&elements), "elements");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/cart.toml");
+    let cart = tree_mech::model::from_toml_file(path).unwrap();
+    inverse_undoes_forward(&mut interpreted(&cart), "cart (interpreted)");
+    inverse_undoes_forward(&mut Cart, "cart (compiled)");
 }

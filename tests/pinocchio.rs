@@ -1,7 +1,8 @@
 //! Every shipped URDF against Pinocchio 4.1 (tests/fixtures/pinocchio-*.json, written by
 //! tools/reference/pinocchio_fixtures.py), compiled and interpreted: computeABADerivatives'
 //! ∂q̈/∂q, ∂q̈/∂v, M⁻¹; mass matrix, generalized gravity, nonlinear
-//! effects, forward dynamics (ABA), inverse dynamics (RNEA), every link's pose, kinetic and
+//! effects, forward dynamics (ABA), inverse dynamics (RNEA; also through
+//! `dynamics::inverse_dynamics`), every link's pose, kinetic and
 //! potential energy, at seeded random states — interpreted and compiled, to 1e-9 relative.
 //!
 //! The mapping: `M = ∂²L/∂q̇²`, `nle = (∂²L/∂q̇∂q) q̇ − ∂L/∂q`, `g = −∂L/∂q` at q̇ = 0,
@@ -16,6 +17,7 @@ use nalgebra::{allocator::Allocator, DefaultAllocator};
 use serde_json::Value;
 use tree_mech::integrate::StepContext;
 use tree_mech::model::{self, UrdfOptions};
+use tree_mech::runtime::dynamics::inverse_dynamics;
 use tree_mech::runtime::linearize::continuous_derivatives;
 use tree_mech::runtime::{Dynamics, ModelMotions, Pose, Vector};
 use tree_mech::{tree_model, Order, System, Terms, TreeSystem};
@@ -128,10 +130,21 @@ where
         for i in 0..n {
             close(nle[i], nle_pin[i], nle_scale, &what("nle"));
         }
+        // RNEA through the library's inverse dynamics, less the damping force it includes.
         let rnea_pin = numbers(&state["rnea"]);
+        let mut tau_ours = sys_vector::<S>(n);
+        let mut id_terms = Terms::zeros(sys.dim());
+        inverse_dynamics(&mut sys, &q, &v, &ours(&a), &mut id_terms, &mut tau_ours).unwrap();
         for i in 0..n {
-            let ma: f64 = (0..n).map(|j| terms.mass[(perm[i], perm[j])] * a[j]).sum();
+            let r = perm[i];
+            let ma: f64 = (0..n).map(|j| terms.mass[(r, perm[j])] * a[j]).sum();
             close(ma + nle[i], rnea_pin[i], scale(&rnea_pin), &what("rnea"));
+            close(
+                tau_ours[r] - damping[r] * v[r],
+                rnea_pin[i],
+                scale(&rnea_pin),
+                &what("inverse_dynamics"),
+            );
         }
         let kinetic: f64 = 0.5 * (0..n).map(|i| terms.dl_ddq[i] * v[i]).sum::<f64>();
         let potential = kinetic - terms.l;

@@ -20,6 +20,7 @@ use tree_mech::integrate::{
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
+use tree_mech::runtime::dynamics::inverse_dynamics;
 use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
 use tree_mech::runtime::ModelMotions;
@@ -556,6 +557,30 @@ impl Model {
             py,
             &dynamic.iter().map(|&i| qdd[i]).collect::<Vec<_>>(),
         ))
+    }
+
+    /// Inverse dynamics (Pinocchio's `rnea`): the generalized force on every variable that
+    /// gives it the acceleration `ddq` at `(q, dq)` (default: the model's q0, dq0 and zero),
+    /// `M ddq + (∂²L/∂q̇∂q) dq − ∂L/∂q − F` with the model's damping and dampers in `F` and
+    /// constraint forces left out. With `dq = ddq = 0`, gravity compensation (and the
+    /// springs' hold).
+    #[pyo3(signature = (q=None, dq=None, ddq=None))]
+    fn inverse_dynamics(
+        &self,
+        py: Python<'_>,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Py<PyAny>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
+        let ddq = self.vector("ddq", ddq, |_| 0.0)?;
+        let mut sys = self.sys.lock().expect("no panic holds the lock");
+        let mut terms = Terms::zeros(Dyn(self.n()));
+        let mut tau = Vector::<Dyn>::zeros(self.n());
+        inverse_dynamics(&mut *sys, &q, &dq, &ddq, &mut terms, &mut tau)
+            .map_err(|e| sim_error(py, &e))?;
+        Ok(vector(py, tau.as_slice()))
     }
 
     /// The mass matrix M(q), every variable (`evaluate()["M"]` alone; Pinocchio's `crba`).

@@ -349,3 +349,21 @@ def test_forward_dynamics_and_the_mass_matrix_alone_equal_the_evaluation():
     assert abs(qdd[0] - 1.2) < 1e-12
     with pytest.raises(ValueError, match=r"q has 3 entries; the model has 2 variables"):
         cart.mass_matrix([0.0, 0.0, 0.0])
+
+
+def test_inverse_dynamics_undoes_forward_dynamics():
+    m = tm.load(CART)
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q, dq, u = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2), rng.uniform(-5, 5, 1)
+        qdd = m.forward_dynamics(q, dq, u=u)
+        tau = m.inverse_dynamics(q, dq, qdd)
+        assert tau.shape == (2,)
+        # The push on the cart, nothing on the free pendulum.
+        assert np.allclose(tau, [u[0], 0.0], atol=1e-12 * (1 + abs(u[0])))
+    # At rest, gravity compensation: the UR5's shoulder holds its arm up.
+    ur5 = tm.load(str(ROOT / "models/ur5.urdf"))
+    g = ur5.inverse_dynamics(ur5.q0)
+    assert np.allclose(ur5.forward_dynamics(ur5.q0, np.zeros(6), u=g), 0.0, atol=1e-9)
+    with pytest.raises(ValueError, match=r"ddq\[0\] .* is NaN"):
+        m.inverse_dynamics(ddq=[np.nan, 0.0])

@@ -387,6 +387,37 @@ where
     }
 }
 
+/// Inverse dynamics: the generalized forces `τ` that give every variable the acceleration
+/// `q̈` at `(q, q̇)` — eq. (14) solved for the force,
+/// `τ = M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q − F(q, q̇)`, with `F` the model's own forces (damping,
+/// dampers) and the constraint forces `Dhᵀλ` left out (what Pinocchio's RNEA returns, here
+/// from the Lagrangian's terms). On a dynamic variable it is the force an input there must
+/// supply (with `q̇ = q̈ = 0`: gravity compensation); on a kinematic one, the force that
+/// drives it as given. `terms` is scratch; fails when `τ` is not finite.
+pub fn inverse_dynamics<S: System>(
+    sys: &mut S,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    qdd: &Vector<S::N>,
+    terms: &mut Terms<S::N>,
+    tau: &mut Vector<S::N>,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    sys.lagrangian(q, dq, Order::Dynamics, terms);
+    tau.gemv(1.0, &terms.mass, qdd, 0.0);
+    tau.gemv(1.0, &terms.d2l_ddq_dq, dq, 1.0);
+    *tau -= &terms.dl_dq;
+    *tau -= &terms.force;
+    if tau.iter().any(|x| !x.is_finite()) {
+        return Err(SimError::InvalidInput(
+            "at this state, the inverse dynamics' forces are not finite (they overflowed a floating-point number)".into(),
+        ));
+    }
+    Ok(())
+}
+
 /// `q̈` and `λ` finite, or the error naming the step.
 fn finite<N: Dim>(
     qdd: &Vector<N>,

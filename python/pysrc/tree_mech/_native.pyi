@@ -59,6 +59,12 @@ class Model:
         u: Optional[ArrayLike] = None,
         ddq: Optional[ArrayLike] = None,
     ) -> npt.NDArray[np.float64]: ...
+    def inverse_dynamics(
+        self,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        ddq: Optional[ArrayLike] = None,
+    ) -> npt.NDArray[np.float64]: ...
     def mass_matrix(self, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
     def simulate(
         self,
