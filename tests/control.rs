@@ -538,6 +538,25 @@ variable = "theta"
     }
 }
 
+/// iLQR on `dynamics` over `knots` from `x0` and zero controls, unlimited, 60 iterations at most.
+fn unlimited<S: System>(
+    mut dynamics: DiscreteSystem<S>,
+    mut cost: QuadraticCost,
+    x0: &DVector<f64>,
+    knots: usize,
+) -> tree_mech::runtime::control::Solution
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let options = IlqrSettings {
+        max_iterations: 60,
+        ..IlqrSettings::default()
+    };
+    let u0 = vec![DVector::zeros(dynamics.controls()); knots];
+    solve(&mut dynamics, &mut cost, x0, u0, &options).unwrap()
+}
+
 /// The cart problem with every weight scaled by `scale`, unlimited, iLQR.
 fn scaled_cart(scale: f64) -> tree_mech::runtime::control::Solution {
     let (dt, knots) = (0.02, 60);
@@ -552,18 +571,7 @@ fn scaled_cart(scale: f64) -> tree_mech::runtime::control::Solution {
     ] {
         *w *= scale;
     }
-    let options = IlqrSettings {
-        max_iterations: 60,
-        ..IlqrSettings::default()
-    };
-    solve(
-        &mut dynamics,
-        &mut cost,
-        &x0,
-        vec![DVector::zeros(1); knots],
-        &options,
-    )
-    .unwrap()
+    unlimited(dynamics, cost, &x0, knots)
 }
 
 #[test]
@@ -619,18 +627,7 @@ fn cart_in_units(length: f64) -> tree_mech::runtime::control::Solution {
     cost.x_ref[0] /= l;
     cost.terminal_ref[0] /= l;
     cost.u_weight *= l * l;
-    let options = IlqrSettings {
-        max_iterations: 60,
-        ..IlqrSettings::default()
-    };
-    solve(
-        &mut dynamics,
-        &mut cost,
-        &x0,
-        vec![DVector::zeros(1); knots],
-        &options,
-    )
-    .unwrap()
+    unlimited(dynamics, cost, &x0, knots)
 }
 
 #[test]

@@ -21,10 +21,10 @@ use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
 use tree_mech::runtime::dynamics::inverse_dynamics;
-use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state, evaluate_state_with};
+use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
-use tree_mech::runtime::ModelMotions;
 use tree_mech::runtime::Vector;
+use tree_mech::runtime::{ModelMotions, Prescription};
 use tree_mech::{SimError, System, Terms, Trajectory as CoreTrajectory, TreeSystem};
 
 use numbers::Numbers;
@@ -195,6 +195,24 @@ impl Model {
         }
         check_finite("u", &u, &self.input_names())?;
         Ok(u)
+    }
+
+    /// The kinematic variables' motion for a call at one state: the model's prescription, or
+    /// with `ddq` given, held at the given `q`, `dq` and `ddq`.
+    fn kinematics(
+        &self,
+        sys: &TreeSystem,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Kinematics> {
+        Ok(match ddq {
+            None => Kinematics::Model(ModelMotions::of(sys)),
+            Some(ddq) => {
+                let ddq = self.vector("ddq", Some(ddq), |_| 0.0)?;
+                Kinematics::Given(q.clone(), dq.clone(), ddq)
+            }
+        })
     }
 
     fn names(&self) -> Vec<String> {
@@ -476,15 +494,9 @@ impl Model {
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
         let u = self.input_vector(u)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
-        let e = match ddq {
-            None => evaluate_state(&mut *sys, t, &q, &dq, &u),
-            Some(ddq) => {
-                let ddq = self.vector("ddq", Some(ddq), |_| 0.0)?;
-                let mut given = given_kinematics(&q, &dq, &ddq);
-                evaluate_state_with(&mut *sys, t, &q, &dq, &u, &mut given)
-            }
-        }
-        .map_err(|e| sim_error(py, &e))?;
+        let mut motion = self.kinematics(&sys, &q, &dq, ddq)?;
+        let e = evaluate_state_with(&mut *sys, t, &q, &dq, &u, &mut motion)
+            .map_err(|e| sim_error(py, &e))?;
         let out = PyDict::new(py);
         let square = |m: &tree_mech::runtime::Matrix<Dyn>| {
             DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
@@ -540,18 +552,9 @@ impl Model {
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
         let u = self.input_vector(u)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
-        let (qdd, _) = match ddq {
-            None => {
-                let mut motion = ModelMotions::of(&*sys);
-                continuous_dynamics(&mut *sys, t, &q, &dq, &u, &mut motion)
-            }
-            Some(ddq) => {
-                let ddq = self.vector("ddq", Some(ddq), |_| 0.0)?;
-                let mut given = given_kinematics(&q, &dq, &ddq);
-                continuous_dynamics(&mut *sys, t, &q, &dq, &u, &mut given)
-            }
-        }
-        .map_err(|e| sim_error(py, &e))?;
+        let mut motion = self.kinematics(&sys, &q, &dq, ddq)?;
+        let (qdd, _) = continuous_dynamics(&mut *sys, t, &q, &dq, &u, &mut motion)
+            .map_err(|e| sim_error(py, &e))?;
         let dynamic = self.model.dynamic();
         Ok(vector(
             py,
@@ -698,9 +701,6 @@ impl Model {
         second_order: bool,
         ddq: Option<Numbers<'_, Ix1>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let ddq = ddq
-            .map(|a| self.vector("ddq", Some(a), |_| 0.0))
-            .transpose()?;
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
         let u = self.input_vector(u)?;
@@ -728,14 +728,9 @@ impl Model {
             second_order,
         };
         let mut sys = self.system();
+        let mut motion = self.kinematics(&sys, &q, &dq, ddq)?;
         let r = py
-            .detach(move || match ddq {
-                None => report::linearize(&mut sys, &q, &dq, &request),
-                Some(ddq) => {
-                    let mut given = given_kinematics(&q, &dq, &ddq);
-                    report::linearize_with(&mut sys, &q, &dq, &request, &mut given)
-                }
-            })
+            .detach(move || report::linearize_with(&mut sys, &q, &dq, &request, &mut motion))
             .map_err(|e| sim_error(py, &e))?;
         let out = PyDict::new(py);
         out.set_item("variables", self.names())?;
@@ -1156,15 +1151,20 @@ impl VariationalStepper {
     }
 }
 
-/// The kinematic variables held at the caller's `(q, q̇, q̈)` (trep's way) instead of the
-/// model's prescription.
-fn given_kinematics(
-    q: &Vector<Dyn>,
-    dq: &Vector<Dyn>,
-    ddq: &Vector<Dyn>,
-) -> impl FnMut(usize, f64) -> [f64; 3] {
-    let (q, dq, ddq) = (q.clone(), dq.clone(), ddq.clone());
-    move |i, _| [q[i], dq[i], ddq[i]]
+/// The kinematic variables' motion at one state: the model's prescription at `t`, or the
+/// caller's own `(q, dq, ddq)` (trep's way: `ddq=` given).
+enum Kinematics {
+    Model(ModelMotions),
+    Given(Vector<Dyn>, Vector<Dyn>, Vector<Dyn>),
+}
+
+impl Prescription for Kinematics {
+    fn kinematic(&mut self, i: usize, t: f64) -> [f64; 3] {
+        match self {
+            Kinematics::Model(m) => m.kinematic(i, t),
+            Kinematics::Given(q, dq, ddq) => [q[i], dq[i], ddq[i]],
+        }
+    }
 }
 
 /// trep's name of a step output.
