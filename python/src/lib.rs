@@ -25,7 +25,9 @@ use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state_with};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
 use tree_mech::runtime::Vector;
 use tree_mech::runtime::{ModelMotions, Prescription};
-use tree_mech::{SimError, System, Terms, Trajectory as CoreTrajectory, TreeSystem};
+use tree_mech::{
+    ConstraintTerms, Order, SimError, System, Terms, Trajectory as CoreTrajectory, TreeSystem,
+};
 
 use numbers::Numbers;
 
@@ -584,6 +586,30 @@ impl Model {
         inverse_dynamics(&mut *sys, &q, &dq, &ddq, &mut terms, &mut tau)
             .map_err(|e| sim_error(py, &e))?;
         Ok(vector(py, tau.as_slice()))
+    }
+
+    /// The constraints alone at `q` (default the model's q0): a dict with `h` (one entry per
+    /// constraint equation) and `dh_dq` (equations × variables), as `evaluate()` has them,
+    /// without the dynamics (so also where those have no solution).
+    #[pyo3(signature = (q=None))]
+    fn constraints_at<'py>(
+        &self,
+        py: Python<'py>,
+        q: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let mut sys = self.sys.lock().expect("no panic holds the lock");
+        let mut c = ConstraintTerms::zeros(sys.constraint_count(), self.n());
+        sys.constraints(&q, &Vector::<Dyn>::zeros(self.n()), Order::First, &mut c);
+        if c.h.iter().chain(c.dh.iter()).any(|x| !x.is_finite()) {
+            return Err(bad(
+                "at this q, the constraints are not finite (they overflowed a floating-point number)",
+            ));
+        }
+        let out = PyDict::new(py);
+        out.set_item("h", vector(py, c.h.as_slice()))?;
+        out.set_item("dh_dq", matrix(py, &c.dh))?;
+        Ok(out)
     }
 
     /// The mass matrix M(q), every variable (`evaluate()["M"]` alone; Pinocchio's `crba`).

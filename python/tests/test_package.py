@@ -367,3 +367,14 @@ def test_inverse_dynamics_undoes_forward_dynamics():
     assert np.allclose(ur5.forward_dynamics(ur5.q0, np.zeros(6), u=g), 0.0, atol=1e-9)
     with pytest.raises(ValueError, match=r"ddq\[0\] .* is NaN"):
         m.inverse_dynamics(ddq=[np.nan, 0.0])
+
+
+def test_the_constraints_alone_equal_the_evaluation():
+    m = tm.load(str(ROOT / "models/marionette.toml"))
+    q = m.q0 + np.linspace(-0.1, 0.1, len(m.variables))
+    c, e = m.constraints_at(q), m.evaluate(q)
+    assert c["h"].shape == (len(m.constraints),)
+    assert c["dh_dq"].shape == (len(m.constraints), len(m.variables))
+    assert np.array_equal(c["h"], e["h"]) and np.array_equal(c["dh_dq"], e["dh_dq"])
+    with pytest.raises(ValueError, match=r"q\[0\] .* is NaN"):
+        m.constraints_at(np.full(len(m.variables), np.nan))

@@ -68,7 +68,7 @@ def _list(x):
 def record(trep, build):
     """Everything the layer covers, at one state and over a VI run: the Lagrangian and its
     derivatives, the dynamics and theirs, frames, constraints, MidpointVI steps and the last
-    step's derivatives."""
+    step's derivatives, and the configurations satisfy_constraints finds."""
     s = build(trep)
     out = {"configs": [c.name for c in s.configs],
            "dyn": [c.name for c in s.dyn_configs], "kin": [c.name for c in s.kin_configs]}
@@ -120,6 +120,17 @@ def record(trep, build):
                 name = "%s_d%sd%s" % (of, a, b)
                 d[name] = _list(getattr(mvi, name)())
     out["vi_derivatives"] = d
+    # satisfy_constraints from a configuration moved off the constraints and a moving state,
+    # each way trep's documentation gives of holding configs still (both at once differ:
+    # trep 1.0.2 then holds only the list).
+    satisfied = {}
+    for label, options in [("all", {}), ("keep_kinematic", {"keep_kinematic": True}),
+                           ("constant", {"constant_q_list": [cs[0].name]})]:
+        s.q = [x + 0.05 * (i + 1) / n for i, x in enumerate(q0)]
+        s.dq = 0.3
+        q = s.satisfy_constraints(tolerance=1e-12, **options)
+        satisfied[label] = {"q": _list(q), "dq": _list(s.dq), "h": [c.h() for c in s.constraints]}
+    out["satisfy_constraints"] = satisfied
     return out
 
 

@@ -487,6 +487,9 @@ class System:
         if isinstance(value, dict):
             for k, v in value.items():
                 target[self.get_config(k).index] = v
+        elif np.ndim(value) == 0:
+            # trep's third form: one number for every config of the group.
+            target[[c.index for c in configs]] = float(value)
         else:
             v = np.asarray(value, dtype=float).reshape(-1)
             if len(v) != len(configs):
@@ -726,6 +729,61 @@ class System:
         self._native_model()
         m = self._lambda_derivative("lambda_du", np.arange(self.nu))
         return m[self._index("c", constraint), self._index("u", u1)]
+
+    # Constraints ----------------------------------------------------------------------
+    def _held(self, keep_kinematic: bool, constant_q_list: Any) -> np.ndarray:
+        """Per config (trep's order), whether it stays where it is."""
+        held = np.zeros(self.nQ, dtype=bool)
+        if keep_kinematic:
+            held[self.nQd:] = True
+        for c in constant_q_list or ():
+            held[self.get_config(c).index] = True
+        return held
+
+    def satisfy_constraints(self, tolerance: float = 1e-10, verbose: bool = False,
+                            keep_kinematic: bool = False,
+                            constant_q_list: Optional[Sequence[Any]] = None) -> np.ndarray:
+        """Moves the configuration to the nearest one that satisfies every constraint,
+        ``q = argmin |q − q₀|² s.t. h(q) = 0`` over the configs that may move (all; the
+        dynamic ones with ``keep_kinematic``; less those in ``constant_q_list``), and sets the
+        velocity to zero, as trep does. Sets and returns the configuration.
+
+        Each iterate solves the optimality conditions with the constraints linearised at the
+        current ``q`` (their curvature left out): ``δ = d − J⁺(J d + h)`` with ``d = q₀ − q``
+        and ``J⁺`` the pseudo-inverse of ``∂h/∂q`` on the free configs, so redundant
+        constraints are no obstacle; at its fixed point ``h = 0`` and ``q₀ − q`` is normal to
+        the constraint surface. Stops when every ``|h|`` is below ``tolerance`` (trep's) and the
+        step has settled; raises ``RuntimeError`` (trep's ``StandardError``) when it cannot.
+        """
+        if not self._constraints:
+            self.dq = 0.0
+            return self.q
+        free = ~self._held(keep_kinematic, constant_q_list)
+        q0 = self._q.copy()
+        scale = 1.0 + float(np.max(np.abs(q0)))
+        worst = math.inf
+        for k in range(100):
+            c = self._native_model().constraints_at(self._to_model(self._q))
+            h = np.asarray(c["h"], dtype=float)
+            jac = np.asarray(c["dh_dq"], dtype=float)[:, self._perm][:, free]
+            worst = float(np.max(np.abs(h)))
+            d = (q0 - self._q)[free]
+            delta = d - np.linalg.pinv(jac) @ (jac @ d + h)
+            if verbose:
+                print(f"satisfy_constraints: iteration {k}, max |h| = {worst:.3e}, "
+                      f"step {float(np.max(np.abs(delta))):.3e}")
+            if not np.all(np.isfinite(delta)):
+                break
+            if worst < tolerance and float(np.max(np.abs(delta))) <= 1e-12 * scale:
+                break
+            self._q[free] += delta
+            self._state_changed()
+        if not worst < tolerance:
+            raise RuntimeError(
+                f"satisfy_constraints: the constraints stay violated by {worst:.3e} "
+                f"(tolerance {tolerance:.1e}) from this configuration")
+        self.dq = 0.0
+        return self.q
 
 
 # Potentials, forces and constraints (re-exported by the submodules of trep's names) -------
