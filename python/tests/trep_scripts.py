@@ -58,7 +58,31 @@ def ball_on_incline(trep):
     return s
 
 
-SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline)]
+def imported_tree(trep):
+    """Two pendulums hanging from a carriage on a driven rail, declared as trep's nested
+    definition lists (trep.tx … trep.rz through import_frames), masses given as a number and
+    as (m, Ixx, Iyy, Izz); gravity, a config spring, damping."""
+    s = trep.System()
+    frames = [
+        trep.tx("rail", kinematic=True, name="carriage"), [
+            trep.ry("a1", name="A1"), [
+                trep.tz(-0.6, name="A1_mass", mass=(0.8, 0.01, 0.02, 0.01)),
+                trep.tz(-1.2), [
+                    trep.ry("a2", name="A2"), [
+                        trep.tz(-0.5, name="A2_mass", mass=0.4)]]],
+            trep.ty(0.3), [
+                trep.rx("b1", name="B1"), [
+                    trep.tz(-0.9, name="B1_mass", mass=0.6)]]]]
+    s.import_frames(frames)
+    trep.potentials.Gravity(s)
+    trep.potentials.ConfigSpring(s, "a2", 2.0, q0=0.2)
+    trep.forces.Damping(s, 0.02)
+    s.q = {"a1": 0.4, "a2": -0.3, "b1": 0.2, "rail": 0.1}
+    return s
+
+
+SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline),
+           ("imported_tree", imported_tree)]
 
 
 def _list(x):
@@ -92,6 +116,7 @@ def record(trep, build):
         out["f_du"] = _list(s.f_du())
     out["lambda"] = _list(s.lambda_())
     out["lambda_dq"], out["lambda_ddq"] = _list(s.lambda_dq()), _list(s.lambda_ddq())
+    out["tree"] = s.world_frame.tree_view()
     out["frames"] = dict((f.name, {"g": _list(f.g()), "p": _list(f.p()), "vb": _list(f.vb())})
                          for f in s.frames if f.name is not None)
     out["h"] = [c.h() for c in s.constraints]

@@ -24,6 +24,13 @@ from ._core import (
     MidpointVI,
     Potential,
     System,
+    const_se3,
+    rx,
+    ry,
+    rz,
+    tx,
+    ty,
+    tz,
 )
 
 #: The trep release whose API this matches.
@@ -32,5 +39,6 @@ __version__ = "v1.0.2"
 __all__ = [
     "CONST_SE3", "RX", "RY", "RZ", "TX", "TY", "TZ", "WORLD", "Config", "Constraint",
     "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "System",
-    "constraints", "forces", "potentials", "__version__",
+    "constraints", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
+    "const_se3",
 ]

@@ -102,6 +102,44 @@ def _check_body(frame: str, mass: Any, Ixx: Any = 0.0, Iyy: Any = 0.0, Izz: Any 
             raise ValueError(f"frame `{frame}`: {what} {value!r} must be finite and not negative")
 
 
+class _FrameDef:
+    """One frame of an ``import_frames`` tree (made by ``trep.tx`` … ``trep.rz``)."""
+
+    def __init__(self, transform: str, param: Any, name: Optional[str], kinematic: bool,
+                 mass: Any):
+        self.transform, self.param, self.name = transform, param, name
+        self.kinematic, self.mass = kinematic, mass
+
+    def make(self, parent: "Frame") -> "Frame":
+        return Frame(parent, self.transform, self.param, name=self.name,
+                     kinematic=self.kinematic, mass=self.mass)
+
+    def __repr__(self) -> str:
+        return f"{self.transform.lower()}({self.param!r}, name={self.name!r})"
+
+
+def _definition(transform: str):
+    def define(param: Any, name: Optional[str] = None, kinematic: bool = False,
+               mass: Any = 0.0) -> _FrameDef:
+        return _FrameDef(transform, param, name, kinematic, mass)
+
+    define.__name__ = transform.lower()
+    define.__doc__ = (f"A {transform.upper()} frame for ``import_frames``: as ``Frame(parent, "
+                      f"trep.{transform.upper()}, param, name=, kinematic=, mass=)`` with the "
+                      f"parent given by where the definition sits in the list.")
+    return define
+
+
+tx, ty, tz, rx, ry, rz = (_definition(kind) for kind in _PRIMITIVES)
+
+
+def const_se3(se3: Any, name: Optional[str] = None, kinematic: bool = False,
+              mass: Any = 0.0) -> _FrameDef:
+    """trep's constant SE(3) frame: not supported (``Frame`` refuses ``CONST_SE3`` with a
+    message when the definition is imported)."""
+    return _FrameDef(CONST_SE3, se3, name, kinematic, mass)
+
+
 class Frame:
     """A coordinate frame: ``Frame(parent, trep.TX…trep.RZ, value or config name, name=,
     kinematic=, mass=)``. A number is a constant transform; a name makes a config (kinematic
@@ -157,6 +195,50 @@ class Frame:
     def __repr__(self) -> str:
         what = self._config.name if self._config else self._value
         return f"<Frame {self.name!r} {self._transform}({what})>"
+
+    def import_frames(self, children: Sequence[Any]) -> None:
+        """Adds a tree of frames below this one from trep's definition list: each
+        ``trep.tx(…)`` … ``trep.rz(…)`` makes a child, and a list right after a definition
+        holds that child's own children."""
+        if not isinstance(children, (list, tuple)):
+            raise TypeError("import_frames takes a list of frame definitions (trep.tx(...), …)")
+        system = self._system
+        system._hold()
+        try:
+            last: Optional[Frame] = None
+            for item in children:
+                if isinstance(item, _FrameDef):
+                    last = item.make(self)
+                elif isinstance(item, (list, tuple)):
+                    if last is None:
+                        raise ValueError(
+                            "import_frames: a list of children must follow a frame definition")
+                    last.import_frames(item)
+                    last = None
+                else:
+                    raise TypeError(f"import_frames: expected a frame definition (trep.tx(...), "
+                                    f"…) or a list of them, got {item!r}")
+        finally:
+            system._release()
+
+    def flatten_tree(self) -> List["Frame"]:
+        """This frame and every frame below it."""
+        out = [self]
+        for child in self._children:
+            out.extend(child.flatten_tree())
+        return out
+
+    def tree_view(self, indent: int = 0) -> str:
+        """The frame and its descendants, one line each, indented by depth (trep's form)."""
+        if self._transform == WORLD:
+            line = f"<Frame '{self.name}'>"
+        elif self._config is not None:
+            line = f"<Frame '{self.name}' {self._transform.upper()}({self._config.name})>"
+        else:
+            line = f"<Frame '{self.name}' {self._transform.upper()}({self._value}) {self._mass:f}>"
+        lines = [" " * indent + line]
+        lines += [child.tree_view(indent + 3) for child in self._children]
+        return "\n".join(lines)
 
     @property
     def system(self) -> "System":
@@ -392,6 +474,10 @@ class System:
     @property
     def world_frame(self) -> Frame:
         return self._world
+
+    def import_frames(self, children: Sequence[Any]) -> None:
+        """``world_frame.import_frames(children)``."""
+        self.world_frame.import_frames(children)
 
     @property
     def frames(self) -> tuple:
@@ -687,8 +773,11 @@ class System:
         return np.asarray(self._linear()[key])[np.ix_(rows, cols)]
 
     def _rows_d(self) -> np.ndarray:
+        """The rows of trep's dynamic configs among the model's dynamic variables (the rows
+        of ``qdd_*``: not their places among all variables, where a kinematic config built
+        before a dynamic one shifts them)."""
         self._native_model()
-        return self._perm[: self.nQd]
+        return self._dperm
 
     def f_dq(self, q: Optional[Config] = None, q1: Optional[Config] = None) -> Any:
         m = self._block("qdd_dq", self._rows_d(), self._perm)
