@@ -45,12 +45,12 @@ def test_lagrangian_and_constraints_match_trep(recorded, key):
     close(ours[key], theirs[key], 1e-12, f"{name} {key}")
 
 
-@pytest.mark.parametrize("key", ["f", "f_dq", "f_ddq", "f_du", "lambda", "lambda_dq",
-                                 "lambda_ddq"])
+@pytest.mark.parametrize("key", ["f", "f_dq", "f_ddq", "f_du", "f_dddk", "lambda",
+                                 "lambda_dq", "lambda_ddq", "lambda_dddk"])
 def test_dynamics_and_their_derivatives_match_trep(recorded, key):
     name, ours, theirs = recorded
     if key not in theirs:
-        pytest.skip(f"{name} has no inputs")
+        pytest.skip(f"{name} has no {'inputs' if key == 'f_du' else 'kinematic configs'}")
     close(ours[key], theirs[key], 1e-12, f"{name} {key}")
 
 

@@ -114,6 +114,9 @@ def record(trep, build):
     out["f_dq"], out["f_ddq"] = _list(s.f_dq()), _list(s.f_ddq())
     if s.nu:
         out["f_du"] = _list(s.f_du())
+    if s.nQk:
+        out["f_dddk"] = _list(s.f_dddk())
+        out["lambda_dddk"] = _list(s.lambda_dddk())
     out["lambda"] = _list(s.lambda_())
     out["lambda_dq"], out["lambda_ddq"] = _list(s.lambda_dq()), _list(s.lambda_ddq())
     out["tree"] = s.world_frame.tree_view()

@@ -791,6 +791,36 @@ class System:
         m = self._block("qdd_du", self._rows_d(), np.arange(self.nu))
         return m[self._index("d", q), self._index("u", u1)]
 
+    def _kinematic_acceleration_derivatives(self) -> np.ndarray:
+        """``∂(q̈_d, λ)/∂q̈_k`` (trep's rows and columns, λ in trep's signs): with
+        ``M q̈ = … + Dhᵀλ`` and ``Dh q̈ = …`` the kinematic accelerations enter only through
+        ``M_dk q̈_k`` and ``Dh_k q̈_k``, so ``[[M_dd, −Dh_dᵀ], [Dh_d, 0]] X = −[M_dk; Dh_k]``."""
+        if "dddk" not in self._cache:
+            state = self._state()
+            d, k = self._perm[: self.nQd], self._perm[self.nQd:]
+            mass = np.asarray(state["M"], dtype=float)
+            dh = np.asarray(state["dh_dq"], dtype=float).reshape(self.nc, self.nQ)
+            nd, nc = len(d), self.nc
+            kkt = np.zeros((nd + nc, nd + nc))
+            kkt[:nd, :nd] = mass[np.ix_(d, d)]
+            kkt[:nd, nd:] = -dh[:, d].T
+            kkt[nd:, :nd] = dh[:, d]
+            rhs = -np.vstack([mass[np.ix_(d, k)], dh[:, k]])
+            x = np.linalg.solve(kkt, rhs)
+            x[nd:] *= self._signs()[:, None]
+            self._cache["dddk"] = x
+        return self._cache["dddk"]
+
+    def f_dddk(self, q: Optional[Config] = None, k1: Optional[Config] = None) -> Any:
+        """``∂q̈_d/∂q̈_k``: how the dynamic accelerations follow the kinematic ones."""
+        m = self._kinematic_acceleration_derivatives()[: self.nQd]
+        return m[self._index("d", q), self._index("k", k1)]
+
+    def lambda_dddk(self, constraint: Any = None, k1: Optional[Config] = None) -> Any:
+        """``∂λ/∂q̈_k`` (trep's rows)."""
+        m = self._kinematic_acceleration_derivatives()[self.nQd:]
+        return m[self._index("c", constraint), self._index("k", k1)]
+
     def _signs(self) -> np.ndarray:
         """Per constraint, trep's row over tree-mech's: +1 (a distance: both ``d·d − ℓ²``) or
         −1 (a plane: trep's ``n·(p_plane − p_point)``); multipliers scale the same way."""
