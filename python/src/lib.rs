@@ -589,8 +589,9 @@ impl Model {
     }
 
     /// The constraints alone at `q` (default the model's q0): a dict with `h` (one entry per
-    /// constraint equation) and `dh_dq` (equations × variables), as `evaluate()` has them,
-    /// without the dynamics (so also where those have no solution).
+    /// constraint equation), `dh_dq` (equations × variables), as `evaluate()` has them, and
+    /// `d2h_dqdq` (equations × variables × variables), without the dynamics (so also where
+    /// those have no solution).
     #[pyo3(signature = (q=None))]
     fn constraints_at<'py>(
         &self,
@@ -600,8 +601,14 @@ impl Model {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
         let mut c = ConstraintTerms::zeros(sys.constraint_count(), self.n());
-        sys.constraints(&q, &Vector::<Dyn>::zeros(self.n()), Order::First, &mut c);
-        if c.h.iter().chain(c.dh.iter()).any(|x| !x.is_finite()) {
+        sys.constraints(&q, &Vector::<Dyn>::zeros(self.n()), Order::Full, &mut c);
+        let curvature = c.d2h.iter().flat_map(|m| m.iter());
+        if c.h
+            .iter()
+            .chain(c.dh.iter())
+            .chain(curvature)
+            .any(|x| !x.is_finite())
+        {
             return Err(bad(
                 "at this q, the constraints are not finite (they overflowed a floating-point number)",
             ));
@@ -609,6 +616,9 @@ impl Model {
         let out = PyDict::new(py);
         out.set_item("h", vector(py, c.h.as_slice()))?;
         out.set_item("dh_dq", matrix(py, &c.dh))?;
+        let n = self.n();
+        let d2h = Array3::from_shape_fn((c.d2h.len(), n, n), |(r, i, j)| c.d2h[r][(i, j)]);
+        out.set_item("d2h_dqdq", d2h.into_pyarray(py))?;
         Ok(out)
     }
 

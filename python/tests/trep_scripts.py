@@ -159,6 +159,20 @@ def record(trep, build):
         q = s.satisfy_constraints(tolerance=1e-12, **options)
         satisfied[label] = {"q": _list(q), "dq": _list(s.dq), "h": [c.h() for c in s.constraints]}
     out["satisfy_constraints"] = satisfied
+    # minimize_potential_energy from the same moved configuration: the equilibrium found, its
+    # potential, or that none was (a ball on an endless incline has none).
+    minimized = {}
+    for label, options in [("all", {}), ("keep_kinematic", {"keep_kinematic": True})]:
+        s.q = [x + 0.05 * (i + 1) / n for i, x in enumerate(q0)]
+        s.dq = 0.3
+        try:
+            q = s.minimize_potential_energy(**options)
+        except Exception:  # trep raises a StandardError, tree_mech.trep a RuntimeError
+            minimized[label] = {"failed": True}
+            continue
+        minimized[label] = {"failed": False, "q": _list(q), "V": -s.L(), "dq": _list(s.dq),
+                            "h": [c.h() for c in s.constraints]}
+    out["minimize_potential_energy"] = minimized
     return out
 
 

@@ -904,6 +904,111 @@ class System:
         self.dq = 0.0
         return self.q
 
+    def minimize_potential_energy(self, tolerance: float = 1e-10, verbose: bool = False,
+                                  keep_kinematic: bool = False,
+                                  constant_q_list: Optional[Sequence[Any]] = None
+                                  ) -> np.ndarray:
+        """A nearby equilibrium on the constraints: ``q = argmin V(q) s.t. h(q) = 0`` over the
+        configs that may move (as :meth:`satisfy_constraints` chooses them), the velocity set
+        to zero, as trep does. Sets and returns the configuration.
+
+        A feasible path: the start is brought onto the constraints, then each step is Newton
+        in the constraints' null space on the exact Hessian of ``V + μᵀh`` (``μ`` the
+        multipliers at the current point; eigenvalues taken in magnitude, so a saddle is left;
+        a direction ``V`` neither curves nor slopes along — a config it does not read — is not
+        moved), brought back onto the constraints by minimum-norm corrections, and halved
+        until ``V`` falls. Stops when the
+        gradient along the constraints or the step is at rounding; raises ``RuntimeError``
+        (trep's ``StandardError``) when it cannot (a potential unbounded below, say).
+        """
+        free = ~self._held(keep_kinematic, constant_q_list)
+        model = self._native_model()
+        perm, rest = self._perm, np.zeros(self.nQ)
+
+        def onto(q: np.ndarray) -> Optional[np.ndarray]:
+            """``q`` moved onto the constraints by minimum-norm corrections, or None."""
+            q = q.copy()
+            for _ in range(50):
+                c = model.constraints_at(self._to_model(q))
+                h = np.asarray(c["h"], dtype=float)
+                if not h.size or float(np.max(np.abs(h))) < tolerance:
+                    return q
+                jac = np.asarray(c["dh_dq"], dtype=float)[:, perm][:, free]
+                q[free] -= np.linalg.pinv(jac) @ h
+                if not np.all(np.isfinite(q)):
+                    return None
+            return None
+
+        def at(q: np.ndarray) -> Dict[str, Any]:
+            try:
+                return model.evaluate(self._to_model(q), rest)
+            except _native.SimulationError as e:
+                raise RuntimeError(f"minimize_potential_energy: {e}") from None
+
+        q = onto(self._q)
+        if q is None:
+            raise RuntimeError("minimize_potential_energy: the constraints cannot be satisfied "
+                               "from this configuration")
+        e = at(q)
+        for k in range(200):
+            g = -np.asarray(e["dL_dq"])[perm][free]
+            hess = -np.asarray(e["d2L_dqdq"])[np.ix_(perm, perm)][np.ix_(free, free)]
+            if self.nc:
+                c = model.constraints_at(self._to_model(q))
+                jac = np.asarray(c["dh_dq"], dtype=float)[:, perm][:, free]
+                _, sv, vt = np.linalg.svd(jac)
+                rank = int(np.sum(sv > 1e-12 * max(float(sv[0]) if sv.size else 0.0, 1e-300)))
+                z = vt[rank:].T
+                # The Lagrangian's Hessian: V's plus the multipliers' share of the constraints'
+                # curvature, μ from g + Jᵀμ = 0.
+                mu = np.linalg.lstsq(jac.T, -g, rcond=None)[0]
+                d2h = np.asarray(c["d2h_dqdq"], dtype=float)[:, perm][:, :, perm]
+                hess = hess + np.einsum("s,sij->ij", mu, d2h)[np.ix_(free, free)]
+            else:
+                z = np.eye(int(free.sum()))
+            reduced = z.T @ g
+            w, v = np.linalg.eigh(z.T @ hess @ z)
+            along = v.T @ reduced
+            floor = 1e-12 * max(float(np.max(np.abs(w))) if w.size else 0.0, 1e-300)
+            flat = np.abs(w) <= floor
+            slope = 1e-9 * (1.0 + float(np.max(np.abs(g))) if g.size else 1.0)
+            if np.any(flat & (np.abs(along) > slope)):
+                raise RuntimeError(
+                    "minimize_potential_energy: the potential falls without bound along the "
+                    "constraints (it slopes where it has no curvature)")
+            step = -z @ (v @ (np.where(flat, 0.0, 1.0 / np.maximum(np.abs(w), floor)) * along))
+            gradient = float(np.max(np.abs(reduced))) if reduced.size else 0.0
+            value = -float(e["L"])
+            if verbose:
+                print(f"minimize_potential_energy: iteration {k}, V = {value:.12g}, "
+                      f"gradient along the constraints {gradient:.3e}")
+            size = 1e-12 * (1.0 + float(np.max(np.abs(q))))
+            if gradient <= 1e-12 * (1.0 + float(np.max(np.abs(g)))) or \
+                    float(np.max(np.abs(step), initial=0.0)) <= size:
+                break
+            alpha, accepted = 1.0, None
+            while alpha * float(np.max(np.abs(step))) > size:
+                trial = q.copy()
+                trial[free] += alpha * step
+                trial = onto(trial)
+                if trial is not None:
+                    e_trial = at(trial)
+                    if -float(e_trial["L"]) < value:
+                        accepted = trial
+                        break
+                alpha *= 0.5
+            if accepted is None:
+                break  # V falls no further than rounding: a minimum on the constraints
+            q, e = accepted, e_trial
+        else:
+            raise RuntimeError(
+                "minimize_potential_energy: no equilibrium found in 200 iterations (is the "
+                "potential bounded below on the constraints?)")
+        self._q[:] = q
+        self._state_changed()
+        self.dq = 0.0
+        return self.q
+
 
 # Potentials, forces and constraints (re-exported by the submodules of trep's names) -------
 class _Part:
