@@ -54,6 +54,13 @@ def test_dynamics_and_their_derivatives_match_trep(recorded, key):
     close(ours[key], theirs[key], 1e-12, f"{name} {key}")
 
 
+def test_frame_derivatives_match_trep(recorded):
+    name, ours, theirs = recorded
+    for frame, values in theirs["frame_derivatives"].items():
+        for key, value in values.items():
+            close(ours["frame_derivatives"][frame][key], value, 1e-12, f"{name} {frame}.{key}")
+
+
 def test_the_tree_view_reads_as_treps(recorded):
     name, ours, theirs = recorded
     assert ours["tree"] == theirs["tree"], f"{name}:\n{ours['tree']}\nagainst trep's\n{theirs['tree']}"

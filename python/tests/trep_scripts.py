@@ -122,6 +122,17 @@ def record(trep, build):
     out["tree"] = s.world_frame.tree_view()
     out["frames"] = dict((f.name, {"g": _list(f.g()), "p": _list(f.p()), "vb": _list(f.vb())})
                          for f in s.frames if f.name is not None)
+    out["frame_derivatives"] = dict(
+        (f.name, {"g_dq": [_list(f.g_dq(a)) for a in cs],
+                  "g_dqdq": [[_list(f.g_dqdq(a, b)) for b in cs] for a in cs],
+                  "p_dq": [_list(f.p_dq(a)) for a in cs],
+                  "p_dqdq": [[_list(f.p_dqdq(a, b)) for b in cs] for a in cs],
+                  "vb_dq": [_list(f.vb_dq(a)) for a in cs],
+                  "vb_ddq": [_list(f.vb_ddq(a)) for a in cs],
+                  "g_inv": _list(f.g_inv()), "g_inv_dq": [_list(f.g_inv_dq(a)) for a in cs],
+                  "lg": _list(f.lg()), "lg_dq": _list(f.lg_dq()),
+                  "twist_hat": _list(f.twist_hat())})
+        for f in s.frames if f.name is not None and f.name != "World")
     out["h"] = [c.h() for c in s.constraints]
     out["h_dq"] = [[c.h_dq(a) for a in cs] for c in s.constraints]
     # The midpoint VI from rest at this configuration, 20 steps of dt = 0.01 with the

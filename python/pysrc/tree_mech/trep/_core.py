@@ -336,6 +336,95 @@ class Frame:
         out[:3, 3] = v[:3]
         return out
 
+    # Derivatives of the pose and the body velocity by the configs -------------------------
+    def _generator(self) -> np.ndarray:
+        """``ξ̂``: this frame's primitive as a 4×4 generator, ``d(local)/dq = local · ξ̂``."""
+        out = np.zeros((4, 4))
+        axis = "xyz".index(self._transform[1])
+        if self._transform[0] == "t":
+            out[axis, 3] = 1.0
+        else:
+            a, b = [(1, 2), (2, 0), (0, 1)][axis]
+            out[b, a], out[a, b] = 1.0, -1.0
+        return out
+
+    def _spatial(self, q: Config) -> Optional[np.ndarray]:
+        """``S = g_F ξ̂ g_F⁻¹`` of the frame F that config ``q`` drives, if ``q`` moves this
+        frame: then ``∂g/∂q = S g``."""
+        if not isinstance(q, Config):
+            raise TypeError("expected a Config")
+        driven = q.frame
+        if driven is None or not self.uses_config(q):
+            return None
+        pose = driven.g()
+        return pose @ driven._generator() @ np.linalg.inv(pose)
+
+    def _depth(self) -> int:
+        depth, f = 0, self
+        while f._parent is not None:
+            depth, f = depth + 1, f._parent
+        return depth
+
+    def g_dq(self, q1: Config) -> np.ndarray:
+        """``∂g/∂q1`` (4×4)."""
+        s1 = self._spatial(q1)
+        return np.zeros((4, 4)) if s1 is None else s1 @ self.g()
+
+    def g_dqdq(self, q1: Config, q2: Config) -> np.ndarray:
+        """``∂²g/∂q1∂q2`` (4×4): the generator nearer the root acts first from the left."""
+        s1, s2 = self._spatial(q1), self._spatial(q2)
+        if s1 is None or s2 is None:
+            return np.zeros((4, 4))
+        if q1.frame._depth() > q2.frame._depth():
+            s1, s2 = s2, s1
+        return s1 @ s2 @ self.g()
+
+    def p_dq(self, q1: Config) -> np.ndarray:
+        """``∂p/∂q1``, homogeneous (last entry 0)."""
+        return self.g_dq(q1)[:, 3].copy()
+
+    def p_dqdq(self, q1: Config, q2: Config) -> np.ndarray:
+        """``∂²p/∂q1∂q2``, homogeneous."""
+        return self.g_dqdq(q1, q2)[:, 3].copy()
+
+    def g_inv(self) -> np.ndarray:
+        """``g⁻¹``: the world seen from this frame."""
+        return np.linalg.inv(self.g())
+
+    def g_inv_dq(self, q1: Config) -> np.ndarray:
+        """``∂g⁻¹/∂q1 = −g⁻¹ (∂g/∂q1) g⁻¹``."""
+        inv = self.g_inv()
+        return -inv @ self.g_dq(q1) @ inv
+
+    def _rate(self) -> np.ndarray:
+        """``ġ = Σ_i (∂g/∂q_i) q̇_i``."""
+        s = self._system
+        return sum((self.g_dq(c) * c.dq for c in s.configs), np.zeros((4, 4)))
+
+    def vb_ddq(self, dq1: Config) -> np.ndarray:
+        """``∂v̂_b/∂q̇1 = g⁻¹ ∂g/∂q1`` (4×4)."""
+        return self.g_inv() @ self.g_dq(dq1)
+
+    def vb_dq(self, q1: Config) -> np.ndarray:
+        """``∂v̂_b/∂q1`` of ``v̂_b = g⁻¹ ġ`` (4×4)."""
+        s = self._system
+        inv = self.g_inv()
+        d_rate = sum((self.g_dqdq(c, q1) * c.dq for c in s.configs), np.zeros((4, 4)))
+        return -inv @ self.g_dq(q1) @ inv @ self._rate() + inv @ d_rate
+
+    def lg(self) -> np.ndarray:
+        """The transform from the parent to this frame (4×4)."""
+        return np.linalg.inv(self._parent.g()) @ self.g()
+
+    def lg_dq(self) -> np.ndarray:
+        """Its derivative by the primitive's parameter, ``lg · ξ̂`` — for a constant frame
+        too, as trep 1.0.2 returns it (its documentation says zero)."""
+        return self.lg() @ self._generator()
+
+    def twist_hat(self) -> np.ndarray:
+        """The frame's own twist ``ξ̂``: its primitive's generator in its axes (4×4)."""
+        return self._generator()
+
 
 class _World(Frame):
     def __init__(self, system: "System"):
