@@ -725,8 +725,9 @@ class System:
             if isinstance(p, _Gravity):
                 gravity = [a + b for a, b in zip(gravity, p.gravity)]
         out = ['name = "trep"', f"gravity = {json.dumps([float(g) for g in gravity])}", ""]
-        if any(self._world in c._frames() for c in self._constraints):
-            # A constraint on the world frame attaches to a fixed frame at the origin.
+        attached = [*self._constraints, *self._potentials, *self._forces]
+        if any(self._world in getattr(c, "_frames", tuple)() for c in attached):
+            # An element on the world frame attaches to a fixed frame at the origin.
             out += ["[[frame]]", 'name = "World"', "tx = 0.0", ""]
         for f in self._frames_created:
             out.append("[[frame]]")
@@ -755,7 +756,11 @@ class System:
             if isinstance(p, _ConfigSpring):
                 out += ["[[spring]]", f"variable = {_toml_string(p.config.name)}",
                         f"stiffness = {p.k!r}", f"rest = {p.q0!r}", ""]
+            elif isinstance(p, _LinearSpring):
+                out += p._toml()
         for force in self._forces:
+            if isinstance(force, _LinearDamper):
+                out += force._toml()
             if isinstance(force, _ConfigForce):
                 out += ["[[input]]", f"name = {_toml_string(force.finput.name)}",
                         f"variable = {_toml_string(force.config.name)}", ""]
@@ -1142,6 +1147,25 @@ class _ConfigSpring(Potential):
         super().__init__(system, name)
 
 
+class _LinearSpring(Potential):
+    """A spring between two frames' origins, ``½k(|p₁ − p₂| − x0)²``."""
+
+    def __init__(self, system: System, frame1: Any, frame2: Any, k: float, x0: float = 0.0,
+                 name: Optional[str] = None):
+        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
+        self.k, self.x0 = float(k), float(x0)
+        super().__init__(system, name)
+
+    def _frames(self) -> tuple:
+        return (self.frame1, self.frame2)
+
+    def _toml(self) -> List[str]:
+        s = self._system
+        return ["[[spring]]", f"frames = [{_toml_string(s._frame_key(self.frame1))}, "
+                f"{_toml_string(s._frame_key(self.frame2))}]", f"stiffness = {self.k!r}",
+                f"rest = {self.x0!r}", ""]
+
+
 class Force(_Part):
     """A generalized force of the system."""
 
@@ -1187,6 +1211,24 @@ class _ConfigForce(Force):
             super().__init__(system, name)
         finally:
             system._release()
+
+
+class _LinearDamper(Force):
+    """A damper between two frames' origins: ``−c ℓ̇`` along the line, ``ℓ = |p₁ − p₂|``."""
+
+    def __init__(self, system: System, frame1: Any, frame2: Any, c: float,
+                 name: Optional[str] = None):
+        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
+        self.c = float(c)
+        super().__init__(system, name)
+
+    def _frames(self) -> tuple:
+        return (self.frame1, self.frame2)
+
+    def _toml(self) -> List[str]:
+        s = self._system
+        return ["[[damper]]", f"frames = [{_toml_string(s._frame_key(self.frame1))}, "
+                f"{_toml_string(s._frame_key(self.frame2))}]", f"damping = {self.c!r}", ""]
 
 
 class Constraint:
