@@ -183,20 +183,31 @@ impl Model {
 
     /// The inputs at one state: one finite value per input, or zeros.
     fn input_vector(&self, given: Option<Numbers<'_, Ix1>>) -> PyResult<Vec<f64>> {
-        let width = self.model.inputs.len();
-        let Some(u) = given else {
-            return Ok(vec![0.0; width]);
-        };
-        let u = u.as_array().to_vec();
-        if u.len() != width {
+        match given {
+            None => Ok(vec![0.0; self.model.inputs.len()]),
+            Some(u) => self.checked_inputs(u.as_array().to_vec()),
+        }
+    }
+
+    /// `u` if it holds one finite value per input, else a `ValueError` naming the inputs.
+    fn checked_inputs(&self, u: Vec<f64>) -> PyResult<Vec<f64>> {
+        if u.len() != self.model.inputs.len() {
             return Err(bad(format!(
-                "u has {} entries; the model has {width} inputs ({})",
+                "u has {} entries; the model has {}",
                 u.len(),
-                self.input_names().join(", ")
+                self.inputs_phrase()
             )));
         }
         check_finite("u", &u, &self.input_names())?;
         Ok(u)
+    }
+
+    /// "no inputs", or "2 inputs (push, pull)".
+    fn inputs_phrase(&self) -> String {
+        match self.model.inputs.len() {
+            0 => "no inputs".to_string(),
+            n => format!("{n} inputs ({})", self.input_names().join(", ")),
+        }
     }
 
     /// The kinematic variables' motion for a call at one state: the model's prescription, or
@@ -247,14 +258,7 @@ impl Model {
             return Ok(InputSchedule::default());
         }
         if let Ok(a) = u.extract::<PyArrayLike1<f64, AllowTypeChange>>() {
-            let v: Vec<f64> = a.as_array().to_vec();
-            if v.len() != width {
-                return Err(bad(format!(
-                    "u has {} entries; the model has {width} inputs",
-                    v.len()
-                )));
-            }
-            check_finite("u", &v, &self.input_names())?;
+            let v = self.checked_inputs(a.as_array().to_vec())?;
             return Ok(InputSchedule::constant(v));
         }
         let a = u
@@ -263,8 +267,9 @@ impl Model {
         let a = a.as_array();
         if a.ncols() != width {
             return Err(bad(format!(
-                "u has {} columns; the model has {width} inputs",
-                a.ncols()
+                "u has {} columns; the model has {}",
+                a.ncols(),
+                self.inputs_phrase()
             )));
         }
         check_rows(a.nrows(), duration, dt)?;

@@ -349,6 +349,8 @@ def test_forward_dynamics_and_the_mass_matrix_alone_equal_the_evaluation():
     assert abs(qdd[0] - 1.2) < 1e-12
     with pytest.raises(ValueError, match=r"q has 3 entries; the model has 2 variables"):
         cart.mass_matrix([0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"u has 1 entries; the model has no inputs$"):
+        tm.load(PENDULUM).forward_dynamics(u=[1.0])
 
 
 def test_inverse_dynamics_undoes_forward_dynamics():
