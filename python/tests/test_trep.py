@@ -239,3 +239,11 @@ def test_a_failed_step_leaves_the_integrator_where_it_was():
     fresh.step(0.02)
     assert (mvi.t1, mvi.t2) == (0.01, 0.02)
     assert np.array_equal(mvi.q2, fresh.q2) and np.array_equal(mvi.p2, fresh.p2)
+
+
+def test_the_world_frame_has_the_identity_and_no_motion():
+    s = trep_scripts.cart_pendulum_string(trep)
+    w, x = s.world_frame, s.get_config("x")
+    assert np.array_equal(w.lg(), np.eye(4)) and np.array_equal(w.g(), np.eye(4))
+    for m in (w.lg_dq(), w.twist_hat(), w.g_dq(x), w.vb_dq(x), w.vb_ddq(x), w.g_dqdq(x, x)):
+        assert np.array_equal(m, np.zeros((4, 4)))

@@ -338,8 +338,11 @@ class Frame:
 
     # Derivatives of the pose and the body velocity by the configs -------------------------
     def _generator(self) -> np.ndarray:
-        """``ξ̂``: this frame's primitive as a 4×4 generator, ``d(local)/dq = local · ξ̂``."""
+        """``ξ̂``: this frame's primitive as a 4×4 generator, ``d(local)/dq = local · ξ̂``
+        (zero for the world, which has none)."""
         out = np.zeros((4, 4))
+        if self._transform == WORLD:
+            return out
         axis = "xyz".index(self._transform[1])
         if self._transform[0] == "t":
             out[axis, 3] = 1.0
@@ -413,7 +416,9 @@ class Frame:
         return -inv @ self.g_dq(q1) @ inv @ self._rate() + inv @ d_rate
 
     def lg(self) -> np.ndarray:
-        """The transform from the parent to this frame (4×4)."""
+        """The transform from the parent to this frame (4×4; the identity for the world)."""
+        if self._parent is None:
+            return np.eye(4)
         return np.linalg.inv(self._parent.g()) @ self.g()
 
     def lg_dq(self) -> np.ndarray:
