@@ -1152,7 +1152,22 @@ class _ConfigSpring(Potential):
         super().__init__(system, name)
 
 
-class _LinearSpring(Potential):
+class _BetweenFrames:
+    """An element attached to two frames' origins (``frame1``, ``frame2``)."""
+
+    frame1: Frame
+    frame2: Frame
+
+    def _frames(self) -> tuple:
+        return (self.frame1, self.frame2)
+
+    def _frames_line(self, system: System) -> str:
+        """The model file's ``frames = [...]`` of the two."""
+        return (f"frames = [{_toml_string(system._frame_key(self.frame1))}, "
+                f"{_toml_string(system._frame_key(self.frame2))}]")
+
+
+class _LinearSpring(_BetweenFrames, Potential):
     """A spring between two frames' origins, ``½k(|p₁ − p₂| − x0)²``."""
 
     def __init__(self, system: System, frame1: Any, frame2: Any, k: float, x0: float = 0.0,
@@ -1161,13 +1176,8 @@ class _LinearSpring(Potential):
         self.k, self.x0 = float(k), float(x0)
         super().__init__(system, name)
 
-    def _frames(self) -> tuple:
-        return (self.frame1, self.frame2)
-
     def _toml(self) -> List[str]:
-        s = self._system
-        return ["[[spring]]", f"frames = [{_toml_string(s._frame_key(self.frame1))}, "
-                f"{_toml_string(s._frame_key(self.frame2))}]", f"stiffness = {self.k!r}",
+        return ["[[spring]]", self._frames_line(self._system), f"stiffness = {self.k!r}",
                 f"rest = {self.x0!r}", ""]
 
 
@@ -1218,7 +1228,7 @@ class _ConfigForce(Force):
             system._release()
 
 
-class _LinearDamper(Force):
+class _LinearDamper(_BetweenFrames, Force):
     """A damper between two frames' origins: ``−c ℓ̇`` along the line, ``ℓ = |p₁ − p₂|``."""
 
     def __init__(self, system: System, frame1: Any, frame2: Any, c: float,
@@ -1227,13 +1237,8 @@ class _LinearDamper(Force):
         self.c = float(c)
         super().__init__(system, name)
 
-    def _frames(self) -> tuple:
-        return (self.frame1, self.frame2)
-
     def _toml(self) -> List[str]:
-        s = self._system
-        return ["[[damper]]", f"frames = [{_toml_string(s._frame_key(self.frame1))}, "
-                f"{_toml_string(s._frame_key(self.frame2))}]", f"damping = {self.c!r}", ""]
+        return ["[[damper]]", self._frames_line(self._system), f"damping = {self.c!r}", ""]
 
 
 class Constraint:
@@ -1265,7 +1270,7 @@ class Constraint:
         return self._sign * float(np.asarray(s._state()["dh_dq"])[self.index][s._i(q1)])
 
 
-class _Distance(Constraint):
+class _Distance(_BetweenFrames, Constraint):
     """``|p₁ − p₂|² − ℓ²`` for two frames' origins (trep's row, and tree-mech's); ``distance``
     a number or the name of a new kinematic config holding ℓ."""
 
@@ -1284,19 +1289,14 @@ class _Distance(Constraint):
         finally:
             system._release()
 
-    def _frames(self) -> tuple:
-        return (self.frame1, self.frame2)
-
     @property
     def distance(self) -> float:
         return self.config.q if self.config else self._distance
 
     def _toml(self) -> List[str]:
-        s = self._system
         length = _toml_string(self.config.name) if self.config else repr(self._distance)
         return ["[[constraint]]", f"name = {_toml_string(self.name)}", 'kind = "distance"',
-                f"frames = [{_toml_string(s._frame_key(self.frame1))}, "
-                f"{_toml_string(s._frame_key(self.frame2))}]", f"length = {length}", ""]
+                self._frames_line(self._system), f"length = {length}", ""]
 
 
 class _PointOnPlane(Constraint):
