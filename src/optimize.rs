@@ -335,6 +335,10 @@ fn write_outputs(
              trajectory found is written.",
             MAX_MU
         ),
+        // The command line's report never asks to stop.
+        Stop::Interrupted => {
+            println!("The solve was interrupted; the best trajectory found is written.")
+        }
     }
     for file in [
         files.out,

@@ -6,8 +6,8 @@
 mod common;
 
 use tree_mech::control::{
-    cost_gradient, dare, solve, tvlqr, Control, Cost, Derivatives, DiscreteSystem, IlqrSettings,
-    Knot, QuadraticCost, Solver, Stop,
+    cost_gradient, dare, solve, solve_until, tvlqr, Control, Cost, Derivatives, DiscreteSystem,
+    IlqrSettings, Knot, QuadraticCost, Solver, Stop,
 };
 use tree_mech::integrate::{Forcing, ViSettings};
 use tree_mech::model;
@@ -714,4 +714,42 @@ fn a_solve_whose_model_never_lowers_the_cost_stops_on_the_regularisation() {
     assert!(!sol.converged && sol.history.len() < 100);
     // The start is kept: nothing lowered its cost.
     assert!(sol.u.iter().all(|u| u[0] == 0.0));
+}
+
+#[test]
+fn a_report_that_asks_to_stop_ends_the_solve_with_its_best_trajectory() {
+    let (dt, knots) = (0.02, 60);
+    let mut dynamics = DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap();
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let mut cost = common::cart_to_half_metre(dt);
+    let mut seen = 0;
+    let sol = solve_until(
+        &mut dynamics,
+        &mut cost,
+        &x0,
+        vec![DVector::zeros(1); knots],
+        &IlqrSettings::default(),
+        &mut |_| {
+            seen += 1;
+            if seen == 2 {
+                std::ops::ControlFlow::Break(())
+            } else {
+                std::ops::ControlFlow::Continue(())
+            }
+        },
+    )
+    .unwrap();
+    assert_eq!(sol.stop, Stop::Interrupted);
+    assert!(!sol.converged);
+    assert_eq!(sol.history.len(), 2);
+    assert_eq!(sol.cost, sol.history[1].cost);
+    // The full solve goes on from there to a lower cost.
+    let full = unlimited(
+        DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap(),
+        common::cart_to_half_metre(dt),
+        &x0,
+        knots,
+    );
+    assert!(full.history.len() > 2 && full.cost < sol.cost);
 }

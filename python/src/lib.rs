@@ -4,6 +4,7 @@
 
 mod numbers;
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -12,7 +13,7 @@ use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLik
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use tree_mech::control::{solve_task, TaskOptions, TaskSolver};
+use tree_mech::control::{solve_task_until, TaskOptions, TaskSolver};
 use tree_mech::integrate::{
     Forcing, InputSchedule, Method, MidpointVi, SimOptions, StepContext, StepInput, StepOutput,
     Tolerance, ViSettings,
@@ -1257,8 +1258,11 @@ fn loads(py: Python<'_>, text: &str, format: &str, floating_base: bool) -> PyRes
 
 /// Solves a task (the text of a task file; its `model` relative to `base`): returns a dict
 /// with the summary of `tree-mech optimize --json` and the trajectory and gains as arrays.
+/// The GIL is released while it runs; after every iteration Ctrl-C is honoured and
+/// `progress(iteration, cost)`, if given, is called (an exception from either ends the
+/// solve and is raised).
 #[pyfunction]
-#[pyo3(signature = (text, base, source=None, solver=None, max_iterations=None))]
+#[pyo3(signature = (text, base, source=None, solver=None, max_iterations=None, progress=None))]
 fn optimize_text<'py>(
     py: Python<'py>,
     text: &str,
@@ -1266,6 +1270,7 @@ fn optimize_text<'py>(
     source: Option<String>,
     solver: Option<&str>,
     max_iterations: Option<usize>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (task, m) = model::task_from_str(text, source.as_deref(), Path::new(&base))
         .map_err(|e| model_error(py, &e))?;
@@ -1280,9 +1285,31 @@ fn optimize_text<'py>(
         solver,
         max_iterations,
     };
-    let res = py
-        .detach(|| solve_task(sys, &task, &m, &options, &mut |_| {}))
-        .map_err(|e| sim_error(py, &e))?;
+    let mut raised: Option<PyErr> = None;
+    let res = py.detach(|| {
+        let mut iteration = 0usize;
+        solve_task_until(sys, &task, &m, &options, &mut |it| {
+            iteration += 1;
+            let checked = Python::attach(|py| {
+                py.check_signals()?;
+                if let Some(f) = &progress {
+                    f.call1(py, (iteration, it.cost))?;
+                }
+                Ok::<_, PyErr>(())
+            });
+            match checked {
+                Ok(()) => ControlFlow::Continue(()),
+                Err(e) => {
+                    raised = Some(e);
+                    ControlFlow::Break(())
+                }
+            }
+        })
+    });
+    if let Some(e) = raised {
+        return Err(e);
+    }
+    let res = res.map_err(|e| sim_error(py, &e))?;
     let sol = &res.solution;
     let n = task.knots;
     let out = PyDict::new(py);

@@ -395,3 +395,26 @@ def test_the_computed_torque_example_tracks_its_reference():
     assert errors[0] > 0.15
     assert errors[times.searchsorted(0.6)] < 5e-3
     assert errors[times >= 1.0].max() < 2e-3
+
+
+def test_optimize_reports_each_iteration_and_stops_on_an_exception():
+    path = str(ROOT / "tasks/ur5-reach.toml")
+    seen = []
+    plan = tm.optimize(path, progress=lambda k, cost: seen.append((k, cost)))
+    assert [k for k, _ in seen] == list(range(1, plan["iterations"] + 1))
+    assert seen[-1][1] == plan["cost"]
+    assert all(b[1] <= a[1] for a, b in zip(seen, seen[1:]))  # the cost never rises
+
+    class Enough(Exception):
+        pass
+
+    calls = []
+
+    def stop_at_two(k, cost):
+        calls.append(k)
+        if k == 2:
+            raise Enough("two iterations are enough")
+
+    with pytest.raises(Enough, match="two iterations are enough"):
+        tm.optimize(path, progress=stop_at_two)
+    assert calls == [1, 2]  # the solve ended there

@@ -27,7 +27,7 @@ crate's ``tree_model!``. Errors are ``ModelError`` (a model or task file; ``file
 from __future__ import annotations
 
 import os
-from typing import Any, Mapping, Union
+from typing import Any, Callable, Mapping, Union
 
 from ._native import (
     Model,
@@ -100,15 +100,19 @@ def optimize(
     task: Union[str, os.PathLike, Mapping[str, Any]],
     solver: str | None = None,
     max_iterations: int | None = None,
+    progress: Callable[[int, float], Any] | None = None,
 ) -> dict:
     """Solves an optimal-control task (see the README's task-file format): ``task`` is the
     path of a task file, or a dict with the same keys (``model`` relative to the current
     directory). Returns a dict: ``converged``, ``iterations``, ``cost``, ``q_final``,
     ``dq_final``, ``frames`` (final positions of the frames the costs name),
     ``solve_seconds``, and the trajectory ``t``, ``q``, ``dq``, ``u``, ``lam``, the states
-    ``x``, the gains ``K`` (knots, controls, states) and ``feedforward``."""
+    ``x``, the gains ``K`` (knots, controls, states) and ``feedforward``. After every
+    iteration ``progress(iteration, cost)``, if given, is called and Ctrl-C honoured; an
+    exception from either ends the solve and is raised."""
     if isinstance(task, Mapping):
-        return optimize_text(_task_toml(task), os.getcwd(), None, solver, max_iterations)
+        return optimize_text(_task_toml(task), os.getcwd(), None, solver, max_iterations,
+                             progress)
     path = os.fspath(task)
     try:
         with open(path, encoding="utf-8") as f:
@@ -116,4 +120,4 @@ def optimize(
     except OSError as e:
         raise ModelError(f"cannot read task file `{path}`: {e.strerror}") from None
     base = os.path.dirname(os.path.abspath(path))
-    return optimize_text(text, base, path, solver, max_iterations)
+    return optimize_text(text, base, path, solver, max_iterations, progress)

@@ -1,5 +1,5 @@
 import os
-from typing import Any, Mapping, Optional, Union
+from typing import Any, Callable, Mapping, Optional, Union
 
 from ._native import (
     Model as Model,
@@ -17,4 +17,5 @@ def optimize(
     task: Union[str, os.PathLike, Mapping[str, Any]],
     solver: Optional[str] = None,
     max_iterations: Optional[int] = None,
+    progress: Optional[Callable[[int, float], Any]] = None,
 ) -> dict: ...

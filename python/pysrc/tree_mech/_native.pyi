@@ -1,5 +1,5 @@
 from os import PathLike
-from typing import Callable, Optional, Sequence, Union
+from typing import Any, Callable, Optional, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -141,4 +141,5 @@ def optimize_text(
     source: Optional[str] = None,
     solver: Optional[str] = None,
     max_iterations: Optional[int] = None,
+    progress: Optional[Callable[[int, float], Any]] = None,
 ) -> dict: ...

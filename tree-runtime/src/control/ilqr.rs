@@ -9,6 +9,8 @@
 //! is not, which a pass falls back to when the full one's is not), no step length lowers the
 //! cost or the accepted one is under ¼, lowered after a longer accepted step.
 
+use std::ops::ControlFlow;
+
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
 use super::cost::{Cost, Derivatives, Needs};
@@ -110,6 +112,8 @@ pub enum Stop {
     /// without a step that lowers the cost, or with `Q_uu + μ s I` still not positive
     /// definite: the local model is not trusted any nearer.
     Regularisation,
+    /// The caller's report asked to stop ([`solve_until`]).
+    Interrupted,
 }
 
 impl Stop {
@@ -119,6 +123,7 @@ impl Stop {
             Stop::Converged => "converged",
             Stop::IterationLimit => "iteration limit",
             Stop::Regularisation => "regularisation",
+            Stop::Interrupted => "interrupted",
         }
     }
 }
@@ -174,9 +179,29 @@ pub fn solve_with<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
     x0: &DVector<f64>,
-    mut u: Vec<DVector<f64>>,
+    u: Vec<DVector<f64>>,
     settings: &IlqrSettings,
     report: &mut dyn FnMut(&Iteration),
+) -> Result<Solution, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    solve_until(dynamics, cost, x0, u, settings, &mut |it| {
+        report(it);
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`solve_with`] whose `report` may also end the solve: on `ControlFlow::Break` it stops
+/// after that iteration with the best trajectory found ([`Stop::Interrupted`]) — a caller's
+/// Ctrl-C, say.
+pub fn solve_until<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
+    x0: &DVector<f64>,
+    mut u: Vec<DVector<f64>>,
+    settings: &IlqrSettings,
+    report: &mut dyn FnMut(&Iteration) -> ControlFlow<()>,
 ) -> Result<Solution, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -246,8 +271,8 @@ where
             model: pass.0,
             limits: has_limits.then_some(pass.1),
         };
-        report(&it);
         history.push(it);
+        report(&it)
     };
     let mut stop = Stop::IterationLimit;
     let mut phase = BoxPhase::Clamped;
@@ -288,7 +313,7 @@ where
         // its line search), and that ends on the regularisation's ceiling instead.
         if decrease <= settings.decrease_tolerance * total.abs() && mu <= settings.mu.max(1e-6) {
             stop = Stop::Converged;
-            record(total, 0.0, mu, gradient, used);
+            let _ = record(total, 0.0, mu, gradient, used);
             break;
         }
         // Forward pass: the first step length that lowers the true cost.
@@ -318,9 +343,13 @@ where
         }
         if accepted == 0.0 {
             mu = raised(mu);
-            record(total, 0.0, mu, gradient, used);
+            let flow = record(total, 0.0, mu, gradient, used);
             if mu > MAX_MU {
                 stop = Stop::Regularisation;
+                break;
+            }
+            if flow.is_break() {
+                stop = Stop::Interrupted;
                 break;
             }
             continue;
@@ -348,9 +377,13 @@ where
         } else {
             (mu * 0.1).max(1e-12)
         };
-        record(total, accepted, mu, gradient, used);
+        let flow = record(total, accepted, mu, gradient, used);
         if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             stop = Stop::Converged;
+            break;
+        }
+        if flow.is_break() {
+            stop = Stop::Interrupted;
             break;
         }
     }

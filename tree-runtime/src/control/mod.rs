@@ -17,10 +17,10 @@ pub mod task_solve;
 pub use cost::{Cost, Derivatives, Needs, QuadraticCost};
 pub use discrete::{DiscreteSystem, Knot};
 pub use ilqr::{
-    cost_gradient, solve, solve_with, BoxPhase, IlqrSettings, Iteration, Solution, Solver, Stop,
-    MAX_MU,
+    cost_gradient, solve, solve_until, solve_with, BoxPhase, IlqrSettings, Iteration, Solution,
+    Solver, Stop, MAX_MU,
 };
 pub use lqr::{dare, tvlqr, Lqr};
 pub use task_cost::TaskCost;
-pub use task_solve::{solve_task, task_system, TaskOptions, TaskResult};
+pub use task_solve::{solve_task, solve_task_until, task_system, TaskOptions, TaskResult};
 pub use tree_model::{About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver};

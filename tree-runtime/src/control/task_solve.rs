@@ -3,6 +3,7 @@
 //! kinematic controls on their prescription), the limits, the solve, and the optimal
 //! trajectory read back knot by knot (`q`, `q̇`, the controls, `λ`).
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
@@ -10,7 +11,7 @@ use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
 
 use super::cost::Needs;
 use super::discrete::{DiscreteSystem, Knot};
-use super::ilqr::{solve_with, IlqrSettings, Iteration, Solution, Solver};
+use super::ilqr::{solve_until, IlqrSettings, Iteration, Solution, Solver};
 use super::task_cost::TaskCost;
 use crate::dynamics::{ModelMotions, Prescription};
 use crate::error::SimError;
@@ -77,6 +78,24 @@ pub fn solve_task<S: System>(
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    solve_task_until(sys, task, model, options, &mut |it| {
+        report(it);
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`solve_task`] whose `report` may end the solve ([`solve_until`]): the result is then the
+/// best trajectory found, its `solution.stop` [`Stop::Interrupted`](super::Stop::Interrupted).
+pub fn solve_task_until<S: System>(
+    sys: S,
+    task: &Task,
+    model: &Model,
+    options: &TaskOptions,
+    report: &mut dyn FnMut(&Iteration) -> ControlFlow<()>,
+) -> Result<TaskResult, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     if sys.dof() != model.variables.len() {
         return Err(SimError::InvalidInput(format!(
             "the system has {} variables but the task's model has {}",
@@ -138,7 +157,7 @@ where
     };
     let mut cost = TaskCost::new(task, model);
     let start = Instant::now();
-    let solution = solve_with(&mut dynamics, &mut cost, &x0, guess, &settings, report)?;
+    let solution = solve_until(&mut dynamics, &mut cost, &x0, guess, &settings, report)?;
     let solve_seconds = start.elapsed().as_secs_f64();
     // Read the trajectory back: q, q̇ at every knot, λ of every step.
     let mut knot = Knot::empty();
