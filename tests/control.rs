@@ -16,6 +16,18 @@ use tree_mech::{tree_model, System, TreeSystem};
 
 tree_model!(struct Cart from "tests/models/cart.toml");
 
+/// `sys` discretised by the VI at `dt` (`settings`), and its model's start as a state.
+fn at_start<S: System>(sys: S, settings: ViSettings, dt: f64) -> (DiscreteSystem<S>, DVector<f64>)
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let mut dynamics = DiscreteSystem::new(sys, settings, dt, 0.0).unwrap();
+    let (q0, dq0) = dynamics.sys.initial_state();
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    (dynamics, x0)
+}
+
 #[test]
 fn dare_matches_the_scalar_riccati_root_and_solves_the_equation() {
     let (a, b, q, r) = (1.1, 0.5, 2.0, 1.0);
@@ -85,9 +97,7 @@ fn ilqr_solves_a_linear_quadratic_problem_in_one_iteration_as_the_riccati_recurs
         tolerance: 1e-14,
         ..ViSettings::default()
     };
-    let mut dynamics = DiscreteSystem::new(sys, settings, dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (mut dynamics, x0) = at_start(sys, settings, dt);
     let cost = QuadraticCost {
         dt,
         x_ref: DVector::zeros(3),
@@ -149,9 +159,7 @@ where
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
 {
     let (dt, knots) = (0.02, 60);
-    let mut dynamics = DiscreteSystem::new(sys, ViSettings::default(), dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (mut dynamics, x0) = at_start(sys, ViSettings::default(), dt);
     let mut cost = common::cart_to_half_metre(dt);
     let options = IlqrSettings {
         solver,
@@ -275,10 +283,7 @@ fn the_cost_gradient_matches_finite_differences() {
         constraint_tolerance: 1e-14,
         ..ViSettings::default()
     };
-    let mut dynamics =
-        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), settings, dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (mut dynamics, x0) = at_start(TreeSystem::new(&m).unwrap(), settings, dt);
     let mut cost = QuadraticCost {
         dt,
         x_ref: DVector::from_vec(vec![0.5, 0.3, 0.0, 0.0, 0.0]),
@@ -560,9 +565,7 @@ where
 /// The cart problem with every weight scaled by `scale`, unlimited, iLQR.
 fn scaled_cart(scale: f64) -> tree_mech::runtime::control::Solution {
     let (dt, knots) = (0.02, 60);
-    let mut dynamics = DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (dynamics, x0) = at_start(Cart, ViSettings::default(), dt);
     let mut cost = common::cart_to_half_metre(dt);
     for w in [
         &mut cost.x_weight,
@@ -614,10 +617,7 @@ fn cart_in_units(length: f64) -> tree_mech::runtime::control::Solution {
     );
     let m = model::from_toml_str(&text, None).unwrap();
     let (dt, knots) = (0.02, 60);
-    let mut dynamics =
-        DiscreteSystem::new(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (dynamics, x0) = at_start(TreeSystem::new(&m).unwrap(), ViSettings::default(), dt);
     let mut cost = common::cart_to_half_metre(dt);
     // State (x, θ, p_x, p_θ, the push's memory): a length scales x, p_x and the push by 1/l,
     // p_θ by 1/l², so their weights gain l², l², l⁴, l².
@@ -700,9 +700,7 @@ impl Cost for Misleading {
 #[test]
 fn a_solve_whose_model_never_lowers_the_cost_stops_on_the_regularisation() {
     let (dt, knots) = (0.02, 30);
-    let mut dynamics = DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (mut dynamics, x0) = at_start(Cart, ViSettings::default(), dt);
     let mut cost = Misleading(common::cart_to_half_metre(dt));
     let options = IlqrSettings {
         max_iterations: 100,
@@ -719,9 +717,7 @@ fn a_solve_whose_model_never_lowers_the_cost_stops_on_the_regularisation() {
 #[test]
 fn a_report_that_asks_to_stop_ends_the_solve_with_its_best_trajectory() {
     let (dt, knots) = (0.02, 60);
-    let mut dynamics = DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap();
-    let (q0, dq0) = dynamics.sys.initial_state();
-    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let (mut dynamics, x0) = at_start(Cart, ViSettings::default(), dt);
     let mut cost = common::cart_to_half_metre(dt);
     let mut seen = 0;
     let sol = solve_until(
@@ -745,11 +741,7 @@ fn a_report_that_asks_to_stop_ends_the_solve_with_its_best_trajectory() {
     assert_eq!(sol.history.len(), 2);
     assert_eq!(sol.cost, sol.history[1].cost);
     // The full solve goes on from there to a lower cost.
-    let full = unlimited(
-        DiscreteSystem::new(Cart, ViSettings::default(), dt, 0.0).unwrap(),
-        common::cart_to_half_metre(dt),
-        &x0,
-        knots,
-    );
+    let (dynamics, _) = at_start(Cart, ViSettings::default(), dt);
+    let full = unlimited(dynamics, common::cart_to_half_metre(dt), &x0, knots);
     assert!(full.history.len() > 2 && full.cost < sol.cost);
 }

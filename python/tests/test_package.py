@@ -378,6 +378,15 @@ def test_the_constraints_alone_equal_the_evaluation():
     assert c["h"].shape == (len(m.constraints),)
     assert c["dh_dq"].shape == (len(m.constraints), len(m.variables))
     assert np.array_equal(c["h"], e["h"]) and np.array_equal(c["dh_dq"], e["dh_dq"])
+    # D²h against central differences of Dh.
+    n, step = len(m.variables), 1e-6
+    assert c["d2h_dqdq"].shape == (len(m.constraints), n, n)
+    for j in range(n):
+        dq = np.zeros(n)
+        dq[j] = step
+        fd = (m.constraints_at(q + dq)["dh_dq"] - m.constraints_at(q - dq)["dh_dq"]) / (2 * step)
+        assert np.allclose(c["d2h_dqdq"][:, :, j], fd, rtol=1e-6, atol=1e-7), j
+    assert np.abs(c["d2h_dqdq"]).max() > 0.1  # the strings' curvature is there to see
     with pytest.raises(ValueError, match=r"q\[0\] .* is NaN"):
         m.constraints_at(np.full(len(m.variables), np.nan))
 

@@ -134,12 +134,13 @@ where
     let mut qdd = sys.zero_vector();
     let mut dynamics = Dynamics::new(sys);
     let mut force = NoForce;
-    let names = sys.input_names();
     let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
     cx.u = u;
     // A q̈ or λ that is not finite is the acceleration's own error.
     dynamics
         .acceleration(cx.at(0, t), q, dq, &mut qdd)
-        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, u).at_this_state()))?;
+        .map_err(|e| {
+            SimError::InvalidInput(e.under_inputs(&sys.input_names(), u).at_this_state())
+        })?;
     Ok((qdd, dynamics.lambda.clone()))
 }

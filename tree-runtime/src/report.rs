@@ -137,7 +137,7 @@ where
         [q[k], dq[k], _] = motion.kinematic(k, t);
     }
     let mut force = NoForce;
-    let names: Vec<String> = sys.input_names();
+    let names = sys.input_names();
     let inputs: &[f64] = &request.u;
     let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
     cx.u = inputs;

@@ -288,7 +288,6 @@ where
         });
     }
     let moved = project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?;
-    let input_names: Vec<String> = sys.input_names();
     let mut rec = Recorder {
         summary: RunSummary {
             moved,
@@ -352,7 +351,7 @@ where
     }
     .map_err(|e| {
         let t = e.when().map_or(0.0, |(_, t)| t);
-        e.under_inputs(&input_names, inputs.at(t))
+        e.under_inputs(&sys.input_names(), inputs.at(t))
     })?;
     Ok(rec.summary)
 }
