@@ -1,6 +1,7 @@
-"""Runs python/tests/trep_scripts.py on trep 1.0.2 itself and saves what the scripts record
-as python/tests/fixtures/trep-api.json (read by python/tests/test_trep.py, which runs the
-same scripts on tree_mech.trep); with --time, times trep's Puppet built by the same script
+"""Runs python/tests/trep_scripts.py and trep_discopt_scripts.py on trep 1.0.2 itself and
+saves what the scripts record as python/tests/fixtures/trep-api.json and trep-discopt.json
+(read by python/tests/test_trep.py and test_trep_discopt.py, which run the same scripts on
+tree_mech.trep); with --time, times trep's Puppet built by the same script
 (1000 VI steps at dt = 0.01) instead. trep is called, never copied.
 
 Run with trep's Python 2.7 (README, "Checked against trep"):
@@ -20,9 +21,11 @@ visual.__all__ = ['VisualItem3D']
 sys.modules['trep.visual'] = visual
 
 import trep  # noqa: E402
+import trep.discopt  # noqa: E402,F401 (the scripts reach it as trep.discopt)
 
 root = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..')
 sys.path.insert(0, os.path.join(root, 'python', 'tests'))
+import trep_discopt_scripts  # noqa: E402
 import trep_scripts  # noqa: E402
 
 with open(os.path.join(root, 'tools', 'reference', 'trep-puppet.json')) as f:
@@ -39,5 +42,13 @@ out['puppet'] = {'configs': [c.name for c in s.configs],
 path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-api.json')
 with open(path, 'w') as f:
     json.dump(out, f, indent=1, sort_keys=True)
+    f.write('\n')
+print('wrote', path)
+
+discopt = dict((name, trep_discopt_scripts.record(trep, build, dt, n))
+               for name, build, dt, n in trep_discopt_scripts.SYSTEMS)
+path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-discopt.json')
+with open(path, 'w') as f:
+    json.dump(discopt, f, indent=1, sort_keys=True)
     f.write('\n')
 print('wrote', path)

@@ -32,6 +32,7 @@ from ._core import (
     ty,
     tz,
 )
+from . import discopt  # noqa: E402 (needs the core above)
 
 #: The trep release whose API this matches.
 __version__ = "v1.0.2"
@@ -39,6 +40,6 @@ __version__ = "v1.0.2"
 __all__ = [
     "CONST_SE3", "RX", "RY", "RZ", "TX", "TY", "TZ", "WORLD", "Config", "Constraint",
     "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "System",
-    "constraints", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
+    "constraints", "discopt", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
     "const_se3",
 ]

@@ -1,0 +1,193 @@
+"""tree_mech.trep.discopt against trep 1.0.2's ``trep.discopt``: the scripts of
+trep_discopt_scripts.py, run here on the layer, match what they recorded on trep
+(fixtures/trep-discopt.json, written by tools/reference/trep_api.py under Python 2.7); and
+what the fixtures cannot show — derivative checks, errors, monitors — on its own."""
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from tree_mech import trep
+from tree_mech.trep import discopt
+
+import trep_discopt_scripts
+
+HERE = pathlib.Path(__file__).parent
+FIXTURE = json.loads((HERE / "fixtures" / "trep-discopt.json").read_text())
+# trep's Newton stops at its own tolerance (1e-10 on the residual); ours goes on to 1e-12,
+# so quantities that pass through a constrained step agree to about 1e-9 of their scale.
+TOLERANCE = 1e-8
+
+
+def compare(ours, theirs, path):
+    if isinstance(theirs, dict):
+        assert set(ours) == set(theirs), f"{path}: keys differ"
+        for key in theirs:
+            compare(ours[key], theirs[key], f"{path}.{key}")
+        return
+    if isinstance(theirs, (bool, str)) or (isinstance(theirs, list) and theirs
+                                          and isinstance(theirs[0], str)):
+        assert ours == theirs, f"{path}: {ours!r} against trep's {theirs!r}"
+        return
+    a, b = np.asarray(ours, dtype=float), np.asarray(theirs, dtype=float)
+    assert a.shape == b.shape, f"{path}: shape {a.shape} against trep's {b.shape}"
+    scale = max(1.0, float(np.max(np.abs(b)))) if b.size else 1.0
+    err = float(np.max(np.abs(a - b))) if b.size else 0.0
+    assert err <= TOLERANCE * scale, f"{path}: off by {err:.3e} (scale {scale:.3e})"
+
+
+@pytest.fixture(scope="module", params=[s[0] for s in trep_discopt_scripts.SYSTEMS])
+def recorded(request):
+    name, build, dt, n = next(s for s in trep_discopt_scripts.SYSTEMS if s[0] == request.param)
+    return name, trep_discopt_scripts.record(trep, build, dt, n), FIXTURE[name]
+
+
+@pytest.mark.parametrize("group", [
+    ["nX", "nU", "kf", "X", "U", "split_p"],
+    ["f", "fdx", "fdu", "fdxdx", "fdxdu", "fdudu"],
+    ["A", "B", "K", "K_weighted", "project_X", "project_U", "dproject_dX", "dproject_dU"],
+    ["lq_K", "lq_C", "lq_P", "lq_b", "lqr_P"],
+    ["l", "l_dx", "l_du", "m", "m_dx", "cost"],
+    ["steepest", "quasi", "newton"],
+    ["armijo", "step", "optimize"],
+], ids=["trajectory", "step-map", "linearisation", "lq", "cost", "descent", "optimiser"])
+def test_discopt_matches_trep(recorded, group):
+    name, ours, theirs = recorded
+    for key in group:
+        compare(ours[key], theirs[key], f"{name}.{key}")
+
+
+def test_the_optimiser_takes_treps_steps(recorded):
+    """The same methods in the same order (quasi, then newton, with its fallbacks), to an
+    optimum in as many steps."""
+    _, ours, theirs = recorded
+    assert ours["optimize"]["methods"] == theirs["optimize"]["methods"]
+    assert ours["optimize"]["converged"] and theirs["optimize"]["converged"]
+
+
+def system_and_trajectory(n=11, dt=0.05):
+    s = trep_discopt_scripts.pendulum_on_cart(trep)
+    mvi = trep.MidpointVI(s)
+    q0 = np.array(s.q)
+    mvi.initialize_from_configs(0.0, q0, dt, q0)
+    d = discopt.DSystem(mvi, np.arange(n) * dt)
+    t = d.time
+    X, U = d.build_trajectory(u=0.2 * np.sin(t[:-1]), rho=0.3 * t[1:] ** 2)
+    X = trep_discopt_scripts.rollout(d, d.build_state(mvi.q2, mvi.p2), U)
+    return d, X, U
+
+
+@pytest.mark.parametrize("which", ["fdx", "fdu", "fdxdx", "fdxdu", "fdudu"])
+def test_every_step_derivative_passes_its_own_check(which):
+    d, X, U = system_and_trajectory()
+    delta = 1e-5
+    error, exact, approx = getattr(d, f"check_{which}")(X[4], U[4], 4, delta)
+    # Central differences of the lower derivative: truncation O(δ²), rounding about
+    # ε·|lower derivative|/δ.
+    d.set(X[4], U[4], 4)
+    lower = np.linalg.norm(d.fdx()) + np.linalg.norm(d.fdu())
+    allowed = 1e-6 * exact + 100 * np.finfo(float).eps * lower / delta
+    assert exact > 0 and error <= allowed, (which, error, exact, approx)
+
+
+def test_the_cost_derivatives_pass_the_optimisers_checks():
+    d, X, U = system_and_trajectory()
+    xd = np.zeros((len(X), d.nX))
+    cost = discopt.DCost(xd, np.zeros(U.shape), np.eye(d.nX), 0.1 * np.eye(d.nU))
+    opt = discopt.DOptimizer(d, cost, monitor=discopt.DOptimizerMonitor())
+    for method in ("steepest", "quasi", "newton"):
+        check = opt.check_dcost(X, U, method)
+        assert check.result and abs(check.exact_dcost) > 0, (method, check)
+    check = opt.check_ddcost(X, U, "newton", delta=1e-5, tolerance=1e-3)
+    assert abs(check.error) <= 1e-3 * abs(check.exact_ddcost), check
+
+
+def test_model_weights_are_treps_functions_of_k_and_arrays():
+    d, X, U = system_and_trajectory()
+    cost = discopt.DCost(np.zeros((len(X), d.nX)), np.zeros(U.shape), np.eye(d.nX),
+                         np.eye(d.nU))
+    opt = discopt.DOptimizer(d, cost, monitor=discopt.DOptimizerMonitor())
+    Q, R, S = opt.calc_quasi_model(X, U)
+    assert np.array_equal(Q(3), Q[3]) and Q.shape == (len(X), d.nX, d.nX)
+    assert R(0).shape == (d.nU, d.nU) and S(0).shape == (d.nX, d.nU)
+    # calc_ddcost takes trep's functions as well as the stacks.
+    dX, dU = np.ones(X.shape), np.ones(U.shape)
+    stacks = opt.calc_ddcost(X, U, dX, dU, Q, R, S)
+    functions = opt.calc_ddcost(X, U, dX, dU, lambda k: Q[k], lambda k: R[k], lambda k: S[k])
+    assert stacks == functions and stacks > 0
+
+
+def test_the_default_monitor_prints_and_keeps_the_history(capsys):
+    d, X, U = system_and_trajectory()
+    xd = np.tile(X[0], (len(X), 1))
+    xd[:, 0] = 0.0
+    cost = discopt.DCost(xd, np.zeros(U.shape), np.eye(d.nX), 0.1 * np.eye(d.nU))
+    opt = discopt.DOptimizer(d, cost)
+    converged, nX, nU = opt.optimize(X, U, max_steps=30)
+    out = capsys.readouterr().out
+    assert converged and "converged" in out and "quasi" in out
+    history = opt.monitor.cost_history
+    costs = [history[k] for k in sorted(history)]
+    assert all(b <= a for a, b in zip(costs, costs[1:])), costs
+    assert opt.calc_cost(nX, nU) < opt.calc_cost(X, U)
+
+
+def test_projection_keeps_a_trajectory_and_dproject_its_tangent():
+    d, X, U = system_and_trajectory()
+    K = d.calc_feedback_controller(X, U)
+    pX, pU = d.project(X, U, K)
+    assert np.allclose(pX, X, rtol=0, atol=1e-12) and np.allclose(pU, U, rtol=0, atol=1e-12)
+    A, B = d.linearize_trajectory(X, U)
+    dX, dU = d.dproject(A, B, np.zeros(X.shape), np.ones(U.shape), K)
+    for k in range(len(U)):
+        assert np.allclose(dX[k + 1], A[k] @ dX[k] + B[k] @ dU[k], rtol=0, atol=1e-12)
+
+
+def test_optimising_the_start_moves_it():
+    d, X, U = system_and_trajectory()
+    xd = np.tile(X[0], (len(X), 1))
+    xd[:, 0] = 0.0
+    cost = discopt.DCost(xd, np.zeros(U.shape), np.eye(d.nX), 0.1 * np.eye(d.nU))
+    opt = discopt.DOptimizer(d, cost, monitor=discopt.DOptimizerMonitor())
+    opt.optimize_ic = True
+    _, dX, _, _, _, _ = opt.calc_descent_direction(X, U, "quasi")
+    assert np.abs(dX[0]).max() > 0
+    converged, nX, nU = opt.optimize(X, U, max_steps=30)
+    assert converged and abs(nX[0, 0]) < abs(X[0, 0])
+
+
+def test_convert_trajectory_moves_parts_by_name():
+    d, X, U = system_and_trajectory()
+    back = d.convert_trajectory(d, X, U)
+    assert np.array_equal(back.X, X) and np.array_equal(back.U, U)
+
+
+def test_bad_arguments_are_plain_errors():
+    d, X, U = system_and_trajectory()
+    with pytest.raises(ValueError, match="shape"):
+        d.build_state(Q=[1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="outside the time base"):
+        d.set(X[0], U[0], 99)
+    d.set(X[-1], U[-1], d.kf())
+    with pytest.raises(ValueError, match="no next state"):
+        d.f()
+    with pytest.raises(ValueError, match="increasing"):
+        discopt.DSystem(d.varint, [0.0, 0.0])
+    with pytest.raises(ValueError, match="Q has shape"):
+        discopt.DCost(X, U, np.eye(2), np.eye(d.nU))
+    opt = discopt.DOptimizer(d, discopt.DCost(X, U, np.eye(d.nX), np.eye(d.nU)))
+    with pytest.raises(ValueError, match="unknown descent method"):
+        opt.calc_descent_direction(X, U, "sideways")
+
+
+def test_solve_tv_lqr_is_the_riccati_recursion():
+    """On a fixed system over a long horizon the gains settle to the DARE's: the cost-to-go
+    P satisfies P = Q + AᵀPA − AᵀPB(R + BᵀPB)⁻¹BᵀPA."""
+    A = np.array([[1.0, 0.1], [0.0, 1.0]])
+    B = np.array([[0.005], [0.1]])
+    K, P = discopt.solve_tv_lqr([A] * 400, [B] * 400, lambda k: np.eye(2), lambda k: np.eye(1))
+    gamma = np.eye(1) + B.T @ P @ B
+    residual = np.eye(2) + A.T @ P @ A - A.T @ P @ B @ np.linalg.solve(gamma, B.T @ P @ A) - P
+    assert np.abs(residual).max() < 1e-9 * np.abs(P).max()
+    assert np.allclose(K[0], np.linalg.solve(gamma, B.T @ P @ A), rtol=1e-12, atol=0)
