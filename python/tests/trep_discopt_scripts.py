@@ -152,3 +152,30 @@ def record(trep, build, dt, n):
     out['optimize'] = {'converged': bool(converged), 'X': oX, 'U': oU,
                        'costs': monitor.costs, 'methods': monitor.methods}
     return _plain(out)
+
+
+def time_discopt(trep, spec, runs=3, knots=100, dt=0.01):
+    """The best of `runs` wall times (s) of the pieces of one trajectory-optimisation
+    iteration on trep's Puppet over `knots` steps (building it is not timed): a rollout
+    through DSystem with the strings held, `linearize_trajectory` along it, and
+    `solve_tv_lqr` on that linearisation. Returns (rollout, linearize, lqr)."""
+    import time
+    discopt = trep.discopt
+    best = [float("inf")] * 3
+    for _ in range(runs):
+        s = trep_scripts.puppet_from_frames(trep, spec)
+        mvi = trep.MidpointVI(s)
+        q0 = np.array(s.q)
+        mvi.initialize_from_configs(0.0, q0, dt, q0)
+        d = discopt.DSystem(mvi, np.arange(knots + 1) * dt)
+        U = np.tile(d.build_input(rho=q0[s.nQd:]), (knots, 1))
+        start = time.time()
+        X = rollout(d, d.build_state(mvi.q2, mvi.p2), U)
+        rolled = time.time()
+        A, B = d.linearize_trajectory(X, U)
+        linearized = time.time()
+        discopt.solve_tv_lqr(A, B, lambda k: np.eye(d.nX), lambda k: np.eye(d.nU))
+        solved = time.time()
+        times = [rolled - start, linearized - rolled, solved - linearized]
+        best = [min(b, t) for b, t in zip(best, times)]
+    return best

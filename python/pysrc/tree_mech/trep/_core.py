@@ -1353,6 +1353,7 @@ class MidpointVI:
         self._derivs: Optional[Dict[str, np.ndarray]] = None
         self._order = 0
         self._k2: Optional[np.ndarray] = None
+        self._blocks: Dict[Any, Any] = {}
 
     # State ----------------------------------------------------------------------------
     @property
@@ -1420,6 +1421,11 @@ class MidpointVI:
              q2_hint: Any = None, lambda1_hint: Any = None) -> int:
         """Steps to ``t2`` with inputs ``u1`` over the step and the kinematic configs at
         ``k2`` at its end; returns Newton's iterations."""
+        return self._step(t2, u1, k2, 0)
+
+    def _step(self, t2: float, u1: Any, k2: Any, order: int) -> int:
+        """:meth:`step`, with the step's derivatives up to ``order`` computed in the same
+        solve (``trep.discopt`` asks for them at once)."""
         u1 = self._vec(u1, self.nu, "u1")
         k2 = self._vec(k2, self.nk, "k2")
         # A step that fails (a bad t2, Newton's failure) leaves the integrator where it was,
@@ -1431,7 +1437,7 @@ class MidpointVI:
         self._k2 = k2
         self._derivs = None
         try:
-            self._solve(0)
+            self._solve(order)
         except BaseException:
             (self._q1, self._p1, self.t1, self._u1, self.t2, self._k2, self._derivs,
              self._q2, self._p2, self._lam) = kept
@@ -1479,8 +1485,13 @@ class MidpointVI:
     def _first(self, of: str, by: str) -> np.ndarray:
         s = self._system
         d = self._need(1)
-        rows = {"q2": s._dperm, "p2": s._dperm, "lambda1": np.arange(self.nc)}[of]
-        m = d[f"{of}_d{by}"][np.ix_(rows, self._cols(by))]
+        # The rows and columns in trep's order, worked out once per pair (trep.discopt
+        # reads every block at every knot).
+        where = self._blocks.get((of, by))
+        if where is None:
+            rows = {"q2": s._dperm, "p2": s._dperm, "lambda1": np.arange(self.nc)}[of]
+            where = self._blocks[(of, by)] = np.ix_(rows, self._cols(by))
+        m = d[f"{of}_d{by}"][where]
         return m * s._signs()[:, None] if of == "lambda1" else m
 
     def _second(self, of: str, a: str, b: str) -> np.ndarray:
@@ -1499,6 +1510,8 @@ class MidpointVI:
         return stack.transpose(1, 2, 0)
 
     def _pick(self, m: np.ndarray, kinds: str, args: Sequence[Any]) -> Any:
+        if all(x is None for x in args):
+            return m
         s = self._system
         return m[tuple(s._index(k, x) for k, x in zip(kinds, args))]
 

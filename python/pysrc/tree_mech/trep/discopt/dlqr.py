@@ -50,9 +50,12 @@ def solve_tv_lqr(A: Sequence[np.ndarray], B: Sequence[np.ndarray], Q, R) -> LqrS
     K = [None] * n
     for k in range(n - 1, -1, -1):
         a, b = np.asarray(A[k], dtype=float), np.asarray(B[k], dtype=float)
-        gamma = at_step(R, k) + b.T @ P @ b
-        K[k] = np.linalg.solve(gamma, b.T @ P @ a)
-        P = at_step(Q, k) + a.T @ P @ a - K[k].T @ gamma @ K[k]
+        pa, pb = P @ a, P @ b
+        gamma = at_step(R, k) + b.T @ pb
+        bpa = pb.T @ a
+        K[k] = np.linalg.solve(gamma, bpa)
+        # KᵀΓK = (BᵀP'A)ᵀK, since ΓK = BᵀP'A.
+        P = at_step(Q, k) + a.T @ pa - bpa.T @ K[k]
         P = 0.5 * (P + P.T)
     return LqrSolution(np.array(K), P)
 
@@ -71,10 +74,11 @@ def solve_tv_lq(A, B, q, r, Q, S, R) -> LqSolution:
     for k in range(n - 1, -1, -1):
         a, bk = np.asarray(A[k], dtype=float), np.asarray(B[k], dtype=float)
         rk = np.asarray(r[k], dtype=float)
-        gamma = at_step(R, k) + bk.T @ P @ bk
-        K[k] = np.linalg.solve(gamma, bk.T @ P @ a + at_step(S, k).T)
+        pa, pb = P @ a, P @ bk
+        gamma = at_step(R, k) + bk.T @ pb
+        K[k] = np.linalg.solve(gamma, pb.T @ a + at_step(S, k).T)
         C[k] = np.linalg.solve(gamma, bk.T @ b_next + rk)
         b_next = (a.T - K[k].T @ bk.T) @ b_next + np.asarray(q[k], dtype=float) - K[k].T @ rk
-        P = at_step(Q, k) + a.T @ P @ a - K[k].T @ gamma @ K[k]
+        P = at_step(Q, k) + a.T @ pa - K[k].T @ gamma @ K[k]
         P = 0.5 * (P + P.T)
     return LqSolution(np.array(K), np.array(C), P, b_next)

@@ -106,7 +106,7 @@ class DOptimizer:
         z = c.m_dx(X[-1])
         Q[n] = c.m_dxdx(X[-1])
         for k in range(n - 1, -1, -1):
-            d.set(X[k], U[k], k, xk_hint=X[k + 1])
+            d._set(X[k], U[k], k, 2)
             Q[k] = c.l_dxdx(X[k], U[k], k) + d.fdxdx(z)
             S[k] = c.l_dxdu(X[k], U[k], k) + d.fdxdu(z)
             R[k] = c.l_dudu(X[k], U[k], k) + d.fdudu(z)
@@ -152,7 +152,7 @@ class DOptimizer:
         try:
             for k in range(len(bU)):
                 U[k] = bU[k] - Kproj[k] @ (X[k] - bX[k])
-                d.set(X[k], U[k], k, xk_hint=bX[k + 1])
+                d._set(X[k], U[k], k, 0)
                 X[k + 1] = d.f()
         except ConvergenceError:
             return ArmijoSimulation(False, X, U)

@@ -145,7 +145,12 @@ class DSystem:
     def set(self, xk: Any, uk: Any, k: int, xk_hint: Any = None, lambda_hint: Any = None) -> None:
         """Sets the state, input and discrete time, and steps the integrator to ``k + 1``
         (when ``k`` is not the last time), so that :meth:`f` and its derivatives refer to
-        them. A step that does not converge raises ``ConvergenceError``."""
+        them. A step that does not converge raises ``ConvergenceError``. (The hints are
+        accepted for trep's scripts; tree-mech's Newton starts from its own predictor.)"""
+        self._set(xk, uk, k, 0)
+
+    def _set(self, xk: Any, uk: Any, k: int, order: int) -> None:
+        """:meth:`set`, the step's derivatives up to ``order`` solved for with it."""
         k = int(k)
         if not 0 <= k <= self.kf():
             raise ValueError(f"k = {k} is outside the time base (0 … {self.kf()})")
@@ -156,12 +161,11 @@ class DSystem:
         self._xk, self._uk, self._k = x.copy(), u.copy(), k
         if k < self.kf():
             force, rho = self.split_input(u)
-            hint = None if xk_hint is None else self.split_state(xk_hint).Q
-            self.varint.step(self.time[k + 1], force, rho, q2_hint=hint, lambda1_hint=lambda_hint)
+            self.varint._step(self.time[k + 1], force, rho, order)
 
     def step(self, uk: Any, xk_hint: Any = None, lambda_hint: Any = None) -> None:
         """``set(f(), uk, k + 1)``: advances to the next discrete time under ``uk``."""
-        self.set(self.f(), uk, self._k + 1, xk_hint, lambda_hint)
+        self._set(self.f(), uk, self._k + 1, 0)
 
     def _dt(self) -> float:
         if self._k >= self.kf():
@@ -269,7 +273,7 @@ class DSystem:
         X, U = self._trajectory(X, U)
         A, B = [], []
         for k in range(len(U)):
-            self.set(X[k], U[k], k, xk_hint=X[k + 1])
+            self._set(X[k], U[k], k, 1)
             A.append(self.fdx())
             B.append(self.fdu())
         return Linearization(np.array(A), np.array(B))
@@ -295,7 +299,7 @@ class DSystem:
         X[0] = bX[0]
         for k in range(len(bU)):
             U[k] = bU[k] - K[k] @ (X[k] - bX[k])
-            self.set(X[k], U[k], k, xk_hint=bX[k + 1])
+            self._set(X[k], U[k], k, 0)
             X[k + 1] = self.f()
         return Trajectory(X, U)
 
