@@ -191,3 +191,36 @@ def test_solve_tv_lqr_is_the_riccati_recursion():
     residual = np.eye(2) + A.T @ P @ A - A.T @ P @ B @ np.linalg.solve(gamma, B.T @ P @ A) - P
     assert np.abs(residual).max() < 1e-9 * np.abs(P).max()
     assert np.allclose(K[0], np.linalg.solve(gamma, B.T @ P @ A), rtol=1e-12, atol=0)
+
+
+def test_descent_plot_draws_the_cost_along_the_direction(monkeypatch):
+    """With a stand-in for matplotlib: the true cost change along the direction starts as
+    the model does (zero, then falling at the rate Dh·ζ), and the Armijo points lie on
+    the line search's steps."""
+    import sys
+    import types
+
+    drawn = {}
+
+    def plot(x, y, *style, label=None):
+        drawn[label] = (np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+
+    pyplot = types.SimpleNamespace(plot=plot, legend=lambda: drawn.setdefault("legend", None))
+    package = types.ModuleType("matplotlib")
+    package.pyplot = pyplot
+    monkeypatch.setitem(sys.modules, "matplotlib", package)
+    monkeypatch.setitem(sys.modules, "matplotlib.pyplot", pyplot)
+    d, X, U = system_and_trajectory()
+    xd = np.tile(X[0], (len(X), 1))
+    xd[:, 0] = 0.0
+    cost = discopt.DCost(xd, np.zeros(U.shape), np.eye(d.nX), 0.1 * np.eye(d.nU))
+    opt = discopt.DOptimizer(d, cost, monitor=discopt.DOptimizerMonitor())
+    opt.descent_plot(X, U, method="quasi", points=23)
+    z, true = drawn["cost"]
+    _, model = drawn["model"]
+    assert len(z) == 23 and "legend" in drawn
+    near = np.argsort(np.abs(z))[:3]
+    assert np.allclose(true[near], model[near], rtol=0.05, atol=1e-9 * abs(opt.calc_cost(X, U)))
+    assert true[-1] < 0  # the full step lowers the cost
+    armijo, _ = drawn["Armijo points"]
+    assert np.allclose(armijo[:3], [1.0, 0.7, 0.49])
