@@ -224,3 +224,91 @@ def test_descent_plot_draws_the_cost_along_the_direction(monkeypatch):
     assert true[-1] < 0  # the full step lowers the cost
     armijo, _ = drawn["Armijo points"]
     assert np.allclose(armijo[:3], [1.0, 0.7, 0.49])
+
+
+def saved_parts():
+    s, t, Q, p, v, u, rho = trep_discopt_scripts.saved_trajectory(trep)
+    return s, [t, Q, p, v, u, rho]
+
+
+def same_parts(got, want):
+    assert len(got) == len(want)
+    for g, w in zip(got, want):
+        if w is None:
+            assert g is None
+        else:
+            assert np.array_equal(np.asarray(g, dtype=float), np.asarray(w, dtype=float))
+
+
+def test_a_trajectory_file_trep_wrote_loads():
+    s, parts = saved_parts()
+    same_parts(trep.load_trajectory(str(HERE / "fixtures" / "trep-trajectory.mat"), s), parts)
+    # Without a system: each part with its column names, trep's way.
+    t, (names, Q), _, (vnames, v), (unames, u), _ = trep.load_trajectory(
+        str(HERE / "fixtures" / "trep-trajectory"))
+    assert names == ["theta", "x"] and vnames == ["x"] and unames == ["torque"]
+    assert v is None and u is None and np.array_equal(Q, parts[1])
+
+
+def test_trep_read_what_the_layer_writes(tmp_path):
+    """trep loaded the committed file the layer wrote (the fixture records what it read);
+    the layer's writer still writes a file that loads the same."""
+    s, parts = saved_parts()
+    read_by_trep = [None if x == "none" else x for x in FIXTURE["loaded_by_trep"]]
+    same_parts(read_by_trep, parts)
+    trep.save_trajectory(str(tmp_path / "again"), s, *parts)
+    committed = HERE / "fixtures" / "tree-mech-trajectory.mat"
+    same_parts(trep.load_trajectory(str(tmp_path / "again.mat"), s),
+               trep.load_trajectory(str(committed), s))
+
+
+def test_state_trajectories_round_trip_through_a_file(tmp_path):
+    d, X, U = system_and_trajectory()
+    d.save_state_trajectory(str(tmp_path / "x.mat"), X, U)
+    back = d.load_state_trajectory(str(tmp_path / "x"))
+    assert np.array_equal(back.X, X) and np.array_equal(back.U, U)
+    with pytest.raises(ValueError, match="times"):
+        discopt.DSystem(d.varint, np.arange(5) * 0.1).load_state_trajectory(str(tmp_path / "x"))
+
+
+def test_a_file_that_is_not_a_trajectory_is_refused(tmp_path):
+    (tmp_path / "junk.mat").write_bytes(b"not a MAT-file at all" * 10)
+    with pytest.raises(ValueError, match="level-5 MAT-file"):
+        trep.load_trajectory(str(tmp_path / "junk.mat"))
+    s, parts = saved_parts()
+    with pytest.raises(ValueError, match="Q has shape"):
+        trep.save_trajectory(str(tmp_path / "bad"), s, parts[0], parts[1][:3])
+
+
+def test_compressed_and_small_elements_read_as_matlab_writes_them(tmp_path):
+    """MATLAB (and scipy with compression) may wrap each element in zlib, and write a name of
+    up to four bytes in the small-element form: both read as the plain file."""
+    import struct
+    import zlib
+
+    from tree_mech.trep import _matfile
+
+    plain = tmp_path / "plain.mat"
+    _matfile.write(str(plain), {"time": np.array([[0.0, 0.5]]), "Q_index": ["a", "bc"]})
+    data = plain.read_bytes()
+    packed, at = data[:128], 128
+    while at < len(data):
+        kind, size = struct.unpack("<II", data[at:at + 8])
+        element = data[at:at + 8 + size + (-size % 8)]
+        body = zlib.compress(element)
+        packed += struct.pack("<II", _matfile.MI_COMPRESSED, len(body)) + body
+        at += len(element)
+    (tmp_path / "packed.mat").write_bytes(packed)
+    # A small element: the name "time" in the tag's upper half and the next four bytes.
+    small = data.replace(struct.pack("<II", _matfile.MI_INT8, 4) + b"time" + b"\0" * 4,
+                         struct.pack("<I", (4 << 16) | _matfile.MI_INT8) + b"time")
+    assert len(small) == len(data) - 8
+    # The enclosing matrix (the file's first element) is 8 bytes shorter now.
+    outer = struct.unpack("<I", small[132:136])[0]
+    small = small[:132] + struct.pack("<I", outer - 8) + small[136:]
+    (tmp_path / "small.mat").write_bytes(small)
+    want = _matfile.read(str(plain))
+    assert want["Q_index"] == ["a", "bc"] and np.array_equal(want["time"], [[0.0, 0.5]])
+    for name in ("packed.mat", "small.mat"):
+        got = _matfile.read(str(tmp_path / name))
+        assert got["Q_index"] == want["Q_index"] and np.array_equal(got["time"], want["time"])

@@ -179,3 +179,14 @@ def time_discopt(trep, spec, runs=3, knots=100, dt=0.01):
         times = [rolled - start, linearized - rolled, solved - linearized]
         best = [min(b, t) for b, t in zip(best, times)]
     return best
+
+
+def saved_trajectory(trep):
+    """A system and a trajectory of it, parts (t, Q, p, v, u, rho), for the trajectory-file
+    round trips between trep and tree_mech.trep (v and u left out: a file may lack parts)."""
+    s = pendulum_on_cart(trep)
+    t = np.arange(6) * 0.1
+    Q = np.column_stack([0.3 + t ** 2, -0.5 * t])
+    p = (1.0 + t).reshape(-1, 1)
+    rho = np.sin(t[1:]).reshape(-1, 1)
+    return s, t, Q, p, None, None, rho

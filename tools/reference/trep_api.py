@@ -52,7 +52,15 @@ print('wrote', path)
 
 discopt = dict((name, trep_discopt_scripts.record(trep, build, dt, n))
                for name, build, dt, n in trep_discopt_scripts.SYSTEMS)
-path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-discopt.json')
+# Trajectory files both ways: trep writes one for the layer to read, and reads the one the
+# layer wrote (committed beside it) so the test can hold the layer's writer to what trep read.
+fixtures = os.path.join(root, 'python', 'tests', 'fixtures')
+s, t, Q, p, v, u, rho = trep_discopt_scripts.saved_trajectory(trep)
+trep.save_trajectory(os.path.join(fixtures, 'trep-trajectory.mat'), s, t, Q, p, v, u, rho)
+loaded = trep.load_trajectory(os.path.join(fixtures, 'tree-mech-trajectory.mat'), s)
+discopt['loaded_by_trep'] = trep_discopt_scripts._plain(
+    [x if x is not None else 'none' for x in loaded])
+path = os.path.join(fixtures, 'trep-discopt.json')
 with open(path, 'w') as f:
     json.dump(discopt, f, indent=1, sort_keys=True)
     f.write('\n')

@@ -32,6 +32,7 @@ from ._core import (
     ty,
     tz,
 )
+from ._trajectory import load_trajectory, save_trajectory
 from . import discopt  # noqa: E402 (needs the core above)
 
 #: The trep release whose API this matches.
@@ -41,5 +42,5 @@ __all__ = [
     "CONST_SE3", "RX", "RY", "RZ", "TX", "TY", "TZ", "WORLD", "Config", "Constraint",
     "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "System",
     "constraints", "discopt", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
-    "const_se3",
+    "const_se3", "load_trajectory", "save_trajectory",
 ]

@@ -20,6 +20,7 @@ from typing import Any, Optional
 import numpy as np
 
 from .._core import ConvergenceError, MidpointVI
+from .._trajectory import load_trajectory, save_trajectory
 from .dlqr import solve_tv_lqr
 
 SplitState = namedtuple("split_state", ["Q", "p", "v"])
@@ -140,6 +141,21 @@ class DSystem:
             move(Qa, configs(a), configs(b), self._nQ), move(pa, dyn(a), dyn(b), self._nd),
             move(va, kin(a), kin(b), self._nk), move(ua, inputs(a), inputs(b), self._nu),
             move(rhoa, kin(a), kin(b), self._nk))
+
+    def save_state_trajectory(self, filename: str, X: Any = None, U: Any = None) -> None:
+        """Saves ``(X, U)`` (zeros for one not given) split into its parts, as
+        ``trep.save_trajectory`` does, on this system's time base."""
+        Q, p, v, u, rho = self.split_trajectory(X, U)
+        save_trajectory(filename, self.system, self.time, Q, p, v, u, rho)
+
+    def load_state_trajectory(self, filename: str) -> Trajectory:
+        """``(X, U)`` from a file of :meth:`save_state_trajectory` or ``save_trajectory``;
+        what the file lacks (another system's parts, inputs not saved) is zero."""
+        t, Q, p, v, u, rho = load_trajectory(filename, self.system)
+        if len(t) != len(self.time):
+            raise ValueError(f"{filename} holds {len(t)} times; this system's time base has "
+                             f"{len(self.time)}")
+        return self.build_trajectory(Q, p, v, u, rho)
 
     # Dynamics -----------------------------------------------------------------------------
     def set(self, xk: Any, uk: Any, k: int, xk_hint: Any = None, lambda_hint: Any = None) -> None:
