@@ -101,8 +101,37 @@ def coupled_pendulums(trep):
     return s
 
 
+def pinned_masses(trep):
+    """A spherical pendulum whose tip carries, by point constraints, a free ball (3-D:
+    PointToPoint3D), a cup sliding in x-z (PointToPoint2D) and a slider on a rail along y
+    (PointToPoint1D); damping on the pendulum, a push on the ball, gravity."""
+    s = trep.System()
+    th1 = trep.Frame(s.world_frame, trep.RX, "th1", name="th1")
+    th2 = trep.Frame(th1, trep.RY, "th2", name="th2")
+    trep.Frame(th2, trep.TZ, -1.0, name="tip", mass=1.0)
+    bx = trep.Frame(s.world_frame, trep.TX, "bx")
+    by = trep.Frame(bx, trep.TY, "by")
+    trep.Frame(by, trep.TZ, "bz", name="ball", mass=0.5)
+    cx = trep.Frame(s.world_frame, trep.TX, "cx")
+    trep.Frame(cx, trep.TZ, "cz", name="cup", mass=0.2)
+    trep.Frame(s.world_frame, trep.TY, "sy", name="slider", mass=0.3)
+    trep.potentials.Gravity(s)
+    trep.forces.Damping(s, 0.0, {"th1": 0.1, "th2": 0.05})
+    trep.forces.ConfigForce(s, "bx", "push")
+    trep.constraints.PointToPoint3D(s, "tip", "ball", name="pin")
+    trep.constraints.PointToPoint2D(s, "xz", "cup", "ball", name="cup_pin")
+    trep.constraints.PointToPoint1D(s, "y", "slider", "tip", name="rail")
+    # Everything on its constraints: the ball, cup and slider where the tip is.
+    s.q = {"th1": 0.3, "th2": -0.2}
+    tip = s.get_frame("tip").p()
+    s.q = {"th1": 0.3, "th2": -0.2, "bx": tip[0], "by": tip[1], "bz": tip[2],
+           "cx": tip[0], "cz": tip[2], "sy": tip[1]}
+    return s
+
+
 SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline),
-           ("imported_tree", imported_tree), ("coupled_pendulums", coupled_pendulums)]
+           ("imported_tree", imported_tree), ("coupled_pendulums", coupled_pendulums),
+           ("pinned_masses", pinned_masses)]
 
 
 def _list(x):
@@ -188,10 +217,12 @@ def record(trep, build):
     satisfied = {}
     for label, options in [("all", {}), ("keep_kinematic", {"keep_kinematic": True}),
                            ("constant", {"constant_q_list": [cs[0].name]})]:
-        s.q = [x + 0.05 * (i + 1) / n for i, x in enumerate(q0)]
+        start = [x + 0.05 * (i + 1) / n for i, x in enumerate(q0)]
+        s.q = start
         s.dq = 0.3
         q = s.satisfy_constraints(tolerance=1e-12, **options)
-        satisfied[label] = {"q": _list(q), "dq": _list(s.dq), "h": [c.h() for c in s.constraints]}
+        satisfied[label] = {"q": _list(q), "dq": _list(s.dq), "h": [c.h() for c in s.constraints],
+                            "start": _list(start)}
     out["satisfy_constraints"] = satisfied
     # minimize_potential_energy from the same moved configuration: the equilibrium found, its
     # potential, or that none was (a ball on an endless incline has none).

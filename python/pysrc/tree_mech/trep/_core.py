@@ -1329,6 +1329,78 @@ class _PointOnPlane(Constraint):
                 f"normal = {json.dumps(self.normal)}", ""]
 
 
+class _PointToPoint1D(_BetweenFrames, Constraint):
+    """trep's ``(p₁ − p₂)[axis]`` for two frames' origins along one world axis (``"x"``,
+    ``"y"`` or ``"z"``): tree-mech's point row on that axis."""
+
+    def __init__(self, system: System, axis: str, frame1: Any, frame2: Any,
+                 name: Optional[str] = None):
+        if axis not in ("x", "y", "z"):
+            raise ValueError(f"PointToPoint1D {name or ''}: axis must be 'x', 'y' or 'z', "
+                             f"got {axis!r}")
+        self.axis = axis
+        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
+        system._hold()
+        try:
+            super().__init__(system, name)
+        finally:
+            system._release()
+
+    def get_actual_distance(self) -> float:
+        """``|p₁ − p₂|``, the whole distance between the origins (zero when held)."""
+        return _actual_distance(self.frame1, self.frame2)
+
+    def _toml(self) -> List[str]:
+        # trep lets a 3-D point constraint's three rows share one name; the model's rows
+        # need their own.
+        earlier = [c.name for c in self._system._constraints[: self.index]]
+        key = self.name if self.name not in earlier else f"{self.name}#{self.index}"
+        return ["[[constraint]]", f"name = {_toml_string(key)}", 'kind = "point"',
+                self._frames_line(self._system), f"axes = {_toml_string(self.axis)}", ""]
+
+
+def _actual_distance(frame1: Frame, frame2: Frame) -> float:
+    return float(np.linalg.norm(np.asarray(frame1.p())[:3] - np.asarray(frame2.p())[:3]))
+
+
+class _PointToPoint:
+    """trep's ``PointToPoint2D``/``3D``: one :class:`_PointToPoint1D` row per axis, all
+    named ``name``."""
+
+    def __init__(self, system: System, axes: str, frame1: Any, frame2: Any,
+                 name: Optional[str]):
+        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
+        system._hold()
+        try:
+            self.constraints = [_PointToPoint1D(system, a, frame1, frame2, name) for a in axes]
+        finally:
+            system._release()
+
+    def get_actual_distance(self) -> float:
+        """``|p₁ − p₂|``, the whole distance between the origins (zero when held)."""
+        return _actual_distance(self.frame1, self.frame2)
+
+
+class _PointToPoint3D(_PointToPoint):
+    """trep's ``PointToPoint3D(system, frame1, frame2, name=None)``: the origins held
+    together, three rows (x, y, z)."""
+
+    def __init__(self, system: System, frame1: Any, frame2: Any, name: Optional[str] = None):
+        super().__init__(system, "xyz", frame1, frame2, name)
+
+
+class _PointToPoint2D(_PointToPoint):
+    """trep's ``PointToPoint2D(system, plane, frame1, frame2, name=None)``: the origins held
+    together in ``plane`` (``"xy"``, ``"xz"`` or ``"yz"``), two rows."""
+
+    def __init__(self, system: System, plane: str, frame1: Any, frame2: Any,
+                 name: Optional[str] = None):
+        if plane not in ("xy", "xz", "yz"):
+            raise ValueError(f"PointToPoint2D {name or ''}: plane must be 'xy', 'xz' or 'yz', "
+                             f"got {plane!r}")
+        super().__init__(system, plane, frame1, frame2, name)
+
+
 class MidpointVI:
     """trep's midpoint variational integrator over tree-mech's: state ``(t1, q1, p1)`` →
     ``(t2, q2, p2)`` and ``lambda1`` by ``step(t2, u1, k2)``, trep's forcing (the force over
