@@ -534,8 +534,7 @@ impl Model {
         }
         out.set_item("poses", poses)?;
         let velocities = PyDict::new(py);
-        let full = &sys.frame_velocities(&q, &dq);
-        for (f, (v, _)) in self.model.frames.iter().zip(full) {
+        for (f, v) in self.model.frames.iter().zip(&sys.body_velocities(&q, &dq)) {
             velocities.set_item(&f.name, vector(py, v))?;
         }
         out.set_item("body_velocities", velocities)?;

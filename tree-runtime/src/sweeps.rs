@@ -93,6 +93,19 @@ pub fn poses<S: Scalar>(plan: &TreePlan, q: &[S], out: &mut [Pose<S>]) {
     }
 }
 
+/// Every model frame's body velocity alone, `v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k` (eq. (6)) from
+/// the world at rest, over [`TreePlan::pose_frames`] as [`poses`] goes: no columns, O(frames).
+pub fn velocities<S: Scalar>(plan: &TreePlan, q: &[S], dq: &[S], out: &mut [Twist<S>]) {
+    for (k, f) in plan.pose_frames.iter().enumerate() {
+        let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
+        let mut v = f.parent.map_or_else(zero6, |p| local.ad_inverse(&out[p]));
+        if let Joint::Variable(i) = f.joint {
+            v[f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 }] += dq[i];
+        }
+        out[k] = v;
+    }
+}
+
 /// What an outward sweep computes, and on which frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reach {

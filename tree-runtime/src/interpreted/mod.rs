@@ -66,6 +66,14 @@ impl TreeSystem {
         &self.model
     }
 
+    /// Every model frame's body velocity `v_k` (eq. (6)), without the columns
+    /// [`Self::frame_velocities`] adds (allocates the result).
+    pub fn body_velocities(&self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<Twist> {
+        let mut out = vec![[0.0; 6]; self.model.frames.len()];
+        sweeps::velocities(&self.full_plan, q.as_slice(), dq.as_slice(), &mut out);
+        out
+    }
+
     /// Every frame's body velocity `v_k` and its columns, for checking against finite
     /// differences (allocates; not for hot paths).
     pub fn frame_velocities(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<FrameVelocity> {
