@@ -40,7 +40,13 @@ fn continuous_derivatives_match_finite_differences() {
     let root = env!("CARGO_MANIFEST_DIR");
     let mut damped = common::load("humanoid.toml");
     damped.variables[3].damping = 0.7;
+    // Every element but the constraints: differentiated by recursive Newton–Euler over dual
+    // numbers (the constrained models above by the whole evaluation's).
+    let mut unconstrained =
+        model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap();
+    unconstrained.constraints.clear();
     for (name, model) in [
+        ("elements without constraints", unconstrained),
         (
             "elements",
             model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap(),
@@ -207,5 +213,44 @@ fn explicit_step_map_derivatives_match_finite_differences() {
             gap > 0.0 && gap < 1e-6,
             "{name}: RK4 vs Dormand–Prince {gap}"
         );
+    }
+}
+
+/// The inverse dynamics over dual numbers that the linearisation differentiates (recursive
+/// Newton–Euler): its values are the Lagrangian's `M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q − F` on
+/// random states of every model, springs, dampers and damping included.
+#[test]
+fn newton_euler_is_the_lagrangians_inverse_dynamics() {
+    use tree_mech::runtime::dual::{Dual, DualOutputs};
+    use tree_mech::runtime::dynamics::inverse_dynamics;
+    use tree_mech::runtime::outputs::Output;
+    use tree_mech::runtime::Terms;
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut files = common::model_files();
+    files.push(format!("{root}/tests/models/elements.toml").into());
+    for (k, file) in files.iter().enumerate() {
+        let model = model::from_toml_file(file).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let n = sys.dof();
+        let mut rng = common::Rng::new(90 + k as u64);
+        let (q, dq, qdd) = (rng.vector(n, 1.0), rng.vector(n, 1.5), rng.vector(n, 2.0));
+        let mut terms = Terms::zeros(Dyn(n));
+        let mut want = Vector::<Dyn>::zeros(n);
+        inverse_dynamics(&mut sys, &q, &dq, &qdd, &mut terms, &mut want).unwrap();
+        let constant = |v: &Vector<Dyn>| v.iter().map(|&x| Dual::new(x, 0.0)).collect::<Vec<_>>();
+        let mut out = DualOutputs::new(n, sys.constraint_count());
+        assert!(sys.inverse_dynamics_dual(&constant(&q), &constant(&dq), qdd.as_slice(), &mut out));
+        let scale = want.amax().max(1.0);
+        for i in 0..n {
+            let got = out.get(Output::Tau(i)).v
+                - out.get(Output::DlDq(i)).v
+                - out.get(Output::Force(i)).v;
+            assert!(
+                (got - want[i]).abs() <= 1e-12 * scale,
+                "{}: τ[{i}] = {got} by Newton–Euler, {} from the Lagrangian",
+                model.name,
+                want[i]
+            );
+        }
     }
 }

@@ -63,7 +63,7 @@ impl<S: Scalar> Articulated<S> {
 
 /// `v ×* w = (ω × f, v × f + ω × τ)`: the rate of change of a momentum `w = (f, τ)` carried by
 /// a body moving with twist `v = (v, ω)` (body-frame Newton–Euler).
-fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
+pub(crate) fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
     let (lin, ang) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
     let (f, tau) = ([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
     let a = cross(&ang, &f);
@@ -72,7 +72,8 @@ fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
     [a[0], a[1], a[2], b[0] + e[0], b[1] + e[1], b[2] + e[2]]
 }
 
-fn add6<S: Scalar>(a: &mut [S; 6], b: &[S; 6]) {
+/// `a += b`.
+pub(crate) fn add6<S: Scalar>(a: &mut [S; 6], b: &[S; 6]) {
     for (x, y) in a.iter_mut().zip(b) {
         *x += *y;
     }

@@ -112,7 +112,7 @@ pub struct DualOutputs {
 }
 
 /// Every field, in declaration order (so `field as usize` indexes it).
-const FIELDS: [Field; 13] = [
+const FIELDS: [Field; 14] = [
     Field::L,
     Field::DlDq,
     Field::DlDdq,
@@ -126,6 +126,7 @@ const FIELDS: [Field; 13] = [
     Field::Dh,
     Field::DhDot,
     Field::D2h,
+    Field::Tau,
 ];
 
 impl DualOutputs {
@@ -133,7 +134,7 @@ impl DualOutputs {
     pub fn new(n: usize, m: usize) -> Self {
         let size = |f: Field| match f {
             Field::L => 1,
-            Field::DlDq | Field::DlDdq | Field::Force => n,
+            Field::DlDq | Field::DlDdq | Field::Force | Field::Tau => n,
             Field::Mass | Field::D2lDdqDq | Field::D2lDqDq | Field::DforceDq | Field::DforceDdq => {
                 n * n
             }
@@ -155,6 +156,14 @@ impl DualOutputs {
     pub fn clear(&mut self) {
         for f in &mut self.fields {
             f.fill(Dual::default());
+        }
+    }
+
+    /// Zeroes the outputs of `fields` alone (an evaluation that writes only those need not
+    /// pay for clearing the matrices).
+    pub fn clear_fields(&mut self, fields: &[Field]) {
+        for &f in fields {
+            self.fields[f as usize].fill(Dual::default());
         }
     }
 

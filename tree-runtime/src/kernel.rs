@@ -4,8 +4,9 @@
 //! tracing scalar.
 
 use crate::elements::{self, Scratch};
+use crate::newton_euler::{self, NewtonEuler};
 use crate::order::Order;
-use crate::outputs::Sink;
+use crate::outputs::{Output, Sink};
 use crate::plan::TreePlan;
 use crate::scalar::Scalar;
 use crate::sweeps::{self, Workspace};
@@ -18,6 +19,8 @@ pub struct Kernel<S: Scalar> {
     pub tree: Workspace<S>,
     /// Per-variable scratch of the elements.
     pub elements: Scratch<S>,
+    /// The inverse dynamics' per-frame values.
+    pub newton_euler: NewtonEuler<S>,
 }
 
 impl<S: Scalar> Kernel<S> {
@@ -26,6 +29,7 @@ impl<S: Scalar> Kernel<S> {
         Kernel {
             tree: Workspace::new(plan),
             elements: Scratch::new(plan.dof()),
+            newton_euler: NewtonEuler::new(plan),
         }
     }
 }
@@ -73,6 +77,27 @@ pub fn elements_at<S: Scalar>(
     );
     elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
     elements::forces(plan, &k.tree, &mut k.elements, dq, Order::First, out);
+}
+
+/// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable): the
+/// bodies' `τ` by recursive Newton–Euler ([`Output::Tau`]) and, as [`elements_at`] gives
+/// them, the springs' `∂L/∂q` and the model's own forces — so that
+/// `Tau − DlDq − Force` is `M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q − F` of the whole model (the
+/// generalized force the accelerations need).
+pub fn inverse_dynamics<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    dq: &[S],
+    qdd: &[S],
+    out: &mut impl Sink<S>,
+) {
+    elements_at(plan, k, q, dq, out);
+    let ne = &mut k.newton_euler;
+    newton_euler::generalized_forces(plan, &k.tree, ne, dq, qdd);
+    for (i, &t) in ne.tau.iter().enumerate() {
+        out.set(Output::Tau(i), t);
+    }
 }
 
 /// The constraints `h`, `Dh` and, from `Order::Dynamics` on, `q̇ᵀD²h q̇` (and at `Order::Full`

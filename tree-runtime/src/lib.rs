@@ -46,6 +46,10 @@ pub mod sweeps;
 // system's in f64, unrolled by `tree_model!`).
 #[doc(hidden)]
 pub mod articulated;
+// Inverse dynamics by recursive Newton–Euler, over any scalar (dual numbers for the
+// continuous linearisation).
+#[doc(hidden)]
+pub mod newton_euler;
 
 // Simulation (needs nalgebra).
 #[cfg(feature = "simulate")]

@@ -225,6 +225,17 @@ where
             b[nd + s] = x;
         }
     };
+    // Without constraints the differentiated equations are `M_dd δq̈ = −δr` for the
+    // residual `r = τ(q, q̇, q̈) − ∂L_springs/∂q − F − Bu` at the solved q̈: one recursive
+    // Newton–Euler sweep over dual numbers a direction (O(frames)), where differentiating
+    // the whole evaluation forms `δM`, `δ(∂²L/∂q̇∂q)` (O(frames · depth)) and contracts
+    // them with q̈ and q̇ (O(n²)).
+    let rhs_inverse = |d: &DualOutputs, b: &mut [f64]| {
+        for (r, &i) in dynamic.iter().enumerate() {
+            b[r] = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d - d.get(Output::Tau(i)).d;
+        }
+    };
+    let by_inverse_dynamics = m == 0;
     for (x, &v) in ws.qd.iter_mut().zip(q.iter()) {
         *x = Dual::new(v, 0.0);
     }
@@ -247,8 +258,16 @@ where
                 .zip(e.iter())
                 .for_each(|(x, &de)| x.d = de);
             other.iter_mut().for_each(|x| x.d = 0.0);
-            cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, d);
-            rhs_along(d, if j < n { zero } else { e }, None, cx.sys, b);
+            if by_inverse_dynamics
+                && cx
+                    .sys
+                    .inverse_dynamics_dual(&ws.qd, &ws.vd, qdd.as_slice(), d)
+            {
+                rhs_inverse(d, b);
+            } else {
+                cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, d);
+                rhs_along(d, if j < n { zero } else { e }, None, cx.sys, b);
+            }
         } else {
             // An input moves only its own row of B u.
             d.clear();

@@ -32,6 +32,10 @@ pub enum Output {
     DhDot(usize),
     /// `∂²h_r/∂q_i∂q_j`.
     D2h(usize, usize, usize),
+    /// The bodies' inverse dynamics `τ_i = [M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q]_i` at given
+    /// accelerations (recursive Newton–Euler, [`crate::newton_euler`]; springs and forces not
+    /// included).
+    Tau(usize),
 }
 
 /// Where evaluations put what they produce: the interpreted system's matrices, or the
@@ -77,6 +81,8 @@ pub enum Field {
     DhDot,
     /// `ConstraintTerms::d2h`.
     D2h,
+    /// The inverse dynamics' `τ` (dual evaluations only).
+    Tau,
 }
 
 impl Field {
@@ -96,6 +102,7 @@ impl Field {
             Field::Dh => "dh",
             Field::DhDot => "dh_dot",
             Field::D2h => "d2h",
+            Field::Tau => "tau",
         }
     }
 }
@@ -132,6 +139,7 @@ impl Output {
             Output::Dh(r, i) => (Field::Dh, Pair(r, i)),
             Output::DhDot(r) => (Field::DhDot, Entry(r)),
             Output::D2h(r, i, j) => (Field::D2h, Stacked(r, i, j)),
+            Output::Tau(i) => (Field::Tau, Entry(i)),
         }
     }
 }

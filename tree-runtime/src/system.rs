@@ -243,6 +243,9 @@ impl Sink<f64> for ConstraintTerms {
     }
 }
 
+/// The outputs [`System::inverse_dynamics_dual`] writes (and clears).
+pub const INVERSE_DYNAMICS_FIELDS: [Field; 4] = [Field::L, Field::DlDq, Field::Force, Field::Tau];
+
 /// A mechanical system in generalized coordinates: a tree whose Lagrangian and derivatives
 /// can be evaluated at any state. `N` is `Const<n>` for generated systems (nothing is
 /// allocated per evaluation) and `Dyn` for the interpreted one.
@@ -374,6 +377,23 @@ where
     /// too). Clears `out` first; `out` is `DualOutputs::new(dof, constraint_count)`. What
     /// the linearisations differentiate.
     fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs);
+
+    /// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable) over
+    /// dual numbers ([`crate::kernel::inverse_dynamics`]: the bodies' `Tau` by recursive
+    /// Newton–Euler, the springs' `DlDq` and `L`, the model's `Force`), the outputs of
+    /// [`INVERSE_DYNAMICS_FIELDS`] cleared first: one O(frames) sweep per direction, what the
+    /// continuous linearisation differentiates. `false` when this system has no such
+    /// evaluation (the caller differentiates [`Self::evaluate_dual`] instead).
+    fn inverse_dynamics_dual(
+        &mut self,
+        q: &[Dual],
+        dq: &[Dual],
+        qdd: &[f64],
+        out: &mut DualOutputs,
+    ) -> bool {
+        let _ = (q, dq, qdd, out);
+        false
+    }
 
     /// [`Self::evaluate_dual`] at `(q, q̇)` along `(δq, δq̇)` into fresh storage (allocates).
     fn directional(

@@ -12,7 +12,7 @@ use crate::kernel::{self, Kernel};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
 use crate::sweeps::{self, Reach, Workspace};
-use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
+use crate::system::{ConstraintTerms, Order, System, Terms, Vector, INVERSE_DYNAMICS_FIELDS};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
 pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
@@ -33,6 +33,8 @@ pub struct TreeSystem {
     articulated: Articulated,
     kinematic: Vec<bool>,
     tau: Vec<f64>,
+    /// Accelerations as dual constants, for [`System::inverse_dynamics_dual`].
+    qdd_dual: Vec<Dual>,
 }
 
 impl TreeSystem {
@@ -57,6 +59,7 @@ impl TreeSystem {
             articulated: Articulated::new(&plan),
             kinematic: model.variables.iter().map(|v| v.is_kinematic()).collect(),
             tau: vec![0.0; model.variables.len()],
+            qdd_dual: vec![Dual::default(); model.variables.len()],
             plan,
         })
     }
@@ -243,5 +246,22 @@ impl System for TreeSystem {
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::evaluate(plan, kernel, q, dq, order, out);
         kernel::constraints(plan, kernel, q, dq, order, out);
+    }
+
+    fn inverse_dynamics_dual(
+        &mut self,
+        q: &[Dual],
+        dq: &[Dual],
+        qdd: &[f64],
+        out: &mut DualOutputs,
+    ) -> bool {
+        out.clear_fields(&INVERSE_DYNAMICS_FIELDS);
+        let plan = &self.plan;
+        let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
+        for (x, &a) in self.qdd_dual.iter_mut().zip(qdd) {
+            *x = Dual::new(a, 0.0);
+        }
+        kernel::inverse_dynamics(plan, kernel, q, dq, &self.qdd_dual, out);
+        true
     }
 }
