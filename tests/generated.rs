@@ -202,6 +202,42 @@ where
                 );
             }
         }
+        // The inverse dynamics over dual numbers (the continuous linearisation's sweep): values
+        // and derivatives along a random direction alike, where the model has no constraints
+        // (with them neither path offers it).
+        {
+            use tree_mech::runtime::dual::{Dual, DualOutputs};
+            use tree_mech::runtime::outputs::Output;
+            let seed = |x: &[f64], rng: &mut Rng| -> Vec<Dual> {
+                x.iter()
+                    .map(|&v| Dual::new(v, rng.uniform() - 0.5))
+                    .collect()
+            };
+            let (qd, vd) = (seed(q.as_slice(), &mut rng), seed(dq.as_slice(), &mut rng));
+            let acc: Vec<f64> = (0..n).map(|_| rng.uniform() - 0.5).collect();
+            let m = interpreted.constraint_count();
+            let (mut dg, mut dt) = (DualOutputs::new(n, m), DualOutputs::new(n, m));
+            let offered_g = generated.inverse_dynamics_dual(&qd, &vd, &acc, &mut dg);
+            let offered_t = interpreted.inverse_dynamics_dual(&qd, &vd, &acc, &mut dt);
+            assert_eq!(
+                offered_g,
+                m == 0,
+                "{}: compiled inverse dynamics offered",
+                model.name
+            );
+            if offered_g && offered_t {
+                for i in 0..n {
+                    for at in [Output::Tau(i), Output::DlDq(i), Output::Force(i)] {
+                        let (a, b) = (dg.get(at), dt.get(at));
+                        assert!(
+                            close(a.v, b.v, 1e-12) && close(a.d, b.d, 1e-12),
+                            "{}: {at:?} {a:?} vs {b:?}",
+                            model.name
+                        );
+                    }
+                }
+            }
+        }
         let mut pg = vec![Pose::IDENTITY; generated.frame_count()];
         let mut pt = pg.clone();
         generated.poses(&q, &mut pg);

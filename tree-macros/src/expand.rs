@@ -585,6 +585,42 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         )
     });
     let articulated_functions = articulated.as_ref().map(|e| e.functions.clone());
+    // The inverse dynamics over a generic scalar with the accelerations as inputs, for the
+    // continuous linearisation's one sweep per direction (`System::inverse_dynamics_dual`);
+    // only without constraints, where the linearisation uses it.
+    let inverse = (plan.rows == 0).then(|| {
+        let evaluation: Evaluation = |plan, k, q, dq, _, out| {
+            let qdd: Vec<Term> = (0..plan.dof()).map(trace::qdd).collect();
+            kernel::inverse_dynamics(plan, k, q, dq, &qdd, out)
+        };
+        traced(&plan, Order::First, evaluation)
+            .naming()
+            .emit("__d_inverse", &var_names, generic)
+    });
+    let inverse_functions = inverse.as_ref().map(|e| e.functions.clone());
+    let inverse_method = inverse.as_ref().map(|e| {
+        let body = &e.body;
+        quote! {
+            #[inline]
+            fn inverse_dynamics_dual(
+                &mut self,
+                q: &[::tree_mech::runtime::dual::Dual],
+                dq: &[::tree_mech::runtime::dual::Dual],
+                qdd: &[f64],
+                out: &mut ::tree_mech::runtime::dual::DualOutputs,
+            ) -> bool {
+                out.clear_fields(&::tree_mech::runtime::system::INVERSE_DYNAMICS_FIELDS);
+                out.accelerations.copy_from_slice(qdd);
+                let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
+                    match (q.try_into(), dq.try_into()) {
+                        (Ok(q), Ok(dq)) => (q, dq),
+                        _ => panic!("inverse_dynamics_dual takes one dual number per variable ({})", #n),
+                    };
+                #body
+                true
+            }
+        }
+    });
     let articulated_method = articulated.as_ref().map(|e| {
         let body = &e.body;
         quote! {
@@ -697,6 +733,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             #(#functions)*
             #articulated_functions
+            #inverse_functions
         }
 
         impl ::tree_mech::runtime::System for #name {
@@ -810,6 +847,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             }
 
             #articulated_method
+            #inverse_method
 
             fn poses(
                 &mut self,

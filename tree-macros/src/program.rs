@@ -104,7 +104,9 @@ impl Names {
 
 fn operands(node: &Node) -> Vec<Term> {
     match *node {
-        Node::Q(_) | Node::Dq(_) | Node::Tau(_) | Node::KinematicQdd(_) => vec![],
+        Node::Q(_) | Node::Dq(_) | Node::Tau(_) | Node::KinematicQdd(_) | Node::Qdd(_) => {
+            vec![]
+        }
         Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => vec![a, b],
         Node::Neg(a) | Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Recip(a) => vec![a],
     }
@@ -117,6 +119,8 @@ fn expression(node: &Node, names: &Names, generic: bool) -> TokenStream {
         Node::Dq(i) => quote!(dq[#i]),
         Node::Tau(i) => quote!(out.tau[#i]),
         Node::KinematicQdd(i) => quote!(out.qdd_in[#i]),
+        Node::Qdd(i) if generic => quote!(S::constant(out.acceleration(#i))),
+        Node::Qdd(i) => quote!(out.acceleration(#i)),
         Node::Add(a, b) => {
             let (a, b) = (term(a), term(b));
             quote!(#a + #b)

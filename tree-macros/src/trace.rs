@@ -37,6 +37,8 @@ pub enum Node {
     Tau(usize),
     /// A kinematic variable's prescribed acceleration (`out.qdd_in[i]`).
     KinematicQdd(usize),
+    /// The acceleration an inverse-dynamics evaluation is asked for (`out.acceleration(i)`).
+    Qdd(usize),
     Add(Term, Term),
     Sub(Term, Term),
     Mul(Term, Term),
@@ -76,6 +78,7 @@ fn key(node: &Node) -> NodeKey {
         Node::Dq(i) => (1, (false, i as u64), none),
         Node::Tau(i) => (10, (false, i as u64), none),
         Node::KinematicQdd(i) => (11, (false, i as u64), none),
+        Node::Qdd(i) => (12, (false, i as u64), none),
         Node::Add(a, b) => {
             let (x, y) = ordered(a, b);
             (2, x, y)
@@ -132,6 +135,11 @@ pub fn dq(i: usize) -> Term {
 /// The input `τ[i]`, the generalized force on variable i.
 pub fn tau(i: usize) -> Term {
     push(Node::Tau(i))
+}
+
+/// The input `q̈[i]` an inverse-dynamics evaluation is asked for.
+pub fn qdd(i: usize) -> Term {
+    push(Node::Qdd(i))
 }
 
 /// The input `q̈[i]` of a kinematic variable (its prescription).

@@ -109,6 +109,9 @@ pub struct DualOutputs {
     /// Generated code's storage between its functions (not part of the outputs).
     #[doc(hidden)]
     pub scratch: Scratch<Dual>,
+    /// The accelerations an inverse-dynamics evaluation reads
+    /// ([`crate::system::System::inverse_dynamics_dual`] sets them; not part of the outputs).
+    pub accelerations: Vec<f64>,
 }
 
 /// Every field, in declaration order (so `field as usize` indexes it).
@@ -149,6 +152,7 @@ impl DualOutputs {
                 .map(|&f| vec![Dual::default(); size(f)])
                 .collect(),
             scratch: Scratch::default(),
+            accelerations: vec![0.0; n],
         }
     }
 
@@ -204,5 +208,10 @@ impl Sink<Dual> for DualOutputs {
         let (field, index) = at.slot();
         let o = self.offset(field, index);
         self.fields[field as usize][o] += x;
+    }
+
+    #[inline(always)]
+    fn acceleration(&self, i: usize) -> f64 {
+        self.accelerations[i]
     }
 }

@@ -50,6 +50,13 @@ pub trait Sink<S> {
     fn set(&mut self, at: Output, x: S) {
         self.add(at, x)
     }
+
+    /// The acceleration `q̈_i` an inverse-dynamics evaluation is asked for, where the sink
+    /// carries it (the generated code's one input besides the state; default zero).
+    fn acceleration(&self, i: usize) -> f64 {
+        let _ = i;
+        0.0
+    }
 }
 
 /// A field of `Terms` or `ConstraintTerms` that outputs are stored in.
