@@ -216,14 +216,14 @@ fn explicit_step_map_derivatives_match_finite_differences() {
     }
 }
 
-/// The inverse dynamics over dual numbers that the linearisation differentiates (recursive
+/// The inverse dynamics over jets that the linearisation differentiates (recursive
 /// Newton–Euler): its values are the Lagrangian's `M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q − F` on
-/// random states of every model, springs, dampers and damping included.
+/// random states of every model, springs, dampers and damping included, and each lane's
+/// derivative is the central difference of those values along its direction.
 #[test]
 fn newton_euler_is_the_lagrangians_inverse_dynamics() {
-    use tree_mech::runtime::dual::{Dual, DualOutputs};
+    use tree_mech::runtime::dual::{Jet, JetOutputs, LANES};
     use tree_mech::runtime::dynamics::inverse_dynamics;
-    use tree_mech::runtime::outputs::Output;
     use tree_mech::runtime::Terms;
     let root = env!("CARGO_MANIFEST_DIR");
     let mut files = common::model_files();
@@ -234,23 +234,60 @@ fn newton_euler_is_the_lagrangians_inverse_dynamics() {
         let n = sys.dof();
         let mut rng = common::Rng::new(90 + k as u64);
         let (q, dq, qdd) = (rng.vector(n, 1.0), rng.vector(n, 1.5), rng.vector(n, 2.0));
-        let mut terms = Terms::zeros(Dyn(n));
-        let mut want = Vector::<Dyn>::zeros(n);
-        inverse_dynamics(&mut sys, &q, &dq, &qdd, &mut terms, &mut want).unwrap();
-        let constant = |v: &Vector<Dyn>| v.iter().map(|&x| Dual::new(x, 0.0)).collect::<Vec<_>>();
-        let mut out = DualOutputs::new(n, sys.constraint_count());
-        assert!(sys.inverse_dynamics_dual(&constant(&q), &constant(&dq), qdd.as_slice(), &mut out));
+        // The Lagrangian's τ at a state.
+        let lagrangian = |sys: &mut TreeSystem, q: &Vector<Dyn>, dq: &Vector<Dyn>| {
+            let mut terms = Terms::zeros(Dyn(n));
+            let mut tau = Vector::<Dyn>::zeros(n);
+            inverse_dynamics(sys, q, dq, &qdd, &mut terms, &mut tau).unwrap();
+            tau
+        };
+        let want = lagrangian(&mut sys, &q, &dq);
+        // Lane l seeds a random direction of (q, q̇).
+        let dirs: Vec<(Vector<Dyn>, Vector<Dyn>)> = (0..LANES)
+            .map(|_| (rng.vector(n, 1.0), rng.vector(n, 1.0)))
+            .collect();
+        // Lane l of entry i: the direction's component `part` (0: q, 1: q̇).
+        let jets = |x: &Vector<Dyn>, part: usize| {
+            (0..n)
+                .map(|i| Jet {
+                    v: x[i],
+                    d: std::array::from_fn(|l| {
+                        if part == 0 {
+                            dirs[l].0[i]
+                        } else {
+                            dirs[l].1[i]
+                        }
+                    }),
+                })
+                .collect::<Vec<_>>()
+        };
+        let (qj, vj) = (jets(&q, 0), jets(&dq, 1));
+        let mut out = JetOutputs::<LANES>::new(n);
+        assert!(sys.inverse_dynamics_jet(&qj, &vj, qdd.as_slice(), &mut out));
+        let total = |i: usize| out.tau[i] - out.dl_dq[i] - out.force[i];
         let scale = want.amax().max(1.0);
         for i in 0..n {
-            let got = out.get(Output::Tau(i)).v
-                - out.get(Output::DlDq(i)).v
-                - out.get(Output::Force(i)).v;
             assert!(
-                (got - want[i]).abs() <= 1e-12 * scale,
-                "{}: τ[{i}] = {got} by Newton–Euler, {} from the Lagrangian",
+                (total(i).v - want[i]).abs() <= 1e-12 * scale,
+                "{}: τ[{i}] = {} by Newton–Euler, {} from the Lagrangian",
                 model.name,
+                total(i).v,
                 want[i]
             );
+        }
+        let h = 1e-6;
+        for (l, (dir_q, dir_dq)) in dirs.iter().enumerate() {
+            let plus = lagrangian(&mut sys, &(&q + dir_q * h), &(&dq + dir_dq * h));
+            let minus = lagrangian(&mut sys, &(&q - dir_q * h), &(&dq - dir_dq * h));
+            for i in 0..n {
+                let fd = (plus[i] - minus[i]) / (2.0 * h);
+                assert!(
+                    (total(i).d[l] - fd).abs() <= 1e-6 * scale.max(fd.abs()),
+                    "{}: δτ[{i}] along lane {l}: {} vs {fd}",
+                    model.name,
+                    total(i).d[l]
+                );
+            }
         }
     }
 }

@@ -202,38 +202,42 @@ where
                 );
             }
         }
-        // The inverse dynamics over dual numbers (the continuous linearisation's sweep): values
-        // and derivatives along a random direction alike, where the model has no constraints
-        // (with them neither path offers it).
+        // The inverse dynamics over jets (the continuous linearisation's sweep): values and
+        // derivatives along random directions alike, where the model has no constraints (with
+        // them neither path offers it).
         {
-            use tree_mech::runtime::dual::{Dual, DualOutputs};
-            use tree_mech::runtime::outputs::Output;
-            let seed = |x: &[f64], rng: &mut Rng| -> Vec<Dual> {
+            use tree_mech::runtime::dual::{Jet, JetOutputs, LANES};
+            let mut seed = |x: &[f64]| -> Vec<Jet<LANES>> {
                 x.iter()
-                    .map(|&v| Dual::new(v, rng.uniform() - 0.5))
+                    .map(|&v| Jet {
+                        v,
+                        d: std::array::from_fn(|_| rng.uniform() - 0.5),
+                    })
                     .collect()
             };
-            let (qd, vd) = (seed(q.as_slice(), &mut rng), seed(dq.as_slice(), &mut rng));
+            let (qj, vj) = (seed(q.as_slice()), seed(dq.as_slice()));
             let acc: Vec<f64> = (0..n).map(|_| rng.uniform() - 0.5).collect();
+            let (mut jg, mut jt) = (JetOutputs::new(n), JetOutputs::new(n));
+            let offered_g = generated.inverse_dynamics_jet(&qj, &vj, &acc, &mut jg);
+            let offered_t = interpreted.inverse_dynamics_jet(&qj, &vj, &acc, &mut jt);
             let m = interpreted.constraint_count();
-            let (mut dg, mut dt) = (DualOutputs::new(n, m), DualOutputs::new(n, m));
-            let offered_g = generated.inverse_dynamics_dual(&qd, &vd, &acc, &mut dg);
-            let offered_t = interpreted.inverse_dynamics_dual(&qd, &vd, &acc, &mut dt);
             assert_eq!(
                 offered_g,
                 m == 0,
                 "{}: compiled inverse dynamics offered",
                 model.name
             );
-            if offered_g && offered_t {
+            assert!(offered_t, "{}: interpreted inverse dynamics", model.name);
+            if offered_g {
                 for i in 0..n {
-                    for at in [Output::Tau(i), Output::DlDq(i), Output::Force(i)] {
-                        let (a, b) = (dg.get(at), dt.get(at));
-                        assert!(
-                            close(a.v, b.v, 1e-12) && close(a.d, b.d, 1e-12),
-                            "{}: {at:?} {a:?} vs {b:?}",
-                            model.name
-                        );
+                    for (what, a, b) in [
+                        ("tau", jg.tau[i], jt.tau[i]),
+                        ("dl_dq", jg.dl_dq[i], jt.dl_dq[i]),
+                        ("force", jg.force[i], jt.force[i]),
+                    ] {
+                        let same = close(a.v, b.v, 1e-12)
+                            && a.d.iter().zip(&b.d).all(|(&x, &y)| close(x, y, 1e-12));
+                        assert!(same, "{}: {what}[{i}] {a:?} vs {b:?}", model.name);
                     }
                 }
             }

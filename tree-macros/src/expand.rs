@@ -586,7 +586,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     });
     let articulated_functions = articulated.as_ref().map(|e| e.functions.clone());
     // The inverse dynamics over a generic scalar with the accelerations as inputs, for the
-    // continuous linearisation's one sweep per direction (`System::inverse_dynamics_dual`);
+    // continuous linearisation's sweeps over jets (`System::inverse_dynamics_jet`);
     // only without constraints, where the linearisation uses it.
     let inverse = (plan.rows == 0).then(|| {
         let evaluation: Evaluation = |plan, k, q, dq, _, out| {
@@ -602,20 +602,22 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         let body = &e.body;
         quote! {
             #[inline]
-            fn inverse_dynamics_dual(
+            fn inverse_dynamics_jet(
                 &mut self,
-                q: &[::tree_mech::runtime::dual::Dual],
-                dq: &[::tree_mech::runtime::dual::Dual],
+                q: &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>],
+                dq: &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>],
                 qdd: &[f64],
-                out: &mut ::tree_mech::runtime::dual::DualOutputs,
+                out: &mut ::tree_mech::runtime::dual::JetOutputs<{ ::tree_mech::runtime::dual::LANES }>,
             ) -> bool {
-                out.clear_fields(&::tree_mech::runtime::system::INVERSE_DYNAMICS_FIELDS);
+                out.clear();
                 out.accelerations.copy_from_slice(qdd);
-                let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
-                    match (q.try_into(), dq.try_into()) {
-                        (Ok(q), Ok(dq)) => (q, dq),
-                        _ => panic!("inverse_dynamics_dual takes one dual number per variable ({})", #n),
-                    };
+                let (q, dq): (
+                    &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>; #n],
+                    &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>; #n],
+                ) = match (q.try_into(), dq.try_into()) {
+                    (Ok(q), Ok(dq)) => (q, dq),
+                    _ => panic!("inverse_dynamics_jet takes one jet per variable ({})", #n),
+                };
                 #body
                 true
             }

@@ -109,9 +109,6 @@ pub struct DualOutputs {
     /// Generated code's storage between its functions (not part of the outputs).
     #[doc(hidden)]
     pub scratch: Scratch<Dual>,
-    /// The accelerations an inverse-dynamics evaluation reads
-    /// ([`crate::system::System::inverse_dynamics_dual`] sets them; not part of the outputs).
-    pub accelerations: Vec<f64>,
 }
 
 /// Every field, in declaration order (so `field as usize` indexes it).
@@ -152,7 +149,6 @@ impl DualOutputs {
                 .map(|&f| vec![Dual::default(); size(f)])
                 .collect(),
             scratch: Scratch::default(),
-            accelerations: vec![0.0; n],
         }
     }
 
@@ -160,14 +156,6 @@ impl DualOutputs {
     pub fn clear(&mut self) {
         for f in &mut self.fields {
             f.fill(Dual::default());
-        }
-    }
-
-    /// Zeroes the outputs of `fields` alone (an evaluation that writes only those need not
-    /// pay for clearing the matrices).
-    pub fn clear_fields(&mut self, fields: &[Field]) {
-        for &f in fields {
-            self.fields[f as usize].fill(Dual::default());
         }
     }
 
@@ -208,6 +196,186 @@ impl Sink<Dual> for DualOutputs {
         let (field, index) = at.slot();
         let o = self.offset(field, index);
         self.fields[field as usize][o] += x;
+    }
+}
+
+/// A value with its derivatives along `K` directions at once, `v + Σ_l d_l ε_l`
+/// (`ε_l ε_m = 0`): forward-mode differentiation in lanes, the value's work done once for
+/// all of them (the continuous linearisation seeds [`LANES`] directions a sweep).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Jet<const K: usize> {
+    /// The value.
+    pub v: f64,
+    /// Its derivative along each direction.
+    pub d: [f64; K],
+}
+
+/// The directions one [`Jet`] sweep carries.
+pub const LANES: usize = 8;
+
+impl<const K: usize> Default for Jet<K> {
+    fn default() -> Self {
+        Jet {
+            v: 0.0,
+            d: [0.0; K],
+        }
+    }
+}
+
+impl<const K: usize> Jet<K> {
+    /// `v` with no derivative.
+    #[inline(always)]
+    pub fn constant(v: f64) -> Self {
+        Jet { v, d: [0.0; K] }
+    }
+
+    /// `v` with `d = s·e` (each lane scaled).
+    #[inline(always)]
+    fn chain(v: f64, s: f64, e: &[f64; K]) -> Self {
+        Jet {
+            v,
+            d: e.map(|x| s * x),
+        }
+    }
+}
+
+impl<const K: usize> Add for Jet<K> {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        let mut d = self.d;
+        for (x, y) in d.iter_mut().zip(o.d) {
+            *x += y;
+        }
+        Jet { v: self.v + o.v, d }
+    }
+}
+
+impl<const K: usize> Sub for Jet<K> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        let mut d = self.d;
+        for (x, y) in d.iter_mut().zip(o.d) {
+            *x -= y;
+        }
+        Jet { v: self.v - o.v, d }
+    }
+}
+
+impl<const K: usize> Mul for Jet<K> {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        let mut d = [0.0; K];
+        for l in 0..K {
+            d[l] = self.d[l] * o.v + self.v * o.d[l];
+        }
+        Jet { v: self.v * o.v, d }
+    }
+}
+
+impl<const K: usize> Neg for Jet<K> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        Jet {
+            v: -self.v,
+            d: self.d.map(|x| -x),
+        }
+    }
+}
+
+impl<const K: usize> AddAssign for Jet<K> {
+    #[inline(always)]
+    fn add_assign(&mut self, o: Self) {
+        *self = *self + o;
+    }
+}
+
+impl<const K: usize> SubAssign for Jet<K> {
+    #[inline(always)]
+    fn sub_assign(&mut self, o: Self) {
+        *self = *self - o;
+    }
+}
+
+impl<const K: usize> Scalar for Jet<K> {
+    #[inline(always)]
+    fn constant(x: f64) -> Self {
+        Jet::constant(x)
+    }
+
+    #[inline(always)]
+    fn sin_cos(self) -> (Self, Self) {
+        let (s, c) = self.v.sin_cos();
+        (Jet::chain(s, c, &self.d), Jet::chain(c, -s, &self.d))
+    }
+
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        let r = self.v.sqrt();
+        Jet::chain(r, 0.5 / r, &self.d)
+    }
+
+    #[inline(always)]
+    fn recip(self) -> Self {
+        let r = 1.0 / self.v;
+        Jet::chain(r, -r * r, &self.d)
+    }
+}
+
+/// The inverse dynamics' outputs over [`Jet`]s ([`crate::kernel::inverse_dynamics`]: `L`,
+/// `DlDq`, `Force`, `Tau`; the rest ignored), with the accelerations it reads.
+#[derive(Clone, Debug)]
+pub struct JetOutputs<const K: usize> {
+    /// `L`.
+    pub l: Jet<K>,
+    /// `∂L/∂q` of the springs.
+    pub dl_dq: Vec<Jet<K>>,
+    /// The model's own forces.
+    pub force: Vec<Jet<K>>,
+    /// The bodies' `τ`.
+    pub tau: Vec<Jet<K>>,
+    /// The accelerations the evaluation reads.
+    pub accelerations: Vec<f64>,
+    /// Generated code's storage between its functions (not part of the outputs).
+    #[doc(hidden)]
+    pub scratch: Scratch<Jet<K>>,
+}
+
+impl<const K: usize> JetOutputs<K> {
+    /// Zeros for `n` variables.
+    pub fn new(n: usize) -> Self {
+        JetOutputs {
+            l: Jet::default(),
+            dl_dq: vec![Jet::default(); n],
+            force: vec![Jet::default(); n],
+            tau: vec![Jet::default(); n],
+            accelerations: vec![0.0; n],
+            scratch: Scratch::default(),
+        }
+    }
+
+    /// Zeroes the outputs.
+    pub fn clear(&mut self) {
+        self.l = Jet::default();
+        for v in [&mut self.dl_dq, &mut self.force, &mut self.tau] {
+            v.fill(Jet::default());
+        }
+    }
+}
+
+impl<const K: usize> Sink<Jet<K>> for JetOutputs<K> {
+    #[inline]
+    fn add(&mut self, at: Output, x: Jet<K>) {
+        match at {
+            Output::L => self.l += x,
+            Output::DlDq(i) => self.dl_dq[i] += x,
+            Output::Force(i) => self.force[i] += x,
+            Output::Tau(i) => self.tau[i] += x,
+            _ => {}
+        }
     }
 
     #[inline(always)]

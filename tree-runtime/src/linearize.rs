@@ -13,10 +13,10 @@
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
 use crate::context::StepContext;
-use crate::dual::{Dual, DualOutputs};
+use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
-use crate::linalg::{lu_factor_packed, lu_solve_packed, mul_into, Packing};
+use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows, mul_into, Packing};
 use crate::outputs::Output;
 use crate::system::{Order, System, Vector};
 
@@ -80,6 +80,12 @@ where
     qd: Vec<Dual>,
     vd: Vec<Dual>,
     along: DualOutputs,
+    /// The state over jets, and the inverse dynamics along LANES directions.
+    qj: Vec<Jet<LANES>>,
+    vj: Vec<Jet<LANES>>,
+    jets: JetOutputs<LANES>,
+    /// Every column's right side at once, row-major.
+    rows: Vec<f64>,
     /// A coordinate direction, zeros, and one right-hand side.
     e: Vec<f64>,
     zero: Vec<f64>,
@@ -105,6 +111,10 @@ where
             qd: vec![Dual::default(); n],
             vd: vec![Dual::default(); n],
             along: DualOutputs::new(n, sys.constraint_count()),
+            qj: vec![Jet::default(); n],
+            vj: vec![Jet::default(); n],
+            jets: JetOutputs::new(n),
+            rows: Vec::new(),
             e: vec![0.0; n],
             zero: vec![0.0; n],
             b: vec![0.0; k],
@@ -227,15 +237,64 @@ where
     };
     // Without constraints the differentiated equations are `M_dd δq̈ = −δr` for the
     // residual `r = τ(q, q̇, q̈) − ∂L_springs/∂q − F − Bu` at the solved q̈: one recursive
-    // Newton–Euler sweep over dual numbers a direction (O(frames)), where differentiating
-    // the whole evaluation forms `δM`, `δ(∂²L/∂q̇∂q)` (O(frames · depth)) and contracts
-    // them with q̈ and q̇ (O(n²)).
-    let rhs_inverse = |d: &DualOutputs, b: &mut [f64]| {
-        for (r, &i) in dynamic.iter().enumerate() {
-            b[r] = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d - d.get(Output::Tau(i)).d;
+    // Newton–Euler sweep over jets for LANES directions at once (O(frames)), where
+    // differentiating the whole evaluation forms `δM`, `δ(∂²L/∂q̇∂q)` (O(frames · depth))
+    // and contracts them with q̈ and q̇ (O(n²)) a direction.
+    let mut first = 0;
+    if m == 0 {
+        // Every column's right side, row-major (row r at r·cols), solved at once.
+        let cols = 2 * n + nu;
+        ws.rows.resize(k * cols, 0.0);
+        let (qj, vj, jets, rows) = (&mut ws.qj, &mut ws.vj, &mut ws.jets, &mut ws.rows);
+        let mut offered = true;
+        for group in (0..2 * n).step_by(LANES) {
+            for (x, &v) in qj.iter_mut().zip(q.iter()) {
+                *x = Jet::constant(v);
+            }
+            for (x, &v) in vj.iter_mut().zip(dq.iter()) {
+                *x = Jet::constant(v);
+            }
+            let lanes = (2 * n - group).min(LANES);
+            for l in 0..lanes {
+                let j = group + l;
+                if j < n {
+                    qj[j].d[l] = 1.0;
+                } else {
+                    vj[j - n].d[l] = 1.0;
+                }
+            }
+            if !cx.sys.inverse_dynamics_jet(qj, vj, qdd.as_slice(), jets) {
+                offered = false;
+                break;
+            }
+            for (r, &i) in dynamic.iter().enumerate() {
+                let (f, s, t) = (&jets.force[i].d, &jets.dl_dq[i].d, &jets.tau[i].d);
+                for l in 0..lanes {
+                    rows[r * cols + group + l] = f[l] + s[l] - t[l];
+                }
+            }
         }
-    };
-    let by_inverse_dynamics = m == 0;
+        if offered {
+            // An input moves only its own row of B u.
+            for (r, &i) in dynamic.iter().enumerate() {
+                for c in 0..nu {
+                    rows[r * cols + 2 * n + c] = f64::from(u8::from(cx.sys.input_variable(c) == i));
+                }
+            }
+            lu_solve_packed_rows(&ws.kkt, k, &ws.pivots, rows, cols);
+            for r in 0..nd {
+                let row = &rows[r * cols..(r + 1) * cols];
+                for j in 0..n {
+                    out.qdd_dq[(r, j)] = row[j];
+                    out.qdd_ddq[(r, j)] = row[n + j];
+                }
+                for c in 0..nu {
+                    out.qdd_du[(r, c)] = row[2 * n + c];
+                }
+            }
+            first = cols;
+        }
+    }
     for (x, &v) in ws.qd.iter_mut().zip(q.iter()) {
         *x = Dual::new(v, 0.0);
     }
@@ -243,7 +302,7 @@ where
         *x = Dual::new(v, 0.0);
     }
     let (e, zero, b, d) = (&mut ws.e, &ws.zero, &mut ws.b, &mut ws.along);
-    for j in 0..(2 * n + nu) {
+    for j in first..(2 * n + nu) {
         if j < 2 * n {
             // Seed the one coordinate direction j.
             e.fill(0.0);
@@ -258,16 +317,8 @@ where
                 .zip(e.iter())
                 .for_each(|(x, &de)| x.d = de);
             other.iter_mut().for_each(|x| x.d = 0.0);
-            if by_inverse_dynamics
-                && cx
-                    .sys
-                    .inverse_dynamics_dual(&ws.qd, &ws.vd, qdd.as_slice(), d)
-            {
-                rhs_inverse(d, b);
-            } else {
-                cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, d);
-                rhs_along(d, if j < n { zero } else { e }, None, cx.sys, b);
-            }
+            cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, d);
+            rhs_along(d, if j < n { zero } else { e }, None, cx.sys, b);
         } else {
             // An input moves only its own row of B u.
             d.clear();

@@ -4,8 +4,9 @@
 //! `(q, q̇)` it gives the generalized forces the tree's bodies need,
 //! `τ = M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q` of the bodies' own Lagrangian (gravity included; springs,
 //! damping and dampers are the caller's), in O(frames) where forming `M` is O(frames · depth).
-//! Written over any [`Scalar`]: over dual numbers it is the directional derivative of `τ`
-//! that the continuous linearisation needs ([`crate::linearize`]), one sweep per direction.
+//! Written over any [`Scalar`]: over jets (a value with derivatives along several directions,
+//! [`crate::dual::Jet`]) it gives the directional derivatives of `τ` the continuous
+//! linearisation needs ([`crate::linearize`]), one sweep for eight directions.
 //!
 //! After the outward sweep ([`crate::sweeps::forward`] at
 //! [`Reach::Lagrangian`](crate::sweeps::Reach::Lagrangian)`(First)`: poses, body velocities

@@ -6,7 +6,7 @@ use nalgebra::{
 };
 use tree_model::Motion;
 
-use crate::dual::{Dual, DualOutputs};
+use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 pub use crate::order::Order;
 use crate::outputs::{Field, Index, Output, Scratch, Sink};
 use crate::se3::Pose;
@@ -243,9 +243,6 @@ impl Sink<f64> for ConstraintTerms {
     }
 }
 
-/// The outputs [`System::inverse_dynamics_dual`] writes (and clears).
-pub const INVERSE_DYNAMICS_FIELDS: [Field; 4] = [Field::L, Field::DlDq, Field::Force, Field::Tau];
-
 /// A mechanical system in generalized coordinates: a tree whose Lagrangian and derivatives
 /// can be evaluated at any state. `N` is `Const<n>` for generated systems (nothing is
 /// allocated per evaluation) and `Dyn` for the interpreted one.
@@ -379,17 +376,17 @@ where
     fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs);
 
     /// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable) over
-    /// dual numbers ([`crate::kernel::inverse_dynamics`]: the bodies' `Tau` by recursive
-    /// Newton–Euler, the springs' `DlDq` and `L`, the model's `Force`), the outputs of
-    /// [`INVERSE_DYNAMICS_FIELDS`] cleared first: one O(frames) sweep per direction, what the
-    /// continuous linearisation differentiates. `false` when this system has no such
-    /// evaluation (the caller differentiates [`Self::evaluate_dual`] instead).
-    fn inverse_dynamics_dual(
+    /// [`Jet`]s ([`crate::kernel::inverse_dynamics`]: the bodies' `τ` by recursive
+    /// Newton–Euler, the springs' `∂L/∂q` and `L`, the model's own forces) into `out`
+    /// (cleared first): one O(frames) sweep for [`LANES`] directions, what the continuous
+    /// linearisation differentiates. `false` when this system has no such evaluation (the
+    /// caller differentiates [`Self::evaluate_dual`] instead).
+    fn inverse_dynamics_jet(
         &mut self,
-        q: &[Dual],
-        dq: &[Dual],
+        q: &[Jet<LANES>],
+        dq: &[Jet<LANES>],
         qdd: &[f64],
-        out: &mut DualOutputs,
+        out: &mut JetOutputs<LANES>,
     ) -> bool {
         let _ = (q, dq, qdd, out);
         false

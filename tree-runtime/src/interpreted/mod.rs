@@ -6,13 +6,13 @@ use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
 use crate::articulated::{self, Articulated};
-use crate::dual::{Dual, DualOutputs};
+use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 use crate::error::SimError;
 use crate::kernel::{self, Kernel};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
 use crate::sweeps::{self, Reach, Workspace};
-use crate::system::{ConstraintTerms, Order, System, Terms, Vector, INVERSE_DYNAMICS_FIELDS};
+use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
 pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
@@ -33,8 +33,10 @@ pub struct TreeSystem {
     articulated: Articulated,
     kinematic: Vec<bool>,
     tau: Vec<f64>,
-    /// Accelerations as dual constants, for [`System::inverse_dynamics_dual`].
-    qdd_dual: Vec<Dual>,
+    /// The kernel over jets and the accelerations as jet constants, for
+    /// [`System::inverse_dynamics_jet`] (made on first use).
+    jet_kernel: Option<Box<Kernel<Jet<LANES>>>>,
+    qdd_jet: Vec<Jet<LANES>>,
 }
 
 impl TreeSystem {
@@ -59,7 +61,8 @@ impl TreeSystem {
             articulated: Articulated::new(&plan),
             kinematic: model.variables.iter().map(|v| v.is_kinematic()).collect(),
             tau: vec![0.0; model.variables.len()],
-            qdd_dual: vec![Dual::default(); model.variables.len()],
+            jet_kernel: None,
+            qdd_jet: vec![Jet::default(); model.variables.len()],
             plan,
         })
     }
@@ -248,20 +251,22 @@ impl System for TreeSystem {
         kernel::constraints(plan, kernel, q, dq, order, out);
     }
 
-    fn inverse_dynamics_dual(
+    fn inverse_dynamics_jet(
         &mut self,
-        q: &[Dual],
-        dq: &[Dual],
+        q: &[Jet<LANES>],
+        dq: &[Jet<LANES>],
         qdd: &[f64],
-        out: &mut DualOutputs,
+        out: &mut JetOutputs<LANES>,
     ) -> bool {
-        out.clear_fields(&INVERSE_DYNAMICS_FIELDS);
+        out.clear();
         let plan = &self.plan;
-        let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
-        for (x, &a) in self.qdd_dual.iter_mut().zip(qdd) {
-            *x = Dual::new(a, 0.0);
+        let kernel = self
+            .jet_kernel
+            .get_or_insert_with(|| Box::new(Kernel::new(plan)));
+        for (x, &a) in self.qdd_jet.iter_mut().zip(qdd) {
+            *x = Jet::constant(a);
         }
-        kernel::inverse_dynamics(plan, kernel, q, dq, &self.qdd_dual, out);
+        kernel::inverse_dynamics(plan, kernel, q, dq, &self.qdd_jet, out);
         true
     }
 }
