@@ -17,7 +17,9 @@
 
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
-use crate::se3::{component, cross, dot, inertia_times, zero6, SpatialInertia, Twist, Wrench};
+use crate::se3::{
+    component, cross, dot, inertia_times, twist_index, zero6, SpatialInertia, Twist, Wrench,
+};
 use crate::sweeps::Workspace;
 use tree_model::Joint;
 
@@ -70,6 +72,31 @@ pub(crate) fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
     let b = cross(&lin, &f);
     let e = cross(&ang, &tau);
     [a[0], a[1], a[2], b[0] + e[0], b[1] + e[1], b[2] + e[2]]
+}
+
+/// The world's acceleration `(−γ, 0)`: gravity as an upward acceleration of the base, so
+/// that every body's inertial wrench carries its weight.
+pub(crate) fn base_acceleration<S: Scalar>(plan: &TreePlan) -> Twist<S> {
+    let g = plan.gravity;
+    [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0].map(S::constant)
+}
+
+/// The parent's acceleration `a_par` (the base's for a root) seen from frame `k`:
+/// `Ad_{g_k⁻¹} a_par`, through the folded constant transform first.
+pub(crate) fn from_parent<S: Scalar>(
+    plan: &TreePlan,
+    ws: &Workspace<S>,
+    k: usize,
+    accelerations: &[Twist<S>],
+) -> Twist<S> {
+    let f = &plan.frames[k];
+    let mut a = f
+        .parent
+        .map_or_else(|| base_acceleration(plan), |p| accelerations[p]);
+    if let Some(pre) = &f.pre {
+        a = pre.ad_inverse(&a);
+    }
+    ws.local[k].ad_inverse(&a)
 }
 
 /// `a += b`.
@@ -151,7 +178,7 @@ pub fn accelerations<S: Scalar>(
         if let Joint::Variable(i) = f.joint {
             if kinematic[i] {
                 let mut a = c;
-                let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
+                let axis = twist_index(f.kind);
                 a[axis] += qdd[i];
                 add6(&mut bias, &inertia.times(&a));
             } else {
@@ -190,23 +217,17 @@ pub fn accelerations<S: Scalar>(
         add6(&mut art.bias[p], &p_up);
     }
     // Outward: accelerations from the base's `(−γ, 0)`.
-    let g = plan.gravity;
-    let base = [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0].map(S::constant);
     for (k, f) in plan.frames.iter().enumerate() {
         if !f.needed {
             continue;
         }
-        let mut a = f.parent.map_or(base, |p| art.acceleration[p]);
-        if let Some(pre) = &f.pre {
-            a = pre.ad_inverse(&a);
-        }
-        a = ws.local[k].ad_inverse(&a);
+        let mut a = from_parent(plan, ws, k, &art.acceleration);
         add6(&mut a, &art.bias_acceleration[k]);
         if let Joint::Variable(i) = f.joint {
             if !kinematic[i] {
                 qdd[i] = (art.force[k] - dot(&art.column[k], &a)) * art.pivot[k].recip();
             }
-            let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
+            let axis = twist_index(f.kind);
             a[axis] += qdd[i];
         }
         art.acceleration[k] = a;

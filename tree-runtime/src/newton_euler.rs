@@ -17,10 +17,10 @@
 //! 2. inward, each subtree's wrench at its root, `f_par += Ad_{g⁻¹}ᵀ f_k`, and at a frame
 //!    driven by variable `i`, `τ_i = ξ_k · f_k`.
 
-use crate::articulated::{add6, cross_force};
+use crate::articulated::{add6, cross_force, from_parent};
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
-use crate::se3::{component, inertia_times, zero6, Twist, Wrench};
+use crate::se3::{component, inertia_times, twist_index, zero6, Twist, Wrench};
 use crate::sweeps::Workspace;
 use tree_model::Joint;
 
@@ -59,20 +59,14 @@ pub fn generalized_forces<S: Scalar>(
 ) {
     ne.tau.iter_mut().for_each(|x| *x = S::zero());
     // Outward: accelerations, and the wrench each body needs.
-    let g = plan.gravity;
-    let base = [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0].map(S::constant);
     for (k, f) in plan.frames.iter().enumerate() {
         if !f.needed {
             continue;
         }
-        let mut a = f.parent.map_or(base, |p| ne.acceleration[p]);
-        if let Some(pre) = &f.pre {
-            a = pre.ad_inverse(&a);
-        }
-        a = ws.local[k].ad_inverse(&a);
+        let mut a = from_parent(plan, ws, k, &ne.acceleration);
         if let (Some(d), Joint::Variable(i)) = (f.own(), f.joint) {
             add6(&mut a, &ws.dv_dq[f.col_offset + d].map(|x| x * dq[i]));
-            let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
+            let axis = twist_index(f.kind);
             a[axis] += qdd[i];
         }
         ne.acceleration[k] = a;

@@ -690,10 +690,16 @@ impl<S: Scalar> SpatialInertia<S> {
     }
 }
 
+/// The entry of a twist or wrench `(v, ω)` along a primitive's unit twist ξ.
+#[inline(always)]
+pub fn twist_index(kind: PrimitiveKind) -> usize {
+    kind.axis() + if kind.is_rotation() { 3 } else { 0 }
+}
+
 /// `x · ξ` for a primitive's unit twist: one component.
 #[inline(always)]
 pub fn component<S: Scalar>(x: &[S; 6], kind: PrimitiveKind) -> S {
-    x[kind.axis() + if kind.is_rotation() { 3 } else { 0 }]
+    x[twist_index(kind)]
 }
 
 /// `a × b`.

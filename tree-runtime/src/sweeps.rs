@@ -24,8 +24,8 @@ use crate::outputs::{Output, Sink};
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
 use crate::se3::{
-    bracket_with_axis, component, cross, dot, inertia_times, zero6, LocalTransform, Pose,
-    SpatialInertia, Twist, Wrench,
+    bracket_with_axis, component, cross, dot, inertia_times, twist_index, zero6, LocalTransform,
+    Pose, SpatialInertia, Twist, Wrench,
 };
 
 /// Per-frame storage for one evaluation (allocated once, reused).
@@ -100,7 +100,7 @@ pub fn velocities<S: Scalar>(plan: &TreePlan, q: &[S], dq: &[S], out: &mut [Twis
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let mut v = f.parent.map_or_else(zero6, |p| local.ad_inverse(&out[p]));
         if let Joint::Variable(i) = f.joint {
-            v[f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 }] += dq[i];
+            v[twist_index(f.kind)] += dq[i];
         }
         out[k] = v;
     }
@@ -173,7 +173,7 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             let transported = local.ad_inverse(&parent_vel);
             let mut v = transported;
             if let Joint::Variable(i) = f.joint {
-                let axis = f.kind.axis() + if f.kind.is_rotation() { 3 } else { 0 };
+                let axis = twist_index(f.kind);
                 v[axis] += dq[i];
             }
             ws.velocity[k] = v;
