@@ -15,7 +15,7 @@
 //!    `q̈ = (u − U·(Ad_{g⁻¹} a_par + c))/D`, from the world's `a_0 = (−γ, 0)` (gravity as an
 //!    upward acceleration of the base).
 
-use crate::plan::{Body, TreePlan};
+use crate::plan::{Body, FramePlan, TreePlan};
 use crate::scalar::Scalar;
 use crate::se3::{
     component, cross, dot, inertia_times, twist_index, zero6, SpatialInertia, Twist, Wrench,
@@ -99,6 +99,15 @@ pub(crate) fn from_parent<S: Scalar>(
     ws.local[k].ad_inverse(&a)
 }
 
+/// `c_k = (∂v_k/∂q_k) q̇_k`: the acceleration frame `k`'s own joint adds at constant speed
+/// (the velocity-product term); zero for a constant frame.
+pub(crate) fn velocity_product<S: Scalar>(f: &FramePlan, ws: &Workspace<S>, dq: &[S]) -> Twist<S> {
+    match (f.own(), f.joint) {
+        (Some(d), Joint::Variable(i)) => ws.dv_dq[f.col_offset + d].map(|x| x * dq[i]),
+        _ => zero6(),
+    }
+}
+
 /// `a += b`.
 pub(crate) fn add6<S: Scalar>(a: &mut [S; 6], b: &[S; 6]) {
     for (x, y) in a.iter_mut().zip(b) {
@@ -155,15 +164,7 @@ pub fn accelerations<S: Scalar>(
         };
         art.inertia[k] = inertia;
         art.bias[k] = cross_force(v, &momentum);
-        art.bias_acceleration[k] = match f.own() {
-            Some(d) => {
-                let Joint::Variable(i) = f.joint else {
-                    unreachable!("a frame with an own column is driven")
-                };
-                ws.dv_dq[f.col_offset + d].map(|x| x * dq[i])
-            }
-            None => zero6(),
-        };
+        art.bias_acceleration[k] = velocity_product(f, ws, dq);
     }
     // Inward: articulate each subtree at its root and hand it to the parent.
     for k in (0..plan.frames.len()).rev() {

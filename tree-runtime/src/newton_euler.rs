@@ -17,7 +17,7 @@
 //! 2. inward, each subtree's wrench at its root, `f_par += Ad_{g⁻¹}ᵀ f_k`, and at a frame
 //!    driven by variable `i`, `τ_i = ξ_k · f_k`.
 
-use crate::articulated::{add6, cross_force, from_parent};
+use crate::articulated::{add6, cross_force, from_parent, velocity_product};
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
 use crate::se3::{component, inertia_times, twist_index, zero6, Twist, Wrench};
@@ -64,10 +64,9 @@ pub fn generalized_forces<S: Scalar>(
             continue;
         }
         let mut a = from_parent(plan, ws, k, &ne.acceleration);
-        if let (Some(d), Joint::Variable(i)) = (f.own(), f.joint) {
-            add6(&mut a, &ws.dv_dq[f.col_offset + d].map(|x| x * dq[i]));
-            let axis = twist_index(f.kind);
-            a[axis] += qdd[i];
+        add6(&mut a, &velocity_product(f, ws, dq));
+        if let Joint::Variable(i) = f.joint {
+            a[twist_index(f.kind)] += qdd[i];
         }
         ne.acceleration[k] = a;
         let v = &ws.velocity[k];
