@@ -274,8 +274,13 @@ def test_point_to_point_constraints_are_treps_rows():
     tip, ball = s.get_frame("tip").p()[:3], s.get_frame("ball").p()[:3]
     assert np.allclose([c.h() for c in s.constraints[:3]], tip - ball, rtol=0, atol=1e-15)
     assert s.constraints[0].get_actual_distance() == pytest.approx(np.linalg.norm(tip - ball))
-    with pytest.raises(ValueError, match="axis must be 'x', 'y' or 'z'"):
+    with pytest.raises(ValueError, match="PointToPoint1D between `tip` and `ball`: axis must "
+                                         "be 'x', 'y' or 'z', got 'w'"):
         trep.constraints.PointToPoint1D(s, "w", "tip", "ball")
-    with pytest.raises(ValueError, match="plane must be 'xy', 'xz' or 'yz'"):
+    with pytest.raises(ValueError, match="PointToPoint2D between `tip` and `ball`: plane must "
+                                         "be 'xy', 'xz' or 'yz', got 'xyz'"):
         trep.constraints.PointToPoint2D(s, "xyz", "tip", "ball")
+    with pytest.raises(ValueError, match="PointOnPlane between `tip` and `ball`: plane_normal "
+                                         "must not be zero"):
+        trep.constraints.PointOnPlane(s, "tip", [0.0, 0.0, 0.0], "ball")
     assert len(s.constraints) == 6

@@ -158,8 +158,27 @@ def test_optimising_the_start_moves_it():
 
 
 def test_convert_trajectory_moves_parts_by_name():
+    """Into a system with a config and an input of its own, made first (so every column
+    moves): what both have keeps its values under its name, the rest is zero; and back."""
     d, X, U = system_and_trajectory()
-    back = d.convert_trajectory(d, X, U)
+    s = trep.System()
+    lift = trep.Frame(s.world_frame, trep.TZ, "lift", name="lift", mass=1.0)
+    trep.forces.ConfigForce(s, "lift", "raise")
+    cart = trep.Frame(lift, trep.TX, "x", kinematic=True, name="cart", mass=1.0)
+    pivot = trep.Frame(cart, trep.RX, "theta", name="pivot")
+    trep.Frame(pivot, trep.TZ, -1.0, name="bob", mass=1.0)
+    trep.forces.ConfigForce(s, "theta", "torque")
+    mvi = trep.MidpointVI(s)
+    other = discopt.DSystem(mvi, d.time)
+    assert [c.name for c in s.configs] == ["lift", "theta", "x"]
+    Xb, Ub = other.convert_trajectory(d, X, U)
+    Q, p, v, u, rho = other.split_trajectory(Xb, Ub)
+    Qa, pa, va, ua, rhoa = d.split_trajectory(X, U)
+    assert np.array_equal(Q[:, 0], np.zeros(len(X))) and np.array_equal(p[:, 0], np.zeros(len(X)))
+    assert np.array_equal(Q[:, 1:], Qa) and np.array_equal(p[:, 1], pa[:, 0])
+    assert np.array_equal(v, va) and np.array_equal(rho, rhoa)
+    assert np.array_equal(u[:, 0], np.zeros(len(U))) and np.array_equal(u[:, 1], ua[:, 0])
+    back = d.convert_trajectory(other, Xb, Ub)
     assert np.array_equal(back.X, X) and np.array_equal(back.U, U)
 
 
@@ -275,6 +294,11 @@ def test_a_file_that_is_not_a_trajectory_is_refused(tmp_path):
     (tmp_path / "junk.mat").write_bytes(b"not a MAT-file at all" * 10)
     with pytest.raises(ValueError, match="level-5 MAT-file"):
         trep.load_trajectory(str(tmp_path / "junk.mat"))
+    # A file cut short names itself and what is wrong.
+    whole = (HERE / "fixtures" / "trep-trajectory.mat").read_bytes()
+    (tmp_path / "cut.mat").write_bytes(whole[:-40])
+    with pytest.raises(ValueError, match=r"cut\.mat: the file ends inside an element"):
+        trep.load_trajectory(str(tmp_path / "cut.mat"))
     s, parts = saved_parts()
     with pytest.raises(ValueError, match="Q has shape"):
         trep.save_trajectory(str(tmp_path / "bad"), s, parts[0], parts[1][:3])

@@ -237,17 +237,22 @@ impl<const K: usize> Jet<K> {
             d: e.map(|x| s * x),
         }
     }
+
+    /// `op` on the values and lane by lane on the derivatives (a linear operation).
+    #[inline(always)]
+    fn lanewise(self, o: Self, op: impl Fn(f64, f64) -> f64) -> Self {
+        Jet {
+            v: op(self.v, o.v),
+            d: std::array::from_fn(|l| op(self.d[l], o.d[l])),
+        }
+    }
 }
 
 impl<const K: usize> Add for Jet<K> {
     type Output = Self;
     #[inline(always)]
     fn add(self, o: Self) -> Self {
-        let mut d = self.d;
-        for (x, y) in d.iter_mut().zip(o.d) {
-            *x += y;
-        }
-        Jet { v: self.v + o.v, d }
+        self.lanewise(o, |a, b| a + b)
     }
 }
 
@@ -255,11 +260,7 @@ impl<const K: usize> Sub for Jet<K> {
     type Output = Self;
     #[inline(always)]
     fn sub(self, o: Self) -> Self {
-        let mut d = self.d;
-        for (x, y) in d.iter_mut().zip(o.d) {
-            *x -= y;
-        }
-        Jet { v: self.v - o.v, d }
+        self.lanewise(o, |a, b| a - b)
     }
 }
 
@@ -369,11 +370,12 @@ impl<const K: usize> JetOutputs<K> {
 impl<const K: usize> Sink<Jet<K>> for JetOutputs<K> {
     #[inline]
     fn add(&mut self, at: Output, x: Jet<K>) {
-        match at {
-            Output::L => self.l += x,
-            Output::DlDq(i) => self.dl_dq[i] += x,
-            Output::Force(i) => self.force[i] += x,
-            Output::Tau(i) => self.tau[i] += x,
+        // Stored as the one table places them (`Output::slot`); other fields ignored.
+        match at.slot() {
+            (Field::L, _) => self.l += x,
+            (Field::DlDq, Index::Entry(i)) => self.dl_dq[i] += x,
+            (Field::Force, Index::Entry(i)) => self.force[i] += x,
+            (Field::Tau, Index::Entry(i)) => self.tau[i] += x,
             _ => {}
         }
     }

@@ -88,7 +88,7 @@ pub enum Field {
     DhDot,
     /// `ConstraintTerms::d2h`.
     D2h,
-    /// The inverse dynamics' `τ` (dual evaluations only).
+    /// The inverse dynamics' `τ` (`JetOutputs::tau`; no f64 storage keeps it).
     Tau,
 }
 

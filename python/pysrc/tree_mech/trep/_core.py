@@ -1309,9 +1309,10 @@ class _PointOnPlane(Constraint):
                  point_frame: Any, name: Optional[str] = None):
         self.plane_frame = system.get_frame(plane_frame)
         self.point_frame = system.get_frame(point_frame)
-        self.normal = _vector3(plane_normal, f"PointOnPlane {name or ''}: plane_normal")
+        where = _between("PointOnPlane", self.plane_frame, self.point_frame)
+        self.normal = _vector3(plane_normal, f"{where}: plane_normal")
         if not any(self.normal):
-            raise ValueError(f"PointOnPlane {name or ''}: plane_normal must not be zero")
+            raise ValueError(f"{where}: plane_normal must not be zero")
         system._hold()
         try:
             super().__init__(system, name)
@@ -1335,11 +1336,11 @@ class _PointToPoint1D(_BetweenFrames, Constraint):
 
     def __init__(self, system: System, axis: str, frame1: Any, frame2: Any,
                  name: Optional[str] = None):
-        if axis not in ("x", "y", "z"):
-            raise ValueError(f"PointToPoint1D {name or ''}: axis must be 'x', 'y' or 'z', "
-                             f"got {axis!r}")
-        self.axis = axis
         self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
+        if axis not in ("x", "y", "z"):
+            raise ValueError(f"{_between('PointToPoint1D', self.frame1, self.frame2)}: axis "
+                             f"must be 'x', 'y' or 'z', got {axis!r}")
+        self.axis = axis
         system._hold()
         try:
             super().__init__(system, name)
@@ -1357,6 +1358,11 @@ class _PointToPoint1D(_BetweenFrames, Constraint):
         key = self.name if self.name not in earlier else f"{self.name}#{self.index}"
         return ["[[constraint]]", f"name = {_toml_string(key)}", 'kind = "point"',
                 self._frames_line(self._system), f"axes = {_toml_string(self.axis)}", ""]
+
+
+def _between(kind: str, frame1: Frame, frame2: Frame) -> str:
+    """Where an error is: the element's kind and its two frames."""
+    return f"{kind} between `{frame1.name}` and `{frame2.name}`"
 
 
 def _actual_distance(frame1: Frame, frame2: Frame) -> float:
@@ -1396,8 +1402,8 @@ class _PointToPoint2D(_PointToPoint):
     def __init__(self, system: System, plane: str, frame1: Any, frame2: Any,
                  name: Optional[str] = None):
         if plane not in ("xy", "xz", "yz"):
-            raise ValueError(f"PointToPoint2D {name or ''}: plane must be 'xy', 'xz' or 'yz', "
-                             f"got {plane!r}")
+            where = _between("PointToPoint2D", system.get_frame(frame1), system.get_frame(frame2))
+            raise ValueError(f"{where}: plane must be 'xy', 'xz' or 'yz', got {plane!r}")
         super().__init__(system, plane, frame1, frame2, name)
 
 

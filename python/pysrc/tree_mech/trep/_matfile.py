@@ -110,11 +110,14 @@ def read(path: str) -> Dict[str, Value]:
     if len(data) < 128 or data[126:128] != b"IM":
         raise MatFileError(f"{path} is not a little-endian level-5 MAT-file")
     out: Dict[str, Value] = {}
-    for kind, payload in _elements(data, 128):
-        if kind == MI_COMPRESSED:
-            inner = zlib.decompress(payload)
-            kind, payload = next(_elements(inner))
-        if kind == MI_MATRIX:
-            name, value = _array(payload)
-            out[name] = value
+    try:
+        for kind, payload in _elements(data, 128):
+            if kind == MI_COMPRESSED:
+                inner = zlib.decompress(payload)
+                kind, payload = next(_elements(inner))
+            if kind == MI_MATRIX:
+                name, value = _array(payload)
+                out[name] = value
+    except (MatFileError, zlib.error, StopIteration, UnicodeDecodeError, ValueError) as e:
+        raise MatFileError(f"{path}: {e}") from None
     return out
