@@ -3,7 +3,10 @@
 //! ∂q̈/∂q, ∂q̈/∂v, M⁻¹; mass matrix, generalized gravity, nonlinear
 //! effects, forward dynamics (ABA), inverse dynamics (RNEA; also through
 //! `dynamics::inverse_dynamics`), every link's pose, kinetic and
-//! potential energy, at seeded random states — interpreted and compiled, to 1e-9 relative.
+//! potential energy, at seeded random states — interpreted and compiled, to 1e-9 relative;
+//! and `runtime::kinematics` against Pinocchio's frame functions: every link's Jacobian,
+//! velocity and acceleration in its three references, its classical acceleration, and the
+//! centre of mass with its velocity, acceleration and Jacobian.
 //!
 //! The mapping: `M = ∂²L/∂q̇²`, `nle = (∂²L/∂q̇∂q) q̇ − ∂L/∂q`, `g = −∂L/∂q` at q̇ = 0,
 //! `τ = u`. Pinocchio's ABA has no joint damping, so the damping force is cancelled; its
@@ -18,6 +21,7 @@ use serde_json::Value;
 use tree_mech::integrate::StepContext;
 use tree_mech::model::{self, UrdfOptions};
 use tree_mech::runtime::dynamics::inverse_dynamics;
+use tree_mech::runtime::kinematics::{Kinematics, Reference};
 use tree_mech::runtime::linearize::continuous_derivatives;
 use tree_mech::runtime::{Dynamics, ModelMotions, Pose, Vector};
 use tree_mech::{tree_model, Order, System, Terms, TreeSystem};
@@ -263,12 +267,152 @@ where
     )
 }
 
-fn interpreted(fx: &Fixture) -> TreeSystem {
+fn robot(fx: &Fixture) -> model::Model {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(&fx.file);
     let options = UrdfOptions {
         floating_base: fx.floating_base,
     };
-    TreeSystem::new(&model::from_file(path, options).unwrap()).unwrap()
+    model::from_file(path, options).unwrap()
+}
+
+fn interpreted(fx: &Fixture) -> TreeSystem {
+    TreeSystem::new(&robot(fx)).unwrap()
+}
+
+/// `runtime::kinematics` against Pinocchio's frame functions on the fixture's states that
+/// carry them (each link's Jacobian, velocity and acceleration in LOCAL,
+/// LOCAL_WORLD_ALIGNED and WORLD, its classical acceleration; the centre of mass, its
+/// velocity, acceleration and Jacobian), to 1e-9 of each quantity's scale.
+fn compare_kinematics(fx: &Fixture, label: &str) {
+    let m = robot(fx);
+    let mut k = Kinematics::new(&m).unwrap();
+    let n = m.variables.len();
+    let perm: Vec<usize> = fx
+        .variables
+        .iter()
+        .map(|name| m.variables.iter().position(|v| &v.name == name).unwrap())
+        .collect();
+    let ours = |x: &[f64]| {
+        let mut v = vec![0.0; n];
+        for (j, &i) in perm.iter().enumerate() {
+            v[i] = x[j];
+        }
+        v
+    };
+    let references = [
+        ("local", Reference::Local),
+        ("local_world_aligned", Reference::LocalWorldAligned),
+        ("world", Reference::World),
+    ];
+    let mut states = 0;
+    for (s, state) in fx.states.iter().enumerate() {
+        let Some(links) = state.get("frames").and_then(Value::as_object) else {
+            continue;
+        };
+        states += 1;
+        let what = |q: &str| format!("{label} state {s}: {q}");
+        let (q, v, a) = (
+            ours(&numbers(&state["q"])),
+            ours(&numbers(&state["v"])),
+            ours(&numbers(&state["a"])),
+        );
+        k.update(&q, Some(&v), Some(&a)).unwrap();
+        let mut compared = 0;
+        for (link, entry) in links {
+            let Ok(f) = k.frame(link) else { continue };
+            compared += 1;
+            for (name, reference) in references {
+                let rows: Vec<Vec<f64>> = entry[format!("jacobian_{name}")]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(numbers)
+                    .collect();
+                let j = k.jacobian(f, reference);
+                let sj = scale(&rows.concat());
+                for (r, row) in rows.iter().enumerate() {
+                    for (c, &x) in row.iter().enumerate() {
+                        let w = what(&format!("`{link}`'s {name} Jacobian ({r}, {c})"));
+                        close(j[(r, perm[c])], x, sj, &w);
+                    }
+                }
+                for (key, ours) in [
+                    ("velocity", k.velocity(f, reference)),
+                    ("acceleration", k.acceleration(f, reference)),
+                ] {
+                    let theirs = numbers(&entry[format!("{key}_{name}")]);
+                    for r in 0..6 {
+                        let w = what(&format!("`{link}`'s {name} {key} [{r}]"));
+                        close(ours[r], theirs[r], scale(&theirs), &w);
+                    }
+                }
+            }
+            let theirs = numbers(&entry["classical_acceleration"]);
+            let ours = k.classical_acceleration(f);
+            for r in 0..3 {
+                let w = what(&format!("`{link}`'s classical acceleration [{r}]"));
+                close(ours[r], theirs[r], scale(&theirs), &w);
+            }
+        }
+        assert!(compared + 1 >= links.len(), "{label}: links compared");
+        // Pinocchio's centre of mass leaves out the bodies welded to the world (its
+        // universe's); ours is every body's: the welded ones are put back into Pinocchio's
+        // (they do not move: its velocity, acceleration and Jacobian scale by m_moving/m).
+        let (mut welded_mass, mut welded_moment) = (0.0, [0.0; 3]);
+        for (f, frame) in m.frames.iter().enumerate() {
+            let moves = std::iter::successors(Some(f), |&a| m.frames[a].parent)
+                .any(|a| matches!(m.frames[a].joint, model::Joint::Variable(_)));
+            let Some(body) = frame.mass.as_ref().filter(|_| !moves) else {
+                continue;
+            };
+            let pose = k.pose(f);
+            let at = pose.rotate(&body.com);
+            welded_mass += body.mass;
+            for r in 0..3 {
+                welded_moment[r] += body.mass * (pose.p[r] + at[r]);
+            }
+        }
+        let com = k.center_of_mass();
+        let moving = (com.mass - welded_mass) / com.mass;
+        for (key, ours) in [
+            ("com", com.position),
+            ("vcom", com.velocity),
+            ("acom", com.acceleration),
+        ] {
+            let theirs = numbers(&state[key]);
+            for r in 0..3 {
+                let welded = if key == "com" {
+                    welded_moment[r] / com.mass
+                } else {
+                    0.0
+                };
+                let expected = moving * theirs[r] + welded;
+                close(ours[r], expected, scale(&theirs), &what(key));
+            }
+        }
+        assert!(
+            !fx.floating_base || welded_mass == 0.0,
+            "{label}: welded mass"
+        );
+        let rows: Vec<Vec<f64>> = state["jcom"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(numbers)
+            .collect();
+        let j = k.com_jacobian();
+        for (r, row) in rows.iter().enumerate() {
+            for (c, &x) in row.iter().enumerate() {
+                close(
+                    j[(r, perm[c])],
+                    moving * x,
+                    scale(&rows.concat()),
+                    &what("jcom"),
+                );
+            }
+        }
+    }
+    assert!(states >= 2, "{label}: states with kinematics");
 }
 
 #[test]
@@ -276,6 +420,7 @@ fn ur5_matches_pinocchio() {
     let fx = fixture("ur5");
     compare(interpreted(&fx), &fx, "ur5 interpreted");
     compare(Ur5, &fx, "ur5 compiled");
+    compare_kinematics(&fx, "ur5");
 }
 
 #[test]
@@ -283,6 +428,7 @@ fn panda_matches_pinocchio() {
     let fx = fixture("panda");
     compare(interpreted(&fx), &fx, "panda interpreted");
     compare(Panda, &fx, "panda compiled");
+    compare_kinematics(&fx, "panda");
 }
 
 #[test]
@@ -290,6 +436,7 @@ fn solo12_with_a_floating_base_matches_pinocchio() {
     let fx = fixture("solo12");
     compare(interpreted(&fx), &fx, "solo12 interpreted");
     compare(Solo12, &fx, "solo12 compiled");
+    compare_kinematics(&fx, "solo12");
 }
 
 /// The robots' compiled evaluations, pinned (see tests/generated.rs).

@@ -23,6 +23,7 @@ use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
 use tree_mech::runtime::dynamics::inverse_dynamics;
 use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state_with};
+use tree_mech::runtime::kinematics::{Kinematics as FrameKinematics, Reference};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
 use tree_mech::runtime::Vector;
 use tree_mech::runtime::{ModelMotions, Prescription};
@@ -128,15 +129,42 @@ fn check_rows(rows: usize, duration: f64, dt: f64) -> PyResult<()> {
 struct Model {
     model: model::Model,
     sys: Mutex<TreeSystem>,
+    /// The frames' kinematics (`frame_jacobian` and the rest).
+    frames: Mutex<FrameKinematics>,
 }
 
 impl Model {
     fn of(model: model::Model) -> PyResult<Self> {
         let sys = TreeSystem::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
+        let frames =
+            FrameKinematics::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
         Ok(Model {
             model,
             sys: Mutex::new(sys),
+            frames: Mutex::new(frames),
         })
+    }
+
+    /// The frames' kinematics at `(q, dq, ddq)` (defaults: the model's q0, dq0 and zero),
+    /// with `frame`'s index when one is named.
+    fn frames_at(
+        &self,
+        frame: Option<&str>,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<(std::sync::MutexGuard<'_, FrameKinematics>, usize)> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
+        let ddq = self.vector("ddq", ddq, |_| 0.0)?;
+        let mut k = self.frames.lock().expect("no panic holds the lock");
+        let f = match frame {
+            Some(name) => k.frame(name).map_err(|e| bad(e.to_string()))?,
+            None => 0,
+        };
+        k.update(q.as_slice(), Some(dq.as_slice()), Some(ddq.as_slice()))
+            .map_err(|e| bad(e.to_string()))?;
+        Ok((k, f))
     }
 
     fn system(&self) -> TreeSystem {
@@ -347,6 +375,15 @@ fn rows(py: Python<'_>, len: usize, width: usize, row: impl Fn(usize) -> Vec<f64
         .into_pyarray(py)
         .into_any()
         .unbind()
+}
+
+/// A frame reference by its name, or a `ValueError` naming the three.
+fn parse_reference(name: &str) -> PyResult<Reference> {
+    Reference::parse(name).ok_or_else(|| {
+        bad(format!(
+            "reference `{name}` is not one of \"local\", \"local_world_aligned\", \"world\""
+        ))
+    })
 }
 
 fn vector(py: Python<'_>, v: &[f64]) -> Py<PyAny> {
@@ -643,6 +680,106 @@ impl Model {
             py,
             &DMatrix::from_fn(self.n(), self.n(), |i, j| terms.mass[(i, j)]),
         ))
+    }
+
+    /// Frame `frame`'s pose in the world at `q` (default the model's q0): 4 × 4, homogeneous
+    /// (as `evaluate()["poses"][frame]`, alone).
+    #[pyo3(signature = (frame, q=None))]
+    fn frame_pose(
+        &self,
+        py: Python<'_>,
+        frame: &str,
+        q: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Py<PyAny>> {
+        let (k, f) = self.frames_at(Some(frame), q, None, None)?;
+        let m = k.pose(f).matrix();
+        Ok(matrix(py, &DMatrix::from_fn(4, 4, |i, j| m[i][j])))
+    }
+
+    /// Frame `frame`'s Jacobian at `q`: 6 × (variables), linear rows first, in `reference`
+    /// — "local" (the frame's axes), "local_world_aligned" (world axes at the frame's
+    /// origin: the origin's velocity and the angular velocity) or "world" (the spatial
+    /// twist) — so that `frame_velocity` is `J @ dq` (Pinocchio's `getFrameJacobian`).
+    #[pyo3(signature = (frame, q=None, reference="local_world_aligned"))]
+    fn frame_jacobian(
+        &self,
+        py: Python<'_>,
+        frame: &str,
+        q: Option<Numbers<'_, Ix1>>,
+        reference: &str,
+    ) -> PyResult<Py<PyAny>> {
+        let reference = parse_reference(reference)?;
+        let (k, f) = self.frames_at(Some(frame), q, None, None)?;
+        Ok(matrix(py, &k.jacobian(f, reference)))
+    }
+
+    /// Frame `frame`'s twist (v, ω) at `(q, dq)` in `reference` (see `frame_jacobian`;
+    /// Pinocchio's `getFrameVelocity`).
+    #[pyo3(signature = (frame, q=None, dq=None, reference="local_world_aligned"))]
+    fn frame_velocity(
+        &self,
+        py: Python<'_>,
+        frame: &str,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        reference: &str,
+    ) -> PyResult<Py<PyAny>> {
+        let reference = parse_reference(reference)?;
+        let (k, f) = self.frames_at(Some(frame), q, dq, None)?;
+        Ok(vector(py, &k.velocity(f, reference)))
+    }
+
+    /// Frame `frame`'s acceleration at `(q, dq, ddq)` (`ddq` default zero; every variable,
+    /// kinematic ones included): with `classical=False` the spatial acceleration — the
+    /// rate of its twist — in `reference` (Pinocchio's `getFrameAcceleration`); with
+    /// `classical=True` the acceleration of its origin in world axes, 3 entries.
+    #[pyo3(signature = (frame, q=None, dq=None, ddq=None, reference="local_world_aligned", classical=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn frame_acceleration(
+        &self,
+        py: Python<'_>,
+        frame: &str,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+        reference: &str,
+        classical: bool,
+    ) -> PyResult<Py<PyAny>> {
+        let reference = parse_reference(reference)?;
+        let (k, f) = self.frames_at(Some(frame), q, dq, ddq)?;
+        Ok(if classical {
+            vector(py, &k.classical_acceleration(f))
+        } else {
+            vector(py, &k.acceleration(f, reference))
+        })
+    }
+
+    /// The centre of mass of every body (those welded to the world too, which Pinocchio
+    /// leaves out) at `(q, dq, ddq)`: a dict with `mass`, `com`, `vcom`, `acom` (world).
+    #[pyo3(signature = (q=None, dq=None, ddq=None))]
+    fn center_of_mass<'py>(
+        &self,
+        py: Python<'py>,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (k, _) = self.frames_at(None, q, dq, ddq)?;
+        let c = k.center_of_mass();
+        let out = PyDict::new(py);
+        out.set_item("mass", c.mass)?;
+        out.set_item("com", vector(py, &c.position))?;
+        out.set_item("vcom", vector(py, &c.velocity))?;
+        out.set_item("acom", vector(py, &c.acceleration))?;
+        Ok(out)
+    }
+
+    /// The centre of mass's Jacobian at `q`: 3 × (variables), `vcom = J @ dq` (Pinocchio's
+    /// `jacobianCenterOfMass`, every body counted).
+    #[pyo3(signature = (q=None))]
+    fn com_jacobian(&self, py: Python<'_>, q: Option<Numbers<'_, Ix1>>) -> PyResult<Py<PyAny>> {
+        let (k, _) = self.frames_at(None, q, None, None)?;
+        Ok(matrix(py, &k.com_jacobian()))
     }
 
     /// Simulates from (q0, dq0) (default the model's) for `duration` s at step `dt`; `u`

@@ -427,3 +427,43 @@ def test_optimize_reports_each_iteration_and_stops_on_an_exception():
     with pytest.raises(Enough, match="two iterations are enough"):
         tm.optimize(path, progress=stop_at_two)
     assert calls == [1, 2]  # the solve ended there
+
+
+def test_frame_kinematics_agree_with_the_evaluation_and_their_own_differences():
+    rng = np.random.default_rng(11)
+    m = tm.load(str(ROOT / "models/ur5.urdf"))
+    n = len(m.variables)
+    q, dq, ddq = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    e = m.evaluate(q, dq)
+    for frame in ("tool0", "wrist_2_link"):
+        pose = m.frame_pose(frame, q)
+        assert pose.shape == (4, 4) and pose.dtype == np.float64
+        assert np.allclose(pose, e["poses"][frame], rtol=0, atol=1e-14)
+        # The body twist is evaluate()'s; J @ dq is the twist in every reference.
+        assert np.allclose(m.frame_velocity(frame, q, dq, reference="local"),
+                           e["body_velocities"][frame], rtol=0, atol=1e-13)
+        for reference in ("local", "local_world_aligned", "world"):
+            J = m.frame_jacobian(frame, q, reference=reference)
+            assert J.shape == (6, n)
+            assert np.allclose(J @ dq, m.frame_velocity(frame, q, dq, reference=reference),
+                               rtol=0, atol=1e-13)
+        # The origin's velocity and classical acceleration against differences of the pose.
+        h = 1e-5
+        path = lambda t: q + t * dq + 0.5 * t * t * ddq
+        p = lambda t: m.frame_pose(frame, path(t))[:3, 3]
+        v = m.frame_velocity(frame, q, dq)[:3]
+        assert np.allclose(v, (p(h) - p(-h)) / (2 * h), rtol=0, atol=1e-8)
+        a = m.frame_acceleration(frame, q, dq, ddq, classical=True)
+        assert a.shape == (3,)
+        assert np.allclose(a, (p(h) - 2 * p(0) + p(-h)) / h**2, rtol=0, atol=1e-4)
+        assert m.frame_acceleration(frame, q, dq, ddq).shape == (6,)
+    com = m.center_of_mass(q, dq)
+    assert set(com) == {"mass", "com", "vcom", "acom"}
+    assert com["mass"] > 0 and com["com"].shape == (3,)
+    assert np.allclose(m.com_jacobian(q) @ dq, com["vcom"], rtol=0, atol=1e-13)
+    with pytest.raises(ValueError, match=r"there is no frame `hand`; the frames are `"):
+        m.frame_jacobian("hand")
+    with pytest.raises(ValueError, match=r'reference `body` is not one of "local", "local_world_aligned", "world"'):
+        m.frame_velocity("tool0", reference="body")
+    with pytest.raises(ValueError, match=r"q has 2 entries; the model has 6 variables"):
+        m.frame_pose("tool0", [0.0, 0.0])

@@ -8,7 +8,11 @@ at seeded random states, for tests/pinocchio.rs (which reads them without Python
 For each state: q, v, tau, a (random), and from Pinocchio the mass matrix (CRBA), the
 generalized gravity, the nonlinear effects C(q,v)v + g, ABA's acceleration for tau, RNEA's
 torque for a, every link's pose (4×4, row-major), the kinetic and potential energy, and
-computeABADerivatives' ∂q̈/∂q, ∂q̈/∂v and M⁻¹ (= ∂q̈/∂τ) at (q, v, tau).
+computeABADerivatives' ∂q̈/∂q, ∂q̈/∂v and M⁻¹ (= ∂q̈/∂τ) at (q, v, tau); and, for the first two states, the
+kinematics at (q, v, a): every link's Jacobian (6 × nv, linear rows first), spatial velocity and
+spatial acceleration in each of LOCAL, LOCAL_WORLD_ALIGNED and WORLD, its classical
+acceleration (LOCAL_WORLD_ALIGNED), and the centre of mass with its velocity, acceleration
+and Jacobian.
 Vectors are in Pinocchio's joint order; `variables` names it (joint names), so the Rust
 side maps by name. The floating base is a composite joint PX PY PZ RZ RY RX, whose q and v
 are tree-mech's root_x … root_roll. Pinocchio's ABA ignores joint damping; so do these
@@ -33,6 +37,8 @@ MODELS = [
     ("solo12", "models/solo12.urdf", True),
 ]
 STATES = 5
+# The states that also carry the kinematics (every link in three references: large).
+KINEMATIC_STATES = 2
 
 
 def build(path, floating):
@@ -71,6 +77,39 @@ def variables(model, floating):
     return names
 
 
+REFERENCES = {
+    "local": pin.ReferenceFrame.LOCAL,
+    "local_world_aligned": pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+    "world": pin.ReferenceFrame.WORLD,
+}
+
+
+def frame_kinematics(model, data, links, q, v, a):
+    """Every link's Jacobian, velocity and acceleration in the three references, its
+    classical acceleration, and the centre of mass with its derivatives, at (q, v, a)."""
+    pin.forwardKinematics(model, data, q, v, a)
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    frames = {}
+    for f in links:
+        fid = model.getFrameId(f.name, pin.FrameType.BODY)
+        entry = {}
+        for label, ref in REFERENCES.items():
+            entry[f"jacobian_{label}"] = pin.getFrameJacobian(model, data, fid, ref).tolist()
+            entry[f"velocity_{label}"] = pin.getFrameVelocity(model, data, fid, ref).vector.tolist()
+            entry[f"acceleration_{label}"] = pin.getFrameAcceleration(model, data, fid, ref).vector.tolist()
+        entry["classical_acceleration"] = pin.getFrameClassicalAcceleration(
+            model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear.tolist()
+        frames[f.name] = entry
+    com = pin.centerOfMass(model, data, q, v, a)
+    jcom = pin.jacobianCenterOfMass(model, data, q)
+    return {
+        "frames": frames,
+        "com": com.tolist(), "vcom": data.vcom[0].tolist(), "acom": data.acom[0].tolist(),
+        "jcom": jcom.tolist(),
+    }
+
+
 def main():
     rng = np.random.default_rng(20261201)
     for label, rel, floating in MODELS:
@@ -90,7 +129,7 @@ def main():
             "variables": variables(model, floating),
             "states": [],
         }
-        for _ in range(STATES):
+        for state in range(STATES):
             q = rng.uniform(-1.5, 1.5, model.nq)
             v = rng.uniform(-2.0, 2.0, model.nv)
             tau = rng.uniform(-5.0, 5.0, model.nv)
@@ -111,11 +150,19 @@ def main():
             pin.framesForwardKinematics(model, data, q)
             poses = {f.name: data.oMf[model.getFrameId(f.name, pin.FrameType.BODY)].homogeneous.flatten().tolist()
                      for f in links}
+            kinematics = frame_kinematics(model, data, links, q, v, a) if state < KINEMATIC_STATES else {}
+            if floating and kinematics:
+                # The composite joint's Jacobian columns against the chain of six joints'.
+                chained = frame_kinematics(smooth, smooth.createData(), links, q, v, a)
+                for name, entry in kinematics["frames"].items():
+                    for key, value in entry.items():
+                        assert np.abs(np.array(value) - np.array(chained["frames"][name][key])).max() <= 1e-10, (name, key)
             out["states"].append({
                 "q": q.tolist(), "v": v.tolist(), "tau": tau.tolist(), "a": a.tolist(),
                 "M": M.tolist(), "g": g.tolist(), "nle": nle.tolist(), "ddq": ddq.tolist(),
                 "rnea": rnea.tolist(), "kinetic": kinetic, "potential": potential, "poses": poses,
                 "ddq_dq": ddq_dq.tolist(), "ddq_dv": ddq_dv.tolist(), "minv": minv.tolist(),
+                **kinematics,
             })
         path = ROOT / "tests" / "fixtures" / f"pinocchio-{label}.json"
         path.write_text(json.dumps(out, indent=1) + "\n")

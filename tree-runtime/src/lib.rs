@@ -69,6 +69,8 @@ pub mod integrate;
 #[cfg(feature = "simulate")]
 pub mod interpreted;
 #[cfg(feature = "simulate")]
+pub mod kinematics;
+#[cfg(feature = "simulate")]
 #[doc(hidden)]
 pub mod linalg;
 #[cfg(feature = "simulate")]

@@ -67,6 +67,36 @@ class Model:
     ) -> npt.NDArray[np.float64]: ...
     def constraints_at(self, q: Optional[ArrayLike] = None) -> dict: ...
     def mass_matrix(self, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
+    def frame_pose(self, frame: str, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
+    def frame_jacobian(
+        self,
+        frame: str,
+        q: Optional[ArrayLike] = None,
+        reference: str = "local_world_aligned",
+    ) -> npt.NDArray[np.float64]: ...
+    def frame_velocity(
+        self,
+        frame: str,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        reference: str = "local_world_aligned",
+    ) -> npt.NDArray[np.float64]: ...
+    def frame_acceleration(
+        self,
+        frame: str,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        ddq: Optional[ArrayLike] = None,
+        reference: str = "local_world_aligned",
+        classical: bool = False,
+    ) -> npt.NDArray[np.float64]: ...
+    def center_of_mass(
+        self,
+        q: Optional[ArrayLike] = None,
+        dq: Optional[ArrayLike] = None,
+        ddq: Optional[ArrayLike] = None,
+    ) -> dict: ...
+    def com_jacobian(self, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
     def simulate(
         self,
         duration: float,
