@@ -128,14 +128,7 @@ impl Kinematics {
     /// Fails as [`crate::TreeSystem::new`] does when the model would need more Jacobian
     /// columns than the runtime allocates.
     pub fn new(model: &Model) -> Result<Self, SimError> {
-        let (columns, deepest) = crate::plan::column_count(model);
-        if columns > crate::plan::MAX_COLUMNS {
-            return Err(SimError::InvalidInput(format!(
-                "model `{}` would need {columns} Jacobian columns (its deepest frame has {deepest} variables above it); the runtime allocates at most {}",
-                model.name,
-                crate::plan::MAX_COLUMNS
-            )));
-        }
+        crate::interpreted::columns_fit(model)?;
         let plan = TreePlan::new(model);
         let n = model.variables.len();
         let mut k = Kinematics {

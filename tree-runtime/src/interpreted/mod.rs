@@ -39,18 +39,25 @@ pub struct TreeSystem {
     qdd_jet: Vec<Jet<LANES>>,
 }
 
+/// An error when `model` would need more Jacobian columns than the runtime allocates (each
+/// frame keeps one for every variable at or above it).
+pub(crate) fn columns_fit(model: &Model) -> Result<(), SimError> {
+    let (columns, deepest) = crate::plan::column_count(model);
+    if columns > crate::plan::MAX_COLUMNS {
+        return Err(SimError::InvalidInput(format!(
+            "model `{}` would need {columns} Jacobian columns (each of its {} frames keeps one for every variable at or above it; its deepest frame has {deepest} variables above it); the interpreted system allocates at most {}",
+            model.name,
+            model.frames.len(),
+            crate::plan::MAX_COLUMNS
+        )));
+    }
+    Ok(())
+}
+
 impl TreeSystem {
     /// Builds the interpreted system for a validated model.
     pub fn new(model: &Model) -> Result<Self, SimError> {
-        let (columns, deepest) = crate::plan::column_count(model);
-        if columns > crate::plan::MAX_COLUMNS {
-            return Err(SimError::InvalidInput(format!(
-                "model `{}` would need {columns} Jacobian columns (each of its {} frames keeps one for every variable at or above it; its deepest frame has {deepest} variables above it); the interpreted system allocates at most {}",
-                model.name,
-                model.frames.len(),
-                crate::plan::MAX_COLUMNS
-            )));
-        }
+        columns_fit(model)?;
         let plan = TreePlan::folded(model);
         Ok(TreeSystem {
             model: model.clone(),
