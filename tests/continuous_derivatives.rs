@@ -7,10 +7,11 @@ mod common;
 use nalgebra::Dyn;
 use tree_mech::integrate::{project_initial_state, StepContext};
 use tree_mech::model;
+use tree_mech::runtime::dual::{Dual, DualOutputs};
 use tree_mech::runtime::dynamics::Split;
 use tree_mech::runtime::linearize::continuous_derivatives;
-use tree_mech::runtime::{Dynamics, ModelMotions, Prescription, Vector};
-use tree_mech::{NoForce, System, TreeSystem};
+use tree_mech::runtime::{Dynamics, ModelMotions, Pose, Prescription, Vector};
+use tree_mech::{ConstraintTerms, NoForce, Order, System, Terms, TreeSystem};
 
 /// `(q̈_d, λ)` at `(q, q̇, u)`, t = 0.3.
 fn accelerations(
@@ -40,8 +41,9 @@ fn continuous_derivatives_match_finite_differences() {
     let root = env!("CARGO_MANIFEST_DIR");
     let mut damped = common::load("humanoid.toml");
     damped.variables[3].damping = 0.7;
-    // Every element but the constraints: differentiated by recursive Newton–Euler over dual
-    // numbers (the constrained models above by the whole evaluation's).
+    // Every element without and with the constraints: the right sides by recursive
+    // Newton–Euler and the constraints over jets (the fallback over dual numbers is held to
+    // these below).
     let mut unconstrained =
         model::from_toml_file(format!("{root}/tests/models/elements.toml")).unwrap();
     unconstrained.constraints.clear();
@@ -262,7 +264,7 @@ fn newton_euler_is_the_lagrangians_inverse_dynamics() {
                 .collect::<Vec<_>>()
         };
         let (qj, vj) = (jets(&q, 0), jets(&dq, 1));
-        let mut out = JetOutputs::<LANES>::new(n);
+        let mut out = JetOutputs::<LANES>::new(n, sys.constraint_count());
         assert!(sys.inverse_dynamics_jet(&qj, &vj, qdd.as_slice(), &mut out));
         let total = |i: usize| out.tau[i] - out.dl_dq[i] - out.force[i];
         let scale = want.amax().max(1.0);
@@ -288,6 +290,134 @@ fn newton_euler_is_the_lagrangians_inverse_dynamics() {
                     total(i).d[l]
                 );
             }
+        }
+    }
+}
+
+/// A system that offers no evaluation over jets: the continuous linearisation falls back on
+/// differentiating its whole evaluation over dual numbers, a direction at a time.
+struct DualOnly(TreeSystem);
+
+impl System for DualOnly {
+    type N = Dyn;
+    fn dim(&self) -> Dyn {
+        self.0.dim()
+    }
+    fn variable_name(&self, i: usize) -> &str {
+        self.0.variable_name(i)
+    }
+    fn frame_count(&self) -> usize {
+        self.0.frame_count()
+    }
+    fn frame_name(&self, k: usize) -> &str {
+        self.0.frame_name(k)
+    }
+    fn initial(&self, i: usize) -> (f64, f64) {
+        self.0.initial(i)
+    }
+    fn damping(&self, i: usize) -> f64 {
+        self.0.damping(i)
+    }
+    fn motion(&self, i: usize) -> Option<model::Motion> {
+        self.0.motion(i)
+    }
+    fn is_angle(&self, i: usize) -> bool {
+        self.0.is_angle(i)
+    }
+    fn constraint_count(&self) -> usize {
+        self.0.constraint_count()
+    }
+    fn constraint_name(&self, r: usize) -> &str {
+        self.0.constraint_name(r)
+    }
+    fn input_count(&self) -> usize {
+        self.0.input_count()
+    }
+    fn input_name(&self, k: usize) -> &str {
+        self.0.input_name(k)
+    }
+    fn input_variable(&self, k: usize) -> usize {
+        self.0.input_variable(k)
+    }
+    fn constraints(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        order: Order,
+        out: &mut ConstraintTerms,
+    ) {
+        self.0.constraints(q, dq, order, out)
+    }
+    fn lagrangian(
+        &mut self,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        order: Order,
+        out: &mut Terms<Dyn>,
+    ) {
+        self.0.lagrangian(q, dq, order, out)
+    }
+    fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
+        self.0.poses(q, out)
+    }
+    fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
+        self.0.evaluate_dual(q, dq, order, out)
+    }
+}
+
+/// The continuous linearisation of `sys` at `(q, q̇, u)`, t = 0.3.
+fn linearise<S: System<N = Dyn>>(
+    sys: &mut S,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    u: &[f64],
+) -> tree_mech::runtime::linearize::ContinuousDerivatives {
+    let (mut force, mut motion) = (NoForce, ModelMotions::of(&*sys));
+    let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
+    cx.u = u;
+    continuous_derivatives(cx.at(0, 0.3), q, dq).unwrap()
+}
+
+/// The linearisation's two ways to its right sides — over jets, eight directions a sweep, and
+/// the fallback over dual numbers, a direction at a time — agree on every constrained and
+/// unconstrained model with inputs, kinematic variables and every element.
+#[test]
+fn the_dual_fallback_equals_the_jets() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let files = [
+        format!("{root}/tests/models/elements.toml"),
+        format!("{root}/tests/models/cart.toml"),
+        format!("{root}/tests/models/string-pendulum.toml"),
+        format!("{root}/models/marionette.toml"),
+        format!("{root}/models/humanoid.toml"),
+    ];
+    for file in files {
+        let model = model::from_toml_file(&file).unwrap();
+        let mut jets = TreeSystem::new(&model).unwrap();
+        let mut duals = DualOnly(TreeSystem::new(&model).unwrap());
+        let n = jets.dof();
+        let mut rng = common::Rng::new(31);
+        let (q, dq) = (rng.vector(n, 0.4), rng.vector(n, 0.8));
+        let u: Vec<f64> = (0..jets.input_count())
+            .map(|k| 0.3 * k as f64 - 0.2)
+            .collect();
+        let a = linearise(&mut jets, &q, &dq, &u);
+        let b = linearise(&mut duals, &q, &dq, &u);
+        for (what, x, y) in [
+            ("qdd_dq", &a.qdd_dq, &b.qdd_dq),
+            ("qdd_ddq", &a.qdd_ddq, &b.qdd_ddq),
+            ("qdd_du", &a.qdd_du, &b.qdd_du),
+            ("lambda_dq", &a.lambda_dq, &b.lambda_dq),
+            ("lambda_ddq", &a.lambda_ddq, &b.lambda_ddq),
+            ("lambda_du", &a.lambda_du, &b.lambda_du),
+        ] {
+            let scale = y.amax().max(1.0);
+            assert_eq!(x.shape(), y.shape(), "{file}: {what}");
+            assert!(
+                (x - y).amax() <= 1e-11 * scale,
+                "{file}: {what} over jets and over dual numbers differ by {} (scale {scale})",
+                (x - y).amax()
+            );
         }
     }
 }

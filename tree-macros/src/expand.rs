@@ -585,21 +585,24 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         )
     });
     let articulated_functions = articulated.as_ref().map(|e| e.functions.clone());
-    // The inverse dynamics over a generic scalar with the accelerations as inputs, for the
-    // continuous linearisation's sweeps over jets (`System::inverse_dynamics_jet`);
-    // only without constraints, where the linearisation uses it.
-    let inverse = (plan.rows == 0).then(|| {
+    // The inverse dynamics over a generic scalar with the accelerations as inputs, and the
+    // constraints' `Dh` and `q̇ᵀD²h q̇`, for the continuous linearisation's sweeps over jets
+    // (`System::inverse_dynamics_jet`).
+    let inverse = {
         let evaluation: Evaluation = |plan, k, q, dq, _, out| {
             let qdd: Vec<Term> = (0..plan.dof()).map(trace::qdd).collect();
-            kernel::inverse_dynamics(plan, k, q, dq, &qdd, out)
+            kernel::inverse_dynamics(plan, k, q, dq, &qdd, out);
+            if plan.rows > 0 {
+                kernel::constraints(plan, k, q, dq, Order::Dynamics, out);
+            }
         };
         traced(&plan, Order::First, evaluation)
             .naming()
             .emit("__d_inverse", &var_names, generic)
-    });
-    let inverse_functions = inverse.as_ref().map(|e| e.functions.clone());
-    let inverse_method = inverse.as_ref().map(|e| {
-        let body = &e.body;
+    };
+    let inverse_functions = &inverse.functions;
+    let inverse_method = {
+        let body = &inverse.body;
         quote! {
             #[inline]
             fn inverse_dynamics_jet(
@@ -622,7 +625,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 true
             }
         }
-    });
+    };
     let articulated_method = articulated.as_ref().map(|e| {
         let body = &e.body;
         quote! {

@@ -327,7 +327,8 @@ impl<const K: usize> Scalar for Jet<K> {
 }
 
 /// The inverse dynamics' outputs over [`Jet`]s ([`crate::kernel::inverse_dynamics`]: `L`,
-/// `DlDq`, `Force`, `Tau`; the rest ignored), with the accelerations it reads.
+/// `DlDq`, `Force`, `Tau`; with constraints [`crate::kernel::constraints`]' `Dh` and
+/// `DhDot`; the rest ignored), with the accelerations it reads.
 #[derive(Clone, Debug)]
 pub struct JetOutputs<const K: usize> {
     /// `L`.
@@ -338,6 +339,12 @@ pub struct JetOutputs<const K: usize> {
     pub force: Vec<Jet<K>>,
     /// The bodies' `τ`.
     pub tau: Vec<Jet<K>>,
+    /// The constraints' `Dh`, row-major (row `r` at `r·n`): empty without constraints.
+    pub dh: Vec<Jet<K>>,
+    /// The constraints' `q̇ᵀD²h q̇`.
+    pub dh_dot: Vec<Jet<K>>,
+    /// The number of variables (`dh`'s row length).
+    n: usize,
     /// The accelerations the evaluation reads.
     pub accelerations: Vec<f64>,
     /// Generated code's storage between its functions (not part of the outputs).
@@ -346,13 +353,16 @@ pub struct JetOutputs<const K: usize> {
 }
 
 impl<const K: usize> JetOutputs<K> {
-    /// Zeros for `n` variables.
-    pub fn new(n: usize) -> Self {
+    /// Zeros for `n` variables and `rows` constraint equations.
+    pub fn new(n: usize, rows: usize) -> Self {
         JetOutputs {
             l: Jet::default(),
             dl_dq: vec![Jet::default(); n],
             force: vec![Jet::default(); n],
             tau: vec![Jet::default(); n],
+            dh: vec![Jet::default(); rows * n],
+            dh_dot: vec![Jet::default(); rows],
+            n,
             accelerations: vec![0.0; n],
             scratch: Scratch::default(),
         }
@@ -361,7 +371,13 @@ impl<const K: usize> JetOutputs<K> {
     /// Zeroes the outputs.
     pub fn clear(&mut self) {
         self.l = Jet::default();
-        for v in [&mut self.dl_dq, &mut self.force, &mut self.tau] {
+        for v in [
+            &mut self.dl_dq,
+            &mut self.force,
+            &mut self.tau,
+            &mut self.dh,
+            &mut self.dh_dot,
+        ] {
             v.fill(Jet::default());
         }
     }
@@ -376,6 +392,8 @@ impl<const K: usize> Sink<Jet<K>> for JetOutputs<K> {
             (Field::DlDq, Index::Entry(i)) => self.dl_dq[i] += x,
             (Field::Force, Index::Entry(i)) => self.force[i] += x,
             (Field::Tau, Index::Entry(i)) => self.tau[i] += x,
+            (Field::Dh, Index::Pair(r, i)) => self.dh[r * self.n + i] += x,
+            (Field::DhDot, Index::Entry(r)) => self.dh_dot[r] += x,
             _ => {}
         }
     }

@@ -6,8 +6,11 @@
 //! `M_dd δq̈_d − Dh_dᵀ δλ = δF + B δu + δL_q − δ(L_q̇q) q̇ − L_q̇q δq̇ − δM q̈ + δDh_dᵀ λ`,
 //! `Dh_d δq̈_d = −δDh q̈ − δ(q̇ᵀD²h q̇)`
 //!
-//! is solved for each direction (kinematic `q̈_k` are prescribed: they do not move). For any
-//! [`System`] (generated ones evaluate their compiled dual program); without Baumgarte
+//! is solved for each direction (kinematic `q̈_k` are prescribed: they do not move). The
+//! right sides come from the recursive Newton–Euler inverse dynamics and the constraints over
+//! [`Jet`]s (eight directions a sweep, [`System::inverse_dynamics_jet`]); a system that does
+//! not offer those differentiates its whole evaluation over dual numbers, a direction at a
+//! time. For any [`System`] (generated ones run their compiled programs); without Baumgarte
 //! stabilisation.
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
@@ -113,7 +116,7 @@ where
             along: DualOutputs::new(n, sys.constraint_count()),
             qj: vec![Jet::default(); n],
             vj: vec![Jet::default(); n],
-            jets: JetOutputs::new(n),
+            jets: JetOutputs::new(n, sys.constraint_count()),
             rows: Vec::new(),
             e: vec![0.0; n],
             zero: vec![0.0; n],
@@ -235,65 +238,91 @@ where
             b[nd + s] = x;
         }
     };
-    // Without constraints the differentiated equations are `M_dd δq̈ = −δr` for the
-    // residual `r = τ(q, q̇, q̈) − ∂L_springs/∂q − F − Bu` at the solved q̈: one recursive
-    // Newton–Euler sweep over jets for LANES directions at once (O(frames)), where
-    // differentiating the whole evaluation forms `δM`, `δ(∂²L/∂q̇∂q)` (O(frames · depth))
-    // and contracts them with q̈ and q̇ (O(n²)) a direction.
+    // The right sides come from the inverse dynamics over jets: along a direction, the
+    // dynamic rows are `−δr + δDh_dᵀλ` for the residual `r = τ(q, q̇, q̈) − ∂L_springs/∂q − F`
+    // at the solved q̈, and the constraint rows `−δ(q̇ᵀD²h q̇) − δDh q̈`: one recursive
+    // Newton–Euler sweep (and one of the constraints) for LANES directions at once
+    // (O(frames)), where differentiating the whole evaluation forms `δM`, `δ(∂²L/∂q̇∂q)`
+    // (O(frames · depth)) and contracts them with q̈ and q̇ (O(n²)) a direction.
     let mut first = 0;
-    if m == 0 {
-        // Every column's right side, row-major (row r at r·cols), solved at once.
-        let cols = 2 * n + nu;
-        ws.rows.resize(k * cols, 0.0);
-        let (qj, vj, jets, rows) = (&mut ws.qj, &mut ws.vj, &mut ws.jets, &mut ws.rows);
-        let mut offered = true;
-        for group in (0..2 * n).step_by(LANES) {
-            for (x, &v) in qj.iter_mut().zip(q.iter()) {
-                *x = Jet::constant(v);
+    // Every column's right side, row-major (row r at r·cols), solved at once.
+    let cols = 2 * n + nu;
+    ws.rows.resize(k * cols, 0.0);
+    let (qj, vj, jets, rows) = (&mut ws.qj, &mut ws.vj, &mut ws.jets, &mut ws.rows);
+    let mut offered = true;
+    for group in (0..2 * n).step_by(LANES) {
+        for (x, &v) in qj.iter_mut().zip(q.iter()) {
+            *x = Jet::constant(v);
+        }
+        for (x, &v) in vj.iter_mut().zip(dq.iter()) {
+            *x = Jet::constant(v);
+        }
+        let lanes = (2 * n - group).min(LANES);
+        for l in 0..lanes {
+            let j = group + l;
+            if j < n {
+                qj[j].d[l] = 1.0;
+            } else {
+                vj[j - n].d[l] = 1.0;
             }
-            for (x, &v) in vj.iter_mut().zip(dq.iter()) {
-                *x = Jet::constant(v);
+        }
+        if !cx.sys.inverse_dynamics_jet(qj, vj, qdd.as_slice(), jets) {
+            offered = false;
+            break;
+        }
+        for (r, &i) in dynamic.iter().enumerate() {
+            let (f, s, t) = (&jets.force[i].d, &jets.dl_dq[i].d, &jets.tau[i].d);
+            let row = &mut rows[r * cols + group..r * cols + group + lanes];
+            for (l, x) in row.iter_mut().enumerate() {
+                *x = f[l] + s[l] - t[l];
             }
-            let lanes = (2 * n - group).min(LANES);
-            for l in 0..lanes {
-                let j = group + l;
-                if j < n {
-                    qj[j].d[l] = 1.0;
-                } else {
-                    vj[j - n].d[l] = 1.0;
-                }
-            }
-            if !cx.sys.inverse_dynamics_jet(qj, vj, qdd.as_slice(), jets) {
-                offered = false;
-                break;
-            }
-            for (r, &i) in dynamic.iter().enumerate() {
-                let (f, s, t) = (&jets.force[i].d, &jets.dl_dq[i].d, &jets.tau[i].d);
-                for l in 0..lanes {
-                    rows[r * cols + group + l] = f[l] + s[l] - t[l];
+            for (c, &ls) in lambda.iter().enumerate() {
+                let dh = &jets.dh[c * n + i].d;
+                for (l, x) in row.iter_mut().enumerate() {
+                    *x += dh[l] * ls;
                 }
             }
         }
-        if offered {
-            // An input moves only its own row of B u.
-            for (r, &i) in dynamic.iter().enumerate() {
-                for c in 0..nu {
-                    rows[r * cols + 2 * n + c] = f64::from(u8::from(cx.sys.input_variable(c) == i));
+        for c in 0..m {
+            let row = &mut rows[(nd + c) * cols + group..(nd + c) * cols + group + lanes];
+            let curvature = &jets.dh_dot[c].d;
+            for (l, x) in row.iter_mut().enumerate() {
+                *x = -curvature[l];
+            }
+            for (j, &a) in qdd.iter().enumerate() {
+                let dh = &jets.dh[c * n + j].d;
+                for (l, x) in row.iter_mut().enumerate() {
+                    *x -= dh[l] * a;
                 }
             }
-            lu_solve_packed_rows(&ws.kkt, k, &ws.pivots, rows, cols);
-            for r in 0..nd {
-                let row = &rows[r * cols..(r + 1) * cols];
-                for j in 0..n {
-                    out.qdd_dq[(r, j)] = row[j];
-                    out.qdd_ddq[(r, j)] = row[n + j];
-                }
-                for c in 0..nu {
-                    out.qdd_du[(r, c)] = row[2 * n + c];
-                }
-            }
-            first = cols;
         }
+    }
+    if offered {
+        // An input moves only its own row of B u.
+        for r in 0..k {
+            for c in 0..nu {
+                let moved = r < nd && cx.sys.input_variable(c) == dynamic[r];
+                rows[r * cols + 2 * n + c] = f64::from(u8::from(moved));
+            }
+        }
+        lu_solve_packed_rows(&ws.kkt, k, &ws.pivots, rows, cols);
+        for r in 0..k {
+            let row = &rows[r * cols..(r + 1) * cols];
+            let (dq_block, ddq_block, du_block) = if r < nd {
+                (&mut out.qdd_dq, &mut out.qdd_ddq, &mut out.qdd_du)
+            } else {
+                (&mut out.lambda_dq, &mut out.lambda_ddq, &mut out.lambda_du)
+            };
+            let i = if r < nd { r } else { r - nd };
+            for j in 0..n {
+                dq_block[(i, j)] = row[j];
+                ddq_block[(i, j)] = row[n + j];
+            }
+            for c in 0..nu {
+                du_block[(i, c)] = row[2 * n + c];
+            }
+        }
+        first = cols;
     }
     for (x, &v) in ws.qd.iter_mut().zip(q.iter()) {
         *x = Dual::new(v, 0.0);

@@ -377,9 +377,10 @@ where
 
     /// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable) over
     /// [`Jet`]s ([`crate::kernel::inverse_dynamics`]: the bodies' `τ` by recursive
-    /// Newton–Euler, the springs' `∂L/∂q` and `L`, the model's own forces) into `out`
-    /// (cleared first): one O(frames) sweep for [`LANES`] directions, what the continuous
-    /// linearisation differentiates. `false` when this system has no such evaluation (the
+    /// Newton–Euler, the springs' `∂L/∂q` and `L`, the model's own forces; with constraints
+    /// also their `Dh` and `q̇ᵀD²h q̇`, [`crate::kernel::constraints`]) into `out` (cleared
+    /// first; `JetOutputs::new(dof, constraint_count)`): one O(frames) sweep for [`LANES`]
+    /// directions, what the continuous linearisation differentiates. `false` when this system has no such evaluation (the
     /// caller differentiates [`Self::evaluate_dual`] instead).
     fn inverse_dynamics_jet(
         &mut self,

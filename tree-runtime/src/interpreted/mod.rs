@@ -274,6 +274,9 @@ impl System for TreeSystem {
             *x = Jet::constant(a);
         }
         kernel::inverse_dynamics(plan, kernel, q, dq, &self.qdd_jet, out);
+        if plan.rows > 0 {
+            kernel::constraints(plan, kernel, q, dq, Order::Dynamics, out);
+        }
         true
     }
 }
