@@ -905,11 +905,15 @@ impl Model {
             },
             second_order,
         };
-        let mut sys = self.system();
-        let mut motion = self.kinematics(&sys, &q, &dq, ddq)?;
+        // The model's own system, whose workspaces (the jets' kernel among them) stay warm
+        // between calls.
+        let mut guard = self.sys.lock().expect("no panic holds the lock");
+        let sys: &mut TreeSystem = &mut guard;
+        let mut motion = self.kinematics(sys, &q, &dq, ddq)?;
         let r = py
-            .detach(move || report::linearize_with(&mut sys, &q, &dq, &request, &mut motion))
+            .detach(move || report::linearize_with(sys, &q, &dq, &request, &mut motion))
             .map_err(|e| sim_error(py, &e))?;
+        drop(guard);
         let out = PyDict::new(py);
         out.set_item("variables", self.names())?;
         out.set_item("dynamic", self.dynamic())?;
