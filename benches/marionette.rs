@@ -1,8 +1,9 @@
 //! The marionette (models/marionette.toml, 42 variables, six strings) and trep's own Puppet
 //! (tools/reference/trep-puppet.toml, 40 variables, six strings): 10 s at Δt = 0.01 with the
 //! VI and with RK4, compiled by `tree_model!` and interpreted, side by side in one run (best of
-//! 7 runs each). Then one VI step, the step with its first derivatives, and the contracted
-//! second derivatives, on both and on the N-link pendulum (interpreted) as N grows. Prints
+//! 7 runs each). Then one VI step, the step with its first derivatives, the contracted
+//! second derivatives and the continuous linearisation, on both and on the N-link pendulum
+//! (interpreted) as N grows. Prints
 //! Markdown tables. Run: `cargo bench --bench marionette`.
 
 use std::time::Instant;
@@ -12,6 +13,9 @@ use tree_mech::integrate::{
     StepDerivatives, ViSettings,
 };
 use tree_mech::nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
+use tree_mech::runtime::linearize::{
+    continuous_derivatives_into, ContinuousDerivatives, ContinuousWorkspace,
+};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{tree_model, NoForce, System, TreeSystem};
 
@@ -74,9 +78,11 @@ fn main() {
     rows("marionette", &mut Marionette, &Marionette::model());
     rows("trep's Puppet", &mut TrepPuppet, &TrepPuppet::model());
     println!();
-    println!("| one VI step at the start (Δt = 0.01) | step [µs] | step + first derivatives [µs] | contracted second derivatives [µs] |");
-    println!("|---|---:|---:|---:|");
-    let row = |name: &str, [a, b, c]: [f64; 3]| println!("| {name} | {a:.1} | {b:.1} | {c:.1} |");
+    println!("| one VI step at the start (Δt = 0.01) | step [µs] | step + first derivatives [µs] | contracted second derivatives [µs] | continuous linearisation [µs] |");
+    println!("|---|---:|---:|---:|---:|");
+    let row = |name: &str, [a, b, c, d]: [f64; 4]| {
+        println!("| {name} | {a:.1} | {b:.1} | {c:.1} | {d:.1} |")
+    };
     row("marionette, compiled", derivatives(&mut Marionette));
     row(
         "marionette, interpreted",
@@ -182,9 +188,10 @@ where
     }) / 100.0
 }
 
-/// `[step, step + first derivatives, contracted second derivatives]` in µs, from the
-/// model's start.
-fn derivatives<S: System>(sys: &mut S) -> [f64; 3]
+/// `[step, step + first derivatives, contracted second derivatives, continuous
+/// linearisation]` in µs, from the model's start (the last: `∂q̈/∂(q, q̇, u)` and
+/// `∂λ/∂(q, q̇, u)` at the start state, `linearize::continuous_derivatives_into`).
+fn derivatives<S: System>(sys: &mut S) -> [f64; 4]
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -223,7 +230,15 @@ where
     let step = time_us(200, || go(sys, 0));
     let with_first = time_us(200, || go(sys, 1));
     let with_second = time_us(20, || go(sys, 2));
-    [step, with_first, with_second - with_first]
+    let mut workspace = ContinuousWorkspace::new(sys);
+    let mut continuous = ContinuousDerivatives::empty();
+    let linearise = time_us(20, || {
+        let mut force = NoForce;
+        let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
+        continuous_derivatives_into(&mut cx, &q, &dq, &mut workspace, &mut continuous)
+            .expect("the linearisation");
+    });
+    [step, with_first, with_second - with_first, linearise]
 }
 
 /// The VI and RK4 rows for one model, compiled (`sys`) and interpreted (from `model`).
