@@ -152,6 +152,52 @@ fn add_point_hessian<S: Scalar>(
     }
 }
 
+/// `Σ_{a,b} q̇_a q̇_b X_ab` for the pattern `X_ab = w_a × x_b` (`a` at or above `b`, and
+/// symmetric) over frame `f`'s variables, `x_b = column(b)`: `Σ_b q̇_b (2Ω_b + q̇_b w_b) × x_b`
+/// with `Ω_b = Σ_{a above b} q̇_a w_a`. With `x_b = J_b` it is `q̇ᵀ(∂²p_f/∂q²)q̇`, the
+/// acceleration of f's origin at `q̈ = 0`; with `x_b = w_b × n`, `q̇ᵀ(∂²n/∂q²)q̇` for a vector
+/// `n` fixed in f. O(depth), where the Hessian's pairs are O(depth²).
+fn curvature_along<S: Scalar>(
+    plan: &TreePlan,
+    ws: &At<'_, S>,
+    f: usize,
+    dq: &[S],
+    column: impl Fn(usize) -> [S; 3],
+) -> [S; 3] {
+    let (col, vars) = columns(plan, f);
+    let two = S::constant(2.0);
+    let mut above = [S::zero(); 3];
+    let mut sum = [S::zero(); 3];
+    for (ib, &b) in vars.iter().enumerate() {
+        let w = ws.tree.axis[col + ib];
+        let lead: [S; 3] = std::array::from_fn(|c| two * above[c] + dq[b] * w[c]);
+        let x = cross(&lead, &column(ib));
+        for c in 0..3 {
+            sum[c] += dq[b] * x[c];
+            above[c] += dq[b] * w[c];
+        }
+    }
+    sum
+}
+
+/// `q̇ᵀ(∂²p_f/∂q²)q̇` (world): frame `f`'s origin's acceleration at `q̈ = 0` ([`curvature_along`]).
+fn point_curvature<S: Scalar>(plan: &TreePlan, ws: &At<'_, S>, f: usize, dq: &[S]) -> [S; 3] {
+    let col = plan.frames[f].col_offset;
+    curvature_along(plan, ws, f, dq, |b| ws.tree.point_jac[col + b])
+}
+
+/// `ḋ = Σ_i Dd_i q̇_i` of the current pair.
+fn pair_rate<S: Scalar>(ws: &At<'_, S>, dq: &[S]) -> [S; 3] {
+    let sc = &ws.scratch;
+    let mut rate = [S::zero(); 3];
+    for &i in &sc.vars {
+        for c in 0..3 {
+            rate[c] += sc.dd[i][c] * dq[i];
+        }
+    }
+    rate
+}
+
 /// Hessian of `s = d·d` into the scratch: `2 Dd_i·Dd_j + 2 d·∂²d/∂q_i∂q_j`.
 fn squared_distance_hessian<S: Scalar>(
     plan: &TreePlan,
@@ -173,12 +219,13 @@ fn squared_distance_hessian<S: Scalar>(
     add_point_hessian(plan, ws, b, d, -two);
 }
 
-/// Emits the current element's value, gradient and Hessian as constraint row `r`.
+/// Emits the current element's value, gradient, `q̇ᵀD²h q̇` (`curvature`, from
+/// `Order::Dynamics` on) and Hessian (at `Order::Full`) as constraint row `r`.
 fn emit_row<S: Scalar>(
     ws: &At<'_, S>,
     r: usize,
     h: S,
-    dq: &[S],
+    curvature: S,
     order: Order,
     out: &mut impl Sink<S>,
 ) {
@@ -190,15 +237,7 @@ fn emit_row<S: Scalar>(
     if order < Order::Dynamics {
         return;
     }
-    let mut acc = S::zero();
-    for &i in &sc.vars {
-        let mut row = S::zero();
-        for &j in &sc.vars {
-            row += sc.hess_at(i, j) * dq[j];
-        }
-        acc += dq[i] * row;
-    }
-    out.add(Output::DhDot(r), acc);
+    out.add(Output::DhDot(r), curvature);
     if order >= Order::Full {
         for &i in &sc.vars {
             for &j in &sc.vars {
@@ -222,14 +261,27 @@ pub fn constraints<S: Scalar>(
     out: &mut impl Sink<S>,
 ) {
     let ws = &mut At { tree, scratch };
+    // `q̇ᵀD²h q̇` from `Order::Dynamics` on (by the frames' curvatures, O(depth)); the whole
+    // Hessian `D²h` only at `Order::Full`.
     let second = order >= Order::Dynamics;
+    let full = order >= Order::Full;
+    let two = S::constant(2.0);
     let mut r = 0;
     for con in &plan.constraints {
         let [a, b] = con.frames;
         match &con.kind {
             ConstraintKind::Distance { length } => {
+                // q̇ᵀD²h q̇ = 2ḋ·ḋ + 2d·(κ_a − κ_b) − 2q̇_ℓ² (κ: the points' curvatures).
                 let d = pair(plan, ws, a, b);
-                let two = S::constant(2.0);
+                let mut curvature = S::zero();
+                if second {
+                    let rate = pair_rate(ws, dq);
+                    let (ka, kb) = (
+                        point_curvature(plan, ws, a, dq),
+                        point_curvature(plan, ws, b, dq),
+                    );
+                    curvature = two * (dot3(&rate, &rate) + dot3(&d, &sub3(&ka, &kb)));
+                }
                 let sc = &mut ws.scratch;
                 for x in 0..sc.vars.len() {
                     let i = sc.vars[x];
@@ -240,16 +292,17 @@ pub fn constraints<S: Scalar>(
                     Parameter::Variable(i) => {
                         sc.involve(i);
                         sc.grad[i] -= two * q[i];
-                        if second {
+                        if full {
                             sc.add_hess(i, i, -two);
                         }
+                        curvature -= two * dq[i] * dq[i];
                         q[i]
                     }
                 };
-                if second {
+                if full {
                     squared_distance_hessian(plan, ws, a, b, &d);
                 }
-                emit_row(ws, r, dot3(&d, &d) - l * l, dq, order, out);
+                emit_row(ws, r, dot3(&d, &d) - l * l, curvature, order, out);
                 r += 1;
             }
             ConstraintKind::Plane { normal } => {
@@ -258,6 +311,27 @@ pub fn constraints<S: Scalar>(
                 let n = ws.tree.pose[a].rotate(&normal.map(S::constant));
                 let n_cross_e = cross(&n, &e);
                 let (col, anc) = columns(plan, a);
+                // q̇ᵀD²h q̇ = n·(κ_b − κ_a) + 2ṅ·ė + (q̇ᵀ∂²n q̇)·e, ṅ = ω_a × n, ė = −ḋ.
+                let mut curvature = S::zero();
+                if second {
+                    let rate = pair_rate(ws, dq);
+                    let mut omega = [S::zero(); 3];
+                    for (ia, &i) in anc.iter().enumerate() {
+                        let w = ws.tree.axis[col + ia];
+                        for c in 0..3 {
+                            omega[c] += dq[i] * w[c];
+                        }
+                    }
+                    let n_rate = cross(&omega, &n);
+                    let n_curvature =
+                        curvature_along(plan, ws, a, dq, |ib| cross(&ws.tree.axis[col + ib], &n));
+                    let (ka, kb) = (
+                        point_curvature(plan, ws, a, dq),
+                        point_curvature(plan, ws, b, dq),
+                    );
+                    curvature = dot3(&n, &sub3(&kb, &ka)) - two * dot3(&n_rate, &rate)
+                        + dot3(&n_curvature, &e);
+                }
                 let sc = &mut ws.scratch;
                 for x in 0..sc.vars.len() {
                     let i = sc.vars[x];
@@ -267,7 +341,7 @@ pub fn constraints<S: Scalar>(
                 for (ia, &i) in anc.iter().enumerate() {
                     sc.grad[i] += dot3(&ws.tree.axis[col + ia], &n_cross_e);
                 }
-                if second {
+                if full {
                     // n·∂²e = n·(∂²p_b − ∂²p_a).
                     add_point_hessian(plan, ws, b, &n, S::constant(1.0));
                     add_point_hessian(plan, ws, a, &n, S::constant(-1.0));
@@ -290,10 +364,19 @@ pub fn constraints<S: Scalar>(
                         }
                     }
                 }
-                emit_row(ws, r, dot3(&n, &e), dq, order, out);
+                emit_row(ws, r, dot3(&n, &e), curvature, order, out);
                 r += 1;
             }
             ConstraintKind::Point { axes } => {
+                // q̇ᵀD²h q̇ = e_k·(κ_a − κ_b).
+                let relative = if second {
+                    sub3(
+                        &point_curvature(plan, ws, a, dq),
+                        &point_curvature(plan, ws, b, dq),
+                    )
+                } else {
+                    [S::zero(); 3]
+                };
                 for &k in axes {
                     let d = pair(plan, ws, a, b);
                     let sc = &mut ws.scratch;
@@ -301,13 +384,13 @@ pub fn constraints<S: Scalar>(
                         let i = sc.vars[x];
                         sc.grad[i] = sc.dd[i][k];
                     }
-                    if second {
+                    if full {
                         let mut e = [S::zero(); 3];
                         e[k] = S::constant(1.0);
                         add_point_hessian(plan, ws, a, &e, S::constant(1.0));
                         add_point_hessian(plan, ws, b, &e, S::constant(-1.0));
                     }
-                    emit_row(ws, r, d[k], dq, order, out);
+                    emit_row(ws, r, d[k], relative[k], order, out);
                     r += 1;
                 }
             }
