@@ -7,11 +7,10 @@ mod common;
 use nalgebra::Dyn;
 use tree_mech::integrate::{project_initial_state, StepContext};
 use tree_mech::model;
-use tree_mech::runtime::dual::{Dual, DualOutputs};
 use tree_mech::runtime::dynamics::Split;
 use tree_mech::runtime::linearize::continuous_derivatives;
-use tree_mech::runtime::{Dynamics, ModelMotions, Pose, Prescription, Vector};
-use tree_mech::{ConstraintTerms, NoForce, Order, System, Terms, TreeSystem};
+use tree_mech::runtime::{Dynamics, ModelMotions, Prescription, Vector};
+use tree_mech::{NoForce, Order, System, Terms, TreeSystem};
 
 /// `(q̈_d, λ)` at `(q, q̇, u)`, t = 0.3.
 fn accelerations(
@@ -296,58 +295,13 @@ fn newton_euler_is_the_lagrangians_inverse_dynamics() {
 
 /// A system that offers no evaluation over jets: the continuous linearisation falls back on
 /// differentiating its whole evaluation over dual numbers, a direction at a time.
-struct DualOnly(TreeSystem);
+struct DualOnly {
+    inner: TreeSystem,
+}
 
 impl System for DualOnly {
     type N = Dyn;
-    fn dim(&self) -> Dyn {
-        self.0.dim()
-    }
-    fn variable_name(&self, i: usize) -> &str {
-        self.0.variable_name(i)
-    }
-    fn frame_count(&self) -> usize {
-        self.0.frame_count()
-    }
-    fn frame_name(&self, k: usize) -> &str {
-        self.0.frame_name(k)
-    }
-    fn initial(&self, i: usize) -> (f64, f64) {
-        self.0.initial(i)
-    }
-    fn damping(&self, i: usize) -> f64 {
-        self.0.damping(i)
-    }
-    fn motion(&self, i: usize) -> Option<model::Motion> {
-        self.0.motion(i)
-    }
-    fn is_angle(&self, i: usize) -> bool {
-        self.0.is_angle(i)
-    }
-    fn constraint_count(&self) -> usize {
-        self.0.constraint_count()
-    }
-    fn constraint_name(&self, r: usize) -> &str {
-        self.0.constraint_name(r)
-    }
-    fn input_count(&self) -> usize {
-        self.0.input_count()
-    }
-    fn input_name(&self, k: usize) -> &str {
-        self.0.input_name(k)
-    }
-    fn input_variable(&self, k: usize) -> usize {
-        self.0.input_variable(k)
-    }
-    fn constraints(
-        &mut self,
-        q: &Vector<Dyn>,
-        dq: &Vector<Dyn>,
-        order: Order,
-        out: &mut ConstraintTerms,
-    ) {
-        self.0.constraints(q, dq, order, out)
-    }
+    delegate_description!(inner);
     fn lagrangian(
         &mut self,
         q: &Vector<Dyn>,
@@ -355,13 +309,7 @@ impl System for DualOnly {
         order: Order,
         out: &mut Terms<Dyn>,
     ) {
-        self.0.lagrangian(q, dq, order, out)
-    }
-    fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
-        self.0.poses(q, out)
-    }
-    fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
-        self.0.evaluate_dual(q, dq, order, out)
+        self.inner.lagrangian(q, dq, order, out)
     }
 }
 
@@ -394,7 +342,9 @@ fn the_dual_fallback_equals_the_jets() {
     for file in files {
         let model = model::from_toml_file(&file).unwrap();
         let mut jets = TreeSystem::new(&model).unwrap();
-        let mut duals = DualOnly(TreeSystem::new(&model).unwrap());
+        let mut duals = DualOnly {
+            inner: TreeSystem::new(&model).unwrap(),
+        };
         let n = jets.dof();
         let mut rng = common::Rng::new(31);
         let (q, dq) = (rng.vector(n, 0.4), rng.vector(n, 0.8));

@@ -9,7 +9,7 @@ use tree_mech::integrate::{
     simulate, Forcing, JacobianUpdate, Method, MidpointVi, SimOptions, StepContext, ViSettings,
 };
 use tree_mech::model;
-use tree_mech::runtime::{Pose, Vector};
+use tree_mech::runtime::Vector;
 use tree_mech::{NoForce, Order, PaperEvaluation, PaperSystem, System, Terms, TreeSystem};
 
 #[test]
@@ -101,54 +101,7 @@ struct Counting {
 
 impl System for Counting {
     type N = Dyn;
-    fn dim(&self) -> Dyn {
-        self.inner.dim()
-    }
-    fn variable_name(&self, i: usize) -> &str {
-        self.inner.variable_name(i)
-    }
-    fn frame_count(&self) -> usize {
-        self.inner.frame_count()
-    }
-    fn frame_name(&self, k: usize) -> &str {
-        self.inner.frame_name(k)
-    }
-    fn initial(&self, i: usize) -> (f64, f64) {
-        self.inner.initial(i)
-    }
-    fn damping(&self, i: usize) -> f64 {
-        self.inner.damping(i)
-    }
-    fn is_angle(&self, i: usize) -> bool {
-        self.inner.is_angle(i)
-    }
-    fn input_count(&self) -> usize {
-        self.inner.input_count()
-    }
-    fn input_name(&self, k: usize) -> &str {
-        self.inner.input_name(k)
-    }
-    fn input_variable(&self, k: usize) -> usize {
-        self.inner.input_variable(k)
-    }
-    fn motion(&self, i: usize) -> Option<tree_mech::model::Motion> {
-        self.inner.motion(i)
-    }
-    fn constraint_count(&self) -> usize {
-        self.inner.constraint_count()
-    }
-    fn constraint_name(&self, r: usize) -> &str {
-        self.inner.constraint_name(r)
-    }
-    fn constraints(
-        &mut self,
-        q: &Vector<Dyn>,
-        dq: &Vector<Dyn>,
-        order: Order,
-        out: &mut tree_mech::ConstraintTerms,
-    ) {
-        self.inner.constraints(q, dq, order, out)
-    }
+    delegate_description!(inner);
     fn lagrangian(
         &mut self,
         q: &Vector<Dyn>,
@@ -162,18 +115,6 @@ impl System for Counting {
             Order::Dynamics => {}
         }
         self.inner.lagrangian(q, dq, order, out)
-    }
-    fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
-        self.inner.poses(q, out)
-    }
-    fn evaluate_dual(
-        &mut self,
-        q: &[tree_mech::runtime::dual::Dual],
-        dq: &[tree_mech::runtime::dual::Dual],
-        order: Order,
-        out: &mut tree_mech::runtime::dual::DualOutputs,
-    ) {
-        self.inner.evaluate_dual(q, dq, order, out)
     }
 }
 

@@ -97,3 +97,76 @@ pub fn cart_to_half_metre(dt: f64) -> tree_mech::control::QuadraticCost {
         terminal_weight: DVector::from_vec(vec![100.0, 10.0, 10.0, 10.0, 0.0]),
     }
 }
+
+/// The `System` methods that describe a model (names, counts, initial state, motions),
+/// delegated to the system in field `$inner`: for test wrappers that change only how a
+/// system evaluates (`impl System for W { type N = Dyn; delegate_description!(inner); … }`).
+#[macro_export]
+macro_rules! delegate_description {
+    ($inner:ident) => {
+        fn dim(&self) -> nalgebra::Dyn {
+            self.$inner.dim()
+        }
+        fn variable_name(&self, i: usize) -> &str {
+            self.$inner.variable_name(i)
+        }
+        fn frame_count(&self) -> usize {
+            self.$inner.frame_count()
+        }
+        fn frame_name(&self, k: usize) -> &str {
+            self.$inner.frame_name(k)
+        }
+        fn initial(&self, i: usize) -> (f64, f64) {
+            self.$inner.initial(i)
+        }
+        fn damping(&self, i: usize) -> f64 {
+            self.$inner.damping(i)
+        }
+        fn is_angle(&self, i: usize) -> bool {
+            self.$inner.is_angle(i)
+        }
+        fn input_count(&self) -> usize {
+            self.$inner.input_count()
+        }
+        fn input_name(&self, k: usize) -> &str {
+            self.$inner.input_name(k)
+        }
+        fn input_variable(&self, k: usize) -> usize {
+            self.$inner.input_variable(k)
+        }
+        fn motion(&self, i: usize) -> Option<tree_mech::model::Motion> {
+            self.$inner.motion(i)
+        }
+        fn constraint_count(&self) -> usize {
+            self.$inner.constraint_count()
+        }
+        fn constraint_name(&self, r: usize) -> &str {
+            self.$inner.constraint_name(r)
+        }
+        fn constraints(
+            &mut self,
+            q: &tree_mech::runtime::Vector<nalgebra::Dyn>,
+            dq: &tree_mech::runtime::Vector<nalgebra::Dyn>,
+            order: tree_mech::Order,
+            out: &mut tree_mech::ConstraintTerms,
+        ) {
+            self.$inner.constraints(q, dq, order, out)
+        }
+        fn poses(
+            &mut self,
+            q: &tree_mech::runtime::Vector<nalgebra::Dyn>,
+            out: &mut [tree_mech::runtime::Pose],
+        ) {
+            self.$inner.poses(q, out)
+        }
+        fn evaluate_dual(
+            &mut self,
+            q: &[tree_mech::runtime::dual::Dual],
+            dq: &[tree_mech::runtime::dual::Dual],
+            order: tree_mech::Order,
+            out: &mut tree_mech::runtime::dual::DualOutputs,
+        ) {
+            self.$inner.evaluate_dual(q, dq, order, out)
+        }
+    };
+}
