@@ -97,7 +97,7 @@ fn gradient_matches(controls: &str, integrator: &str, rate: bool) {
         _ => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()).unwrap(),
     }
     .with_input_memory(rate);
-    let mut cost = TaskCost::new(&task, &model);
+    let mut cost = TaskCost::new(&task, &model).unwrap();
     let q0 = DVector::from_column_slice(&task.q0);
     let dq0 = DVector::from_column_slice(&task.dq0);
     let nu = task.controls.len();
@@ -162,7 +162,7 @@ fn a_rate_cost_on_a_system_that_forgets_its_inputs_is_refused() {
     )
     .unwrap()
     .with_input_memory(false);
-    let mut cost = TaskCost::new(&task, &model);
+    let mut cost = TaskCost::new(&task, &model).unwrap();
     let q0 = DVector::from_column_slice(&task.q0);
     let dq0 = DVector::from_column_slice(&task.dq0);
     let x0 = dynamics.state_of(&q0, &dq0, &[]);

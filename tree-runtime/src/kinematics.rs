@@ -187,6 +187,12 @@ impl Kinematics {
                 )));
             }
         }
+        self.set(q, dq, ddq);
+        Ok(())
+    }
+
+    /// [`Self::update`] for a state known to fit (the right lengths, finite).
+    pub(crate) fn set(&mut self, q: &[f64], dq: Option<&[f64]>, ddq: Option<&[f64]>) {
         match dq {
             Some(x) => self.dq.copy_from_slice(x),
             None => self.dq.fill(0.0),
@@ -197,7 +203,6 @@ impl Kinematics {
         }
         forward(&self.plan, &mut self.ws, q, &self.dq, Reach::Everything);
         self.accelerations();
-        Ok(())
     }
 
     /// `a_k = Ad_{g_k⁻¹} a_par + c_k + ξ_k q̈_k` outward from a base at rest, with

@@ -1,75 +1,8 @@
-//! Frames' world poses and their Jacobians by `q`, read off the model's tree (eq. (1) and
-//! its derivative): what `frame` and `orientation` cost terms are written on. Each variable
-//! drives one primitive, so column `j` of a frame's Jacobian is that primitive's unit twist
-//! seen from the world, when the frame hangs below it.
+//! The rotation algebra the `orientation` cost term is written in: `log` on SO(3) and the
+//! inverse of its right Jacobian (the frames' poses and Jacobians themselves come from
+//! [`crate::kinematics`]).
 
-use nalgebra::{DMatrix, Matrix3, Vector3};
-use tree_model::{Joint, Model};
-
-/// Every frame's world rotation and origin at `q`.
-pub fn world_poses(model: &Model, q: &[f64]) -> Vec<(Matrix3<f64>, Vector3<f64>)> {
-    let mut out = Vec::with_capacity(model.frames.len());
-    world_poses_into(model, q, &mut out);
-    out
-}
-
-/// [`world_poses`] into `out` (cleared; no allocation once it has the capacity).
-pub fn world_poses_into(model: &Model, q: &[f64], out: &mut Vec<(Matrix3<f64>, Vector3<f64>)>) {
-    out.clear();
-    for f in &model.frames {
-        let (r, p) = f
-            .parent
-            .map_or((Matrix3::identity(), Vector3::zeros()), |k| out[k]);
-        let x = match f.joint {
-            Joint::Constant(x) => x,
-            Joint::Variable(i) => q[i],
-        };
-        let axis = f.primitive.axis();
-        out.push(if f.primitive.is_rotation() {
-            let turn = nalgebra::Rotation3::from_axis_angle(
-                &nalgebra::Unit::new_unchecked(Vector3::ith(axis, 1.0)),
-                x,
-            );
-            (r * turn.matrix(), p)
-        } else {
-            (r, p + r.column(axis) * x)
-        });
-    }
-}
-
-/// Frame `f`'s world position Jacobian `∂p_f/∂q` and angular Jacobian `J_ω` (world
-/// components: `ω = J_ω q̇`), each 3 × n, from the poses of [`world_poses`], into `jp`, `jw`.
-pub fn frame_jacobians(
-    model: &Model,
-    poses: &[(Matrix3<f64>, Vector3<f64>)],
-    f: usize,
-    jp: &mut DMatrix<f64>,
-    jw: &mut DMatrix<f64>,
-) {
-    jp.fill(0.0);
-    jw.fill(0.0);
-    let pf = poses[f].1;
-    let mut a = Some(f);
-    while let Some(k) = a {
-        let frame = &model.frames[k];
-        if let Joint::Variable(j) = frame.joint {
-            let (r, p) = poses[k];
-            let e = r.column(frame.primitive.axis()).into_owned();
-            if frame.primitive.is_rotation() {
-                let v = e.cross(&(pf - p));
-                for row in 0..3 {
-                    jp[(row, j)] += v[row];
-                    jw[(row, j)] += e[row];
-                }
-            } else {
-                for row in 0..3 {
-                    jp[(row, j)] += e[row];
-                }
-            }
-        }
-        a = frame.parent;
-    }
-}
+use nalgebra::{Matrix3, Vector3};
 
 /// `log(R)`: the rotation vector `φ` with `R = exp([φ]×)`, `|φ| ≤ π`.
 pub fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {

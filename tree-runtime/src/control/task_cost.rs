@@ -14,10 +14,11 @@ use tree_model::{About, Control, CostTerm, Model, Target, Task};
 
 use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::Knot;
-use super::frames::{
-    frame_jacobians, log_so3, right_jacobian_inverse, world_poses, world_poses_into,
-};
+use super::frames::{log_so3, right_jacobian_inverse};
+use crate::error::SimError;
+use crate::kinematics::{Kinematics, Reference};
 use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
+use crate::se3::Pose;
 
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,13 +79,13 @@ impl Residual {
     }
 }
 
-/// What one evaluation works in, kept between knots: the world poses, a frame's Jacobians and
-/// each term's residual.
-#[derive(Clone, Debug, Default)]
+/// What one evaluation works in, kept between knots: the frames' kinematics at the knot, a
+/// frame's Jacobian (6 × n) and three of its rows (3 × n), and each term's residual.
+#[derive(Clone, Debug)]
 struct Scratch {
-    poses: Vec<(Matrix3<f64>, Vector3<f64>)>,
+    frames: Kinematics,
+    j6: DMatrix<f64>,
     jp: DMatrix<f64>,
-    jw: DMatrix<f64>,
     running: Vec<Residual>,
     terminal: Vec<Residual>,
     /// The factors of the dense products, packed.
@@ -108,9 +109,12 @@ pub struct TaskCost {
 
 impl TaskCost {
     /// The cost of `task` on `model`: offsets and default orientations are placed at the
-    /// task's start configuration.
-    pub fn new(task: &Task, model: &Model) -> Self {
-        let start_poses = world_poses(model, &task.q0);
+    /// task's start configuration. Fails only as [`Kinematics::new`] does (a model too large
+    /// for the runtime's Jacobian columns).
+    pub fn new(task: &Task, model: &Model) -> Result<Self, SimError> {
+        let mut frames = Kinematics::new(model)?;
+        frames.update(&task.q0, None, None)?;
+        let start = |f: usize| world(&frames.pose(f));
         let place = |t: &CostTerm| -> Term {
             match t {
                 CostTerm::State {
@@ -147,7 +151,7 @@ impl TaskCost {
                     frame: *frame,
                     target: match target {
                         Target::World(p) => Vector3::from(*p),
-                        Target::Offset(o) => start_poses[*frame].1 + Vector3::from(*o),
+                        Target::Offset(o) => start(*frame).1 + Vector3::from(*o),
                     },
                     weight: DVector::from_column_slice(weight),
                 },
@@ -157,13 +161,13 @@ impl TaskCost {
                     weight,
                 } => Term::Orientation {
                     frame: *frame,
-                    target: target
-                        .map_or(start_poses[*frame].0, |r| Matrix3::from_fn(|i, j| r[i][j])),
+                    target: target.map_or(start(*frame).0, |r| Matrix3::from_fn(|i, j| r[i][j])),
                     weight: DVector::from_column_slice(weight),
                 },
             }
         };
-        TaskCost {
+        let n = model.variables.len();
+        Ok(TaskCost {
             model: model.clone(),
             dt: task.dt,
             start: DVector::from_iterator(
@@ -178,11 +182,14 @@ impl TaskCost {
             terminal: task.terminal.iter().map(place).collect(),
             reads_previous_inputs: task.reads_previous_inputs(),
             scratch: Scratch {
+                frames,
+                j6: DMatrix::zeros(6, n),
+                jp: DMatrix::zeros(3, n),
                 running: vec![Residual::default(); task.running.len()],
                 terminal: vec![Residual::default(); task.terminal.len()],
-                ..Scratch::default()
+                packing: Packing::default(),
             },
-        }
+        })
     }
 
     fn weight(term: &Term) -> &DVector<f64> {
@@ -205,9 +212,9 @@ impl TaskCost {
         d: Option<&mut Derivatives>,
     ) -> f64 {
         let Scratch {
-            poses,
+            frames,
+            j6,
             jp,
-            jw,
             running,
             terminal,
             packing,
@@ -229,14 +236,9 @@ impl TaskCost {
             .iter()
             .any(|t| matches!(t, Term::Frame { .. } | Term::Orientation { .. }));
         if placed {
-            world_poses_into(&self.model, knot.q.as_slice(), poses);
-            let n = knot.q.len();
-            if jp.ncols() != n {
-                (*jp, *jw) = (DMatrix::zeros(3, n), DMatrix::zeros(3, n));
-            }
+            frames.set(knot.q.as_slice(), None, None);
         }
         let at = At {
-            model: &self.model,
             controls: &self.controls,
             start: &self.start,
             dt: self.dt,
@@ -247,9 +249,9 @@ impl TaskCost {
                 term,
                 knot,
                 u,
-                poses,
+                frames,
                 jac,
-                (&mut *jp, &mut *jw, &mut *packing),
+                (&mut *j6, &mut *jp, &mut *packing),
                 res,
             );
             let w = Self::weight(term);
@@ -282,25 +284,29 @@ impl TaskCost {
     }
 }
 
+/// A pose as a rotation matrix and a position.
+fn world(pose: &Pose) -> (Matrix3<f64>, Vector3<f64>) {
+    (Matrix3::from_fn(|i, j| pose.r[i][j]), Vector3::from(pose.p))
+}
+
 /// What a residual reads besides the knot.
 struct At<'a> {
-    model: &'a Model,
     controls: &'a [Control],
     start: &'a DVector<f64>,
     dt: f64,
 }
 
 impl At<'_> {
-    /// Residual of `term` at `knot` into `res` (with `u` for running terms; `poses` every
-    /// frame's world pose at the knot, when a term needs them; `frame` 3 × n buffers for a
-    /// frame's Jacobians).
+    /// Residual of `term` at `knot` into `res` (with `u` for running terms; `frames` the
+    /// frames' kinematics at the knot, when a term needs them; `frame_jac` a 6 × n and a
+    /// 3 × n buffer for a frame's Jacobian).
     #[allow(clippy::too_many_arguments)] // the term, where it is read, and its buffers
     fn residual(
         &self,
         term: &Term,
         knot: &Knot,
         u: Option<&DVector<f64>>,
-        poses: &[(Matrix3<f64>, Vector3<f64>)],
+        frames: &Kinematics,
         jac: bool,
         frame_jac: (&mut DMatrix<f64>, &mut DMatrix<f64>, &mut Packing),
         res: &mut Residual,
@@ -374,25 +380,27 @@ impl At<'_> {
                 }
             }
             Term::Frame { frame, target, .. } => {
-                res.r.copy_from(&(poses[*frame].1 - target));
+                res.r.copy_from(&(world(&frames.pose(*frame)).1 - target));
                 if jac {
-                    let (jp, jw, packing) = frame_jac;
-                    frame_jacobians(self.model, poses, *frame, jp, jw);
+                    // ∂p_f/∂q: the linear rows in world axes at the frame's origin.
+                    let (j6, jp, packing) = frame_jac;
+                    frames.jacobian_into(*frame, Reference::LocalWorldAligned, j6);
+                    jp.copy_from(&j6.rows(0, 3));
                     mul_into(&mut res.jx, jp, &knot.q_x, 0.0, packing);
                 }
             }
             Term::Orientation { frame, target, .. } => {
-                let rf = poses[*frame].0;
+                let rf = world(&frames.pose(*frame)).0;
                 let phi = log_so3(&(target.transpose() * rf));
                 res.r.copy_from(&phi);
                 if jac {
-                    let (jp, jw, packing) = frame_jac;
-                    frame_jacobians(self.model, poses, *frame, jp, jw);
-                    // J_r⁻¹(φ) R_fᵀ J_ω (the body-frame angular Jacobian), into `jp`.
-                    let m = right_jacobian_inverse(&phi) * rf.transpose();
+                    // J_r⁻¹(φ) R_fᵀ J_ω: the angular rows in the frame's own axes.
+                    let (j6, jp, packing) = frame_jac;
+                    frames.jacobian_into(*frame, Reference::Local, j6);
+                    let m = right_jacobian_inverse(&phi);
                     for c in 0..n {
                         for i in 0..3 {
-                            jp[(i, c)] = (0..3).map(|k| m[(i, k)] * jw[(k, c)]).sum();
+                            jp[(i, c)] = (0..3).map(|k| m[(i, k)] * j6[(3 + k, c)]).sum();
                         }
                     }
                     mul_into(&mut res.jx, jp, &knot.q_x, 0.0, packing);

@@ -155,7 +155,7 @@ where
         limits,
         ..IlqrSettings::default()
     };
-    let mut cost = TaskCost::new(task, model);
+    let mut cost = TaskCost::new(task, model)?;
     let start = Instant::now();
     let solution = solve_until(&mut dynamics, &mut cost, &x0, guess, &settings, report)?;
     let solve_seconds = start.elapsed().as_secs_f64();
