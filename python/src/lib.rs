@@ -732,7 +732,8 @@ impl Model {
     /// Frame `frame`'s acceleration at `(q, dq, ddq)` (`ddq` default zero; every variable,
     /// kinematic ones included): with `classical=False` the spatial acceleration — the
     /// rate of its twist — in `reference` (Pinocchio's `getFrameAcceleration`); with
-    /// `classical=True` the acceleration of its origin in world axes, 3 entries.
+    /// `classical=True` the acceleration of its origin in world axes, 3 entries (whatever
+    /// `reference` says).
     #[pyo3(signature = (frame, q=None, dq=None, ddq=None, reference="local_world_aligned", classical=false))]
     #[allow(clippy::too_many_arguments)]
     fn frame_acceleration(
