@@ -79,10 +79,11 @@ where
     /// The KKT matrix `[[M_dd, −Dh_dᵀ], [Dh_d, 0]]`, LU-factored (column-major, packed).
     kkt: Vec<f64>,
     pivots: Vec<usize>,
-    /// The state over dual numbers, and the evaluation along one direction.
+    /// The state over dual numbers, and the evaluation along one direction (made on first
+    /// use: only a system without jets needs it).
     qd: Vec<Dual>,
     vd: Vec<Dual>,
-    along: DualOutputs,
+    along: Option<Box<DualOutputs>>,
     /// The state over jets, and the inverse dynamics along LANES directions.
     qj: Vec<Jet<LANES>>,
     vj: Vec<Jet<LANES>>,
@@ -113,7 +114,7 @@ where
             pivots: vec![0; k],
             qd: vec![Dual::default(); n],
             vd: vec![Dual::default(); n],
-            along: DualOutputs::new(n, sys.constraint_count()),
+            along: None,
             qj: vec![Jet::default(); n],
             vj: vec![Jet::default(); n],
             jets: JetOutputs::new(n, sys.constraint_count()),
@@ -324,13 +325,21 @@ where
         }
         first = cols;
     }
+    if first == 2 * n + nu {
+        return Ok(());
+    }
+    // The fallback: each direction's right side from the whole evaluation over dual numbers.
     for (x, &v) in ws.qd.iter_mut().zip(q.iter()) {
         *x = Dual::new(v, 0.0);
     }
     for (x, &v) in ws.vd.iter_mut().zip(dq.iter()) {
         *x = Dual::new(v, 0.0);
     }
-    let (e, zero, b, d) = (&mut ws.e, &ws.zero, &mut ws.b, &mut ws.along);
+    let m_rows = cx.sys.constraint_count();
+    let d = ws
+        .along
+        .get_or_insert_with(|| Box::new(DualOutputs::new(n, m_rows)));
+    let (e, zero, b) = (&mut ws.e, &ws.zero, &mut ws.b);
     for j in first..(2 * n + nu) {
         if j < 2 * n {
             // Seed the one coordinate direction j.
