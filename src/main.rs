@@ -22,6 +22,7 @@ use tree_mech::integrate::{
 use tree_mech::model::{self, Given, Rounded};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::evaluation::evaluate_state;
+use tree_mech::runtime::kinematics::{Kinematics, Reference};
 use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Prescription, Seconds, Vector};
 use tree_mech::{NoForce, PaperEvaluation, PaperSystem, SimError, System, Trajectory, TreeSystem};
 
@@ -198,6 +199,10 @@ enum Command {
         /// Inputs `u`, comma-separated in the model's input order (default: zero).
         #[arg(long, allow_hyphen_values = true)]
         u: Option<String>,
+        /// A frame whose kinematics to add under `frames` (repeatable): its pose, Jacobian,
+        /// twist and accelerations at this state, q̈ from the dynamics.
+        #[arg(long = "frame", value_name = "NAME")]
+        frames: Vec<String>,
     },
     /// Linearise the dynamics at a state (exact derivatives of q̈ and λ), and with --dt one
     /// midpoint-VI step as a map; prints JSON.
@@ -336,13 +341,23 @@ fn main() -> ExitCode {
                 }
             })
         }
-        Command::Eval { model, q, dq, t, u } => run_eval(
+        Command::Eval {
+            model,
+            q,
+            dq,
+            t,
+            u,
+            frames,
+        } => run_eval(
             &model,
             &source,
-            q.as_deref(),
-            dq.as_deref(),
-            u.as_deref(),
-            t,
+            EvalState {
+                q: q.as_deref(),
+                dq: dq.as_deref(),
+                u: u.as_deref(),
+                t,
+            },
+            &frames,
         ),
         Command::Check { model } => run_check(&model, &source),
         Command::Optimize(request) => {
@@ -886,14 +901,21 @@ fn parse_list(
     Ok(values)
 }
 
+/// The state `eval` is asked about, as given on the command line.
+struct EvalState<'a> {
+    q: Option<&'a str>,
+    dq: Option<&'a str>,
+    u: Option<&'a str>,
+    t: f64,
+}
+
 fn run_eval(
     path: &Path,
     source: &Source,
-    q: Option<&str>,
-    dq: Option<&str>,
-    u: Option<&str>,
-    time: f64,
+    state: EvalState<'_>,
+    frames: &[String],
 ) -> Result<(), String> {
+    let EvalState { q, dq, u, t: time } = state;
     let mut sys = source.system(path)?;
     let n = sys.dof();
     let names: Vec<String> = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
@@ -937,6 +959,32 @@ fn run_eval(
         .enumerate()
         .map(|(k, p)| (sys.frame_name(k).to_string(), json!(p.matrix())))
         .collect();
+    // The frames' kinematics at the state, q̈ from the dynamics (kinematic variables'
+    // from their prescription), in world axes at each frame's origin.
+    let mut kinematics = Kinematics::new(sys.model()).map_err(|e| e.to_string())?;
+    kinematics
+        .update(q.as_slice(), Some(dq.as_slice()), Some(e.qdd.as_slice()))
+        .map_err(|e| e.to_string())?;
+    let mut frame_entries = serde_json::Map::new();
+    for name in frames {
+        let f = kinematics
+            .frame(name)
+            .map_err(|e| format!("--frame: {e}"))?;
+        let jacobian = kinematics.jacobian(f, Reference::LocalWorldAligned);
+        frame_entries.insert(
+            name.clone(),
+            json!({
+                "pose": kinematics.pose(f).matrix(),
+                "jacobian": (0..6)
+                    .map(|r| (0..n).map(|c| jacobian[(r, c)]).collect::<Vec<_>>())
+                    .collect::<Vec<_>>(),
+                "velocity": kinematics.velocity(f, Reference::LocalWorldAligned),
+                "acceleration": kinematics.acceleration(f, Reference::LocalWorldAligned),
+                "classical_acceleration": kinematics.classical_acceleration(f),
+            }),
+        );
+    }
+    let com = kinematics.center_of_mass();
     let out = json!({
         "variables": names,
         "q": q.as_slice(),
@@ -959,6 +1007,13 @@ fn run_eval(
         "inputs": input_names,
         "u": u,
         "poses": poses,
+        "center_of_mass": {
+            "mass": com.mass,
+            "com": com.position,
+            "vcom": com.velocity,
+            "acom": com.acceleration,
+        },
+        "frames": frame_entries,
     });
     println!(
         "{}",

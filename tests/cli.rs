@@ -84,6 +84,64 @@ fn eval_prints_every_term_as_json() {
     assert_eq!(v["variables"][0], "theta");
 }
 
+/// `eval --frame`: a frame's pose, Jacobian, twist and accelerations under the dynamics, and
+/// the centre of mass — on the pendulum against its closed form (bob at (0, sin θ, −cos θ),
+/// moving at θ̇ (0, cos θ, sin θ)), on the unforced cart-pole against the conservation of
+/// horizontal momentum (c̈_x = 0).
+#[test]
+fn eval_reports_a_frames_kinematics_and_the_centre_of_mass() {
+    let (ok, stdout, stderr) = tree_mech(&[
+        "eval",
+        "models/pendulum.toml",
+        "--q",
+        "0.3",
+        "--dq",
+        "-1",
+        "--frame",
+        "bob",
+    ]);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let bob = &v["frames"]["bob"];
+    let (s, c) = (0.3f64.sin(), 0.3f64.cos());
+    let at = |x: &serde_json::Value, i: usize| x[i].as_f64().unwrap();
+    assert!((bob["pose"][1][3].as_f64().unwrap() - s).abs() < 1e-15);
+    for (i, expected) in [(0, 0.0), (1, -c), (2, -s), (3, -1.0)] {
+        assert!((at(&bob["velocity"], i) - expected).abs() < 1e-14, "{bob}");
+    }
+    assert!((at(&bob["jacobian"][1], 0) - c).abs() < 1e-15, "{bob}");
+    // The origin's acceleration: θ̈ (0, cos θ, sin θ) + θ̇² (0, −sin θ, cos θ).
+    let qdd = -9.81 * s;
+    let expected = [0.0, qdd * c - s, qdd * s + c];
+    for (i, e) in expected.iter().enumerate() {
+        assert!(
+            (at(&bob["classical_acceleration"], i) - e).abs() < 1e-12,
+            "{bob}"
+        );
+    }
+    let (ok, stdout, stderr) = tree_mech(&[
+        "eval",
+        "models/cartpole.toml",
+        "--q",
+        "0.1,0.4",
+        "--dq",
+        "0.5,-1",
+    ]);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let com = &v["center_of_mass"];
+    assert!(at(&com["acom"], 0).abs() < 1e-12, "{com}");
+    assert!(at(&com["acom"], 2).abs() > 0.1, "{com}");
+    assert_eq!(v["frames"], serde_json::json!({}));
+    let (ok, _, stderr) = tree_mech(&["eval", "models/cartpole.toml", "--frame", "hand"]);
+    assert!(!ok);
+    assert!(
+        stderr
+            .contains("--frame: there is no frame `hand`; the frames are `cart`, `pivot`, `pole`"),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn constrained_models_report_constraints_everywhere() {
     let model = "tests/models/string-pendulum.toml";
