@@ -143,10 +143,13 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
         if !visit {
             continue;
         }
+        // The constraints' reach reads only attached frames' world columns, which
+        // `world_columns` forms from the poses on the way: no body columns transported.
         let velocity_columns = all_jac
             || match reach {
                 Reach::Lagrangian(_) | Reach::Mass => f.leads_to_element,
-                Reach::Everything | Reach::Attachments => f.leads_to_attached,
+                Reach::Everything => f.leads_to_attached,
+                Reach::Attachments => false,
             };
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let (mut parent_pose, mut parent_vel, np, pc) = match f.parent {
@@ -199,7 +202,35 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
                 ws.point_jac[kc + a] = pose.rotate(&[j[0], j[1], j[2]]);
                 ws.axis[kc + a] = pose.rotate(&[j[3], j[4], j[5]]);
             }
+        } else if f.attached && reach == Reach::Attachments {
+            world_columns(plan, ws, k);
         }
+    }
+}
+
+/// Attached frame `k`'s world point Jacobian columns and axes from the poses of the frames
+/// its variables drive (all on its path, so already placed): a rotation about the world axis
+/// `w = R_j e` through `p_j` moves k's origin at `w × (p_k − p_j)`, a translation along
+/// `R_j e` at that axis — O(depth) for the frame, where transporting body columns down the
+/// path costs O(depth) a frame on it.
+fn world_columns<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, k: usize) {
+    let f = &plan.frames[k];
+    let p = ws.pose[k].p;
+    for a in 0..f.n {
+        let i = plan.vars[f.var_start + a];
+        let j = plan.variable_frames[i].expect("a variable above a frame drives a frame");
+        let (driver, kind) = (&ws.pose[j], plan.frames[j].kind);
+        let e = kind.axis();
+        let axis = [driver.r[0][e], driver.r[1][e], driver.r[2][e]];
+        let zero = [S::zero(); 3];
+        let (point, turn) = if kind.is_rotation() {
+            let lever = [p[0] - driver.p[0], p[1] - driver.p[1], p[2] - driver.p[2]];
+            (cross(&axis, &lever), axis)
+        } else {
+            (axis, zero)
+        };
+        ws.point_jac[f.col_offset + a] = point;
+        ws.axis[f.col_offset + a] = turn;
     }
 }
 
