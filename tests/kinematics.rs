@@ -183,7 +183,10 @@ fn bad_input_is_a_clear_error() {
         .update(&[0.0, 0.0], Some(&[0.0, f64::NAN]), None)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("q̇'s entry 1 is NaN, not a finite number"), "{e}");
+    assert!(
+        e.contains("q̇'s entry 1 (`theta2`) is NaN, not a finite number"),
+        "{e}"
+    );
     assert_eq!(Reference::parse("World"), Some(Reference::World));
     assert_eq!(Reference::parse("body"), None);
 }

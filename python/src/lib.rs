@@ -145,25 +145,32 @@ impl Model {
         })
     }
 
-    /// The frames' kinematics at `(q, dq, ddq)` (defaults: the model's q0, dq0 and zero),
-    /// with `frame`'s index when one is named.
+    /// The frames' kinematics at `(q, dq, ddq)` (defaults: the model's q0, dq0 and zero).
     fn frames_at(
         &self,
-        frame: Option<&str>,
         q: Option<Numbers<'_, Ix1>>,
         dq: Option<Numbers<'_, Ix1>>,
         ddq: Option<Numbers<'_, Ix1>>,
-    ) -> PyResult<(std::sync::MutexGuard<'_, FrameKinematics>, usize)> {
+    ) -> PyResult<std::sync::MutexGuard<'_, FrameKinematics>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
         let ddq = self.vector("ddq", ddq, |_| 0.0)?;
         let mut k = self.frames.lock().expect("no panic holds the lock");
-        let f = match frame {
-            Some(name) => k.frame(name).map_err(|e| bad(e.to_string()))?,
-            None => 0,
-        };
         k.update(q.as_slice(), Some(dq.as_slice()), Some(ddq.as_slice()))
             .map_err(|e| bad(e.to_string()))?;
+        Ok(k)
+    }
+
+    /// The frame `name`'s kinematics at `(q, dq, ddq)` and its index.
+    fn frame_at(
+        &self,
+        name: &str,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<(std::sync::MutexGuard<'_, FrameKinematics>, usize)> {
+        let k = self.frames_at(q, dq, ddq)?;
+        let f = k.frame(name).map_err(|e| bad(e.to_string()))?;
         Ok((k, f))
     }
 
@@ -691,7 +698,7 @@ impl Model {
         frame: &str,
         q: Option<Numbers<'_, Ix1>>,
     ) -> PyResult<Py<PyAny>> {
-        let (k, f) = self.frames_at(Some(frame), q, None, None)?;
+        let (k, f) = self.frame_at(frame, q, None, None)?;
         let m = k.pose(f).matrix();
         Ok(matrix(py, &DMatrix::from_fn(4, 4, |i, j| m[i][j])))
     }
@@ -709,7 +716,7 @@ impl Model {
         reference: &str,
     ) -> PyResult<Py<PyAny>> {
         let reference = parse_reference(reference)?;
-        let (k, f) = self.frames_at(Some(frame), q, None, None)?;
+        let (k, f) = self.frame_at(frame, q, None, None)?;
         Ok(matrix(py, &k.jacobian(f, reference)))
     }
 
@@ -725,7 +732,7 @@ impl Model {
         reference: &str,
     ) -> PyResult<Py<PyAny>> {
         let reference = parse_reference(reference)?;
-        let (k, f) = self.frames_at(Some(frame), q, dq, None)?;
+        let (k, f) = self.frame_at(frame, q, dq, None)?;
         Ok(vector(py, &k.velocity(f, reference)))
     }
 
@@ -747,7 +754,7 @@ impl Model {
         classical: bool,
     ) -> PyResult<Py<PyAny>> {
         let reference = parse_reference(reference)?;
-        let (k, f) = self.frames_at(Some(frame), q, dq, ddq)?;
+        let (k, f) = self.frame_at(frame, q, dq, ddq)?;
         Ok(if classical {
             vector(py, &k.classical_acceleration(f))
         } else {
@@ -765,7 +772,7 @@ impl Model {
         dq: Option<Numbers<'_, Ix1>>,
         ddq: Option<Numbers<'_, Ix1>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (k, _) = self.frames_at(None, q, dq, ddq)?;
+        let k = self.frames_at(q, dq, ddq)?;
         let c = k.center_of_mass();
         let out = PyDict::new(py);
         out.set_item("mass", c.mass)?;
@@ -779,7 +786,7 @@ impl Model {
     /// `jacobianCenterOfMass`, every body counted).
     #[pyo3(signature = (q=None))]
     fn com_jacobian(&self, py: Python<'_>, q: Option<Numbers<'_, Ix1>>) -> PyResult<Py<PyAny>> {
-        let (k, _) = self.frames_at(None, q, None, None)?;
+        let k = self.frames_at(q, None, None)?;
         Ok(matrix(py, &k.com_jacobian()))
     }
 

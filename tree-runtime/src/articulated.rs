@@ -81,18 +81,17 @@ pub(crate) fn base_acceleration<S: Scalar>(plan: &TreePlan) -> Twist<S> {
     [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0].map(S::constant)
 }
 
-/// The parent's acceleration `a_par` (the base's for a root) seen from frame `k`:
+/// The parent's acceleration `a_par` (`base` for a root) seen from frame `k`:
 /// `Ad_{g_k⁻¹} a_par`, through the folded constant transform first.
 pub(crate) fn from_parent<S: Scalar>(
     plan: &TreePlan,
     ws: &Workspace<S>,
     k: usize,
     accelerations: &[Twist<S>],
+    base: Twist<S>,
 ) -> Twist<S> {
     let f = &plan.frames[k];
-    let mut a = f
-        .parent
-        .map_or_else(|| base_acceleration(plan), |p| accelerations[p]);
+    let mut a = f.parent.map_or(base, |p| accelerations[p]);
     if let Some(pre) = &f.pre {
         a = pre.ad_inverse(&a);
     }
@@ -106,6 +105,27 @@ pub(crate) fn velocity_product<S: Scalar>(f: &FramePlan, ws: &Workspace<S>, dq: 
         (Some(d), Joint::Variable(i)) => ws.dv_dq[f.col_offset + d].map(|x| x * dq[i]),
         _ => zero6(),
     }
+}
+
+/// Frame `k`'s acceleration at known joint accelerations, outward from `base`:
+/// `a_k = Ad_{g_k⁻¹} a_par + c_k + ξ_k q̈_k` (the recursive Newton–Euler algorithm's outward
+/// pass; the frame kinematics' from a base at rest).
+pub(crate) fn outward_acceleration<S: Scalar>(
+    plan: &TreePlan,
+    ws: &Workspace<S>,
+    k: usize,
+    accelerations: &[Twist<S>],
+    base: Twist<S>,
+    dq: &[S],
+    qdd: &[S],
+) -> Twist<S> {
+    let f = &plan.frames[k];
+    let mut a = from_parent(plan, ws, k, accelerations, base);
+    add6(&mut a, &velocity_product(f, ws, dq));
+    if let Joint::Variable(i) = f.joint {
+        a[twist_index(f.kind)] += qdd[i];
+    }
+    a
 }
 
 /// `a += b`.
@@ -222,7 +242,7 @@ pub fn accelerations<S: Scalar>(
         if !f.needed {
             continue;
         }
-        let mut a = from_parent(plan, ws, k, &art.acceleration);
+        let mut a = from_parent(plan, ws, k, &art.acceleration, base_acceleration(plan));
         add6(&mut a, &art.bias_acceleration[k]);
         if let Joint::Variable(i) = f.joint {
             if !kinematic[i] {

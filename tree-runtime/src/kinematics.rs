@@ -44,12 +44,12 @@
 //! ```
 
 use nalgebra::DMatrix;
-use tree_model::{Joint, Model};
+use tree_model::Model;
 
-use crate::articulated::{add6, velocity_product};
+use crate::articulated::outward_acceleration;
 use crate::error::SimError;
 use crate::plan::{Body, TreePlan};
-use crate::se3::{cross, twist_index, zero6, Pose, Twist};
+use crate::se3::{cross, zero6, Pose, Twist};
 use crate::sweeps::{forward, Reach, Workspace};
 
 /// The axes and the point a frame's twist, Jacobian or acceleration is reported in (as
@@ -114,7 +114,9 @@ pub struct CenterOfMass {
 #[derive(Clone, Debug)]
 pub struct Kinematics {
     plan: TreePlan,
+    /// The frames' names, and the variables' (for errors).
     names: Vec<String>,
+    variables: Vec<String>,
     ws: Workspace<f64>,
     /// Each frame's body acceleration `a_k` (in its axes).
     acceleration: Vec<Twist>,
@@ -135,6 +137,7 @@ impl Kinematics {
             ws: Workspace::new(&plan),
             acceleration: vec![zero6(); plan.frames.len()],
             names: model.frames.iter().map(|f| f.name.clone()).collect(),
+            variables: model.variables.iter().map(|v| v.name.clone()).collect(),
             dq: vec![0.0; n],
             ddq: vec![0.0; n],
             plan,
@@ -182,8 +185,8 @@ impl Kinematics {
             }
             if let Some(i) = x.iter().position(|x| !x.is_finite()) {
                 return Err(SimError::InvalidInput(format!(
-                    "{what}'s entry {i} is {}, not a finite number",
-                    x[i]
+                    "{what}'s entry {i} (`{}`) is {}, not a finite number",
+                    self.variables[i], x[i]
                 )));
             }
         }
@@ -202,23 +205,21 @@ impl Kinematics {
             None => self.ddq.fill(0.0),
         }
         forward(&self.plan, &mut self.ws, q, &self.dq, Reach::Everything);
-        self.accelerations();
+        if dq.is_none() && ddq.is_none() {
+            // At rest every frame's acceleration is zero.
+            self.acceleration.fill(zero6());
+        } else {
+            self.accelerations();
+        }
     }
 
     /// `a_k = Ad_{g_k⁻¹} a_par + c_k + ξ_k q̈_k` outward from a base at rest, with
-    /// `c_k = (∂v_k/∂q_k) q̇_k` (docs/derivations.md §11).
+    /// `c_k = (∂v_k/∂q_k) q̇_k` (docs/derivations.md §11): Newton–Euler's outward pass.
     fn accelerations(&mut self) {
-        for (k, f) in self.plan.frames.iter().enumerate() {
-            let mut a = f.parent.map_or_else(zero6, |p| self.acceleration[p]);
-            if let Some(pre) = &f.pre {
-                a = pre.ad_inverse(&a);
-            }
-            let mut a = self.ws.local[k].ad_inverse(&a);
-            add6(&mut a, &velocity_product(f, &self.ws, &self.dq));
-            if let Joint::Variable(i) = f.joint {
-                a[twist_index(f.kind)] += self.ddq[i];
-            }
-            self.acceleration[k] = a;
+        for k in 0..self.plan.frames.len() {
+            let (plan, ws, acc) = (&self.plan, &self.ws, &self.acceleration);
+            self.acceleration[k] =
+                outward_acceleration(plan, ws, k, acc, zero6(), &self.dq, &self.ddq);
         }
     }
 

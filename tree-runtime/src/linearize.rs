@@ -335,10 +335,9 @@ where
     for (x, &v) in ws.vd.iter_mut().zip(dq.iter()) {
         *x = Dual::new(v, 0.0);
     }
-    let m_rows = cx.sys.constraint_count();
     let d = ws
         .along
-        .get_or_insert_with(|| Box::new(DualOutputs::new(n, m_rows)));
+        .get_or_insert_with(|| Box::new(DualOutputs::new(n, m)));
     let (e, zero, b) = (&mut ws.e, &ws.zero, &mut ws.b);
     for j in first..(2 * n + nu) {
         if j < 2 * n {

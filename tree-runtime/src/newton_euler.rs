@@ -17,10 +17,10 @@
 //! 2. inward, each subtree's wrench at its root, `f_par += Ad_{g⁻¹}ᵀ f_k`, and at a frame
 //!    driven by variable `i`, `τ_i = ξ_k · f_k`.
 
-use crate::articulated::{add6, cross_force, from_parent, velocity_product};
+use crate::articulated::{add6, base_acceleration, cross_force, outward_acceleration};
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
-use crate::se3::{component, inertia_times, twist_index, zero6, Twist, Wrench};
+use crate::se3::{component, inertia_times, zero6, Twist, Wrench};
 use crate::sweeps::Workspace;
 use tree_model::Joint;
 
@@ -58,16 +58,13 @@ pub fn generalized_forces<S: Scalar>(
     qdd: &[S],
 ) {
     ne.tau.iter_mut().for_each(|x| *x = S::zero());
-    // Outward: accelerations, and the wrench each body needs.
+    // Outward: accelerations from the base's `(−γ, 0)`, and the wrench each body needs.
+    let base = base_acceleration(plan);
     for (k, f) in plan.frames.iter().enumerate() {
         if !f.needed {
             continue;
         }
-        let mut a = from_parent(plan, ws, k, &ne.acceleration);
-        add6(&mut a, &velocity_product(f, ws, dq));
-        if let Joint::Variable(i) = f.joint {
-            a[twist_index(f.kind)] += qdd[i];
-        }
+        let a = outward_acceleration(plan, ws, k, &ne.acceleration, base, dq, qdd);
         ne.acceleration[k] = a;
         let v = &ws.velocity[k];
         ne.wrench[k] = match f.body {
