@@ -99,7 +99,6 @@ pub fn cholesky_backward(a: &[f64], n: usize, b: &mut [f64]) {
     }
 }
 
-/// Solves `A x = b` by LU with partial pivoting, overwriting `a` and `b` (`b` becomes `x`).
 /// Solves `L Lᵀ X = B` for many right-hand sides at once, with the factor `L` of
 /// [`cholesky_factor_packed`] (`n × n` in `a`). `B` is stored by rows: row r, one entry per
 /// right-hand side, at `rows[r * w..(r + 1) * w]`; it becomes `X`. Each step of the two
@@ -136,6 +135,7 @@ pub fn cholesky_solve_rows(a: &[f64], n: usize, rows: &mut [f64], w: usize) {
     }
 }
 
+/// Solves `A x = b` by LU with partial pivoting, overwriting `a` and `b` (`b` becomes `x`).
 /// On a zero pivot returns its column.
 pub fn lu_solve<N: Dim>(a: &mut Matrix<N>, b: &mut Vector<N>) -> Result<(), usize>
 where
@@ -168,11 +168,15 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
 
 /// Solves `A X = B` for `k` right-hand sides at once with the factors from
 /// [`lu_factor_packed`]: `b` holds `B` row-major (`n × k`, row i at `i·k`) and becomes `X`.
-/// Each elimination updates a whole row of right-hand sides (one contiguous pass), where `k`
-/// calls of [`lu_solve_packed`] would walk the factor `k` times. Compiled also for AVX and
-/// chosen at run time (as [`mul_into`]'s kernel).
-#[multiversion::multiversion(targets("x86_64+avx"))]
+/// Both substitutions are taken row by row in dot-product form, on blocks of up to
+/// [`BLOCK`] right-hand sides: `x_i = b_i − Σ_{j<i} L_ij x_j`, then
+/// `x_i = (y_i − Σ_{j>i} U_ij x_j) / U_ii`, each block of row `i` summed in registers and
+/// stored once (an update row by row would load and store it at every `j`); zero entries of
+/// the factor are skipped. Compiled also for AVX2 with fused multiply-adds and for AVX,
+/// chosen at run time (as [`mul_into`]'s kernel; the last bits then depend on the CPU).
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64], k: usize) {
+    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
     let b = &mut b[..n * k];
     for (j, &p) in pivots[..n].iter().enumerate() {
         if p != j {
@@ -181,53 +185,195 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
             }
         }
     }
-    for j in 0..n {
-        let col = &a[j * n..(j + 1) * n];
-        let (done, rest) = b.split_at_mut((j + 1) * k);
-        let bj = &done[j * k..];
-        for (bi, &l) in rest.chunks_exact_mut(k).zip(&col[j + 1..]) {
-            if l != 0.0 {
-                for (x, y) in bi.iter_mut().zip(bj) {
-                    *x -= l * y;
-                }
-            }
+    let a = &a[..n * n];
+    for (c0, width) in blocks(k) {
+        match (width, fused) {
+            (BLOCK, true) => substitute::<BLOCK, true>(a, n, b, k, c0),
+            (BLOCK, false) => substitute::<BLOCK, false>(a, n, b, k, c0),
+            (4, true) => substitute::<4, true>(a, n, b, k, c0),
+            (4, false) => substitute::<4, false>(a, n, b, k, c0),
+            (_, true) => substitute::<1, true>(a, n, b, k, c0),
+            (_, false) => substitute::<1, false>(a, n, b, k, c0),
         }
     }
-    for j in (0..n).rev() {
-        let col = &a[j * n..(j + 1) * n];
-        let (head, tail) = b.split_at_mut(j * k);
-        let bj = &mut tail[..k];
-        let inverse = 1.0 / col[j];
-        for x in bj.iter_mut() {
-            *x *= inverse;
+}
+
+/// Right-hand sides summed in registers at once by the row kernels (four AVX vectors).
+const BLOCK: usize = 16;
+
+/// `0..k` in blocks of [`BLOCK`], then 4, then 1: `(start, width)`. (The kernels call their
+/// blocks from their own bodies: a closure would not inherit their target features.)
+fn blocks(k: usize) -> impl Iterator<Item = (usize, usize)> {
+    let width = move |c0: usize| match k - c0 {
+        w if w >= BLOCK => BLOCK,
+        w if w >= 4 => 4,
+        _ => 1,
+    };
+    std::iter::successors((k > 0).then(|| (0, width(0))), move |&(c0, w)| {
+        (c0 + w < k).then(|| (c0 + w, width(c0 + w)))
+    })
+}
+
+/// Entries `c0..c0 + W` of a row.
+#[inline(always)]
+fn block<const W: usize>(row: &[f64], c0: usize) -> [f64; W] {
+    row[c0..c0 + W].try_into().expect("a block of the row")
+}
+
+/// `acc −= s x` (one rounding per entry when `FUSED`).
+#[inline(always)]
+fn subtract_scaled<const W: usize, const FUSED: bool>(acc: &mut [f64; W], s: f64, x: &[f64]) {
+    let x: &[f64; W] = x.try_into().expect("a block of the row");
+    for (o, &v) in acc.iter_mut().zip(x) {
+        *o = if FUSED {
+            (-s).mul_add(v, *o)
+        } else {
+            *o - s * v
+        };
+    }
+}
+
+/// `(acc₀, acc₁) −= (s₀ x, s₁ x)`: two rows' blocks updated from one load of `x`.
+#[inline(always)]
+fn subtract_scaled_pair<const W: usize, const FUSED: bool>(
+    acc: &mut [[f64; W]; 2],
+    (s0, s1): (f64, f64),
+    x: &[f64],
+) {
+    let x: &[f64; W] = x.try_into().expect("a block of the row");
+    let [a0, a1] = acc;
+    for ((o0, o1), &v) in a0.iter_mut().zip(a1.iter_mut()).zip(x) {
+        if FUSED {
+            *o0 = (-s0).mul_add(v, *o0);
+            *o1 = (-s1).mul_add(v, *o1);
+        } else {
+            *o0 -= s0 * v;
+            *o1 -= s1 * v;
         }
-        for (row, &u) in head.chunks_exact_mut(k).zip(&col[..j]) {
-            if u != 0.0 {
-                for (x, y) in row.iter_mut().zip(bj.iter()) {
-                    *x -= u * y;
-                }
+    }
+}
+
+/// The substitutions of [`lu_solve_packed_rows`] on columns `c0..c0 + W` of `b`, two rows at
+/// a time: each loaded row of solved unknowns feeds both rows' sums, and the two sums are
+/// independent chains of multiply-adds (one row's would wait on each addition).
+#[inline(always)]
+fn substitute<const W: usize, const FUSED: bool>(
+    a: &[f64],
+    n: usize,
+    b: &mut [f64],
+    k: usize,
+    c0: usize,
+) {
+    // L y = b (unit lower, L_ij = a[j n + i]): rows i and i + 1 over j < i, then row i + 1's
+    // own term in y_i.
+    let mut i = 1;
+    while i + 1 < n {
+        let mut acc = [
+            block::<W>(&b[i * k..], c0),
+            block::<W>(&b[(i + 1) * k..], c0),
+        ];
+        for j in 0..i {
+            let (l0, l1) = (a[j * n + i], a[j * n + i + 1]);
+            if l0 != 0.0 || l1 != 0.0 {
+                subtract_scaled_pair::<W, FUSED>(
+                    &mut acc,
+                    (l0, l1),
+                    &b[j * k + c0..j * k + c0 + W],
+                );
             }
         }
+        let first = acc[0];
+        subtract_scaled::<W, FUSED>(&mut acc[1], a[i * n + i + 1], &first);
+        b[i * k + c0..i * k + c0 + W].copy_from_slice(&acc[0]);
+        b[(i + 1) * k + c0..(i + 1) * k + c0 + W].copy_from_slice(&acc[1]);
+        i += 2;
+    }
+    if i < n {
+        let mut acc = block::<W>(&b[i * k..], c0);
+        for j in 0..i {
+            subtract_scaled::<W, FUSED>(&mut acc, a[j * n + i], &b[j * k + c0..j * k + c0 + W]);
+        }
+        b[i * k + c0..i * k + c0 + W].copy_from_slice(&acc);
+    }
+    // U x = y (U_ij = a[j n + i], j ≥ i): rows i and i − 1 over j > i, then row i − 1's own
+    // term in x_i.
+    let mut i = n;
+    while i >= 2 {
+        let (hi, lo) = (i - 1, i - 2);
+        let mut acc = [block::<W>(&b[hi * k..], c0), block::<W>(&b[lo * k..], c0)];
+        for j in i..n {
+            let (u0, u1) = (a[j * n + hi], a[j * n + lo]);
+            if u0 != 0.0 || u1 != 0.0 {
+                subtract_scaled_pair::<W, FUSED>(
+                    &mut acc,
+                    (u0, u1),
+                    &b[j * k + c0..j * k + c0 + W],
+                );
+            }
+        }
+        let inverse = 1.0 / a[hi * n + hi];
+        acc[0].iter_mut().for_each(|x| *x *= inverse);
+        let first = acc[0];
+        subtract_scaled::<W, FUSED>(&mut acc[1], a[hi * n + lo], &first);
+        let inverse = 1.0 / a[lo * n + lo];
+        acc[1].iter_mut().for_each(|x| *x *= inverse);
+        b[hi * k + c0..hi * k + c0 + W].copy_from_slice(&acc[0]);
+        b[lo * k + c0..lo * k + c0 + W].copy_from_slice(&acc[1]);
+        i -= 2;
+    }
+    if i == 1 {
+        let mut acc = block::<W>(b, c0);
+        for j in 1..n {
+            subtract_scaled::<W, FUSED>(&mut acc, a[j * n], &b[j * k + c0..j * k + c0 + W]);
+        }
+        let inverse = 1.0 / a[0];
+        acc.iter_mut().for_each(|x| *x *= inverse);
+        b[c0..c0 + W].copy_from_slice(&acc);
     }
 }
 
 /// `C += A D` for row-major `C` (rows of `k`) and `D` (row `s` at `s·k`), where row `r` of `A`
 /// is row `r` of the row-major `a` (rows of `w`) read at the columns `cols` (column `s` of `A`
-/// is `a`'s column `cols[s]`): each row of `C` gains a combination of `D`'s rows, zero
-/// coefficients skipped. Compiled also for AVX and chosen at run time (as [`mul_into`]'s
-/// kernel).
-#[multiversion::multiversion(targets("x86_64+avx"))]
+/// is `a`'s column `cols[s]`): each block of a row of `C` sums its combination of `D`'s rows
+/// in registers, zero coefficients skipped. Compiled also for AVX2 with fused multiply-adds
+/// and for AVX, chosen at run time (as [`mul_into`]'s kernel).
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub fn combine_rows(c: &mut [f64], k: usize, a: &[f64], w: usize, cols: &[usize], d: &[f64]) {
+    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
     for (out, arow) in c.chunks_exact_mut(k).zip(a.chunks_exact(w)) {
-        for (s, &col) in cols.iter().enumerate() {
-            let coefficient = arow[col];
-            if coefficient != 0.0 {
-                for (o, x) in out.iter_mut().zip(&d[s * k..(s + 1) * k]) {
-                    *o += coefficient * x;
-                }
+        for (c0, width) in blocks(k) {
+            match (width, fused) {
+                (BLOCK, true) => combine_block::<BLOCK, true>(out, arow, cols, d, k, c0),
+                (BLOCK, false) => combine_block::<BLOCK, false>(out, arow, cols, d, k, c0),
+                (4, true) => combine_block::<4, true>(out, arow, cols, d, k, c0),
+                (4, false) => combine_block::<4, false>(out, arow, cols, d, k, c0),
+                (_, true) => combine_block::<1, true>(out, arow, cols, d, k, c0),
+                (_, false) => combine_block::<1, false>(out, arow, cols, d, k, c0),
             }
         }
     }
+}
+
+/// Columns `c0..c0 + W` of one row of [`combine_rows`].
+#[inline(always)]
+fn combine_block<const W: usize, const FUSED: bool>(
+    out: &mut [f64],
+    arow: &[f64],
+    cols: &[usize],
+    d: &[f64],
+    k: usize,
+    c0: usize,
+) {
+    let out = &mut out[c0..c0 + W];
+    let mut acc: [f64; W] = (&*out).try_into().expect("a block");
+    for (s, &col) in cols.iter().enumerate() {
+        let coefficient = arow[col];
+        if coefficient != 0.0 {
+            // acc += coefficient · D[s]: subtract its negative.
+            subtract_scaled::<W, FUSED>(&mut acc, -coefficient, &d[s * k + c0..s * k + c0 + W]);
+        }
+    }
+    out.copy_from_slice(&acc);
 }
 
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors.
@@ -270,53 +416,96 @@ fn largest_magnitude(x: &[f64]) -> f64 {
 }
 
 /// LU with partial pivoting on column-major storage; `swapped(j, p)` is told that row p was
-/// swapped into row j. Compiled also for AVX and chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx"))]
+/// swapped into row j. Columns are eliminated two at a time: the pair is factored, then each
+/// trailing column takes both rank-one updates in one pass (one load and store of an entry
+/// for two multiply-adds). Compiled also for AVX2 with fused multiply-adds and for AVX,
+/// chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 fn lu_core_factor(
     a: &mut [f64],
     n: usize,
     mut swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
-    for j in 0..n {
-        // Pivot: the largest entry of column j at or below the diagonal.
-        let col = &a[j * n..(j + 1) * n];
-        let mut p = j;
-        for i in j + 1..n {
-            if col[i].abs() > col[p].abs() {
-                p = i;
-            }
+    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
+    let mut j = 0;
+    while j < n {
+        pivot_column(a, n, j, &mut swapped)?;
+        if j + 1 == n {
+            break;
         }
-        let pivot = col[p];
-        // Singular when the pivot is lost in the rounding of its own column (U's part
-        // above included): relative per column, so an unknown in other units (a multiplier
-        // scaled by Δt beside momenta over Δt) is not taken for a singular one.
-        let scale = largest_magnitude(col).max(f64::MIN_POSITIVE);
-        if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
-            return Err(j);
-        }
-        swapped(j, p);
-        if p != j {
-            for c in 0..n {
-                a.swap(c * n + p, c * n + j);
-            }
-        }
-        // Multipliers below the pivot, then update the trailing columns.
-        let inverse = 1.0 / pivot;
-        a[j * n + j + 1..(j + 1) * n]
-            .iter_mut()
-            .for_each(|x| *x *= inverse);
+        // Column j + 1 takes column j's update, then is factored itself.
         let (left, right) = a.split_at_mut((j + 1) * n);
-        let mult = &left[j * n + j + 1..(j + 1) * n];
+        let m0 = &left[j * n + j + 1..(j + 1) * n];
+        let next = &mut right[..n];
+        let t0 = next[j];
+        if t0 != 0.0 {
+            for (x, m) in next[j + 1..].iter_mut().zip(m0) {
+                *x -= m * t0;
+            }
+        }
+        pivot_column(a, n, j + 1, &mut swapped)?;
+        // The trailing columns: entry j + 1 from entry j, then both updates below.
+        let (left, right) = a.split_at_mut((j + 2) * n);
+        let m0 = &left[j * n + j + 2..(j + 1) * n];
+        let m01 = left[j * n + j + 1];
+        let m1 = &left[(j + 1) * n + j + 2..(j + 2) * n];
         for col in right.chunks_exact_mut(n) {
-            let (head, below) = col.split_at_mut(j + 1);
-            let ajc = head[j];
-            if ajc != 0.0 {
-                for (x, m) in below.iter_mut().zip(mult) {
-                    *x -= m * ajc;
+            let (head, below) = col.split_at_mut(j + 2);
+            let t0 = head[j];
+            head[j + 1] -= m01 * t0;
+            let t1 = head[j + 1];
+            if t0 != 0.0 || t1 != 0.0 {
+                if fused {
+                    for ((x, &u), &v) in below.iter_mut().zip(m0).zip(m1) {
+                        *x = (-v).mul_add(t1, (-u).mul_add(t0, *x));
+                    }
+                } else {
+                    for ((x, &u), &v) in below.iter_mut().zip(m0).zip(m1) {
+                        *x = *x - u * t0 - v * t1;
+                    }
                 }
             }
         }
+        j += 2;
     }
+    Ok(())
+}
+
+/// Column `j` of [`lu_core_factor`], updated by every column before it: its pivot chosen and
+/// judged, the rows swapped (whole rows), and the multipliers below the pivot formed.
+#[inline(always)]
+fn pivot_column(
+    a: &mut [f64],
+    n: usize,
+    j: usize,
+    swapped: &mut impl FnMut(usize, usize),
+) -> Result<(), usize> {
+    // Pivot: the largest entry of column j at or below the diagonal.
+    let col = &a[j * n..(j + 1) * n];
+    let mut p = j;
+    for i in j + 1..n {
+        if col[i].abs() > col[p].abs() {
+            p = i;
+        }
+    }
+    let pivot = col[p];
+    // Singular when the pivot is lost in the rounding of its own column (U's part above
+    // included): relative per column, so an unknown in other units (a multiplier scaled by
+    // Δt beside momenta over Δt) is not taken for a singular one.
+    let scale = largest_magnitude(col).max(f64::MIN_POSITIVE);
+    if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
+        return Err(j);
+    }
+    swapped(j, p);
+    if p != j {
+        for c in 0..n {
+            a.swap(c * n + p, c * n + j);
+        }
+    }
+    let inverse = 1.0 / pivot;
+    a[j * n + j + 1..(j + 1) * n]
+        .iter_mut()
+        .for_each(|x| *x *= inverse);
     Ok(())
 }
 
@@ -355,35 +544,69 @@ mod tests {
         }
     }
 
-    /// Several right-hand sides at once give what one solve each gives, and `A X = B` holds
-    /// (a matrix whose first pivot must be swapped).
-    #[test]
-    fn many_right_hand_sides_solve_as_one_each() {
-        let n = 5;
-        let a: Vec<f64> = (0..n * n)
+    /// A test matrix of order `n` with zeros scattered through it and a zero first entry, so
+    /// that pivots are swapped and the kernels' zero skips are taken.
+    fn scattered(n: usize) -> Vec<f64> {
+        (0..n * n)
             .map(|k| {
-                if k == 0 {
+                let diagonal = k % (n + 1) == 0;
+                if (k == 0 && n > 1) || (k % 5 == 3 && !diagonal) {
                     0.0
                 } else {
-                    ((k * 7 % 11) as f64 - 5.0) / 3.0 + (k % 6 == 0) as u8 as f64 * 4.0
+                    ((k * 7 % 11) as f64 - 5.0) / 3.0 + diagonal as u8 as f64 * 6.0
                 }
             })
-            .collect();
-        let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
-        lu_factor_packed(&mut factor, n, &mut pivots).expect("regular");
-        assert_ne!(pivots[0], 0, "the first pivot is swapped");
-        let k = 3;
-        let b: Vec<f64> = (0..n * k).map(|i| (i as f64).sin()).collect();
-        let mut x = b.clone();
-        lu_solve_packed_rows(&factor, n, &pivots, &mut x, k);
-        for c in 0..k {
-            let mut one: Vec<f64> = (0..n).map(|r| b[r * k + c]).collect();
-            lu_solve_packed(&factor, n, &pivots, &mut one);
+            .collect()
+    }
+
+    /// Several right-hand sides at once give what one solve each gives, and `A X = B` holds,
+    /// for orders odd and even (the substitutions take rows in pairs) and widths that leave
+    /// every block size of the kernels (16, 4, 1); `P A = L U` holds for the factors.
+    #[test]
+    fn many_right_hand_sides_solve_as_one_each() {
+        for n in [1, 2, 5, 8, 19] {
+            let a = scattered(n);
+            let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
+            lu_factor_packed(&mut factor, n, &mut pivots).expect("regular");
+            if n > 1 {
+                assert_ne!(pivots[0], 0, "the first pivot is swapped");
+            }
+            // P A = L U: apply the interchanges to A's rows in order, compare with L U.
+            let mut pa = a.clone();
+            for (j, &p) in pivots.iter().enumerate() {
+                for c in 0..n {
+                    pa.swap(c * n + p, c * n + j);
+                }
+            }
             for r in 0..n {
-                assert!((x[r * k + c] - one[r]).abs() < 1e-13, "column {c}, row {r}");
-                // A (column-major) times x's column c gives b's.
-                let ax: f64 = (0..n).map(|j| a[j * n + r] * x[j * k + c]).sum();
-                assert!((ax - b[r * k + c]).abs() < 1e-12, "residual at ({r}, {c})");
+                for c in 0..n {
+                    let lu: f64 = (0..=r.min(c))
+                        .map(|k| {
+                            let l = if k == r { 1.0 } else { factor[k * n + r] };
+                            l * factor[c * n + k]
+                        })
+                        .sum();
+                    assert!(
+                        (lu - pa[c * n + r]).abs() < 1e-12,
+                        "P A = L U at ({r}, {c})"
+                    );
+                }
+            }
+            for k in [1, 3, 7, 21, 37] {
+                let b: Vec<f64> = (0..n * k).map(|i| (i as f64).sin()).collect();
+                let mut x = b.clone();
+                lu_solve_packed_rows(&factor, n, &pivots, &mut x, k);
+                for c in 0..k {
+                    let mut one: Vec<f64> = (0..n).map(|r| b[r * k + c]).collect();
+                    lu_solve_packed(&factor, n, &pivots, &mut one);
+                    for r in 0..n {
+                        let at = format!("n {n}, k {k}, column {c}, row {r}");
+                        assert!((x[r * k + c] - one[r]).abs() < 1e-12, "{at}");
+                        // A (column-major) times x's column c gives b's.
+                        let ax: f64 = (0..n).map(|j| a[j * n + r] * x[j * k + c]).sum();
+                        assert!((ax - b[r * k + c]).abs() < 1e-11, "residual at {at}");
+                    }
+                }
             }
         }
     }
@@ -392,17 +615,20 @@ mod tests {
     /// `largest_magnitude` finds the largest entry wherever it sits (any length, NaN skipped).
     #[test]
     fn row_combination_and_largest_magnitude() {
-        let (rows, w, k) = (3, 6, 5);
-        let a: Vec<f64> = (0..rows * w).map(|x| (x as f64 * 0.7).sin()).collect();
-        let d: Vec<f64> = (0..4 * k).map(|x| (x as f64 * 1.3).cos()).collect();
-        let cols = [4, 0, 5, 2];
-        let mut c: Vec<f64> = (0..rows * k).map(|x| x as f64).collect();
-        let start = c.clone();
-        combine_rows(&mut c, k, &a, w, &cols, &d);
-        for r in 0..rows {
-            for j in 0..k {
-                let sum: f64 = (0..4).map(|s| a[r * w + cols[s]] * d[s * k + j]).sum();
-                assert!((c[r * k + j] - start[r * k + j] - sum).abs() < 1e-14);
+        for k in [5, 21, 37] {
+            let (rows, w) = (3, 6);
+            let mut a: Vec<f64> = (0..rows * w).map(|x| (x as f64 * 0.7).sin()).collect();
+            a[w] = 0.0;
+            let d: Vec<f64> = (0..4 * k).map(|x| (x as f64 * 1.3).cos()).collect();
+            let cols = [4, 0, 5, 2];
+            let mut c: Vec<f64> = (0..rows * k).map(|x| x as f64).collect();
+            let start = c.clone();
+            combine_rows(&mut c, k, &a, w, &cols, &d);
+            for r in 0..rows {
+                for j in 0..k {
+                    let sum: f64 = (0..4).map(|s| a[r * w + cols[s]] * d[s * k + j]).sum();
+                    assert!((c[r * k + j] - start[r * k + j] - sum).abs() < 1e-13);
+                }
             }
         }
         for len in 1..11 {
