@@ -334,46 +334,53 @@ fn substitute<const W: usize, const FUSED: bool>(
 
 /// `C += A D` for row-major `C` (rows of `k`) and `D` (row `s` at `s·k`), where row `r` of `A`
 /// is row `r` of the row-major `a` (rows of `w`) read at the columns `cols` (column `s` of `A`
-/// is `a`'s column `cols[s]`): each block of a row of `C` sums its combination of `D`'s rows
-/// in registers, zero coefficients skipped. Compiled also for AVX2 with fused multiply-adds
-/// and for AVX, chosen at run time (as [`mul_into`]'s kernel).
+/// is `a`'s column `cols[s]`): two rows of `C` at a time, each block of both summing its
+/// combination of `D`'s rows in registers (one load of `D` for both), zero coefficients
+/// skipped. Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time
+/// (as [`mul_into`]'s kernel).
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub fn combine_rows(c: &mut [f64], k: usize, a: &[f64], w: usize, cols: &[usize], d: &[f64]) {
     let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
-    for (out, arow) in c.chunks_exact_mut(k).zip(a.chunks_exact(w)) {
+    let rows = c.len() / k.max(1);
+    for r in (0..rows).step_by(2) {
+        // A last row alone is paired with itself (its coefficients read twice, stored once).
+        let pair = (r, (r + 1).min(rows - 1));
         for (c0, width) in blocks(k) {
             match (width, fused) {
-                (BLOCK, true) => combine_block::<BLOCK, true>(out, arow, cols, d, k, c0),
-                (BLOCK, false) => combine_block::<BLOCK, false>(out, arow, cols, d, k, c0),
-                (4, true) => combine_block::<4, true>(out, arow, cols, d, k, c0),
-                (4, false) => combine_block::<4, false>(out, arow, cols, d, k, c0),
-                (_, true) => combine_block::<1, true>(out, arow, cols, d, k, c0),
-                (_, false) => combine_block::<1, false>(out, arow, cols, d, k, c0),
+                (BLOCK, true) => combine_block::<BLOCK, true>(c, pair, a, w, cols, d, k, c0),
+                (BLOCK, false) => combine_block::<BLOCK, false>(c, pair, a, w, cols, d, k, c0),
+                (4, true) => combine_block::<4, true>(c, pair, a, w, cols, d, k, c0),
+                (4, false) => combine_block::<4, false>(c, pair, a, w, cols, d, k, c0),
+                (_, true) => combine_block::<1, true>(c, pair, a, w, cols, d, k, c0),
+                (_, false) => combine_block::<1, false>(c, pair, a, w, cols, d, k, c0),
             }
         }
     }
 }
 
-/// Columns `c0..c0 + W` of one row of [`combine_rows`].
+/// Columns `c0..c0 + W` of rows `r0`, `r1` of [`combine_rows`].
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn combine_block<const W: usize, const FUSED: bool>(
-    out: &mut [f64],
-    arow: &[f64],
+    c: &mut [f64],
+    (r0, r1): (usize, usize),
+    a: &[f64],
+    w: usize,
     cols: &[usize],
     d: &[f64],
     k: usize,
     c0: usize,
 ) {
-    let out = &mut out[c0..c0 + W];
-    let mut acc: [f64; W] = (&*out).try_into().expect("a block");
+    let mut acc = [block::<W>(&c[r0 * k..], c0), block::<W>(&c[r1 * k..], c0)];
     for (s, &col) in cols.iter().enumerate() {
-        let coefficient = arow[col];
-        if coefficient != 0.0 {
-            // acc += coefficient · D[s]: subtract its negative.
-            subtract_scaled::<W, FUSED>(&mut acc, -coefficient, &d[s * k + c0..s * k + c0 + W]);
+        let (x0, x1) = (a[r0 * w + col], a[r1 * w + col]);
+        if x0 != 0.0 || x1 != 0.0 {
+            // acc += x · D[s]: subtract its negative.
+            subtract_scaled_pair::<W, FUSED>(&mut acc, (-x0, -x1), &d[s * k + c0..s * k + c0 + W]);
         }
     }
-    out.copy_from_slice(&acc);
+    c[r1 * k + c0..r1 * k + c0 + W].copy_from_slice(&acc[1]);
+    c[r0 * k + c0..r0 * k + c0 + W].copy_from_slice(&acc[0]);
 }
 
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors.
