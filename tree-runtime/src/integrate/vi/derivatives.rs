@@ -240,6 +240,33 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
     }
 }
 
+/// `Σ_s λ_s D²h_s` into `out`'s rows `dynamic` (row-major, rows of `n`; D²h_s is symmetric,
+/// so its row i is its column-major column i); a multiplier at zero is skipped. Compiled also
+/// for AVX2 with fused multiply-adds and for AVX, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+fn contract_hessians(
+    out: &mut [f64],
+    n: usize,
+    dynamic: &[usize],
+    lambda: &[f64],
+    d2h: &[DMatrix<f64>],
+) {
+    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
+    for &i in dynamic {
+        let row = &mut out[i * n..(i + 1) * n];
+        row.fill(0.0);
+        for (&l, h) in lambda.iter().zip(d2h) {
+            if l == 0.0 {
+                continue;
+            }
+            let column = &h.as_slice()[i * n..(i + 1) * n];
+            for (o, &x) in row.iter_mut().zip(column) {
+                *o = if fused { l.mul_add(x, *o) } else { *o + l * x };
+            }
+        }
+    }
+}
+
 /// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (as
 /// `linalg`'s kernels; the same operations in the same order on every CPU).
 #[multiversion::multiversion(targets("x86_64+avx"))]
@@ -614,18 +641,13 @@ where
                 lin.dh2[s * n + i] = self.constraint_terms.dh[(s, i)];
             }
         }
-        // D²h_s is symmetric: row i is its column-major column i.
-        for &i in dynamic {
-            let row = &mut lin.lambda_d2h1[i * n..(i + 1) * n];
-            row.fill(0.0);
-            for s in 0..m {
-                let l = self.lambda[s];
-                let d2h = &lin.c1.d2h[s].as_slice()[i * n..(i + 1) * n];
-                for (o, &x) in row.iter_mut().zip(d2h) {
-                    *o += l * x;
-                }
-            }
-        }
+        contract_hessians(
+            &mut lin.lambda_d2h1,
+            n,
+            dynamic,
+            self.lambda.as_slice(),
+            &lin.c1.d2h,
+        );
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
         let lin = self.linearisation.insert(lin);
