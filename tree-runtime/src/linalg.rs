@@ -168,9 +168,9 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
 
 /// Solves `A X = B` for `k` right-hand sides at once with the factors from
 /// [`lu_factor_packed`]: `b` holds `B` row-major (`n × k`, row i at `i·k`) and becomes `X`.
-/// Both substitutions are taken row by row in dot-product form, on blocks of up to
-/// [`BLOCK`] right-hand sides: `x_i = b_i − Σ_{j<i} L_ij x_j`, then
-/// `x_i = (y_i − Σ_{j>i} U_ij x_j) / U_ii`, each block of row `i` summed in registers and
+/// Both substitutions are taken in dot-product form, two rows at a time, on blocks of up to
+/// 16 right-hand sides: `x_i = b_i − Σ_{j<i} L_ij x_j`, then
+/// `x_i = (y_i − Σ_{j>i} U_ij x_j) / U_ii`, each block of a row summed in registers and
 /// stored once (an update row by row would load and store it at every `j`); zero entries of
 /// the factor are skipped. Compiled also for AVX2 with fused multiply-adds and for AVX,
 /// chosen at run time (as [`mul_into`]'s kernel; the last bits then depend on the CPU).
