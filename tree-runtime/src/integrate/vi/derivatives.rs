@@ -267,8 +267,8 @@ fn contract_hessians(
     }
 }
 
-/// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (as
-/// `linalg`'s kernels; the same operations in the same order on every CPU).
+/// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (the same
+/// operations in the same order on every CPU: no fused multiply-adds here).
 #[multiversion::multiversion(targets("x86_64+avx"))]
 fn jacobians_f64(sh: &Shape, st: &StepTerms<f64>, jac: &mut [f64], pjac: &mut [f64]) {
     jacobians(sh, st, jac, pjac);
