@@ -176,7 +176,16 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
 /// chosen at run time (as [`mul_into`]'s kernel; the last bits then depend on the CPU).
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64], k: usize) {
-    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        solve_rows::<true>(a, n, pivots, b, k);
+    } else {
+        solve_rows::<false>(a, n, pivots, b, k);
+    }
+}
+
+/// [`lu_solve_packed_rows`] with fused multiply-adds or without (both tested on any CPU).
+#[inline(always)]
+fn solve_rows<const FUSED: bool>(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64], k: usize) {
     let b = &mut b[..n * k];
     for (j, &p) in pivots[..n].iter().enumerate() {
         if p != j {
@@ -187,13 +196,10 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
     }
     let a = &a[..n * n];
     for (c0, width) in blocks(k) {
-        match (width, fused) {
-            (BLOCK, true) => substitute::<BLOCK, true>(a, n, b, k, c0),
-            (BLOCK, false) => substitute::<BLOCK, false>(a, n, b, k, c0),
-            (4, true) => substitute::<4, true>(a, n, b, k, c0),
-            (4, false) => substitute::<4, false>(a, n, b, k, c0),
-            (_, true) => substitute::<1, true>(a, n, b, k, c0),
-            (_, false) => substitute::<1, false>(a, n, b, k, c0),
+        match width {
+            BLOCK => substitute::<BLOCK, FUSED>(a, n, b, k, c0),
+            4 => substitute::<4, FUSED>(a, n, b, k, c0),
+            _ => substitute::<1, FUSED>(a, n, b, k, c0),
         }
     }
 }
@@ -340,19 +346,32 @@ fn substitute<const W: usize, const FUSED: bool>(
 /// (as [`mul_into`]'s kernel).
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub fn combine_rows(c: &mut [f64], k: usize, a: &[f64], w: usize, cols: &[usize], d: &[f64]) {
-    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        combine_rows_with::<true>(c, k, a, w, cols, d);
+    } else {
+        combine_rows_with::<false>(c, k, a, w, cols, d);
+    }
+}
+
+/// [`combine_rows`] with fused multiply-adds or without (both tested on any CPU).
+#[inline(always)]
+fn combine_rows_with<const FUSED: bool>(
+    c: &mut [f64],
+    k: usize,
+    a: &[f64],
+    w: usize,
+    cols: &[usize],
+    d: &[f64],
+) {
     let rows = c.len() / k.max(1);
     for r in (0..rows).step_by(2) {
         // A last row alone is paired with itself (its coefficients read twice, stored once).
         let pair = (r, (r + 1).min(rows - 1));
         for (c0, width) in blocks(k) {
-            match (width, fused) {
-                (BLOCK, true) => combine_block::<BLOCK, true>(c, pair, a, w, cols, d, k, c0),
-                (BLOCK, false) => combine_block::<BLOCK, false>(c, pair, a, w, cols, d, k, c0),
-                (4, true) => combine_block::<4, true>(c, pair, a, w, cols, d, k, c0),
-                (4, false) => combine_block::<4, false>(c, pair, a, w, cols, d, k, c0),
-                (_, true) => combine_block::<1, true>(c, pair, a, w, cols, d, k, c0),
-                (_, false) => combine_block::<1, false>(c, pair, a, w, cols, d, k, c0),
+            match width {
+                BLOCK => combine_block::<BLOCK, FUSED>(c, pair, a, w, cols, d, k, c0),
+                4 => combine_block::<4, FUSED>(c, pair, a, w, cols, d, k, c0),
+                _ => combine_block::<1, FUSED>(c, pair, a, w, cols, d, k, c0),
             }
         }
     }
@@ -428,12 +447,21 @@ fn largest_magnitude(x: &[f64]) -> f64 {
 /// for two multiply-adds). Compiled also for AVX2 with fused multiply-adds and for AVX,
 /// chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-fn lu_core_factor(
+fn lu_core_factor(a: &mut [f64], n: usize, swapped: impl FnMut(usize, usize)) -> Result<(), usize> {
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        factor_with::<true>(a, n, swapped)
+    } else {
+        factor_with::<false>(a, n, swapped)
+    }
+}
+
+/// [`lu_core_factor`] with fused multiply-adds or without (both tested on any CPU).
+#[inline(always)]
+fn factor_with<const FUSED: bool>(
     a: &mut [f64],
     n: usize,
     mut swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
-    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
     let mut j = 0;
     while j < n {
         pivot_column(a, n, j, &mut swapped)?;
@@ -462,7 +490,7 @@ fn lu_core_factor(
             head[j + 1] -= m01 * t0;
             let t1 = head[j + 1];
             if t0 != 0.0 || t1 != 0.0 {
-                if fused {
+                if FUSED {
                     for ((x, &u), &v) in below.iter_mut().zip(m0).zip(m1) {
                         *x = (-v).mul_add(t1, (-u).mul_add(t0, *x));
                     }
@@ -568,13 +596,31 @@ mod tests {
 
     /// Several right-hand sides at once give what one solve each gives, and `A X = B` holds,
     /// for orders odd and even (the substitutions take rows in pairs) and widths that leave
-    /// every block size of the kernels (16, 4, 1); `P A = L U` holds for the factors.
+    /// every block size of the kernels (16, 4, 1); `P A = L U` holds for the factors. Both
+    /// roundings (with fused multiply-adds and without) are run, whatever this CPU has.
     #[test]
     fn many_right_hand_sides_solve_as_one_each() {
+        many_right_hand_sides::<false>();
+        many_right_hand_sides::<true>();
+        // The dispatched kernels too.
+        let n = 7;
+        let a = scattered(n);
+        let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
+        lu_factor_packed(&mut factor, n, &mut pivots).expect("regular");
+        let b: Vec<f64> = (0..n * 21).map(|i| (i as f64).cos()).collect();
+        let mut x = b.clone();
+        lu_solve_packed_rows(&factor, n, &pivots, &mut x, 21);
+        for (r, c) in (0..n).flat_map(|r| (0..21).map(move |c| (r, c))) {
+            let ax: f64 = (0..n).map(|j| a[j * n + r] * x[j * 21 + c]).sum();
+            assert!((ax - b[r * 21 + c]).abs() < 1e-11, "residual at ({r}, {c})");
+        }
+    }
+
+    fn many_right_hand_sides<const FUSED: bool>() {
         for n in [1, 2, 5, 8, 19] {
             let a = scattered(n);
             let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
-            lu_factor_packed(&mut factor, n, &mut pivots).expect("regular");
+            factor_with::<FUSED>(&mut factor, n, |j, p| pivots[j] = p).expect("regular");
             if n > 1 {
                 assert_ne!(pivots[0], 0, "the first pivot is swapped");
             }
@@ -602,12 +648,12 @@ mod tests {
             for k in [1, 3, 7, 21, 37] {
                 let b: Vec<f64> = (0..n * k).map(|i| (i as f64).sin()).collect();
                 let mut x = b.clone();
-                lu_solve_packed_rows(&factor, n, &pivots, &mut x, k);
+                solve_rows::<FUSED>(&factor, n, &pivots, &mut x, k);
                 for c in 0..k {
                     let mut one: Vec<f64> = (0..n).map(|r| b[r * k + c]).collect();
                     lu_solve_packed(&factor, n, &pivots, &mut one);
                     for r in 0..n {
-                        let at = format!("n {n}, k {k}, column {c}, row {r}");
+                        let at = format!("fused {FUSED}, n {n}, k {k}, column {c}, row {r}");
                         assert!((x[r * k + c] - one[r]).abs() < 1e-12, "{at}");
                         // A (column-major) times x's column c gives b's.
                         let ax: f64 = (0..n).map(|j| a[j * n + r] * x[j * k + c]).sum();
@@ -630,11 +676,17 @@ mod tests {
             let cols = [4, 0, 5, 2];
             let mut c: Vec<f64> = (0..rows * k).map(|x| x as f64).collect();
             let start = c.clone();
+            let mut unfused = c.clone();
+            combine_rows_with::<false>(&mut unfused, k, &a, w, &cols, &d);
+            let mut fused = c.clone();
+            combine_rows_with::<true>(&mut fused, k, &a, w, &cols, &d);
             combine_rows(&mut c, k, &a, w, &cols, &d);
             for r in 0..rows {
                 for j in 0..k {
                     let sum: f64 = (0..4).map(|s| a[r * w + cols[s]] * d[s * k + j]).sum();
-                    assert!((c[r * k + j] - start[r * k + j] - sum).abs() < 1e-13);
+                    for result in [&c, &unfused, &fused] {
+                        assert!((result[r * k + j] - start[r * k + j] - sum).abs() < 1e-13);
+                    }
                 }
             }
         }
