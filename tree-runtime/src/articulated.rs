@@ -83,6 +83,7 @@ pub(crate) fn base_acceleration<S: Scalar>(plan: &TreePlan) -> Twist<S> {
 
 /// The parent's acceleration `a_par` (`base` for a root) seen from frame `k`:
 /// `Ad_{g_k⁻¹} a_par`, through the folded constant transform first.
+#[inline(always)]
 pub(crate) fn from_parent<S: Scalar>(
     plan: &TreePlan,
     ws: &Workspace<S>,
@@ -171,19 +172,20 @@ pub fn accelerations<S: Scalar>(
             continue;
         }
         let v = &ws.velocity[k];
-        let (inertia, momentum) = match f.body {
+        let (inertia, bias) = match f.body {
             Some(Body::Principal { mass, moments }) => (
                 SpatialInertia::diagonal(mass, &moments),
-                inertia_times(mass, &moments, v),
+                cross_force(v, &inertia_times(mass, &moments, v)),
             ),
             Some(Body::Full { inertia, .. }) => {
                 let inertia = inertia.constant::<S>();
-                (inertia, inertia.times(v))
+                (inertia, cross_force(v, &inertia.times(v)))
             }
+            // No body: nothing of its own (its subtree's arrive inward).
             None => (SpatialInertia::default(), zero6()),
         };
         art.inertia[k] = inertia;
-        art.bias[k] = cross_force(v, &momentum);
+        art.bias[k] = bias;
         art.bias_acceleration[k] = velocity_product(f, ws, dq);
     }
     // Inward: articulate each subtree at its root and hand it to the parent.
