@@ -251,7 +251,22 @@ fn contract_hessians(
     lambda: &[f64],
     d2h: &[DMatrix<f64>],
 ) {
-    let fused = multiversion::target::target_cfg_f!(target_feature = "fma");
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        contract_hessians_with::<true>(out, n, dynamic, lambda, d2h);
+    } else {
+        contract_hessians_with::<false>(out, n, dynamic, lambda, d2h);
+    }
+}
+
+/// [`contract_hessians`] with fused multiply-adds or without (both tested on any CPU).
+#[inline(always)]
+fn contract_hessians_with<const FUSED: bool>(
+    out: &mut [f64],
+    n: usize,
+    dynamic: &[usize],
+    lambda: &[f64],
+    d2h: &[DMatrix<f64>],
+) {
     for &i in dynamic {
         let row = &mut out[i * n..(i + 1) * n];
         row.fill(0.0);
@@ -261,7 +276,7 @@ fn contract_hessians(
             }
             let column = &h.as_slice()[i * n..(i + 1) * n];
             for (o, &x) in row.iter_mut().zip(column) {
-                *o = if fused { l.mul_add(x, *o) } else { *o + l * x };
+                *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x };
             }
         }
     }
@@ -1196,5 +1211,45 @@ impl DualJacobians {
             .zip(delta.iter())
             .map(|(c, d)| c * d)
             .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `Σ_s λ_s D²h_s` on the chosen rows, both roundings and the dispatched kernel, against
+    /// the sum written out; rows not chosen are left as they were, a zero multiplier adds
+    /// nothing.
+    #[test]
+    fn hessians_contract_on_the_dynamic_rows() {
+        let n = 5;
+        let d2h: Vec<DMatrix<f64>> = (0..3)
+            .map(|s| DMatrix::from_fn(n, n, |i, j| ((i + j + 3 * s) as f64 * 0.7).sin()))
+            .map(|h| &h + h.transpose())
+            .collect();
+        let lambda = [0.5, 0.0, -2.0];
+        let dynamic = [0, 2, 3];
+        let expected = |i: usize, j: usize| 0.5 * d2h[0][(i, j)] - 2.0 * d2h[2][(i, j)];
+        type Kernel = fn(&mut [f64], usize, &[usize], &[f64], &[DMatrix<f64>]);
+        let kernels: [Kernel; 3] = [
+            contract_hessians_with::<false>,
+            contract_hessians_with::<true>,
+            contract_hessians,
+        ];
+        for kernel in kernels {
+            let mut out = vec![7.0; n * n];
+            kernel(&mut out, n, &dynamic, &lambda, &d2h);
+            for i in 0..n {
+                for j in 0..n {
+                    let want = if dynamic.contains(&i) {
+                        expected(i, j)
+                    } else {
+                        7.0
+                    };
+                    assert!((out[i * n + j] - want).abs() < 1e-14, "({i}, {j})");
+                }
+            }
+        }
     }
 }
