@@ -4,8 +4,8 @@
 //! constraints in O(frames), where forming `M` is O(frames · depth) and factoring it
 //! O(n³); kinematic variables enter with their prescribed `q̈` (hybrid dynamics).
 //!
-//! After the outward sweep ([`crate::sweeps::forward`] at [`Reach::Lagrangian`](crate::sweeps::Reach::Lagrangian)`(First)`:
-//! poses, body velocities `v_k` and each frame's own column `∂v_k/∂q_k = [Ad v_par, ξ_k]`):
+//! After the outward sweep ([`crate::sweeps::forward`] at [`Reach::Motion`](crate::sweeps::Reach::Motion):
+//! body velocities `v_k` and each frame's own column `∂v_k/∂q_k = [Ad v_par, ξ_k]`):
 //! 1. inward, each subtree's articulated inertia `I^A` and bias wrench `p^A`, starting from
 //!    the body's `I_k` and `v_k ×* I_k v_k`; at a frame driven by a dynamic variable with
 //!    `U = I^A ξ`, `D = ξ·U`, `u = τ − ξ·p^A` the parent receives `I^A − U Uᵀ/D` and

@@ -68,13 +68,7 @@ pub fn elements_at<S: Scalar>(
     dq: &[S],
     out: &mut impl Sink<S>,
 ) {
-    sweeps::forward(
-        plan,
-        &mut k.tree,
-        q,
-        dq,
-        sweeps::Reach::Lagrangian(Order::First),
-    );
+    sweeps::forward(plan, &mut k.tree, q, dq, sweeps::Reach::Motion);
     elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
     elements::forces(plan, &k.tree, &mut k.elements, dq, Order::First, out);
 }

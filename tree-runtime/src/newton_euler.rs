@@ -9,8 +9,8 @@
 //! linearisation needs ([`crate::linearize`]), one sweep for eight directions.
 //!
 //! After the outward sweep ([`crate::sweeps::forward`] at
-//! [`Reach::Lagrangian`](crate::sweeps::Reach::Lagrangian)`(First)`: poses, body velocities
-//! `v_k` and each frame's own column `∂v_k/∂q_k`):
+//! [`Reach::Motion`](crate::sweeps::Reach::Motion): body velocities `v_k` and each frame's own
+//! column `∂v_k/∂q_k`):
 //! 1. outward, each frame's acceleration `a_k = Ad_{g⁻¹} a_par + c_k + ξ_k q̈_k` from the
 //!    world's `a_0 = (−γ, 0)` (gravity as an upward acceleration of the base), with
 //!    `c_k = (∂v_k/∂q_k) q̇_k`, and the wrench its body needs, `f_k = I_k a_k + v_k ×* I_k v_k`;

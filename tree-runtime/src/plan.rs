@@ -5,11 +5,12 @@
 //!
 //! [`TreePlan::folded`] also folds constant transforms: a frame with a constant primitive that
 //! nothing attaches to disappears into its children's `pre` transform, so a chain of constant
-//! primitives costs one constant transform (docs/derivations.md §4).
+//! primitives costs one constant transform, and its body joins its kept ancestor's as one
+//! composite rigid body (docs/derivations.md §4).
 
 use tree_model::{Constraint, Damper, Joint, Mass, Model, PrimitiveKind, Spring, SpringKind};
 
-use crate::se3::{LocalTransform, Pose, SpatialInertia};
+use crate::se3::{ConstantTransform, LocalTransform, Pose, SpatialInertia};
 
 /// A frame's rigid body as the inward sweep uses it, classified and prepared once.
 // Kept inline (not boxed): one per frame, read by every inward sweep.
@@ -59,6 +60,45 @@ impl Body {
             Body::Principal { mass, .. } | Body::Full { mass, .. } => mass,
         }
     }
+
+    /// Its mass, centre of mass and spatial inertia at the frame origin.
+    fn parts(&self) -> (f64, [f64; 3], SpatialInertia<f64>) {
+        match *self {
+            Body::Principal { mass, moments } => {
+                (mass, [0.0; 3], SpatialInertia::diagonal(mass, &moments))
+            }
+            Body::Full { mass, com, inertia } => (mass, com, inertia),
+        }
+    }
+
+    /// The composite rigid body of `own` (this frame's body, if any) and `other`, carried
+    /// rigidly at the constant pose `g` from this frame: the masses add, the centre of mass
+    /// is their weighted mean (`g`'s point of `other`'s), and the spatial inertias add once
+    /// both are seen from this frame's origin (`Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`, docs/derivations.md §4).
+    fn joined(own: Option<Body>, other: &Body, g: &Pose) -> Body {
+        let (m_other, c_other, i_other) = other.parts();
+        let c_other = {
+            let r = g.rotate(&c_other);
+            [0, 1, 2].map(|a| r[a] + g.p[a])
+        };
+        let mut inertia = g.inertia_to_parent(&i_other);
+        let (m_own, c_own) = match own {
+            Some(b) => {
+                let (m, c, i) = b.parts();
+                inertia.add(&i);
+                (m, c)
+            }
+            None => (0.0, [0.0; 3]),
+        };
+        let mass = m_own + m_other;
+        // A body with inertia but no mass has no centre of mass to weigh: any point will do.
+        let com = if mass > 0.0 {
+            [0, 1, 2].map(|a| (m_own * c_own[a] + m_other * c_other[a]) / mass)
+        } else {
+            [0.0; 3]
+        };
+        Body::Full { mass, com, inertia }
+    }
 }
 
 /// One frame of the plan.
@@ -67,7 +107,7 @@ pub struct FramePlan {
     /// Index of the parent frame (`None`: the world).
     pub parent: Option<usize>,
     /// A constant transform applied before the primitive (folded constant frames).
-    pub pre: Option<Pose>,
+    pub pre: Option<ConstantTransform>,
     /// Its primitive.
     pub kind: PrimitiveKind,
     /// Its parameter.
@@ -179,9 +219,10 @@ impl TreePlan {
         Self::from_drafts(model, drafts, (0..model.frames.len()).map(Some).collect())
     }
 
-    /// The plan with constant transforms folded: only driven, massive or attached frames
-    /// remain, each with the constant transform from its nearest remaining ancestor to its
-    /// parent in `pre`.
+    /// The plan with constant transforms folded: only driven or attached frames (and massive
+    /// ones fixed to the world) remain, each with the constant transform from its nearest
+    /// remaining ancestor to its parent in `pre`; a folded frame's body joins that ancestor's
+    /// as one composite rigid body.
     pub fn folded(model: &Model) -> Self {
         let (attached, element) = attachments(model);
         let has_mass = lagrangian_reach(model, &element);
@@ -200,7 +241,12 @@ impl TreePlan {
                     None => (nearest_kept(model, &kept, p), carried[p]),
                 },
             };
-            if matches!(f.joint, Joint::Variable(_)) || body.is_some() || attached[k] {
+            // A body on a constant frame fixed to the world (no kept ancestor) keeps its frame,
+            // for its constant share of the potential; elsewhere it joins its kept ancestor's.
+            let keep = matches!(f.joint, Joint::Variable(_))
+                || attached[k]
+                || (body.is_some() && parent.is_none());
+            if keep {
                 let (pre, kind, joint) = match (f.joint, pre) {
                     // A constant frame after a folded chain joins the chain; its own primitive
                     // becomes the identity.
@@ -228,8 +274,13 @@ impl TreePlan {
                     unreachable!("driven frames are kept")
                 };
                 let own = LocalTransform::new(f.primitive, x).pose();
+                let g = pre.map_or(own, |c| c.compose(&own));
+                // Its body moves rigidly with the kept ancestor: one composite body there.
+                if let (Some(b), Some(d)) = (body, parent) {
+                    drafts[d].body = Some(Body::joined(drafts[d].body, &b, &g));
+                }
                 kept.push(None);
-                carried.push(Some(pre.map_or(own, |c| c.compose(&own))));
+                carried.push(Some(g));
             }
         }
         Self::from_drafts(model, drafts, kept)
@@ -251,7 +302,7 @@ impl TreePlan {
             let n = vars.len() - var_start;
             frames.push(FramePlan {
                 parent: d.parent,
-                pre: d.pre,
+                pre: d.pre.map(ConstantTransform::new),
                 kind: d.kind,
                 joint: d.joint,
                 var_start,
@@ -405,4 +456,128 @@ pub fn column_count(model: &Model) -> (usize, usize) {
         deepest = deepest.max(above[k]);
     }
     (total, deepest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::articulated::{accelerations, Articulated};
+    use crate::kernel::{self, Kernel};
+    use crate::order::Order;
+    use crate::system::Terms;
+    use nalgebra::Dyn;
+
+    /// Bodies on constant frames behind rotated and shifted chains, with offset centres of
+    /// mass and products of inertia: two join one driven frame that has a body of its own,
+    /// one joins a driven frame that has none, and one is fixed to the world.
+    const JOINED: &str = r#"
+name = "joined"
+gravity = [0.4, -0.3, -9.81]
+
+[[frame]]
+name = "stand"
+tz = 0.5
+mass = 3.0
+com = [0.1, 0.0, 0.2]
+inertia = [0.2, 0.3, 0.1]
+
+[[frame]]
+name = "yaw"
+parent = "stand"
+rz = "a"
+mass = 1.2
+com = [0.0, 0.05, 0.0]
+inertia = [0.02, 0.015, 0.025, 0.001, 0.0, -0.002]
+
+[[frame]]
+name = "tilt"
+parent = "yaw"
+rx = 0.4
+
+[[frame]]
+name = "arm"
+parent = "tilt"
+ty = 0.3
+mass = 0.7
+com = [0.02, 0.1, -0.01]
+inertia = [0.004, 0.003, 0.005, 0.0, 0.0003, 0.0]
+
+[[frame]]
+name = "tip"
+parent = "arm"
+tx = -0.2
+mass = 0.2
+inertia = [0.001, 0.001, 0.001]
+
+[[frame]]
+name = "pitch"
+parent = "tip"
+ry = "b"
+
+[[frame]]
+name = "turn"
+parent = "pitch"
+rz = 1.1
+
+[[frame]]
+name = "link"
+parent = "turn"
+tz = -0.6
+mass = 0.9
+com = [0.0, 0.0, -0.1]
+inertia = [0.01, 0.012, 0.004, 0.0, 0.001, 0.0]
+
+[variables.a]
+[variables.b]
+"#;
+
+    fn joined() -> Model {
+        tree_model::from_toml_str(JOINED, None).expect("the test model is valid")
+    }
+
+    #[test]
+    fn bodies_on_constant_frames_join_their_kept_ancestors() {
+        let plan = TreePlan::folded(&joined());
+        // stand (fixed to the world), yaw and pitch remain; arm, tip and link joined.
+        assert_eq!(plan.frames.len(), 3);
+        let mass = |k: usize| plan.frames[k].body.map_or(0.0, |b| b.mass());
+        assert_eq!([mass(0), mass(1), mass(2)], [3.0, 1.2 + 0.7 + 0.2, 0.9]);
+        assert!(matches!(plan.frames[1].body, Some(Body::Full { .. })));
+    }
+
+    /// The joined plan evaluates the same Lagrangian terms and accelerations as the plan
+    /// that walks every frame.
+    #[test]
+    fn joined_bodies_leave_the_lagrangian_and_the_accelerations_as_they_were() {
+        let model = joined();
+        let (every, folded) = (TreePlan::new(&model), TreePlan::folded(&model));
+        let states = [([0.3, -1.2], [0.7, 1.9]), ([2.5, 0.4], [-1.4, 0.2])];
+        for (q, dq) in states {
+            let [(a, qa), (b, qb)] = [&every, &folded].map(|plan| {
+                let mut k = Kernel::new(plan);
+                let mut t = Terms::zeros(Dyn(2));
+                t.clear(Order::Full);
+                kernel::evaluate(plan, &mut k, &q, &dq, Order::Full, &mut t);
+                let mut art = Articulated::new(plan);
+                let mut qdd = [0.0; 2];
+                crate::sweeps::forward(plan, &mut k.tree, &q, &dq, crate::sweeps::Reach::Motion);
+                let tau = [0.5, -0.2];
+                accelerations(plan, &k.tree, &mut art, &dq, &tau, &[false; 2], &mut qdd);
+                (t, qdd)
+            });
+            let scale = a.mass.amax().max(a.d2l_dq_dq.amax()).max(a.l.abs());
+            let diff = [
+                (a.l - b.l).abs(),
+                (&a.dl_dq - &b.dl_dq).amax(),
+                (&a.dl_ddq - &b.dl_ddq).amax(),
+                (&a.mass - &b.mass).amax(),
+                (&a.d2l_ddq_dq - &b.d2l_ddq_dq).amax(),
+                (&a.d2l_dq_dq - &b.d2l_dq_dq).amax(),
+                (qa[0] - qb[0]).abs().max((qa[1] - qb[1]).abs()),
+            ];
+            for (i, d) in diff.into_iter().enumerate() {
+                assert!(d <= 1e-13 * scale, "term {i} differs by {d:e}");
+            }
+        }
+    }
 }

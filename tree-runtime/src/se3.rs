@@ -586,13 +586,18 @@ impl SpatialInertia<f64> {
     }
 
     /// The same inertia in scalar `S` (constants, for the sweeps and the tracer).
+    #[inline(always)]
     pub fn constant<S: Scalar>(&self) -> SpatialInertia<S> {
-        let c = |b: &[[f64; 3]; 3]| b.map(|row| row.map(S::constant));
-        SpatialInertia {
-            vv: c(&self.vv),
-            vw: c(&self.vw),
-            ww: c(&self.ww),
+        // Written out: `array::map` here is left as a call, in the articulated-body step too.
+        let mut out = SpatialInertia::default();
+        for i in 0..3 {
+            for j in 0..3 {
+                out.vv[i][j] = S::constant(self.vv[i][j]);
+                out.vw[i][j] = S::constant(self.vw[i][j]);
+                out.ww[i][j] = S::constant(self.ww[i][j]);
+            }
         }
+        out
     }
 }
 
@@ -896,5 +901,172 @@ impl Pose {
             }
         }
         SpatialInertia { vv: out.vv, vw, ww }
+    }
+}
+
+/// A constant transform `C` applied before a frame's own primitive (a folded chain of
+/// constant primitives, docs/derivations.md §4), its form found once when the plan is built:
+/// a single primitive — a translation along an axis, a rotation about one, as most folded
+/// offsets are — acts by that primitive's few multiplications; any other pose by the general
+/// rotation and shift.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConstantTransform {
+    pose: Pose,
+    primitive: Option<LocalTransform>,
+}
+
+impl ConstantTransform {
+    /// `pose`, classified: a primitive when one reproduces it exactly.
+    pub fn new(pose: Pose) -> Self {
+        let candidate = |kind: PrimitiveKind| {
+            let k = kind.axis();
+            let (a, b) = if kind.is_rotation() {
+                let (u, w) = ((k + 1) % 3, (k + 2) % 3);
+                (pose.r[u][u], pose.r[w][u])
+            } else {
+                (pose.p[k], 0.0)
+            };
+            LocalTransform { kind, a, b }
+        };
+        let primitive = PrimitiveKind::ALL
+            .into_iter()
+            .map(candidate)
+            .find(|t| t.pose() == pose);
+        ConstantTransform { pose, primitive }
+    }
+
+    /// The transform as a pose.
+    pub fn pose(&self) -> &Pose {
+        &self.pose
+    }
+
+    /// The primitive in scalar `S` (constants, folded by a tracing scalar).
+    #[inline(always)]
+    fn lifted<S: Scalar>(t: &LocalTransform) -> LocalTransform<S> {
+        LocalTransform {
+            kind: t.kind,
+            a: c::<S>(t.a),
+            b: c::<S>(t.b),
+        }
+    }
+
+    /// `parent · C`.
+    #[inline(always)]
+    pub fn compose_onto<S: Scalar>(&self, parent: &Pose<S>) -> Pose<S> {
+        match &self.primitive {
+            Some(t) => Self::lifted::<S>(t).compose_onto(parent),
+            None => self.pose.compose_onto(parent),
+        }
+    }
+
+    /// `Ad_{C⁻¹} X`: a parent-frame twist seen after `C`.
+    #[inline(always)]
+    pub fn ad_inverse<S: Scalar>(&self, x: &Twist<S>) -> Twist<S> {
+        match &self.primitive {
+            Some(t) => Self::lifted::<S>(t).ad_inverse(x),
+            None => self.pose.ad_inverse(x),
+        }
+    }
+
+    /// [`Self::ad_inverse`] of every twist of `src` into `dst`.
+    pub fn ad_inverse_each<S: Scalar>(&self, src: &[Twist<S>], dst: &mut [Twist<S>]) {
+        match &self.primitive {
+            Some(t) => {
+                dst.copy_from_slice(src);
+                Self::lifted::<S>(t).ad_inverse_each(dst);
+            }
+            None => self.pose.ad_inverse_each(src, dst),
+        }
+    }
+
+    /// `Ad_{C⁻¹}ᵀ w`: a wrench after `C` seen before it.
+    #[inline(always)]
+    pub fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
+        match &self.primitive {
+            Some(t) => Self::lifted::<S>(t).wrench_to_parent(w),
+            None => self.pose.wrench_to_parent(w),
+        }
+    }
+
+    /// `R h + m p`: a first mass moment of a subtree of mass `m` taken before `C`.
+    #[inline(always)]
+    pub fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
+        match &self.primitive {
+            Some(t) => Self::lifted::<S>(t).moment_to_parent(h, m),
+            None => self.pose.moment_to_parent(h, m),
+        }
+    }
+
+    /// `Ad_{C⁻¹}ᵀ I Ad_{C⁻¹}`: a spatial inertia after `C` seen before it.
+    #[inline(always)]
+    pub fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
+        match &self.primitive {
+            Some(t) => Self::lifted::<S>(t).inertia_to_parent(i),
+            None => self.pose.inertia_to_parent(i),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: &[f64], b: &[f64]) -> bool {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= 1e-15 * (1.0 + x.abs()))
+    }
+
+    fn flat(i: &SpatialInertia) -> Vec<f64> {
+        [i.vv, i.vw, i.ww]
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .collect()
+    }
+
+    /// Each single primitive is found and acts as the general pose does; a composite pose
+    /// keeps the general form.
+    #[test]
+    fn a_constant_transform_acts_as_its_pose_whatever_its_form() {
+        let twist = [0.3, -1.2, 0.8, 0.5, 0.9, -0.4];
+        let wrench = [1.1, 0.2, -0.7, 0.3, -0.6, 0.25];
+        let inertia = SpatialInertia::body(
+            1.7,
+            &[0.1, -0.2, 0.05],
+            &[[0.3, 0.01, -0.02], [0.01, 0.2, 0.03], [-0.02, 0.03, 0.25]],
+        );
+        let parent = LocalTransform::new(PrimitiveKind::Ry, 0.6)
+            .pose()
+            .compose(&LocalTransform::new(PrimitiveKind::Tx, 0.4).pose());
+        let mut poses: Vec<(Pose, bool)> = PrimitiveKind::ALL
+            .into_iter()
+            .map(|kind| (LocalTransform::new(kind, 0.7).pose(), true))
+            .collect();
+        poses.push((parent, false));
+        for (pose, primitive) in poses {
+            let c = ConstantTransform::new(pose);
+            assert_eq!(c.primitive.is_some(), primitive, "{pose:?}");
+            assert!(close(&c.ad_inverse(&twist), &pose.ad_inverse(&twist)));
+            let mut each = [[0.0; 6]; 2];
+            c.ad_inverse_each(&[twist, wrench], &mut each);
+            assert!(close(&each[1], &pose.ad_inverse(&wrench)));
+            assert!(close(
+                &c.wrench_to_parent(&wrench),
+                &pose.wrench_to_parent(&wrench)
+            ));
+            let h = [0.2, -0.1, 0.4];
+            assert!(close(
+                &c.moment_to_parent(&h, 1.3),
+                &pose.moment_to_parent(&h, 1.3)
+            ));
+            assert!(close(
+                &flat(&c.inertia_to_parent(&inertia)),
+                &flat(&pose.inertia_to_parent(&inertia))
+            ));
+            let (a, b) = (c.compose_onto(&parent), pose.compose_onto(&parent));
+            assert!(close(&a.r.concat(), &b.r.concat()) && close(&a.p, &b.p));
+        }
     }
 }

@@ -24,8 +24,8 @@ use crate::outputs::{Output, Sink};
 use crate::plan::{Body, TreePlan};
 use crate::scalar::Scalar;
 use crate::se3::{
-    bracket_with_axis, component, cross, dot, inertia_times, twist_index, zero6, LocalTransform,
-    Pose, SpatialInertia, Twist, Wrench,
+    bracket_with_axis, component, cross, dot, inertia_times, twist_index, zero6, ConstantTransform,
+    LocalTransform, Pose, SpatialInertia, Twist, Wrench,
 };
 
 /// Per-frame storage for one evaluation (allocated once, reused).
@@ -122,6 +122,10 @@ pub enum Reach {
     /// What the mass matrix and the potential need ([`mass`]): poses and `∂v/∂q̇` columns on
     /// the frames that carry or lead to mass or an element; no velocities.
     Mass,
+    /// What the recursive dynamics (articulated-body, Newton–Euler: gravity enters as the
+    /// base's acceleration) and the springs and dampers need: [`Reach::Lagrangian`] at
+    /// [`Order::First`] without the world poses, which only the paths to attached frames keep.
+    Motion,
 }
 
 /// The outward sweep: poses, body velocities and their columns (eqs. (1), (6), (7), (10)),
@@ -133,11 +137,12 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
         Reach::Lagrangian(order) => (true, order >= Order::Dynamics, order >= Order::Dynamics),
         Reach::Attachments => (false, false, false),
         Reach::Mass => (false, true, false),
+        Reach::Motion => (true, false, false),
     };
     for (k, f) in plan.frames.iter().enumerate() {
         let visit = match reach {
             Reach::Everything => true,
-            Reach::Lagrangian(_) | Reach::Mass => f.needed,
+            Reach::Lagrangian(_) | Reach::Mass | Reach::Motion => f.needed,
             Reach::Attachments => f.leads_to_attached,
         };
         if !visit {
@@ -147,7 +152,7 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
         // `world_columns` forms from the poses on the way: no body columns transported.
         let velocity_columns = all_jac
             || match reach {
-                Reach::Lagrangian(_) | Reach::Mass => f.leads_to_element,
+                Reach::Lagrangian(_) | Reach::Mass | Reach::Motion => f.leads_to_element,
                 Reach::Everything => f.leads_to_attached,
                 Reach::Attachments => false,
             };
@@ -161,15 +166,21 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
             ),
             None => (Pose::identity(), zero6(), 0, 0),
         };
+        // The world pose, unless only the motion is asked for away from attachments.
+        let pose = reach != Reach::Motion || f.leads_to_attached;
         // A folded constant transform comes first: g = C g_k(x).
         if let Some(c) = &f.pre {
-            parent_pose = c.compose_onto(&parent_pose);
+            if pose {
+                parent_pose = c.compose_onto(&parent_pose);
+            }
             if velocities {
                 parent_vel = c.ad_inverse(&parent_vel);
             }
         }
         ws.local[k] = local;
-        ws.pose[k] = local.compose_onto(&parent_pose);
+        if pose {
+            ws.pose[k] = local.compose_onto(&parent_pose);
+        }
         let kc = f.col_offset;
         if velocities {
             // v_k = Ad_{g_k⁻¹} v_par + ξ_k q̇_k (eq. (6)).
@@ -238,7 +249,7 @@ fn world_columns<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, k: usize) {
 /// `Ad_{g_k⁻¹} Ad_{C⁻¹} X` for the child's primitive `local` after its folded constant `pre`.
 fn transport<S: Scalar>(
     local: &LocalTransform<S>,
-    pre: Option<&Pose>,
+    pre: Option<&ConstantTransform>,
     columns: &mut [Twist<S>],
     from: usize,
     to: usize,
