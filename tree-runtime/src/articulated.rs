@@ -157,6 +157,7 @@ pub fn resolvable(plan: &TreePlan, kinematic: &[bool]) -> bool {
 /// variable's pivot `D` and its scale are left in `art.pivot`, `art.pivot_scale` (by frame)
 /// for the caller to judge ([`pivots_hold`]); a lost pivot makes `qdd` meaningless. Over any
 /// scalar, with no branch on a value, so that `tree_model!` unrolls it.
+#[inline(always)]
 pub fn accelerations<S: Scalar>(
     plan: &TreePlan,
     ws: &Workspace<S>,
@@ -257,6 +258,24 @@ pub fn accelerations<S: Scalar>(
     }
 }
 
+/// [`accelerations`] in `f64`, compiled also for AVX2 and chosen at run time (wider
+/// registers and three-operand instructions; no fused multiply-adds, so the same bits).
+#[cfg_attr(
+    feature = "simulate",
+    multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))
+)]
+fn accelerations_f64(
+    plan: &TreePlan,
+    ws: &Workspace<f64>,
+    art: &mut Articulated,
+    dq: &[f64],
+    tau: &[f64],
+    kinematic: &[bool],
+    qdd: &mut [f64],
+) {
+    accelerations(plan, ws, art, dq, tau, kinematic, qdd);
+}
+
 /// [`accelerations`] in `f64` with its pivots judged: `false` (and `qdd`'s dynamic entries
 /// unspecified) when a dynamic variable moves no frame with mass below it or a pivot is
 /// lost, the cases the caller solves with `M` instead.
@@ -272,7 +291,7 @@ pub fn accelerations_checked(
     if !resolvable(plan, kinematic) {
         return false;
     }
-    accelerations(plan, ws, art, dq, tau, kinematic, qdd);
+    accelerations_f64(plan, ws, art, dq, tau, kinematic, qdd);
     pivots_hold(kinematic, |i| {
         let k = plan.variable_frames[i].expect("a resolvable variable drives a frame");
         (art.pivot[k], art.pivot_scale[k])
@@ -321,6 +340,98 @@ impl<const N: usize> Default for ArticulatedIo<N> {
             pivot_scale: [0.0; N],
             force: [0.0; N],
             dl_dq: [0.0; N],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernel::Kernel;
+    use crate::sweeps::Reach;
+
+    /// Full bodies behind every primitive kind, a kinematic variable among the dynamic ones.
+    const ARM: &str = r#"
+name = "arm"
+gravity = [0.2, -0.1, -9.81]
+
+[[frame]]
+name = "slide"
+ty = "s"
+mass = 2.0
+com = [0.1, 0.0, 0.05]
+inertia = [0.05, 0.04, 0.06, 0.001, 0.0, 0.002]
+
+[[frame]]
+name = "yaw"
+parent = "slide"
+rz = "a"
+
+[[frame]]
+name = "upper"
+parent = "yaw"
+tz = 0.3
+mass = 1.0
+com = [0.0, 0.02, 0.1]
+inertia = [0.01, 0.012, 0.008]
+
+[[frame]]
+name = "pitch"
+parent = "upper"
+ry = "b"
+
+[[frame]]
+name = "reach"
+parent = "pitch"
+tx = "r"
+mass = 0.5
+com = [0.05, 0.0, 0.0]
+inertia = [0.002, 0.003, 0.003, 0.0, 0.0004, 0.0]
+
+[[frame]]
+name = "wrist"
+parent = "reach"
+rx = "w"
+mass = 0.2
+com = [0.0, 0.0, -0.05]
+inertia = [0.001, 0.001, 0.0005]
+
+[variables.s]
+[variables.a]
+[variables.b]
+[variables.r]
+kinematic = true
+[variables.w]
+"#;
+
+    /// The dispatched build (AVX2 where the CPU has it) gives the generic body's bits: no
+    /// fused multiply-adds, no reassociation, only wider registers.
+    #[test]
+    fn the_dispatched_build_gives_the_same_bits() {
+        let models = [
+            tree_model::from_toml_str(ARM, None).expect("the test model is valid"),
+            tree_model::n_link_pendulum(8),
+        ];
+        for model in models {
+            let plan = TreePlan::folded(&model);
+            let n = model.variables.len();
+            let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+            let mut k = Kernel::<f64>::new(&plan);
+            let (mut a, mut b) = (Articulated::new(&plan), Articulated::new(&plan));
+            for trial in 0..3 {
+                let x = |i: usize, s: f64| (1.7 * (i + 3 * trial) as f64 + s).sin() * 1.5;
+                let q: Vec<f64> = (0..n).map(|i| x(i, 0.1)).collect();
+                let dq: Vec<f64> = (0..n).map(|i| x(i, 0.7)).collect();
+                let tau: Vec<f64> = (0..n).map(|i| x(i, 1.3)).collect();
+                let mut qdd_a: Vec<f64> = (0..n).map(|i| x(i, 2.1)).collect();
+                let mut qdd_b = qdd_a.clone();
+                crate::sweeps::forward(&plan, &mut k.tree, &q, &dq, Reach::Motion);
+                accelerations(&plan, &k.tree, &mut a, &dq, &tau, &kinematic, &mut qdd_a);
+                accelerations_f64(&plan, &k.tree, &mut b, &dq, &tau, &kinematic, &mut qdd_b);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&qdd_a), bits(&qdd_b), "{} trial {trial}", model.name);
+                assert!(qdd_a.iter().all(|x| x.is_finite()));
+            }
         }
     }
 }

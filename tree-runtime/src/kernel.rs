@@ -37,6 +37,7 @@ impl<S: Scalar> Kernel<S> {
 /// All Lagrangian terms up to `order` at `(q, q̇)` — the tree's by the two sweeps, then the
 /// springs' potentials — and the model's own forces (damping, dampers) with their
 /// derivatives.
+#[inline(always)]
 pub fn evaluate<S: Scalar>(
     plan: &TreePlan,
     k: &mut Kernel<S>,
@@ -61,6 +62,7 @@ pub fn mass<S: Scalar>(plan: &TreePlan, k: &mut Kernel<S>, q: &[S], out: &mut im
 /// The outward sweep at `(q, q̇)` and, from it, the model's own generalized forces without
 /// the tree's terms: the springs' `L` and `∂L/∂q`, the damping's and dampers' forces (what the
 /// articulated-body algorithm, [`crate::articulated`], takes as its inputs besides `τ`).
+#[inline(always)]
 pub fn elements_at<S: Scalar>(
     plan: &TreePlan,
     k: &mut Kernel<S>,
@@ -68,7 +70,7 @@ pub fn elements_at<S: Scalar>(
     dq: &[S],
     out: &mut impl Sink<S>,
 ) {
-    sweeps::forward(plan, &mut k.tree, q, dq, sweeps::Reach::Motion);
+    sweeps::forward_inline(plan, &mut k.tree, q, dq, sweeps::Reach::Motion);
     elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
     elements::forces(plan, &k.tree, &mut k.elements, dq, Order::First, out);
 }

@@ -131,6 +131,19 @@ pub enum Reach {
 /// The outward sweep: poses, body velocities and their columns (eqs. (1), (6), (7), (10)),
 /// as much of them as `reach` asks for.
 pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S], reach: Reach) {
+    forward_inline(plan, ws, q, dq, reach);
+}
+
+/// [`forward`], inlined into its caller (a caller compiled for wider registers takes the
+/// sweep with it).
+#[inline(always)]
+pub fn forward_inline<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut Workspace<S>,
+    q: &[S],
+    dq: &[S],
+    reach: Reach,
+) {
     // Velocities; every `∂v/∂q̇` column; every `∂v/∂q` column.
     let (velocities, all_jac, all_dv_dq) = match reach {
         Reach::Everything => (true, true, true),
@@ -268,6 +281,7 @@ fn transport<S: Scalar>(
 /// `Order::Dynamics` on, composite inertia) at its root. Returns the Lagrangian `L` (eq. (15)).
 /// Without `kinetic` (no velocities computed: the state at rest) the wrenches are zero and `L`
 /// is `−V`.
+#[inline(always)]
 fn inward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, order: Order, kinetic: bool) -> S {
     let gravity = plan.gravity.map(S::constant);
     let dynamics = order >= Order::Dynamics;
@@ -396,7 +410,9 @@ fn add6<S: Scalar>(a: &[S; 6], b: &[S; 6]) -> [S; 6] {
 }
 
 /// The tree's own Lagrangian terms up to `order` at `(q, q̇)` by the two sweeps (the
-/// elements' follow in [`crate::kernel::evaluate`]).
+/// elements' follow in [`crate::kernel::evaluate`]). Inlined into its caller, as
+/// [`forward_inline`].
+#[inline(always)]
 pub fn evaluate<S: Scalar>(
     plan: &TreePlan,
     ws: &mut Workspace<S>,
@@ -405,7 +421,7 @@ pub fn evaluate<S: Scalar>(
     order: Order,
     out: &mut impl Sink<S>,
 ) {
-    forward(plan, ws, q, dq, Reach::Lagrangian(order));
+    forward_inline(plan, ws, q, dq, Reach::Lagrangian(order));
     let l = inward(plan, ws, order, true);
     out.set(Output::L, l);
     let gravity = plan.gravity.map(S::constant);
