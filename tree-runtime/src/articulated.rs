@@ -199,13 +199,9 @@ pub fn accelerations<S: Scalar>(
         let mut bias = art.bias[k];
         // Articulated in place (the outward sweep reads only the columns and pivots).
         let inertia = &mut art.inertia[k];
-        if let Joint::Variable(i) = f.joint {
-            if kinematic[i] {
-                let mut a = c;
-                let axis = twist_index(f.kind);
-                a[axis] += qdd[i];
-                add6(&mut bias, &inertia.times(&a));
-            } else {
+        // A dynamic variable's column, pivot and force.
+        let dynamic = match f.joint {
+            Joint::Variable(i) if !kinematic[i] => {
                 let u_col = inertia.column(f.kind);
                 let d = component(&u_col, f.kind);
                 // D against its block's trace (angular for a rotation, linear for a
@@ -218,16 +214,29 @@ pub fn accelerations<S: Scalar>(
                 };
                 art.pivot_scale[k] = block[0][0] + block[1][1] + block[2][2];
                 let u = tau[i] - component(&bias, f.kind);
-                let inverse = d.recip();
                 art.column[k] = u_col;
                 art.pivot[k] = d;
                 art.force[k] = u;
+                Some((u_col, u, d.recip()))
+            }
+            _ => None,
+        };
+        // A root hands nothing on.
+        let Some(p) = f.parent else { continue };
+        match (dynamic, f.joint) {
+            (Some((u_col, u, inverse)), _) => {
                 inertia.sub_outer(&u_col, inverse);
                 add6(&mut bias, &inertia.times(&c));
                 add6(&mut bias, &u_col.map(|x| x * (u * inverse)));
             }
+            // A kinematic variable: its prescribed acceleration is known.
+            (None, Joint::Variable(i)) => {
+                let mut a = c;
+                a[twist_index(f.kind)] += qdd[i];
+                add6(&mut bias, &inertia.times(&a));
+            }
+            (None, Joint::Constant(_)) => {}
         }
-        let Some(p) = f.parent else { continue };
         let local = &ws.local[k];
         let (mut i_up, mut p_up) = (
             local.inertia_to_parent(inertia),
