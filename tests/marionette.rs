@@ -148,5 +148,5 @@ fn rk4_at_the_same_step_drifts_off_the_strings() {
 /// The marionette's compiled evaluation, pinned (see tests/generated.rs).
 #[test]
 fn the_marionettes_statement_count_is_pinned() {
-    assert_eq!(Marionette::STATEMENTS, 13565);
+    assert_eq!(Marionette::STATEMENTS, 12888);
 }

@@ -444,6 +444,6 @@ fn solo12_with_a_floating_base_matches_pinocchio() {
 fn the_robots_statement_counts_are_pinned() {
     assert_eq!(
         [Ur5::STATEMENTS, Panda::STATEMENTS, Solo12::STATEMENTS],
-        [1925, 5129, 8037]
+        [1669, 4786, 7317]
     );
 }

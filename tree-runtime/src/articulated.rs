@@ -267,27 +267,15 @@ pub fn accelerations<S: Scalar>(
     }
 }
 
-/// [`accelerations`] in `f64`, compiled also for AVX2 and chosen at run time (wider
-/// registers and three-operand instructions; no fused multiply-adds, so the same bits).
+/// [`accelerations`] in `f64` with its pivots judged: `false` (and `qdd`'s dynamic entries
+/// unspecified) when a dynamic variable moves no frame with mass below it or a pivot is
+/// lost, the cases the caller solves with `M` instead. Compiled also for AVX2 and chosen at
+/// run time (wider registers and three-operand instructions; no fused multiply-adds, so the
+/// generic body's bits).
 #[cfg_attr(
     feature = "simulate",
     multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))
 )]
-fn accelerations_f64(
-    plan: &TreePlan,
-    ws: &Workspace<f64>,
-    art: &mut Articulated,
-    dq: &[f64],
-    tau: &[f64],
-    kinematic: &[bool],
-    qdd: &mut [f64],
-) {
-    accelerations(plan, ws, art, dq, tau, kinematic, qdd);
-}
-
-/// [`accelerations`] in `f64` with its pivots judged: `false` (and `qdd`'s dynamic entries
-/// unspecified) when a dynamic variable moves no frame with mass below it or a pivot is
-/// lost, the cases the caller solves with `M` instead.
 pub fn accelerations_checked(
     plan: &TreePlan,
     ws: &Workspace<f64>,
@@ -300,7 +288,7 @@ pub fn accelerations_checked(
     if !resolvable(plan, kinematic) {
         return false;
     }
-    accelerations_f64(plan, ws, art, dq, tau, kinematic, qdd);
+    accelerations(plan, ws, art, dq, tau, kinematic, qdd);
     pivots_hold(kinematic, |i| {
         let k = plan.variable_frames[i].expect("a resolvable variable drives a frame");
         (art.pivot[k], art.pivot_scale[k])
@@ -359,68 +347,11 @@ mod tests {
     use crate::kernel::Kernel;
     use crate::sweeps::Reach;
 
-    /// Full bodies behind every primitive kind, a kinematic variable among the dynamic ones.
-    const ARM: &str = r#"
-name = "arm"
-gravity = [0.2, -0.1, -9.81]
-
-[[frame]]
-name = "slide"
-ty = "s"
-mass = 2.0
-com = [0.1, 0.0, 0.05]
-inertia = [0.05, 0.04, 0.06, 0.001, 0.0, 0.002]
-
-[[frame]]
-name = "yaw"
-parent = "slide"
-rz = "a"
-
-[[frame]]
-name = "upper"
-parent = "yaw"
-tz = 0.3
-mass = 1.0
-com = [0.0, 0.02, 0.1]
-inertia = [0.01, 0.012, 0.008]
-
-[[frame]]
-name = "pitch"
-parent = "upper"
-ry = "b"
-
-[[frame]]
-name = "reach"
-parent = "pitch"
-tx = "r"
-mass = 0.5
-com = [0.05, 0.0, 0.0]
-inertia = [0.002, 0.003, 0.003, 0.0, 0.0004, 0.0]
-
-[[frame]]
-name = "wrist"
-parent = "reach"
-rx = "w"
-mass = 0.2
-com = [0.0, 0.0, -0.05]
-inertia = [0.001, 0.001, 0.0005]
-
-[variables.s]
-[variables.a]
-[variables.b]
-[variables.r]
-kinematic = true
-[variables.w]
-"#;
-
     /// The dispatched build (AVX2 where the CPU has it) gives the generic body's bits: no
     /// fused multiply-adds, no reassociation, only wider registers.
     #[test]
     fn the_dispatched_build_gives_the_same_bits() {
-        let models = [
-            tree_model::from_toml_str(ARM, None).expect("the test model is valid"),
-            tree_model::n_link_pendulum(8),
-        ];
+        let models = [crate::plan::tests::joined(), tree_model::n_link_pendulum(8)];
         for model in models {
             let plan = TreePlan::folded(&model);
             let n = model.variables.len();
@@ -436,7 +367,10 @@ kinematic = true
                 let mut qdd_b = qdd_a.clone();
                 crate::sweeps::forward(&plan, &mut k.tree, &q, &dq, Reach::Motion);
                 accelerations(&plan, &k.tree, &mut a, &dq, &tau, &kinematic, &mut qdd_a);
-                accelerations_f64(&plan, &k.tree, &mut b, &dq, &tau, &kinematic, &mut qdd_b);
+                let held = accelerations_checked(
+                    &plan, &k.tree, &mut b, &dq, &tau, &kinematic, &mut qdd_b,
+                );
+                assert!(held);
                 let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&qdd_a), bits(&qdd_b), "{} trial {trial}", model.name);
                 assert!(qdd_a.iter().all(|x| x.is_finite()));

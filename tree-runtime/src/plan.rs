@@ -459,7 +459,7 @@ pub fn column_count(model: &Model) -> (usize, usize) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::articulated::{accelerations, Articulated};
     use crate::kernel::{self, Kernel};
@@ -469,8 +469,9 @@ mod tests {
 
     /// Bodies on constant frames behind rotated and shifted chains, with offset centres of
     /// mass and products of inertia: two join one driven frame that has a body of its own,
-    /// one joins a driven frame that has none, and one is fixed to the world.
-    const JOINED: &str = r#"
+    /// one joins a driven frame that has none, and one is fixed to the world; below, every
+    /// primitive kind drives a body, one of them a kinematic variable.
+    pub(crate) const JOINED: &str = r#"
 name = "joined"
 gravity = [0.4, -0.3, -9.81]
 
@@ -482,8 +483,16 @@ com = [0.1, 0.0, 0.2]
 inertia = [0.2, 0.3, 0.1]
 
 [[frame]]
-name = "yaw"
+name = "slide"
 parent = "stand"
+ty = "s"
+mass = 2.0
+com = [0.1, 0.0, 0.05]
+inertia = [0.05, 0.04, 0.06, 0.001, 0.0, 0.002]
+
+[[frame]]
+name = "yaw"
+parent = "slide"
 rz = "a"
 mass = 1.2
 com = [0.0, 0.05, 0.0]
@@ -527,22 +536,51 @@ mass = 0.9
 com = [0.0, 0.0, -0.1]
 inertia = [0.01, 0.012, 0.004, 0.0, 0.001, 0.0]
 
+[[frame]]
+name = "reach"
+parent = "link"
+tx = "r"
+mass = 0.5
+com = [0.05, 0.0, 0.0]
+inertia = [0.002, 0.003, 0.003, 0.0, 0.0004, 0.0]
+
+[[frame]]
+name = "wrist"
+parent = "reach"
+rx = "w"
+mass = 0.2
+com = [0.0, 0.0, -0.05]
+inertia = [0.001, 0.001, 0.0005]
+
+[[frame]]
+name = "lift"
+parent = "wrist"
+tz = "z"
+mass = 0.1
+inertia = [0.0002, 0.0002, 0.0001]
+
+[variables.s]
 [variables.a]
 [variables.b]
+[variables.r]
+kinematic = true
+[variables.w]
+[variables.z]
 "#;
 
-    fn joined() -> Model {
+    pub(crate) fn joined() -> Model {
         tree_model::from_toml_str(JOINED, None).expect("the test model is valid")
     }
 
     #[test]
     fn bodies_on_constant_frames_join_their_kept_ancestors() {
         let plan = TreePlan::folded(&joined());
-        // stand (fixed to the world), yaw and pitch remain; arm, tip and link joined.
-        assert_eq!(plan.frames.len(), 3);
+        // stand (fixed to the world) and the driven frames remain; arm, tip and link joined.
+        assert_eq!(plan.frames.len(), 7);
         let mass = |k: usize| plan.frames[k].body.map_or(0.0, |b| b.mass());
-        assert_eq!([mass(0), mass(1), mass(2)], [3.0, 1.2 + 0.7 + 0.2, 0.9]);
-        assert!(matches!(plan.frames[1].body, Some(Body::Full { .. })));
+        let masses = [0, 1, 2, 3].map(mass);
+        assert_eq!(masses, [3.0, 2.0, 1.2 + 0.7 + 0.2, 0.9]);
+        assert!(matches!(plan.frames[3].body, Some(Body::Full { .. })));
     }
 
     /// The joined plan evaluates the same Lagrangian terms and accelerations as the plan
@@ -551,18 +589,23 @@ inertia = [0.01, 0.012, 0.004, 0.0, 0.001, 0.0]
     fn joined_bodies_leave_the_lagrangian_and_the_accelerations_as_they_were() {
         let model = joined();
         let (every, folded) = (TreePlan::new(&model), TreePlan::folded(&model));
-        let states = [([0.3, -1.2], [0.7, 1.9]), ([2.5, 0.4], [-1.4, 0.2])];
-        for (q, dq) in states {
+        let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+        let n = kinematic.len();
+        for trial in 0..2 {
+            let x = |i: usize, s: f64| (1.9 * (i + 4 * trial) as f64 + s).sin() * 1.5;
+            let q: Vec<f64> = (0..n).map(|i| x(i, 0.3)).collect();
+            let dq: Vec<f64> = (0..n).map(|i| x(i, 1.1)).collect();
+            let tau: Vec<f64> = (0..n).map(|i| x(i, 2.3)).collect();
             let [(a, qa), (b, qb)] = [&every, &folded].map(|plan| {
                 let mut k = Kernel::new(plan);
-                let mut t = Terms::zeros(Dyn(2));
+                let mut t = Terms::zeros(Dyn(n));
                 t.clear(Order::Full);
                 kernel::evaluate(plan, &mut k, &q, &dq, Order::Full, &mut t);
                 let mut art = Articulated::new(plan);
-                let mut qdd = [0.0; 2];
+                // The kinematic variable's prescribed acceleration.
+                let mut qdd: Vec<f64> = (0..n).map(|i| x(i, 0.7)).collect();
                 crate::sweeps::forward(plan, &mut k.tree, &q, &dq, crate::sweeps::Reach::Motion);
-                let tau = [0.5, -0.2];
-                accelerations(plan, &k.tree, &mut art, &dq, &tau, &[false; 2], &mut qdd);
+                accelerations(plan, &k.tree, &mut art, &dq, &tau, &kinematic, &mut qdd);
                 (t, qdd)
             });
             let scale = a.mass.amax().max(a.d2l_dq_dq.amax()).max(a.l.abs());
@@ -573,7 +616,10 @@ inertia = [0.01, 0.012, 0.004, 0.0, 0.001, 0.0]
                 (&a.mass - &b.mass).amax(),
                 (&a.d2l_ddq_dq - &b.d2l_ddq_dq).amax(),
                 (&a.d2l_dq_dq - &b.d2l_dq_dq).amax(),
-                (qa[0] - qb[0]).abs().max((qa[1] - qb[1]).abs()),
+                qa.iter()
+                    .zip(&qb)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0, f64::max),
             ];
             for (i, d) in diff.into_iter().enumerate() {
                 assert!(d <= 1e-13 * scale, "term {i} differs by {d:e}");

@@ -437,46 +437,46 @@ impl<S: Scalar> LocalTransform<S> {
     #[inline(always)]
     pub fn inertia_to_parent(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         match self.kind {
-            PrimitiveKind::Rx => self.inertia_rotated::<1, 2>(i),
-            PrimitiveKind::Ry => self.inertia_rotated::<2, 0>(i),
-            PrimitiveKind::Rz => self.inertia_rotated::<0, 1>(i),
+            PrimitiveKind::Rx => self.inertia_rotated::<0, 1, 2>(i),
+            PrimitiveKind::Ry => self.inertia_rotated::<1, 2, 0>(i),
+            PrimitiveKind::Rz => self.inertia_rotated::<2, 0, 1>(i),
             PrimitiveKind::Tx => self.inertia_shifted::<0>(i),
             PrimitiveKind::Ty => self.inertia_shifted::<1>(i),
             PrimitiveKind::Tz => self.inertia_shifted::<2>(i),
         }
     }
 
-    /// [`Self::inertia_to_parent`] for a rotation mixing axes `U` and `W`: each block becomes
-    /// `R B Rᵀ`.
+    /// [`Self::inertia_to_parent`] for a rotation about axis `K` mixing axes `U` and `W`: each
+    /// block becomes `R B Rᵀ` (the symmetric ones from their upper triangles).
     #[inline(always)]
-    fn inertia_rotated<const U: usize, const W: usize>(
+    fn inertia_rotated<const K: usize, const U: usize, const W: usize>(
         &self,
         i: &SpatialInertia<S>,
     ) -> SpatialInertia<S> {
         let (c, s) = (self.a, self.b);
         SpatialInertia {
-            vv: rotate_block::<S, U, W>(&i.vv, c, s),
+            vv: rotate_symmetric::<S, K, U, W>(&i.vv, c, s),
             vw: rotate_block::<S, U, W>(&i.vw, c, s),
-            ww: rotate_block::<S, U, W>(&i.ww, c, s),
+            ww: rotate_symmetric::<S, K, U, W>(&i.ww, c, s),
         }
     }
 
     /// [`Self::inertia_to_parent`] for a translation along axis `K`: with
     /// `A = [[I, −p̂], [0, I]]`, `vv' = vv`, `vw' = vw − vv p̂`,
-    /// `ww' = ww + p̂ vw − (p̂ vv) p̂ − vwᵀ p̂`.
+    /// `ww' = ww + p̂ vw − (p̂ vv) p̂ − vwᵀ p̂`, where `−vwᵀ p̂ = (p̂ vw)ᵀ`: symmetric, formed
+    /// from its upper triangle.
     #[inline(always)]
     fn inertia_shifted<const K: usize>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         let d = self.a;
         let vw = sub3(&i.vw, &mul_skew(&i.vv, K, d));
-        let vw_t = transpose3(&i.vw);
         let pvv = skew_mul(K, d, &i.vv);
         let mut ww = i.ww;
         let a = skew_mul(K, d, &i.vw);
         let b = mul_skew(&pvv, K, d);
-        let e = mul_skew(&vw_t, K, d);
         for r in 0..3 {
-            for c in 0..3 {
-                ww[r][c] += a[r][c] - b[r][c] - e[r][c];
+            for c in r..3 {
+                ww[r][c] += a[r][c] + a[c][r] - b[r][c];
+                ww[c][r] = ww[r][c];
             }
         }
         SpatialInertia { vv: i.vv, vw, ww }
@@ -500,6 +500,31 @@ fn rotate_block<S: Scalar, const U: usize, const W: usize>(
         r[row][U] = c * t[row][U] - s * t[row][W];
         r[row][W] = s * t[row][U] + c * t[row][W];
     }
+    r
+}
+
+/// `R B Rᵀ` for a symmetric `B` and the rotation by `(c, s)` about axis `K` that mixes axes
+/// `U` and `W`: `B_KK` stays, `(B_KU, B_KW)` turns as a vector, and the `U`–`W` block takes
+/// `c²`, `s²` and `cs` — the upper triangle, mirrored (14 products where the general block
+/// takes 24).
+#[inline(always)]
+fn rotate_symmetric<S: Scalar, const K: usize, const U: usize, const W: usize>(
+    b: &[[S; 3]; 3],
+    c: S,
+    s: S,
+) -> [[S; 3]; 3] {
+    let (uu, ww, uw, ku, kw) = (b[U][U], b[W][W], b[U][W], b[K][U], b[K][W]);
+    let (cc, ss, cs) = (c * c, s * s, c * s);
+    let twice = cs * (uw + uw);
+    let mut r = *b;
+    r[U][U] = cc * uu - twice + ss * ww;
+    r[W][W] = ss * uu + twice + cc * ww;
+    r[U][W] = cs * (uu - ww) + (cc - ss) * uw;
+    r[W][U] = r[U][W];
+    r[K][U] = c * ku - s * kw;
+    r[U][K] = r[K][U];
+    r[K][W] = s * ku + c * kw;
+    r[W][K] = r[K][W];
     r
 }
 
@@ -623,27 +648,36 @@ impl<S: Scalar> SpatialInertia<S> {
         s
     }
 
-    /// `self += other`.
+    /// `self += other` (the symmetric blocks from their upper triangles).
     #[inline(always)]
     pub fn add(&mut self, other: &SpatialInertia<S>) {
         for i in 0..3 {
             for j in 0..3 {
-                self.vv[i][j] += other.vv[i][j];
                 self.vw[i][j] += other.vw[i][j];
+            }
+            for j in i..3 {
+                self.vv[i][j] += other.vv[i][j];
+                self.vv[j][i] = self.vv[i][j];
                 self.ww[i][j] += other.ww[i][j];
+                self.ww[j][i] = self.ww[i][j];
             }
         }
     }
 
-    /// `self −= s u uᵀ` (the articulated-body step's rank-one update).
+    /// `self −= s u uᵀ` (the articulated-body step's rank-one update); the symmetric blocks
+    /// from their upper triangles, so they stay exactly symmetric.
     #[inline(always)]
     pub fn sub_outer(&mut self, u: &Wrench<S>, s: S) {
         for i in 0..3 {
             let (a, b) = (s * u[i], s * u[i + 3]);
             for j in 0..3 {
-                self.vv[i][j] -= a * u[j];
                 self.vw[i][j] -= a * u[j + 3];
+            }
+            for j in i..3 {
+                self.vv[i][j] -= a * u[j];
+                self.vv[j][i] = self.vv[i][j];
                 self.ww[i][j] -= b * u[j + 3];
+                self.ww[j][i] = self.ww[i][j];
             }
         }
     }
@@ -743,6 +777,21 @@ fn mul_const<S: Scalar>(m: &[[S; 3]; 3], a: &[[f64; 3]; 3]) -> [[S; 3]; 3] {
         for j in 0..3 {
             r[i][j] =
                 m[i][0] * c::<S>(a[0][j]) + m[i][1] * c::<S>(a[1][j]) + m[i][2] * c::<S>(a[2][j]);
+        }
+    }
+    r
+}
+
+/// `M a` for a constant 3×3 `a` when the product is symmetric (`R B Rᵀ`, `p̂ B p̂` for a
+/// symmetric `B`): its upper triangle, mirrored.
+#[inline(always)]
+fn mul_const_symmetric<S: Scalar>(m: &[[S; 3]; 3], a: &[[f64; 3]; 3]) -> [[S; 3]; 3] {
+    let mut r = [[S::zero(); 3]; 3];
+    for i in 0..3 {
+        for j in i..3 {
+            r[i][j] =
+                m[i][0] * c::<S>(a[0][j]) + m[i][1] * c::<S>(a[1][j]) + m[i][2] * c::<S>(a[2][j]);
+            r[j][i] = r[i][j];
         }
     }
     r
@@ -879,25 +928,26 @@ impl Pose {
         let mut out = *i;
         if !self.is_rotation_free() {
             let rt = transpose3(&self.r);
-            let rot = |b: &[[S; 3]; 3]| mul_const(&const_mul(&self.r, b), &rt);
+            let rot = |b: &[[S; 3]; 3]| const_mul(&self.r, b);
             out = SpatialInertia {
-                vv: rot(&i.vv),
-                vw: rot(&i.vw),
-                ww: rot(&i.ww),
+                vv: mul_const_symmetric(&rot(&i.vv), &rt),
+                vw: mul_const(&rot(&i.vw), &rt),
+                ww: mul_const_symmetric(&rot(&i.ww), &rt),
             };
         }
         if self.is_translation_free() {
             return out;
         }
+        // As the one-axis shift: `−vwᵀ p̂ = (p̂ vw)ᵀ`, and `p̂ vv p̂` is symmetric.
         let p = skew(&self.p);
         let vw = sub3(&out.vw, &mul_const(&out.vv, &p));
         let a = const_mul(&p, &out.vw);
-        let b = mul_const(&const_mul(&p, &out.vv), &p);
-        let e = mul_const(&transpose3(&out.vw), &p);
+        let b = mul_const_symmetric(&const_mul(&p, &out.vv), &p);
         let mut ww = out.ww;
         for r in 0..3 {
-            for s in 0..3 {
-                ww[r][s] += a[r][s] - b[r][s] - e[r][s];
+            for s in r..3 {
+                ww[r][s] += a[r][s] + a[s][r] - b[r][s];
+                ww[s][r] = ww[r][s];
             }
         }
         SpatialInertia { vv: out.vv, vw, ww }
