@@ -72,28 +72,24 @@ impl Body {
     }
 
     /// The composite rigid body of `own` (this frame's body, if any) and `other`, carried
-    /// rigidly at the constant pose `g` from this frame: the masses add, the centre of mass
-    /// is their weighted mean (`g`'s point of `other`'s), and the spatial inertias add once
-    /// both are seen from this frame's origin (`Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`, docs/derivations.md §4).
+    /// rigidly at the constant pose `g` from this frame: the masses and the first mass
+    /// moments `m c` add (`other`'s carried as the inward sweep carries a subtree's,
+    /// `R h + m p`), and so do the spatial inertias once both are seen from this frame's
+    /// origin (`Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`, docs/derivations.md §4).
     fn joined(own: Option<Body>, other: &Body, g: &Pose) -> Body {
         let (m_other, c_other, i_other) = other.parts();
-        let c_other = {
-            let r = g.rotate(&c_other);
-            [0, 1, 2].map(|a| r[a] + g.p[a])
-        };
+        let mut moment = g.moment_to_parent(&c_other.map(|x| m_other * x), m_other);
         let mut inertia = g.inertia_to_parent(&i_other);
-        let (m_own, c_own) = match own {
-            Some(b) => {
-                let (m, c, i) = b.parts();
-                inertia.add(&i);
-                (m, c)
-            }
-            None => (0.0, [0.0; 3]),
-        };
-        let mass = m_own + m_other;
+        let mut mass = m_other;
+        if let Some(b) = own {
+            let (m, c, i) = b.parts();
+            mass += m;
+            moment = [0, 1, 2].map(|a| moment[a] + m * c[a]);
+            inertia.add(&i);
+        }
         // A body with inertia but no mass has no centre of mass to weigh: any point will do.
         let com = if mass > 0.0 {
-            [0, 1, 2].map(|a| (m_own * c_own[a] + m_other * c_other[a]) / mass)
+            moment.map(|h| h / mass)
         } else {
             [0.0; 3]
         };

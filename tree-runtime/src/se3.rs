@@ -985,11 +985,6 @@ impl ConstantTransform {
         ConstantTransform { pose, primitive }
     }
 
-    /// The transform as a pose.
-    pub fn pose(&self) -> &Pose {
-        &self.pose
-    }
-
     /// The primitive in scalar `S` (constants, folded by a tracing scalar).
     #[inline(always)]
     fn lifted<S: Scalar>(t: &LocalTransform) -> LocalTransform<S> {

@@ -58,14 +58,20 @@ pub(crate) fn columns_fit(model: &Model) -> Result<(), SimError> {
 /// forces) compiled also for AVX2 and chosen at run time: wider registers and three-operand
 /// instructions, no fused multiply-adds, so the same bits.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-fn elements_at(plan: &TreePlan, k: &mut Kernel<f64>, q: &[f64], dq: &[f64], own: &mut Terms<Dyn>) {
+fn dispatched_elements_at(
+    plan: &TreePlan,
+    k: &mut Kernel<f64>,
+    q: &[f64],
+    dq: &[f64],
+    own: &mut Terms<Dyn>,
+) {
     kernel::elements_at(plan, k, q, dq, own);
 }
 
 /// [`kernel::evaluate`] (the two sweeps, then the elements' terms), dispatched as
-/// [`elements_at`].
+/// [`dispatched_elements_at`].
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-fn evaluate(
+fn dispatched_evaluate(
     plan: &TreePlan,
     k: &mut Kernel<f64>,
     q: &[f64],
@@ -225,7 +231,7 @@ impl System for TreeSystem {
         out: &mut Terms<Dyn>,
     ) {
         out.clear(order);
-        evaluate(
+        dispatched_evaluate(
             &self.plan,
             &mut self.kernel,
             q.as_slice(),
@@ -253,7 +259,7 @@ impl System for TreeSystem {
         }
         own.clear(Order::First);
         let (q, dq) = (q.as_slice(), dq.as_slice());
-        elements_at(&self.plan, &mut self.kernel, q, dq, own);
+        dispatched_elements_at(&self.plan, &mut self.kernel, q, dq, own);
         for (i, t) in self.tau.iter_mut().enumerate() {
             *t = tau[i] + own.force[i] + own.dl_dq[i];
         }
@@ -309,20 +315,35 @@ mod tests {
 
     /// The system's accelerations (its outward sweep and articulated-body step dispatched to
     /// AVX2 where the CPU has it) carry the generic bodies' bits.
-    #[test]
-    fn the_dispatched_accelerations_give_the_generic_bits() {
+    fn bits(v: &[f64]) -> Vec<u64> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    fn wave(n: usize, s: f64, scale: f64) -> Vector<Dyn> {
+        Vector::<Dyn>::from_fn(n, |i, _| scale * (1.3 * i as f64 + s).sin())
+    }
+
+    /// The damped humanoid and the 8-link chain, each at a state away from zero.
+    fn models_and_states() -> Vec<(Model, Vector<Dyn>, Vector<Dyn>)> {
         let humanoid = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.toml");
-        let models = [
+        [
             tree_model::from_toml_file(humanoid).expect("the humanoid loads"),
             tree_model::n_link_pendulum(8),
-        ];
-        for model in models {
+        ]
+        .into_iter()
+        .map(|m| {
+            let n = m.variables.len();
+            (m, wave(n, 0.2, 1.0), wave(n, 0.9, 2.0))
+        })
+        .collect()
+    }
+
+    #[test]
+    fn the_dispatched_accelerations_give_the_generic_bits() {
+        for (model, q, dq) in models_and_states() {
             let mut sys = TreeSystem::new(&model).expect("the system builds");
             let n = model.variables.len();
-            let x = |i: usize, s: f64| (1.3 * i as f64 + s).sin();
-            let q = Vector::<Dyn>::from_fn(n, |i, _| x(i, 0.2));
-            let dq = Vector::<Dyn>::from_fn(n, |i, _| 2.0 * x(i, 0.9));
-            let tau = Vector::<Dyn>::from_fn(n, |i, _| x(i, 1.7));
+            let tau = wave(n, 1.7, 1.0);
             let mut own = Terms::zeros(Dyn(n));
             let mut qdd = Vector::<Dyn>::zeros(n);
             assert!(sys.articulated_acceleration(&q, &dq, &tau, &mut qdd, &mut own));
@@ -346,8 +367,48 @@ mod tests {
                 &sys.kinematic,
                 &mut expected,
             );
-            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(qdd.as_slice()), bits(&expected), "{}", model.name);
+        }
+    }
+
+    /// The system's Lagrangian terms (its two sweeps dispatched to AVX2 where the CPU has it)
+    /// carry the generic bodies' bits, every term of a full evaluation.
+    #[test]
+    fn the_dispatched_evaluation_gives_the_generic_bits() {
+        for (model, q, dq) in models_and_states() {
+            let mut sys = TreeSystem::new(&model).expect("the system builds");
+            let n = model.variables.len();
+            let mut terms = Terms::zeros(Dyn(n));
+            sys.lagrangian(&q, &dq, Order::Full, &mut terms);
+            let plan = TreePlan::folded(&model);
+            let mut k = Kernel::<f64>::new(&plan);
+            let mut generic = Terms::zeros(Dyn(n));
+            generic.clear(Order::Full);
+            kernel::evaluate(
+                &plan,
+                &mut k,
+                q.as_slice(),
+                dq.as_slice(),
+                Order::Full,
+                &mut generic,
+            );
+            let every = |t: &Terms<Dyn>| {
+                let mut v = vec![t.l];
+                for m in [&t.dl_dq, &t.dl_ddq, &t.force] {
+                    v.extend(m.iter());
+                }
+                for m in [&t.mass, &t.d2l_ddq_dq, &t.d2l_dq_dq] {
+                    v.extend(m.iter());
+                }
+                v
+            };
+            assert!(every(&terms).iter().any(|&x| x != 0.0));
+            assert_eq!(
+                bits(&every(&terms)),
+                bits(&every(&generic)),
+                "{}",
+                model.name
+            );
         }
     }
 }
