@@ -12,7 +12,7 @@ use tree_mech::model::{self, Model, Task};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::trajectory::{CsvStream, Sample};
 use tree_mech::runtime::{Pose, Seconds, Vector};
-use tree_mech::{Order, System, Terms, Trajectory, TreeSystem};
+use tree_mech::{System, Terms, Trajectory, TreeSystem};
 
 use crate::animate;
 use crate::output::OutputFile;
@@ -170,8 +170,7 @@ fn write_outputs(
             Vector::<Dyn>::from_column_slice(res.q[k].as_slice()),
             Vector::<Dyn>::from_column_slice(res.dq[k].as_slice()),
         );
-        sys.lagrangian(&q, &dq, Order::First, &mut terms);
-        energy.push(terms.energy(&dq));
+        energy.push(sys.energy(&q, &dq, &mut terms));
     }
     let sample = |k: usize| Sample {
         step: k,

@@ -160,6 +160,22 @@ where
                 );
             }
         }
+        // E = T + V alone (poses and velocities only), against the interpreted one and the
+        // Legendre transform q̇·∂L/∂q̇ − L of the full evaluation; garbage beforehand ignored.
+        let mut energy_g = tree_mech::Terms::zeros(generated.dim());
+        energy_g.total_energy = 1e9;
+        let e_g = generated.energy(&q, &dq, &mut energy_g);
+        let (q_t, dq_t) = (to_dyn::<S>(&q), to_dyn::<S>(&dq));
+        let mut energy_t = tree_mech::Terms::<Dyn>::zeros(Dyn(n));
+        let e_t = interpreted.energy(&q_t, &dq_t, &mut energy_t);
+        let legendre = interpreted
+            .evaluate(&q_t, &dq_t, Order::First)
+            .energy(&dq_t);
+        assert!(
+            e_g == energy_g.total_energy && close(e_g, e_t, 1e-12) && close(e_t, legendre, 1e-12),
+            "{}: E = T + V {e_g} (compiled), {e_t} (interpreted), Legendre transform {legendre}",
+            model.name
+        );
         // q̈ by the articulated-body algorithm (elements' forces included): the compiled one
         // is the interpreted one unrolled, and both take or decline a state alike.
         let (mut tau, mut qdd_g) = (generated.zero_vector(), generated.zero_vector());

@@ -488,6 +488,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let constraints: Evaluation = kernel::constraints;
     // `M(q)` and `L(q, 0)` alone (`System::mass_matrix`): the sweeps at rest, no velocity.
     let mass: Evaluation = |plan, k, q, _, _, out| kernel::mass(plan, k, q, out);
+    // `E = T + V` alone (`System::energy`): poses and velocities, no columns.
+    let energy: Evaluation = |plan, k, q, dq, _, out| kernel::energy(plan, k, q, dq, out);
     // Every evaluation over f64; those the linearisations differentiate also generic (only
     // instantiated, over dual numbers, where a program differentiates this model).
     let [l_first, l_dynamics, l_full] =
@@ -498,6 +500,9 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let mass = traced(&plan, Order::Dynamics, mass)
         .assigning()
         .emit("__mass", &var_names, f64_terms);
+    let energy = traced(&plan, Order::First, energy)
+        .assigning()
+        .emit("__energy", &var_names, f64_terms);
     let dynamics = l_dynamics
         .assigning()
         .emit("__dynamics", &var_names, f64_terms);
@@ -530,6 +535,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let functions = [
         &first.functions,
         &mass.functions,
+        &energy.functions,
         &dynamics.functions,
         &full.functions,
         &poses.functions,
@@ -554,12 +560,13 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let inputs = model.inputs.len();
     let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
     let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
-    let (first_body, dynamics_body, full_body, poses_body, mass_body) = (
+    let (first_body, dynamics_body, full_body, poses_body, mass_body, energy_body) = (
         &first.body,
         &dynamics.body,
         &full.body,
         &poses.body,
         &mass.body,
+        &energy.body,
     );
     let statements = full.statements;
     // Where the Full evaluation writes force derivatives (elements::forces): dampers fill
@@ -849,6 +856,19 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 // The traced sweeps read no velocity.
                 let dq = q;
                 #mass_body
+            }
+
+            fn energy(
+                &mut self,
+                q: &::tree_mech::runtime::Vector<Self::N>,
+                dq: &::tree_mech::runtime::Vector<Self::N>,
+                out: &mut ::tree_mech::runtime::Terms<Self::N>,
+            ) -> f64 {
+                let q: &[f64; #n] = &q.data.0[0];
+                let dq: &[f64; #n] = &dq.data.0[0];
+                out.total_energy = 0.0;
+                #energy_body
+                out.total_energy
             }
 
             #articulated_method

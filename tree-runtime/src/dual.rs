@@ -112,8 +112,9 @@ pub struct DualOutputs {
 }
 
 /// Every field, in declaration order (so `field as usize` indexes it).
-const FIELDS: [Field; 14] = [
+const FIELDS: [Field; 15] = [
     Field::L,
+    Field::Energy,
     Field::DlDq,
     Field::DlDdq,
     Field::Mass,
@@ -133,7 +134,7 @@ impl DualOutputs {
     /// Zeros for `n` variables and `m` constraint rows.
     pub fn new(n: usize, m: usize) -> Self {
         let size = |f: Field| match f {
-            Field::L => 1,
+            Field::L | Field::Energy => 1,
             Field::DlDq | Field::DlDdq | Field::Force | Field::Tau => n,
             Field::Mass | Field::D2lDdqDq | Field::D2lDqDq | Field::DforceDq | Field::DforceDdq => {
                 n * n

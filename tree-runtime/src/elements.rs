@@ -465,6 +465,32 @@ pub fn springs<S: Scalar>(
     }
 }
 
+/// The springs' potential energy `V = Σ ½k(r − r₀)²` (`r` a variable's value or the distance
+/// between two frames) from the outward sweep's poses alone — the part of [`springs`]' `L`
+/// the total energy needs, without its derivatives.
+pub fn potential<S: Scalar>(plan: &TreePlan, tree: &Workspace<S>, q: &[S]) -> S {
+    let half = S::constant(0.5);
+    let mut v = S::zero();
+    for spring in &plan.springs {
+        let k = S::constant(spring.stiffness);
+        let rest = S::constant(spring.rest);
+        let stretch = match spring.kind {
+            SpringKind::Variable(i) => q[i] - rest,
+            SpringKind::Frames([a, b]) => {
+                let d = sub3(&tree.pose[a].p, &tree.pose[b].p);
+                let s = dot3(&d, &d);
+                if spring.rest == 0.0 {
+                    v += half * k * s;
+                    continue;
+                }
+                s.sqrt() - rest
+            }
+        };
+        v += half * k * stretch * stretch;
+    }
+    v
+}
+
 /// The model's own generalized forces: per-variable damping `−c_i q̇_i` and dampers
 /// `F = −c ṙ ∇r` (`r = ‖d‖`, `ṙ = ∇r·q̇`), with `∂F/∂q̇ = −c ∇r∇rᵀ` and
 /// `∂F/∂q = −c(∇r (∇²r q̇)ᵀ + ṙ ∇²r)` at `Order::Full` (for the VI's Newton Jacobian).

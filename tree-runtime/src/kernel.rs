@@ -51,6 +51,22 @@ pub fn evaluate<S: Scalar>(
     elements::forces(plan, &k.tree, &mut k.elements, dq, order, out);
 }
 
+/// The total energy `E = T + V` at `(q, q̇)` into [`Output::Energy`]: the tree's by the
+/// outward sweep's poses and velocities ([`sweeps::energy`]), then the springs' potentials
+/// ([`elements::potential`]) — what a recorded sample reports, at a fraction of an
+/// [`Order::First`] evaluation's cost.
+#[inline(always)]
+pub fn energy<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    dq: &[S],
+    out: &mut impl Sink<S>,
+) {
+    let tree = sweeps::energy(plan, &mut k.tree, q, dq);
+    out.set(Output::Energy, tree + elements::potential(plan, &k.tree, q));
+}
+
 /// The mass matrix `M(q)` and `L(q, 0) = −V(q)` (the springs' potentials included) of the
 /// model at rest: [`sweeps::mass`], then the springs at [`Order::First`] (which also add
 /// their `∂L/∂q`).

@@ -8,6 +8,9 @@
 pub enum Output {
     /// `L` (eq. (15)), springs' potentials included.
     L,
+    /// The total energy `E = T + V` (springs' potentials included), from the energy
+    /// evaluation alone ([`crate::kernel::energy`]); the other evaluations leave it out.
+    Energy,
     /// `∂L/∂q_i` (eq. (16)).
     DlDq(usize),
     /// `∂L/∂q̇_i`.
@@ -64,6 +67,8 @@ pub trait Sink<S> {
 pub enum Field {
     /// `Terms::l`.
     L,
+    /// `Terms::total_energy`.
+    Energy,
     /// `Terms::dl_dq`.
     DlDq,
     /// `Terms::dl_ddq`.
@@ -97,6 +102,7 @@ impl Field {
     pub fn name(self) -> &'static str {
         match self {
             Field::L => "l",
+            Field::Energy => "total_energy",
             Field::DlDq => "dl_dq",
             Field::DlDdq => "dl_ddq",
             Field::Mass => "mass",
@@ -134,6 +140,7 @@ impl Output {
         use Index::{Entry, Pair, Scalar, Stacked};
         match self {
             Output::L => (Field::L, Scalar),
+            Output::Energy => (Field::Energy, Scalar),
             Output::DlDq(i) => (Field::DlDq, Entry(i)),
             Output::DlDdq(i) => (Field::DlDdq, Entry(i)),
             Output::Mass(i, j) => (Field::Mass, Pair(i, j)),

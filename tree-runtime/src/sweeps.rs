@@ -126,6 +126,9 @@ pub enum Reach {
     /// base's acceleration) and the springs and dampers need: [`Reach::Lagrangian`] at
     /// [`Order::First`] without the world poses, which only the paths to attached frames keep.
     Motion,
+    /// What the total energy needs ([`energy`]): the poses and body velocities of the frames
+    /// that carry or lead to mass or an element, no columns.
+    Energy,
 }
 
 /// The outward sweep: poses, body velocities and their columns (eqs. (1), (6), (7), (10)),
@@ -151,11 +154,12 @@ pub fn forward_inline<S: Scalar>(
         Reach::Attachments => (false, false, false),
         Reach::Mass => (false, true, false),
         Reach::Motion => (true, false, false),
+        Reach::Energy => (true, false, false),
     };
     for (k, f) in plan.frames.iter().enumerate() {
         let visit = match reach {
             Reach::Everything => true,
-            Reach::Lagrangian(_) | Reach::Mass | Reach::Motion => f.needed,
+            Reach::Lagrangian(_) | Reach::Mass | Reach::Motion | Reach::Energy => f.needed,
             Reach::Attachments => f.leads_to_attached,
         };
         if !visit {
@@ -167,7 +171,7 @@ pub fn forward_inline<S: Scalar>(
             || match reach {
                 Reach::Lagrangian(_) | Reach::Mass | Reach::Motion => f.leads_to_element,
                 Reach::Everything => f.leads_to_attached,
-                Reach::Attachments => false,
+                Reach::Attachments | Reach::Energy => false,
             };
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let (mut parent_pose, mut parent_vel, np, pc) = match f.parent {
@@ -205,7 +209,7 @@ pub fn forward_inline<S: Scalar>(
             }
             ws.velocity[k] = v;
             // The own column of ∂v/∂q is [Ad v_par, ξ_k] (eq. (10)).
-            if let Some(d) = f.own() {
+            if let Some(d) = f.own().filter(|_| reach != Reach::Energy) {
                 ws.dv_dq[kc + d] = bracket_with_axis(&transported, f.kind);
             }
         }
@@ -479,6 +483,47 @@ pub fn evaluate<S: Scalar>(
             }
         }
     }
+}
+
+/// The tree's total energy `E = T + V` at `(q, q̇)`: each body's `½ vᵀ I v` less its `m γ·c`
+/// (the terms of eq. (15) with the potential's sign turned), from the outward sweep's poses
+/// and velocities alone — no columns, no inward sweep (the springs' potentials follow in
+/// [`crate::kernel::energy`]).
+#[inline(always)]
+pub fn energy<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S]) -> S {
+    forward_inline(plan, ws, q, dq, Reach::Energy);
+    let gravity = plan.gravity.map(S::constant);
+    let half = S::constant(0.5);
+    let mut e = S::zero();
+    for (k, f) in plan.frames.iter().enumerate() {
+        if !f.needed {
+            continue;
+        }
+        let pose = &ws.pose[k];
+        let v = &ws.velocity[k];
+        match f.body {
+            Some(Body::Principal { mass, moments }) => {
+                let p = &pose.p;
+                e += half * dot(v, &inertia_times(mass, &moments, v))
+                    - S::constant(mass)
+                        * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
+            }
+            Some(Body::Full { mass, com, inertia }) => {
+                let g_local = pose.rotate_inverse(&gravity);
+                let com = com.map(S::constant);
+                e += half * dot(v, &inertia.constant::<S>().times(v))
+                    - S::constant(mass)
+                        * (gravity[0] * pose.p[0]
+                            + gravity[1] * pose.p[1]
+                            + gravity[2] * pose.p[2]
+                            + g_local[0] * com[0]
+                            + g_local[1] * com[1]
+                            + g_local[2] * com[2]);
+            }
+            None => {}
+        }
+    }
+    e
 }
 
 /// The mass matrix `M(q)` (eq. (18)) and `L(q, 0) = −V(q)` of the tree at rest: the outward

@@ -25,6 +25,9 @@ where
 {
     /// `L = Σ_k ½ v_kᵀ M_k v_k + m_k γ·p_k` (eq. (15), gravity sign as in docs/derivations.md §2).
     pub l: f64,
+    /// The total energy `E = T + V`, written by [`System::energy`] alone (zero after
+    /// [`Terms::clear`]).
+    pub total_energy: f64,
     /// `∂L/∂q` (eq. (16)).
     pub dl_dq: Vector<N>,
     /// `∂L/∂q̇`, the generalized momentum.
@@ -69,6 +72,7 @@ where
     pub fn zeros(n: N) -> Self {
         Terms {
             l: 0.0,
+            total_energy: 0.0,
             dl_dq: Vector::zeros_generic(n, U1),
             dl_ddq: Vector::zeros_generic(n, U1),
             mass: Matrix::zeros_generic(n, n),
@@ -86,6 +90,7 @@ where
     /// `memset` (nalgebra's element iterator costs several times that on 40×40 matrices).
     pub fn clear(&mut self, order: Order) {
         self.l = 0.0;
+        self.total_energy = 0.0;
         self.dl_dq.as_mut_slice().fill(0.0);
         self.dl_ddq.as_mut_slice().fill(0.0);
         self.force.as_mut_slice().fill(0.0);
@@ -152,6 +157,7 @@ where
         let (field, index) = at.slot();
         match (field, index) {
             (Field::L, _) => Some(&mut self.l),
+            (Field::Energy, _) => Some(&mut self.total_energy),
             (Field::DlDq, Index::Entry(i)) => Some(&mut self.dl_dq[i]),
             (Field::DlDdq, Index::Entry(i)) => Some(&mut self.dl_ddq[i]),
             (Field::Force, Index::Entry(i)) => Some(&mut self.force[i]),
@@ -340,6 +346,22 @@ where
     fn mass_matrix(&mut self, q: &Vector<Self::N>, out: &mut Terms<Self::N>) {
         let rest = self.zero_vector();
         self.lagrangian(q, &rest, Order::Dynamics, out);
+    }
+
+    /// The total energy `E = T + V` at `(q, q̇)` (springs' potentials included), also left
+    /// in `out.total_energy` (the rest of `out` unspecified) — what a recorded sample
+    /// reports. The default is [`Self::lagrangian`] at [`Order::First`] and its Legendre
+    /// transform `q̇·∂L/∂q̇ − L`; the interpreted and compiled systems run only the outward
+    /// sweep's poses and velocities ([`crate::kernel::energy`]).
+    fn energy(
+        &mut self,
+        q: &Vector<Self::N>,
+        dq: &Vector<Self::N>,
+        out: &mut Terms<Self::N>,
+    ) -> f64 {
+        self.lagrangian(q, dq, Order::First, out);
+        out.total_energy = out.energy(dq);
+        out.total_energy
     }
 
     /// `q̈` of the dynamic variables by the articulated-body algorithm, in O(frames), for a

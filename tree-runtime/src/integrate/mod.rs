@@ -25,7 +25,7 @@ use crate::dynamics::{
     prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription,
 };
 use crate::error::{Seconds, SimError};
-use crate::system::{Order, System, Terms, Vector};
+use crate::system::{System, Terms, Vector};
 use crate::trajectory::{Sample, Trajectory};
 
 /// The most steps a fixed-step run may take.
@@ -639,12 +639,13 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        cx.sys.lagrangian(q, dq, Order::First, &mut self.terms);
-        let energy = self.terms.energy(dq);
         if self.dynamics.split.rows == 0 {
-            return Ok((energy, 0.0));
+            return Ok((cx.sys.energy(q, dq, &mut self.terms), 0.0));
         }
+        // With constraints the accelerations (for λ) evaluate the Lagrangian's terms, whose
+        // Legendre transform is the energy.
         self.dynamics.acceleration(cx, q, dq, &mut self.qdd)?;
+        let energy = self.dynamics.terms.energy(dq);
         Ok((energy, self.dynamics.constraint_terms.violation()))
     }
 

@@ -246,6 +246,12 @@ impl System for TreeSystem {
         kernel::mass(&self.plan, &mut self.kernel, q.as_slice(), out);
     }
 
+    fn energy(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>, out: &mut Terms<Dyn>) -> f64 {
+        let (q, dq) = (q.as_slice(), dq.as_slice());
+        kernel::energy(&self.plan, &mut self.kernel, q, dq, out);
+        out.total_energy
+    }
+
     fn articulated_acceleration(
         &mut self,
         q: &Vector<Dyn>,
