@@ -1024,9 +1024,22 @@ fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize
     if rows == 0 {
         return;
     }
-    for (c, column) in to.chunks_exact_mut(rows).enumerate() {
-        for (r, o) in column.iter_mut().enumerate() {
-            *o = from[r * k + s0 + c];
+    let cols = to.len() / rows;
+    let row = |r: usize| &from[r * k + s0..r * k + s0 + cols];
+    // Four rows at a time, each read in order, each column's four entries stored together
+    // (a column at a time, the reads strided by a whole row, cost twice as much).
+    let mut r = 0;
+    while r + 4 <= rows {
+        let (a, b, c, d) = (row(r), row(r + 1), row(r + 2), row(r + 3));
+        for ((((column, &a), &b), &c), &d) in to.chunks_exact_mut(rows).zip(a).zip(b).zip(c).zip(d)
+        {
+            column[r..r + 4].copy_from_slice(&[a, b, c, d]);
+        }
+        r += 4;
+    }
+    for r in r..rows {
+        for (column, &x) in to.chunks_exact_mut(rows).zip(row(r)) {
+            column[r] = x;
         }
     }
 }
