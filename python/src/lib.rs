@@ -8,7 +8,7 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use numpy::ndarray::{Array1, Array2, Array3, Ix1, Ix2};
+use numpy::ndarray::{s, Array1, Array2, Array3, Ix1, Ix2};
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -1098,13 +1098,22 @@ impl Model {
         for (b, r) in results.iter().enumerate() {
             match r {
                 Ok(traj) => {
-                    for k in 0..traj.len().min(samples) {
-                        for i in 0..n {
-                            q[(b, k, i)] = traj.q(k)[i];
-                            dq[(b, k, i)] = traj.dq(k)[i];
+                    // Each rollout's samples are contiguous on both sides: one copy each.
+                    let k = traj.len().min(samples);
+                    let rows = |a: &mut Array3<f64>, from: &[f64]| {
+                        let mut to = a.slice_mut(s![b, ..k, ..]);
+                        match to.as_slice_mut() {
+                            Some(to) => to.copy_from_slice(&from[..k * n]),
+                            None => to.iter_mut().zip(from).for_each(|(o, &x)| *o = x),
                         }
-                        energy[(b, k)] = traj.energy[k];
-                    }
+                    };
+                    rows(&mut q, traj.q_rows());
+                    rows(&mut dq, traj.dq_rows());
+                    energy
+                        .slice_mut(s![b, ..k])
+                        .iter_mut()
+                        .zip(&traj.energy)
+                        .for_each(|(e, &x)| *e = x);
                     errors.push(None);
                 }
                 Err(e) => errors.push(Some(in_python_terms(e))),

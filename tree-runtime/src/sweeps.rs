@@ -126,8 +126,8 @@ pub enum Reach {
     /// base's acceleration) and the springs and dampers need: [`Reach::Lagrangian`] at
     /// [`Order::First`] without the world poses, which only the paths to attached frames keep.
     Motion,
-    /// What the total energy needs ([`energy`]): the poses and body velocities of the frames
-    /// that carry or lead to mass or an element, no columns.
+    /// What the total energy needs ([`energy`]): [`Reach::Motion`]'s body velocities and
+    /// world poses (on the paths to attached frames only), without columns.
     Energy,
 }
 
@@ -184,7 +184,7 @@ pub fn forward_inline<S: Scalar>(
             None => (Pose::identity(), zero6(), 0, 0),
         };
         // The world pose, unless only the motion is asked for away from attachments.
-        let pose = reach != Reach::Motion || f.leads_to_attached;
+        let pose = !matches!(reach, Reach::Motion | Reach::Energy) || f.leads_to_attached;
         // A folded constant transform comes first: g = C g_k(x).
         if let Some(c) = &f.pre {
             if pose {
@@ -485,45 +485,53 @@ pub fn evaluate<S: Scalar>(
     }
 }
 
-/// The tree's total energy `E = T + V` at `(q, q̇)`: each body's `½ vᵀ I v` less its `m γ·c`
-/// (the terms of eq. (15) with the potential's sign turned), from the outward sweep's poses
-/// and velocities alone — no columns, no inward sweep (the springs' potentials follow in
-/// [`crate::kernel::energy`]).
+/// The tree's total energy `E = T + V` at `(q, q̇)`: each body's `½ vᵀ I v` from the outward
+/// sweep's body velocities, and the potential `V = −γ·H` from the whole tree's first mass
+/// moment `H = Σ m (p + R c)` about the world origin, carried inward as the Lagrangian's
+/// sweep carries `h` (eq. (15)'s terms with the potential's sign turned). No world poses
+/// (but on the paths to attached frames, for the springs), no columns (the springs'
+/// potentials follow in [`crate::kernel::energy`]).
 #[inline(always)]
 pub fn energy<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &[S]) -> S {
     forward_inline(plan, ws, q, dq, Reach::Energy);
-    let gravity = plan.gravity.map(S::constant);
     let half = S::constant(0.5);
-    let mut e = S::zero();
+    let mut kinetic = S::zero();
     for (k, f) in plan.frames.iter().enumerate() {
         if !f.needed {
             continue;
         }
-        let pose = &ws.pose[k];
         let v = &ws.velocity[k];
+        ws.moment[k] = [S::zero(); 3];
         match f.body {
             Some(Body::Principal { mass, moments }) => {
-                let p = &pose.p;
-                e += half * dot(v, &inertia_times(mass, &moments, v))
-                    - S::constant(mass)
-                        * (gravity[0] * p[0] + gravity[1] * p[1] + gravity[2] * p[2]);
+                kinetic += half * dot(v, &inertia_times(mass, &moments, v));
             }
             Some(Body::Full { mass, com, inertia }) => {
-                let g_local = pose.rotate_inverse(&gravity);
-                let com = com.map(S::constant);
-                e += half * dot(v, &inertia.constant::<S>().times(v))
-                    - S::constant(mass)
-                        * (gravity[0] * pose.p[0]
-                            + gravity[1] * pose.p[1]
-                            + gravity[2] * pose.p[2]
-                            + g_local[0] * com[0]
-                            + g_local[1] * com[1]
-                            + g_local[2] * com[2]);
+                kinetic += half * dot(v, &inertia.constant::<S>().times(v));
+                ws.moment[k] = com.map(|x| S::constant(mass * x));
             }
             None => {}
         }
     }
-    e
+    // Children come after their parents: walking backwards, each is complete when carried
+    // to its parent; a root's lands in the world.
+    let mut world = [S::zero(); 3];
+    for k in (0..plan.frames.len()).rev() {
+        let f = &plan.frames[k];
+        if !f.needed {
+            continue;
+        }
+        let mut h = ws.local[k].moment_to_parent(&ws.moment[k], f.subtree_mass);
+        if let Some(c) = &f.pre {
+            h = c.moment_to_parent(&h, f.subtree_mass);
+        }
+        let to = f.parent.map_or(&mut world, |p| &mut ws.moment[p]);
+        for c in 0..3 {
+            to[c] += h[c];
+        }
+    }
+    let gravity = plan.gravity.map(S::constant);
+    kinetic - (gravity[0] * world[0] + gravity[1] * world[1] + gravity[2] * world[2])
 }
 
 /// The mass matrix `M(q)` (eq. (18)) and `L(q, 0) = −V(q)` of the tree at rest: the outward

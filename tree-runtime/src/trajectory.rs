@@ -110,6 +110,16 @@ impl Trajectory {
         &self.dq[k * n..(k + 1) * n]
     }
 
+    /// Every sample's configuration, row after row (`dof` values a row).
+    pub fn q_rows(&self) -> &[f64] {
+        &self.q
+    }
+
+    /// Every sample's velocity, row after row.
+    pub fn dq_rows(&self) -> &[f64] {
+        &self.dq
+    }
+
     /// The VI's momentum at sample k, when recorded.
     pub fn p(&self, k: usize) -> Option<&[f64]> {
         let n = self.dof();
