@@ -383,6 +383,27 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
+        self.evaluate_residual(cx, q1, p1, q2, jacobian);
+        if jacobian {
+            self.form_jacobian();
+        }
+        &self.residual
+    }
+
+    /// [`Self::residual`]'s evaluation: the residual, and with `second_order` the terms its
+    /// Jacobian is formed from ([`Self::form_jacobian`], when a factor needs it: a converged
+    /// check and a linearisation need only the terms).
+    fn evaluate_residual<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q2: &Vector<N>,
+        second_order: bool,
+    ) where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
         let (sys, force, t, dt) = (&mut *cx.sys, &mut *cx.force, cx.t, cx.dt);
         let a = self.settings.alpha;
         let left = match self.settings.forcing {
@@ -392,10 +413,14 @@ where
         let ld = DiscreteLagrangian { alpha: a, dt };
         ld.point(q1, q2, &mut self.q_alpha, &mut self.velocity);
         self.dt = dt;
-        let order = if jacobian { Order::Full } else { Order::First };
+        let order = if second_order {
+            Order::Full
+        } else {
+            Order::First
+        };
         sys.lagrangian(&self.q_alpha, &self.velocity, order, &mut self.terms);
-        self.full_known = jacobian;
-        if jacobian {
+        self.full_known = second_order;
+        if second_order {
             self.full_q1.copy_from(q1);
             self.full_q2.copy_from(q2);
         }
@@ -423,11 +448,26 @@ where
         if self.split.rows > 0 {
             self.constraints_at(sys, q2);
         }
-        if jacobian {
-            // ∂r/∂q₂ = D₂D₁L_d (eq. (26)) + ∂f⁻/∂q₂, ∂f⁻/∂q₂ = wΔt(α ∂F/∂q + ∂F/∂q̇ /Δt).
+    }
+
+    /// `∂r/∂q₂ = D₂D₁L_d` (eq. (26)) `+ ∂f⁻/∂q₂`, `∂f⁻/∂q₂ = wΔt(α ∂F/∂q + ∂F/∂q̇ /Δt)`, into
+    /// `jacobian` from the second-order terms the last evaluation left (at the current
+    /// guess), with identity rows and columns on the kinematic variables.
+    fn form_jacobian(&mut self) {
+        debug_assert!(
+            self.full_known,
+            "the Jacobian is formed from second-order terms"
+        );
+        let (a, dt) = (self.settings.alpha, self.dt);
+        let left = match self.settings.forcing {
+            Forcing::Split => 1.0 - a,
+            Forcing::Left => 1.0,
+        };
+        let ld = DiscreteLagrangian { alpha: a, dt };
+        {
             // Column-major slices: entry (i, j) is at j·n + i.
             let t = &self.terms;
-            let n = q1.len();
+            let n = self.jacobian.nrows();
             let jac = self.jacobian.as_mut_slice();
             ld.d2d1(t, jac);
             let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
@@ -453,7 +493,6 @@ where
                 jac[k * n + k] = 1.0;
             }
         }
-        &self.residual
     }
 
     /// The full Newton matrix of the last [`Self::residual`] call with `jacobian` set, rows and
@@ -487,6 +526,7 @@ where
     /// into the top of `factors` (18 of the marionette's 42 variables are kinematic: a 24×24
     /// factorisation instead of 42×42).
     fn factor<S: System<N = N>>(&mut self, sys: &S, step: usize, t: f64) -> Result<(), SimError> {
+        self.form_jacobian();
         let dynamic = &self.split.dynamic;
         let (n, nd) = (self.jacobian.nrows(), dynamic.len());
         let (jac, packed) = (self.jacobian.as_slice(), self.factors.as_mut_slice());
@@ -703,7 +743,7 @@ where
             } else {
                 fresh && !check_first
             };
-            self.residual(cx, q, p, q_next, full);
+            self.evaluate_residual(cx, q, p, q_next, full);
             let (residual, violation) = self.residual_norms();
             let mut relative = self.relative_residual();
             if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
@@ -731,7 +771,7 @@ where
             }
             let mut refactor = fresh;
             if check_first {
-                self.residual(cx, q, p, q_next, true);
+                self.evaluate_residual(cx, q, p, q_next, true);
                 relative = self.relative_residual();
             }
             // Relative residual and violation: both independent of the masses.
@@ -759,7 +799,7 @@ where
                 // The reused Jacobian has stopped paying: evaluate it here (a second-order
                 // check already has).
                 if !full {
-                    self.residual(cx, q, p, q_next, true);
+                    self.evaluate_residual(cx, q, p, q_next, true);
                     relative = self.relative_residual();
                 }
                 refactor = true;
@@ -790,7 +830,7 @@ where
             // An update lost in the last bits of q: the residual is at its rounding floor
             // (≈ ε‖M‖‖q‖/Δt), which a large, stiff model can hold above the tolerance.
             if largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
-                self.residual(cx, q, p, q_next, derivatives);
+                self.evaluate_residual(cx, q, p, q_next, derivatives);
                 break;
             }
         }

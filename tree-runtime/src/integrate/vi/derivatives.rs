@@ -606,7 +606,7 @@ where
             }
         } else {
             self.prepare(cx.sys, q1);
-            self.residual(cx, q1, p1, q2, true);
+            self.evaluate_residual(cx, q1, p1, q2, true);
         }
         if m > 0 {
             cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
