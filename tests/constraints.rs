@@ -161,6 +161,85 @@ fn compiled_elements_equal_interpreted() {
     assert_eq!(Elements::CONSTRAINTS, ["string", "wall", "rail.x"]);
 }
 
+/// Every constraint row's `Dh` and `D²h` are zero outside the variables the system names
+/// for it (checked with fully cleared terms at random states of every model with
+/// constraints); terms made with those variables (`ConstraintTerms::of`) clear and fill each
+/// row's block alone, equal to fully cleared ones there, and leave what is outside as it was.
+/// The compiled systems name the same variables as the interpreted ones.
+#[test]
+fn constraint_rows_depend_on_their_named_variables_alone() {
+    let test_models = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/models");
+    let mut files = common::model_files();
+    files.extend(
+        std::fs::read_dir(test_models)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
+    );
+    let mut rng = Rng::new(77);
+    let mut checked = 0;
+    for path in files {
+        let model = model::from_toml_file(&path).unwrap();
+        let mut sys = interpreted(&model);
+        let (n, m) = (sys.dof(), sys.constraint_count());
+        if m == 0 {
+            continue;
+        }
+        checked += 1;
+        let what = path.display();
+        let vars: Vec<Vec<usize>> = (0..m)
+            .map(|r| sys.constraint_variables(r).expect("known").to_vec())
+            .collect();
+        for _ in 0..3 {
+            let (q, dq) = (rng.vector(n, 1.0), rng.vector(n, 1.0));
+            let full = constraints_at(&mut sys, &q, &dq);
+            // Garbage everywhere beforehand: inside the blocks it is cleared, outside kept.
+            let mut own = ConstraintTerms::of(&sys);
+            own.h.fill(7.0);
+            own.dh.fill(7.0);
+            own.d2h.iter_mut().for_each(|b| b.fill(7.0));
+            sys.constraints(&q, &dq, Order::Full, &mut own);
+            assert_eq!((&own.h, &own.dh), (&full.h, &full.dh), "{what}");
+            for (r, vars) in vars.iter().enumerate() {
+                assert!(vars.windows(2).all(|w| w[0] < w[1]), "{what}: ascending");
+                assert_eq!(own.variables(r), Some(vars.as_slice()));
+                for i in 0..n {
+                    let inside_i = vars.contains(&i);
+                    if !inside_i {
+                        assert_eq!(full.dh[(r, i)], 0.0, "{what}: Dh[{r}][{i}] outside");
+                    }
+                    for j in 0..n {
+                        if inside_i && vars.contains(&j) {
+                            assert_eq!(own.d2h[r][(i, j)], full.d2h[r][(i, j)], "{what}");
+                        } else {
+                            assert_eq!(full.d2h[r][(i, j)], 0.0, "{what}: D²h[{r}] outside");
+                            assert_eq!(own.d2h[r][(i, j)], 7.0, "{what}: left as it was");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked >= 3, "the models with constraints: {checked}");
+    // The compiled systems name the same variables.
+    let (elements, string_pendulum) = (
+        interpreted(&elements()),
+        interpreted(&StringPendulum::model()),
+    );
+    for r in 0..Elements::CONSTRAINTS.len() {
+        assert_eq!(
+            Elements.constraint_variables(r),
+            elements.constraint_variables(r)
+        );
+    }
+    for r in 0..StringPendulum::CONSTRAINTS.len() {
+        assert_eq!(
+            StringPendulum.constraint_variables(r),
+            string_pendulum.constraint_variables(r)
+        );
+    }
+}
+
 #[test]
 fn compiled_constrained_trajectory_equals_interpreted() {
     let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 2.0);

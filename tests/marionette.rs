@@ -71,6 +71,12 @@ fn compiled_marionette_equals_interpreted_on_every_output() {
                     }
                 }
             }
+            for r in 0..m {
+                assert_eq!(
+                    generated.constraint_variables(r),
+                    interp.constraint_variables(r)
+                );
+            }
             let mut ca = ConstraintTerms::zeros(m, N);
             let mut cb = ConstraintTerms::zeros(m, N);
             generated.constraints(&q, &dq, order, &mut ca);

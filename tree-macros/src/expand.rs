@@ -557,6 +557,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         (&c_first.body, &c_dynamics.body, &c_full.body);
     let rows = plan.rows;
     let constraint_names = model.constraint_row_names();
+    let constraint_variables = plan.constraint_variables();
     let inputs = model.inputs.len();
     let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
     let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
@@ -810,6 +811,11 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             fn constraint_name(&self, r: usize) -> &str {
                 Self::CONSTRAINTS[r]
+            }
+
+            fn constraint_variables(&self, r: usize) -> Option<&[usize]> {
+                const VARIABLES: [&[usize]; #rows] = [#(&[#(#constraint_variables),*]),*];
+                VARIABLES.get(r).copied()
             }
 
             fn constraints(

@@ -8,7 +8,10 @@
 //! primitives costs one constant transform, and its body joins its kept ancestor's as one
 //! composite rigid body (docs/derivations.md §4).
 
-use tree_model::{Constraint, Damper, Joint, Mass, Model, PrimitiveKind, Spring, SpringKind};
+use tree_model::{
+    Constraint, ConstraintKind, Damper, Joint, Mass, Model, Parameter, PrimitiveKind, Spring,
+    SpringKind,
+};
 
 use crate::se3::{ConstantTransform, LocalTransform, Pose, SpatialInertia};
 
@@ -379,6 +382,30 @@ impl TreePlan {
     pub fn ancestors(&self, k: usize) -> &[usize] {
         let f = &self.frames[k];
         &self.vars[f.var_start..f.var_start + f.n]
+    }
+
+    /// Per constraint row, the variables it depends on, ascending: those above either of
+    /// its frames and a variable length's own. Its `Dh` row and `D²h` block are zero
+    /// outside them (docs/derivations.md §5).
+    pub fn constraint_variables(&self) -> Vec<Vec<usize>> {
+        let mut rows = Vec::with_capacity(self.rows);
+        for con in &self.constraints {
+            let mut vars: Vec<usize> = con
+                .frames
+                .iter()
+                .flat_map(|&f| self.ancestors(f).iter().copied())
+                .collect();
+            if let ConstraintKind::Distance {
+                length: Parameter::Variable(i),
+            } = con.kind
+            {
+                vars.push(i);
+            }
+            vars.sort_unstable();
+            vars.dedup();
+            rows.extend(std::iter::repeat_n(vars, con.rows()));
+        }
+        rows
     }
 
     /// Number of configuration variables.

@@ -198,6 +198,8 @@ pub struct ConstraintTerms {
     /// Generated code's storage between its functions (not part of the terms' value).
     #[doc(hidden)]
     pub scratch: Scratch<f64>,
+    /// Per row, the variables its `D²h` block can be non-zero on (empty: any).
+    variables: Vec<Vec<usize>>,
 }
 
 impl ConstraintTerms {
@@ -209,7 +211,39 @@ impl ConstraintTerms {
             dh_dot: DVector::zeros(rows),
             d2h: vec![DMatrix::zeros(n, n); rows],
             scratch: Scratch::default(),
+            variables: Vec::new(),
         }
+    }
+
+    /// Zeros for `sys`'s constraints that know each row's variables
+    /// ([`System::constraint_variables`]): clearing `D²h` zeroes each row's block on them
+    /// alone (trep's Puppet's six strings: at most 13² entries each instead of 40²). An evaluation
+    /// never writes outside those blocks, so entries there stay as they are (zero, unless
+    /// the caller wrote them).
+    pub fn of<S: System>(sys: &S) -> Self
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        let (rows, n) = (sys.constraint_count(), sys.dof());
+        let terms = Self::zeros(rows, n);
+        let known: Option<Vec<Vec<usize>>> = (0..rows)
+            .map(|r| sys.constraint_variables(r).map(<[usize]>::to_vec))
+            .collect();
+        terms.with_variables(known.unwrap_or_default())
+    }
+
+    /// These terms with row r's `D²h` block known to lie on `variables[r]` (ascending), as
+    /// [`Self::of`] makes them.
+    pub(crate) fn with_variables(mut self, variables: Vec<Vec<usize>>) -> Self {
+        debug_assert_eq!(variables.len(), self.rows());
+        self.variables = variables;
+        self
+    }
+
+    /// The variables row `r`'s `D²h` block can be non-zero on, ascending, when known
+    /// ([`Self::of`]).
+    pub fn variables(&self, r: usize) -> Option<&[usize]> {
+        self.variables.get(r).map(Vec::as_slice)
     }
 
     /// Number of constraint equations.
@@ -225,7 +259,18 @@ impl ConstraintTerms {
             self.dh_dot.as_mut_slice().fill(0.0);
         }
         if order >= Order::Full {
-            self.d2h.iter_mut().for_each(|m| m.as_mut_slice().fill(0.0));
+            if self.variables.is_empty() {
+                self.d2h.iter_mut().for_each(|m| m.as_mut_slice().fill(0.0));
+            }
+            for (m, vars) in self.d2h.iter_mut().zip(&self.variables) {
+                let n = m.nrows();
+                for &j in vars {
+                    let column = &mut m.as_mut_slice()[j * n..(j + 1) * n];
+                    for &i in vars {
+                        column[i] = 0.0;
+                    }
+                }
+            }
         }
     }
 
@@ -300,6 +345,14 @@ where
 
     /// Name of constraint equation `r`.
     fn constraint_name(&self, r: usize) -> &str;
+
+    /// The variables constraint equation `r` depends on, ascending — its `Dh` row and `D²h`
+    /// block are zero outside them — when the system knows them (the default: `None`, any
+    /// variable). The interpreted and compiled systems know them from the tree.
+    fn constraint_variables(&self, r: usize) -> Option<&[usize]> {
+        let _ = r;
+        None
+    }
 
     /// Number of inputs `u`: generalized forces on dynamic variables, `B u` with one column
     /// of `B` per input.

@@ -29,6 +29,8 @@ pub struct TreeSystem {
     /// Every frame as modelled, for the poses.
     full_plan: TreePlan,
     constraint_names: Vec<String>,
+    /// Per constraint row, the variables it depends on ([`TreePlan::constraint_variables`]).
+    constraint_variables: Vec<Vec<usize>>,
     /// The articulated-body algorithm's storage, and its inputs' buffers.
     articulated: Articulated,
     kinematic: Vec<bool>,
@@ -93,6 +95,7 @@ impl TreeSystem {
             dual_kernel: None,
             full_plan: TreePlan::new(model),
             constraint_names: model.constraint_row_names(),
+            constraint_variables: plan.constraint_variables(),
             articulated: Articulated::new(&plan),
             kinematic: model.variables.iter().map(|v| v.is_kinematic()).collect(),
             tau: vec![0.0; model.variables.len()],
@@ -203,6 +206,10 @@ impl System for TreeSystem {
 
     fn constraint_name(&self, r: usize) -> &str {
         &self.constraint_names[r]
+    }
+
+    fn constraint_variables(&self, r: usize) -> Option<&[usize]> {
+        self.constraint_variables.get(r).map(Vec::as_slice)
     }
 
     fn constraints(

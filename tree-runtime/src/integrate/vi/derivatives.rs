@@ -249,12 +249,12 @@ fn contract_hessians(
     n: usize,
     dynamic: &[usize],
     lambda: &[f64],
-    d2h: &[DMatrix<f64>],
+    c: &ConstraintTerms,
 ) {
     if multiversion::target::target_cfg_f!(target_feature = "fma") {
-        contract_hessians_with::<true>(out, n, dynamic, lambda, d2h);
+        contract_hessians_with::<true>(out, n, dynamic, lambda, c);
     } else {
-        contract_hessians_with::<false>(out, n, dynamic, lambda, d2h);
+        contract_hessians_with::<false>(out, n, dynamic, lambda, c);
     }
 }
 
@@ -265,18 +265,38 @@ fn contract_hessians_with<const FUSED: bool>(
     n: usize,
     dynamic: &[usize],
     lambda: &[f64],
-    d2h: &[DMatrix<f64>],
+    c: &ConstraintTerms,
 ) {
     for &i in dynamic {
-        let row = &mut out[i * n..(i + 1) * n];
-        row.fill(0.0);
-        for (&l, h) in lambda.iter().zip(d2h) {
-            if l == 0.0 {
-                continue;
-            }
-            let column = &h.as_slice()[i * n..(i + 1) * n];
+        out[i * n..(i + 1) * n].fill(0.0);
+    }
+    for (s, (&l, h)) in lambda.iter().zip(&c.d2h).enumerate() {
+        if l == 0.0 {
+            continue;
+        }
+        let h = h.as_slice();
+        let add = |row: &mut [f64], column: &[f64]| {
             for (o, &x) in row.iter_mut().zip(column) {
                 *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x };
+            }
+        };
+        match c.variables(s) {
+            // Only the rows and columns of the row's own variables.
+            Some(vars) => {
+                for &i in dynamic.iter().filter(|i| vars.binary_search(i).is_ok()) {
+                    for &j in vars {
+                        out[i * n + j] = if FUSED {
+                            l.mul_add(h[i * n + j], out[i * n + j])
+                        } else {
+                            out[i * n + j] + l * h[i * n + j]
+                        };
+                    }
+                }
+            }
+            None => {
+                for &i in dynamic {
+                    add(&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
+                }
             }
         }
     }
@@ -596,20 +616,25 @@ where
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
         let m = lin.shape.m;
+        if m > 0 && lin.c1.variables(0).is_none() {
+            // Cleared on each row's own variables only (made once).
+            lin.c1 = ConstraintTerms::of(cx.sys);
+        }
         // Terms at the quadrature point, Dh(q₁), Dh(q₂) at the solution (the step's last
         // evaluation, when it was of second order at this point); D²h(q₁).
         let evaluated =
             self.full_known && self.dt == cx.dt && self.full_q1 == *q1 && self.full_q2 == *q2;
+        if m > 0 {
+            cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
+        }
         if evaluated {
             if m > 0 {
                 self.constraints_at(cx.sys, q2);
             }
         } else {
-            self.prepare(cx.sys, q1);
+            // `Dh(q₁)` from the second-order evaluation just made (what `prepare` forms).
+            self.dh1.copy_from(&lin.c1.dh);
             self.evaluate_residual(cx, q1, p1, q2, true);
-        }
-        if m > 0 {
-            cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
         }
         // The Jacobians read only the dynamic variables' rows of the n × n terms, row-major:
         // L_qq, M (symmetric: their column-major storage is their row-major one) and L_q̇q's
@@ -661,7 +686,7 @@ where
             n,
             dynamic,
             self.lambda.as_slice(),
-            &lin.c1.d2h,
+            &lin.c1,
         );
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
@@ -1232,27 +1257,36 @@ mod tests {
     use super::*;
 
     /// `Σ_s λ_s D²h_s` on the chosen rows, both roundings and the dispatched kernel, against
-    /// the sum written out; rows not chosen are left as they were, a zero multiplier adds
-    /// nothing.
+    /// the sum written out, with the rows' variables unknown and known (each block zero
+    /// outside them); rows not chosen are left as they were, a zero multiplier adds nothing.
     #[test]
     fn hessians_contract_on_the_dynamic_rows() {
         let n = 5;
+        let variables = vec![vec![0, 2, 3], vec![1, 2], vec![1, 2, 4]];
         let d2h: Vec<DMatrix<f64>> = (0..3)
-            .map(|s| DMatrix::from_fn(n, n, |i, j| ((i + j + 3 * s) as f64 * 0.7).sin()))
+            .map(|s| {
+                DMatrix::from_fn(n, n, |i, j| {
+                    let inside = variables[s].contains(&i) && variables[s].contains(&j);
+                    inside as u8 as f64 * ((i + j + 3 * s) as f64 * 0.7).sin()
+                })
+            })
             .map(|h| &h + h.transpose())
             .collect();
+        let mut dense = ConstraintTerms::zeros(3, n);
+        dense.d2h.clone_from(&d2h);
+        let sparse = dense.clone().with_variables(variables);
         let lambda = [0.5, 0.0, -2.0];
         let dynamic = [0, 2, 3];
         let expected = |i: usize, j: usize| 0.5 * d2h[0][(i, j)] - 2.0 * d2h[2][(i, j)];
-        type Kernel = fn(&mut [f64], usize, &[usize], &[f64], &[DMatrix<f64>]);
+        type Kernel = fn(&mut [f64], usize, &[usize], &[f64], &ConstraintTerms);
         let kernels: [Kernel; 3] = [
             contract_hessians_with::<false>,
             contract_hessians_with::<true>,
             contract_hessians,
         ];
-        for kernel in kernels {
+        for (kernel, c) in kernels.iter().flat_map(|k| [(k, &dense), (k, &sparse)]) {
             let mut out = vec![7.0; n * n];
-            kernel(&mut out, n, &dynamic, &lambda, &d2h);
+            kernel(&mut out, n, &dynamic, &lambda, c);
             for i in 0..n {
                 for j in 0..n {
                     let want = if dynamic.contains(&i) {
