@@ -323,7 +323,7 @@ where
         if self.articulated && self.split.rows == 0 {
             // The articulated-body algorithm, O(frames), where the system has it: τ from
             // outside the model (the caller's force, B u), kinematic q̈ prescribed.
-            self.rhs.fill(0.0);
+            self.rhs.as_mut_slice().fill(0.0);
             cx.force.add_force(cx.t, q, dq, &mut self.rhs);
             cx.add_inputs(&mut self.rhs);
             for &i in &self.split.kinematic {

@@ -198,11 +198,11 @@ impl Kinematics {
     pub(crate) fn set(&mut self, q: &[f64], dq: Option<&[f64]>, ddq: Option<&[f64]>) {
         match dq {
             Some(x) => self.dq.copy_from_slice(x),
-            None => self.dq.fill(0.0),
+            None => self.dq.as_mut_slice().fill(0.0),
         }
         match ddq {
             Some(x) => self.ddq.copy_from_slice(x),
-            None => self.ddq.fill(0.0),
+            None => self.ddq.as_mut_slice().fill(0.0),
         }
         forward(&self.plan, &mut self.ws, q, &self.dq, Reach::Everything);
         if dq.is_none() && ddq.is_none() {
@@ -268,7 +268,7 @@ impl Kinematics {
 
     /// [`Self::jacobian`] into `out` (6 × variables).
     pub fn jacobian_into(&self, f: usize, reference: Reference, out: &mut DMatrix<f64>) {
-        out.fill(0.0);
+        out.as_mut_slice().fill(0.0);
         let frame = &self.plan.frames[f];
         let pose = &self.ws.pose[f];
         for a in 0..frame.n {
@@ -325,7 +325,7 @@ impl Kinematics {
 
     /// [`Self::com_jacobian`] into `out` (3 × variables).
     pub fn com_jacobian_into(&self, out: &mut DMatrix<f64>) {
-        out.fill(0.0);
+        out.as_mut_slice().fill(0.0);
         let mut total = 0.0;
         for (k, f) in self.plan.frames.iter().enumerate() {
             let Some((m, c)) = f.body.as_ref().map(mass_and_center) else {

@@ -342,7 +342,7 @@ where
     for j in first..(2 * n + nu) {
         if j < 2 * n {
             // Seed the one coordinate direction j.
-            e.fill(0.0);
+            e.as_mut_slice().fill(0.0);
             e[j % n] = 1.0;
             let (seeded, other) = if j < n {
                 (&mut ws.qd, &mut ws.vd)
@@ -566,14 +566,14 @@ where
         out.x2_du1 = DMatrix::zeros(w, nu);
     }
     out.x2_dx1.fill_with_identity();
-    out.x2_du1.fill(0.0);
+    out.x2_du1.as_mut_slice().fill(0.0);
     ws.q2.copy_from(q);
     ws.dq2.copy_from(dq);
     for s in 0..stages {
         ws.qs.copy_from(q);
         ws.vs.copy_from(dq);
         ws.ix.fill_with_identity();
-        ws.iu.fill(0.0);
+        ws.iu.as_mut_slice().fill(0.0);
         for r in 0..s {
             let a = tableau.a[s][r];
             if a != 0.0 {
@@ -600,7 +600,7 @@ where
         d?;
         let d = &ws.derivatives;
         // A_s on the dynamic state: rows (q̇_d, q̈_d), columns (q_d, q̇_d); B_s.
-        ws.a.fill(0.0);
+        ws.a.as_mut_slice().fill(0.0);
         for r in 0..nd {
             ws.a[(r, nd + r)] = 1.0;
             for (c, &j) in ws.dynamic.iter().enumerate() {
@@ -608,7 +608,7 @@ where
                 ws.a[(nd + r, nd + c)] = d.qdd_ddq[(r, j)];
             }
         }
-        ws.b.fill(0.0);
+        ws.b.as_mut_slice().fill(0.0);
         ws.b.view_mut((nd, 0), (nd, nu)).copy_from(&d.qdd_du);
         mul_into(&mut ws.kx[s], &ws.a, &ws.ix, 0.0, &mut ws.packing);
         ws.ku[s].copy_from(&ws.b);
@@ -617,7 +617,7 @@ where
         add_scaled(&mut out.x2_du1, tableau.b[s] * h, &ws.ku[s]);
         // This stage's rates.
         let kv = &mut ws.rate_v[s];
-        kv.fill(0.0);
+        kv.as_mut_slice().fill(0.0);
         for (r, &i) in ws.dynamic.iter().enumerate() {
             kv[i] = d.qdd[r];
         }

@@ -105,7 +105,7 @@ fn quadratic(
             .map(|i| w[i] * (a[i] - b[i]).powi(2))
             .sum::<f64>();
     if let Some((grad, hess)) = derivatives {
-        hess.fill(0.0);
+        hess.as_mut_slice().fill(0.0);
         for i in 0..a.len() {
             grad[i] = s * w[i] * (a[i] - b[i]);
             hess[(i, i)] = s * w[i];
@@ -125,7 +125,7 @@ impl Cost for QuadraticCost {
         let dt = self.dt;
         let (lx, lu) = match d {
             Some(d) => {
-                d.lux.fill(0.0);
+                d.lux.as_mut_slice().fill(0.0);
                 let Derivatives {
                     lx, lu, lxx, luu, ..
                 } = d;

@@ -503,14 +503,14 @@ where
         out.x.as_mut_slice().copy_from_slice(x);
         // q and q̇ in the step buffers (q̇'s dynamic entries zero until known).
         let (q, dq) = (&mut self.buf.q1, &mut self.buf.p1);
-        dq.fill(0.0);
+        dq.as_mut_slice().fill(0.0);
         l.place(&mut self.motion, self.t0 + k as f64 * self.dt, x, q, dq);
         for c in 0..nu {
             out.previous[c] = l.memory[c].map_or(0.0, |at| x[at]);
         }
         if derivatives {
-            out.q_x.fill(0.0);
-            out.dq_x.fill(0.0);
+            out.q_x.as_mut_slice().fill(0.0);
+            out.dq_x.as_mut_slice().fill(0.0);
             for (c, column) in l.x_column.iter().enumerate() {
                 if let Some(StepColumn::Q1(i)) = *column {
                     out.q_x[(i, c)] = 1.0;
@@ -601,14 +601,14 @@ where
         out.q.as_mut_slice().copy_from_slice(q.as_slice());
         out.dq.as_mut_slice().copy_from_slice(dq.as_slice());
         if needs.gravity {
-            dq.fill(0.0);
+            dq.as_mut_slice().fill(0.0);
             let order = if derivatives {
                 Order::Full
             } else {
                 Order::First
             };
             self.sys.lagrangian(q, dq, order, terms);
-            out.gravity_x.fill(0.0);
+            out.gravity_x.as_mut_slice().fill(0.0);
             for (c, control) in l.controls.iter().enumerate() {
                 out.gravity[c] = 0.0;
                 if let Control::Input(kin) = *control {
@@ -656,7 +656,7 @@ where
         let (l, b) = (&self.layout, &mut self.buf);
         let nd = l.dynamic.len();
         let t = self.t0 + k as f64 * self.dt;
-        b.p1.fill(0.0);
+        b.p1.as_mut_slice().fill(0.0);
         l.place(&mut self.motion, t, x, &mut b.q1, &mut b.p1);
         for (r, &i) in l.dynamic.iter().enumerate() {
             b.p1[i] = x[nd + r];
@@ -667,7 +667,7 @@ where
                 b.p1[i] = 0.0;
             }
         }
-        b.inputs.fill(0.0);
+        b.inputs.as_mut_slice().fill(0.0);
         b.controlled.clear();
         for (c, control) in l.controls.iter().enumerate() {
             match *control {
@@ -708,8 +708,8 @@ where
         let dt = self.dt;
         let mut jacobians = jacobians;
         if let Some((a, b)) = jacobians.as_mut() {
-            a.fill(0.0);
-            b.fill(0.0);
+            a.as_mut_slice().fill(0.0);
+            b.as_mut_slice().fill(0.0);
         }
         self.with_step(k, x, u, |method, cx, l, b| {
             let nd = l.dynamic.len();
@@ -789,8 +789,8 @@ where
         if !self.is_vi() {
             return self.step(k, x, u, x2, Some((a, bm)));
         }
-        a.fill(0.0);
-        bm.fill(0.0);
+        a.as_mut_slice().fill(0.0);
+        bm.as_mut_slice().fill(0.0);
         let dt = self.dt;
         let t2 = self.t0 + (k + 1) as f64 * dt;
         self.with_step(k, x, u, |method, cx, l, b| {
@@ -845,8 +845,8 @@ where
             b.covector.p2.copy_from_slice(&v[nd..2 * nd]);
             vi.contracted_second_derivatives(cx, &b.q1, &b.p1, &b.q2, &b.covector, &mut b.hessian)?;
             let at = |col: StepColumn| col.index(n, nd, inputs);
-            hxx.fill(0.0);
-            hux.fill(0.0);
+            hxx.as_mut_slice().fill(0.0);
+            hux.as_mut_slice().fill(0.0);
             for (r, row) in l.x_column.iter().enumerate() {
                 let Some(row) = *row else { continue };
                 for (c, col) in l.x_column.iter().enumerate() {

@@ -727,11 +727,15 @@ where
         bw.quu_gain.scale_mut(0.5);
         bw.quu_gain += &bw.qux;
         tr_mul_into(&mut bw.v, gain, &bw.quu_gain, 0.0, &mut bw.packing);
+        // Symmetric: each entry of the upper triangle formed once, mirrored (column-major).
         let nx = bw.v.nrows();
-        for i in 0..nx {
-            for j in 0..nx {
-                bw.vxx[(i, j)] =
-                    0.5 * (bw.qxx[(i, j)] + bw.qxx[(j, i)]) + (bw.v[(i, j)] + bw.v[(j, i)]);
+        let (qxx, v, vxx) = (bw.qxx.as_slice(), bw.v.as_slice(), bw.vxx.as_mut_slice());
+        for j in 0..nx {
+            for i in 0..=j {
+                let (ij, ji) = (j * nx + i, i * nx + j);
+                let x = 0.5 * (qxx[ij] + qxx[ji]) + (v[ij] + v[ji]);
+                vxx[ij] = x;
+                vxx[ji] = x;
             }
         }
     }

@@ -92,7 +92,7 @@ impl ControlQp {
         gain: &mut DMatrix<f64>,
     ) -> bool {
         let (nu, nx) = (g.len(), qux.ncols());
-        self.x.fill(0.0);
+        self.x.as_mut_slice().fill(0.0);
         self.free.fill(true);
         if let Some((lo, hi)) = limits {
             for c in 0..nu {
@@ -115,7 +115,7 @@ impl ControlQp {
         }
         k.as_mut_slice().copy_from_slice(&self.x);
         // The feedback on the free controls: −H_ff⁻¹ Q_ux,f, column by column.
-        gain.fill(0.0);
+        gain.as_mut_slice().fill(0.0);
         self.idx.clear();
         self.idx.extend((0..nu).filter(|&c| self.free[c]));
         if self.idx.is_empty() {

@@ -226,11 +226,11 @@ impl TaskCost {
         let jac = d.is_some();
         let mut d = d;
         if let Some(d) = d.as_mut() {
-            d.lx.fill(0.0);
-            d.lu.fill(0.0);
-            d.lxx.fill(0.0);
-            d.luu.fill(0.0);
-            d.lux.fill(0.0);
+            d.lx.as_mut_slice().fill(0.0);
+            d.lu.as_mut_slice().fill(0.0);
+            d.lxx.as_mut_slice().fill(0.0);
+            d.luu.as_mut_slice().fill(0.0);
+            d.lux.as_mut_slice().fill(0.0);
         }
         let placed = terms
             .iter()
@@ -319,8 +319,8 @@ impl At<'_> {
         };
         res.fit(rows, nx, nu);
         if jac {
-            res.jx.fill(0.0);
-            res.ju.fill(0.0);
+            res.jx.as_mut_slice().fill(0.0);
+            res.ju.as_mut_slice().fill(0.0);
         }
         match term {
             Term::State {

@@ -94,7 +94,7 @@ where
                 self.acceleration[i] = scale * (v[i] - v_last[i]);
             }
         } else {
-            self.acceleration.fill(0.0);
+            self.acceleration.as_mut_slice().fill(0.0);
         }
         self.dt = dt;
         self.valid = true;
@@ -321,7 +321,7 @@ where
 
     /// [`Self::predict_from`] a zero velocity.
     pub fn predict_from_rest(&mut self) {
-        self.last_velocity.fill(0.0);
+        self.last_velocity.as_mut_slice().fill(0.0);
         self.predictor.valid = false;
         self.constraints_known = false;
     }

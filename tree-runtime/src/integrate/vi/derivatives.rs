@@ -1229,7 +1229,7 @@ impl DualJacobians {
     /// `c_j = μᵀ D_jJ + w_pᵀ D_jP`.
     fn adjoint(&mut self, mu: &[f64], wp: &[f64]) {
         let w = self.adjoint.len();
-        self.adjoint.fill(0.0);
+        self.adjoint.as_mut_slice().fill(0.0);
         for (r, &m) in mu.iter().enumerate() {
             for (c, x) in self.jac[r * w..(r + 1) * w].iter().enumerate() {
                 self.adjoint[c] += m * x.d;
