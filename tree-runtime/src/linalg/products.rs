@@ -76,7 +76,7 @@ impl Packing {
                     }
                 }
                 // Entry (k, r) of the tile is entry k of the given A's column i0 + r.
-                Left::Transposed => transpose_into(tile, ROWS, a, p, i0, m),
+                Left::Transposed => transpose_into::<ROWS>(tile, a, p, i0, m),
             }
             self.left_spans.push(nonzero_span(tile, ROWS));
         }
@@ -87,29 +87,37 @@ impl Packing {
         let packed = fit(&mut self.right, n.div_ceil(COLS) * p * COLS);
         self.right_spans.clear();
         for (t, block) in packed.chunks_exact_mut(p * COLS).enumerate() {
-            transpose_into(block, COLS, b, p, t * COLS, n);
+            transpose_into::<COLS>(block, b, p, t * COLS, n);
             self.right_spans.push(nonzero_span(block, COLS));
         }
     }
 }
 
-/// Entry `(k, w)` of `block` (`p` rows of `width`) set to entry `k` of column `first + w` of
-/// `source` (columns of length `p`, `count` of them), zero past the last column.
-fn transpose_into(
+/// Entry `(k, w)` of `block` (`p` rows of `W`) set to entry `k` of column `first + w` of
+/// `source` (columns of length `p`, `count` of them), zero past the last column. A block of
+/// whole columns is written a row at a time, its `W` columns read side by side.
+fn transpose_into<const W: usize>(
     block: &mut [f64],
-    width: usize,
     source: &[f64],
     p: usize,
     first: usize,
     count: usize,
 ) {
-    for w in 0..width {
-        let rows = block.chunks_exact_mut(width);
+    if first + W <= count {
+        let columns: [&[f64]; W] =
+            std::array::from_fn(|w| &source[(first + w) * p..(first + w + 1) * p]);
+        for (k, row) in block[..p * W].chunks_exact_mut(W).enumerate() {
+            for (x, column) in row.iter_mut().zip(&columns) {
+                *x = column[k];
+            }
+        }
+        return;
+    }
+    for w in 0..W {
+        let rows = block.chunks_exact_mut(W);
         if first + w < count {
             let column = &source[(first + w) * p..(first + w + 1) * p];
-            for (row, &x) in rows.zip(column) {
-                row[w] = x;
-            }
+            rows.zip(column).for_each(|(row, &x)| row[w] = x);
         } else {
             rows.for_each(|row| row[w] = 0.0);
         }
