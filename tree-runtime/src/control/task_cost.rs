@@ -319,7 +319,11 @@ impl At<'_> {
         };
         res.fit(rows, nx, nu);
         if jac {
-            res.jx.as_mut_slice().fill(0.0);
+            // A state term's J_x is gathered whole below; every other term writes a few
+            // entries of zeroed Jacobians.
+            if !matches!(term, Term::State { .. }) {
+                res.jx.as_mut_slice().fill(0.0);
+            }
             res.ju.as_mut_slice().fill(0.0);
         }
         match term {
