@@ -168,14 +168,7 @@ fn compiled_elements_equal_interpreted() {
 /// The compiled systems name the same variables as the interpreted ones.
 #[test]
 fn constraint_rows_depend_on_their_named_variables_alone() {
-    let test_models = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/models");
-    let mut files = common::model_files();
-    files.extend(
-        std::fs::read_dir(test_models)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
-    );
+    let files = common::every_model_file();
     let mut rng = Rng::new(77);
     let mut checked = 0;
     for path in files {

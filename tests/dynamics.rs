@@ -325,7 +325,7 @@ fn damping_removes_energy_monotonically() {
 #[test]
 fn the_mass_matrix_evaluation_is_the_lagrangians_at_rest() {
     let mut rng = Rng::new(41);
-    for path in every_model_file() {
+    for path in common::every_model_file() {
         let model = tree_mech::model::from_toml_file(&path).unwrap();
         let mut sys = interpreted(&model);
         let n = sys.dof();
@@ -358,7 +358,7 @@ fn the_mass_matrix_evaluation_is_the_lagrangians_at_rest() {
 #[test]
 fn the_energy_evaluation_is_the_legendre_transform_of_the_lagrangian() {
     let mut rng = Rng::new(43);
-    for path in every_model_file() {
+    for path in common::every_model_file() {
         let model = tree_mech::model::from_toml_file(&path).unwrap();
         let mut sys = interpreted(&model);
         let n = sys.dof();
@@ -381,19 +381,6 @@ fn the_energy_evaluation_is_the_legendre_transform_of_the_lagrangian() {
     }
 }
 
-/// Every `.toml` model of `models/` and `tests/models/`.
-fn every_model_file() -> Vec<std::path::PathBuf> {
-    let test_models = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/models");
-    let mut files = common::model_files();
-    files.extend(
-        std::fs::read_dir(test_models)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
-    );
-    files
-}
-
 /// The articulated-body algorithm's `q̈` equals the mass matrix's `M⁻¹(…)` on every model
 /// without constraints (springs, dampers, damping, kinematic inputs, inputs, full inertias)
 /// at random states, to 1e-11 relative; and it is the path taken on every one of them.
@@ -401,7 +388,7 @@ fn every_model_file() -> Vec<std::path::PathBuf> {
 fn articulated_body_accelerations_equal_the_mass_matrix_solve() {
     let mut rng = Rng::new(5);
     let mut used = 0;
-    for path in every_model_file() {
+    for path in common::every_model_file() {
         let model = tree_mech::model::from_toml_file(&path).unwrap();
         if !model.constraints.is_empty() {
             continue;

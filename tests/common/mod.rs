@@ -23,6 +23,19 @@ pub fn model_files() -> Vec<PathBuf> {
     files
 }
 
+/// Every `.toml` model of `models/` and `tests/models/`.
+pub fn every_model_file() -> Vec<PathBuf> {
+    let test_models = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/models");
+    let mut files = model_files();
+    files.extend(
+        std::fs::read_dir(test_models)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
+    );
+    files
+}
+
 pub fn load(name: &str) -> Model {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("models")
