@@ -8,7 +8,9 @@ use crate::system::{Matrix, Vector};
 
 mod products;
 
-pub use products::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
+pub use products::{
+    mul_into, mul_into_pair, tr_mul_into, tr_mul_into_pair, tr_mul_into_symmetric, Packing,
+};
 
 /// Solves `A x = b` for symmetric positive definite `A` by Cholesky, overwriting the lower
 /// triangle of `a` with the factor and `b` with `x`. On failure returns the pivot index and

@@ -17,7 +17,9 @@ use super::cost::{Cost, Derivatives, Needs};
 use super::discrete::{DiscreteSystem, Knot};
 use super::qp::{ControlQp, Limits};
 use crate::error::SimError;
-use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
+use crate::linalg::{
+    mul_into, mul_into_pair, tr_mul_into, tr_mul_into_pair, tr_mul_into_symmetric, Packing,
+};
 use crate::system::System;
 
 /// Which second-order model of the dynamics the backward pass uses.
@@ -670,14 +672,15 @@ where
         bw.qx.gemv_tr(1.0, a, &bw.vx, 1.0);
         bw.qu.copy_from(&bw.d.lu);
         bw.qu.gemv_tr(1.0, b, &bw.vx, 1.0);
-        mul_into(&mut bw.vxx_a, &bw.vxx, a, 0.0, &mut bw.packing);
-        mul_into(&mut bw.vxx_b, &bw.vxx, b, 0.0, &mut bw.packing);
+        // V_xx packed once for V_xx A and V_xx B, V_xx A once for Q_xx and Q_ux.
+        let pair = [&mut bw.vxx_a, &mut bw.vxx_b];
+        mul_into_pair(pair, &bw.vxx, [a, b], &mut bw.packing);
         bw.qxx.copy_from(&bw.d.lxx);
-        tr_mul_into_symmetric(&mut bw.qxx, a, &bw.vxx_a, 1.0, &mut bw.packing);
+        bw.qux.copy_from(&bw.d.lux);
+        let (qxx, qux) = ((&mut bw.qxx, a), (&mut bw.qux, b));
+        tr_mul_into_pair(qxx, qux, &bw.vxx_a, &mut bw.packing);
         bw.quu.copy_from(&bw.d.luu);
         tr_mul_into_symmetric(&mut bw.quu, b, &bw.vxx_b, 1.0, &mut bw.packing);
-        bw.qux.copy_from(&bw.d.lux);
-        tr_mul_into(&mut bw.qux, b, &bw.vxx_a, 1.0, &mut bw.packing);
         if pass.solver == Solver::Ddp {
             dynamics.contracted(
                 k,

@@ -181,12 +181,75 @@ pub fn tr_mul_into_symmetric(
     packing: &mut Packing,
 ) {
     tr_mul(c, a, b, beta, packing, true);
+    mirror_upper(c);
+}
+
+/// The lower triangle of the square `c` set from its upper one.
+fn mirror_upper(c: &mut DMatrix<f64>) {
     let m = c.nrows();
+    let c = c.as_mut_slice();
     for j in 0..m {
         for i in j + 1..m {
-            c[(i, j)] = c[(j, i)];
+            c[j * m + i] = c[i * m + j];
         }
     }
+}
+
+/// `C₁ = A B₁` and `C₂ = A B₂` (each overwritten), `A` packed once for both: the backward
+/// pass's `V_xx A` and `V_xx B`. The same sums as two [`mul_into`] calls with `β = 0`.
+pub fn mul_into_pair(
+    [c1, c2]: [&mut DMatrix<f64>; 2],
+    a: &DMatrix<f64>,
+    [b1, b2]: [&DMatrix<f64>; 2],
+    packing: &mut Packing,
+) {
+    let (m, p) = a.shape();
+    if m > 0 && p > 0 {
+        packing.pack_left(a.as_slice(), (m, p), Left::Plain);
+    }
+    for (c, b) in [(c1, b1), (c2, b2)] {
+        let n = b.ncols();
+        assert!(
+            b.nrows() == p && c.nrows() == m && c.ncols() == n,
+            "mul_into_pair: shapes"
+        );
+        c.as_mut_slice().fill(0.0);
+        if m > 0 && n > 0 && p > 0 {
+            packing.pack_right(b.as_slice(), (p, n));
+            tiles(c.as_mut_slice(), (m, n, p), packing, false);
+        }
+    }
+}
+
+/// `S += A_sᵀ B` for a product known to be symmetric (as [`tr_mul_into_symmetric`]) and
+/// `C += Aᵀ B`, `B` packed once for both: the backward pass's `Q_xx += Aᵀ(V_xx A)` and
+/// `Q_ux += Bᵀ(V_xx A)`. The same sums as the two calls with `β = 1`.
+pub fn tr_mul_into_pair(
+    (s, a_s): (&mut DMatrix<f64>, &DMatrix<f64>),
+    (c, a): (&mut DMatrix<f64>, &DMatrix<f64>),
+    b: &DMatrix<f64>,
+    packing: &mut Packing,
+) {
+    let (p, n) = b.shape();
+    assert!(
+        a_s.nrows() == p
+            && a.nrows() == p
+            && s.shape() == (a_s.ncols(), n)
+            && c.shape() == (a.ncols(), n),
+        "tr_mul_into_pair: shapes"
+    );
+    if n == 0 || p == 0 {
+        return;
+    }
+    packing.pack_right(b.as_slice(), (p, n));
+    for (out, left, upper) in [(&mut *s, a_s, true), (&mut *c, a, false)] {
+        let m = left.ncols();
+        if m > 0 {
+            packing.pack_left(left.as_slice(), (m, p), Left::Transposed);
+            tiles(out.as_mut_slice(), (m, n, p), packing, upper);
+        }
+    }
+    mirror_upper(s);
 }
 
 fn tr_mul(
@@ -337,6 +400,43 @@ mod tests {
             let mut c = c0.clone();
             tr_mul_into_symmetric(&mut c, &a, &wa, 1.0, &mut packing);
             assert!((&c - (a.transpose() * &wa + &c0)).amax() < tol, "{m}×{p}");
+        }
+    }
+
+    /// The paired products (one factor packed for two) give the single products' sums bit
+    /// for bit, on shapes with empty dimensions too.
+    #[test]
+    fn paired_products_equal_the_single_ones() {
+        let mut packing = Packing::default();
+        for (m, n1, n2, p) in [
+            (84, 84, 18, 84),
+            (9, 7, 3, 11),
+            (5, 0, 2, 4),
+            (3, 2, 2, 0),
+            (0, 3, 1, 2),
+        ] {
+            let f = |r: usize, c: usize, s: f64| {
+                DMatrix::from_fn(r, c, |i, j| ((i * c + j) as f64 * s).sin())
+            };
+            let (a, b1, b2) = (f(m, p, 0.7), f(p, n1, 0.3), f(p, n2, 0.9));
+            let (mut c1, mut c2) = (f(m, n1, 0.1), f(m, n2, 0.2));
+            mul_into_pair([&mut c1, &mut c2], &a, [&b1, &b2], &mut packing);
+            let (mut e1, mut e2) = (DMatrix::zeros(m, n1), DMatrix::zeros(m, n2));
+            mul_into(&mut e1, &a, &b1, 0.0, &mut packing);
+            mul_into(&mut e2, &a, &b2, 0.0, &mut packing);
+            assert_eq!((&c1, &c2), (&e1, &e2), "{m}×{n1}, {n2}×{p}");
+            // S += A_sᵀ B (B = W A_s, symmetric), C += Aᵀ B.
+            let w = DMatrix::from_fn(p, p, |i, j| 1.0 / (1.0 + i as f64 + j as f64));
+            let (a_s, a2) = (f(p, n1, 0.4), f(p, n2, 0.5));
+            let b = &w * &a_s;
+            let s0 = DMatrix::from_fn(n1, n1, |i, j| (i * j) as f64);
+            let c0 = f(n2, n1, 0.6);
+            let (mut s, mut c) = (s0.clone(), c0.clone());
+            tr_mul_into_pair((&mut s, &a_s), (&mut c, &a2), &b, &mut packing);
+            let (mut es, mut ec) = (s0, c0);
+            tr_mul_into_symmetric(&mut es, &a_s, &b, 1.0, &mut packing);
+            tr_mul_into(&mut ec, &a2, &b, 1.0, &mut packing);
+            assert_eq!((&s, &c), (&es, &ec), "{n1}, {n2}×{p}");
         }
     }
 
