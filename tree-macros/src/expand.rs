@@ -488,7 +488,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let constraints: Evaluation = kernel::constraints;
     // `M(q)` and `L(q, 0)` alone (`System::mass_matrix`): the sweeps at rest, no velocity.
     let mass: Evaluation = |plan, k, q, _, _, out| kernel::mass(plan, k, q, out);
-    // `E = T + V` alone (`System::energy`): poses and velocities, no columns.
+    // `E = T + V` alone (`System::energy`): velocities and first moments, no columns.
     let energy: Evaluation = |plan, k, q, dq, _, out| kernel::energy(plan, k, q, dq, out);
     // Every evaluation over f64; those the linearisations differentiate also generic (only
     // instantiated, over dual numbers, where a program differentiates this model).

@@ -51,8 +51,9 @@ pub fn evaluate<S: Scalar>(
     elements::forces(plan, &k.tree, &mut k.elements, dq, order, out);
 }
 
-/// The total energy `E = T + V` at `(q, q̇)` into [`Output::Energy`]: the tree's by the
-/// outward sweep's poses and velocities ([`sweeps::energy`]), then the springs' potentials
+/// The total energy `E = T + V` at `(q, q̇)` into [`Output::Energy`]: the tree's from the
+/// outward sweep's body velocities and the first mass moments carried inward
+/// ([`sweeps::energy`]), then the springs' potentials
 /// ([`elements::potential`]) — what a recorded sample reports, at a fraction of an
 /// [`Order::First`] evaluation's cost.
 #[inline(always)]

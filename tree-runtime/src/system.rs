@@ -404,8 +404,9 @@ where
     /// The total energy `E = T + V` at `(q, q̇)` (springs' potentials included), also left
     /// in `out.total_energy` (the rest of `out` unspecified) — what a recorded sample
     /// reports. The default is [`Self::lagrangian`] at [`Order::First`] and its Legendre
-    /// transform `q̇·∂L/∂q̇ − L`; the interpreted and compiled systems run only the outward
-    /// sweep's poses and velocities ([`crate::kernel::energy`]).
+    /// transform `q̇·∂L/∂q̇ − L`; the interpreted and compiled systems take the body
+    /// velocities of the outward sweep and the first mass moments carried inward
+    /// ([`crate::kernel::energy`]; no columns).
     fn energy(
         &mut self,
         q: &Vector<Self::N>,
