@@ -601,7 +601,7 @@ where
         };
         let ld = DiscreteLagrangian { alpha: a, dt };
         let mut lin = self.linearisation.take().unwrap_or_else(|| {
-            Box::new(Linearisation::new(Shape {
+            let mut lin = Box::new(Linearisation::new(Shape {
                 n,
                 dynamic: self.split.dynamic.clone(),
                 kinematic: self.split.kinematic.clone(),
@@ -612,14 +612,13 @@ where
                 ld,
                 left,
                 plus,
-            }))
+            }));
+            // D²h(q₁) cleared on each row's own variables, where the system names them.
+            lin.c1 = ConstraintTerms::of(cx.sys);
+            lin
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
         let m = lin.shape.m;
-        if m > 0 && lin.c1.variables(0).is_none() {
-            // Cleared on each row's own variables only (made once).
-            lin.c1 = ConstraintTerms::of(cx.sys);
-        }
         // Terms at the quadrature point, Dh(q₁), Dh(q₂) at the solution (the step's last
         // evaluation, when it was of second order at this point); D²h(q₁).
         let evaluated =
