@@ -354,7 +354,8 @@ fn the_mass_matrix_evaluation_is_the_lagrangians_at_rest() {
 /// `System::energy` (the interpreted system runs only the outward sweep's poses and
 /// velocities, then the springs' potentials) is the Legendre transform `q̇·∂L/∂q̇ − L` of the
 /// full evaluation on every shipped and test model (springs between frames and on variables,
-/// dampers, constraints, kinematic inputs, full inertias) at random states.
+/// dampers, constraints, kinematic inputs, full inertias) at random states, and so is the
+/// energy an RK4 run records at each sample.
 #[test]
 fn the_energy_evaluation_is_the_legendre_transform_of_the_lagrangian() {
     let mut rng = Rng::new(43);
@@ -376,6 +377,25 @@ fn the_energy_evaluation_is_the_legendre_transform_of_the_lagrangian() {
             assert!(
                 (e - legendre).abs() <= 1e-13 * scale,
                 "{what}: E = {e} against the Legendre transform {legendre}"
+            );
+        }
+        // What an RK4 run records at each sample (`System::energy` without constraints, the
+        // accelerations' own evaluation with them) is the same transform at that sample.
+        let options = SimOptions::new(Method::Rk4, 0.01, 0.05);
+        let traj = common::simulate_from_start(&mut sys, &options);
+        for k in 0..traj.len() {
+            let (q, dq) = (
+                Vector::<Dyn>::from_column_slice(traj.q(k)),
+                Vector::<Dyn>::from_column_slice(traj.dq(k)),
+            );
+            let full = sys.evaluate(&q, &dq, tree_mech::runtime::Order::First);
+            let legendre = full.energy(&dq);
+            let scale = legendre.abs().max(full.l.abs()).max(1.0);
+            assert!(
+                (traj.energy[k] - legendre).abs() <= 1e-13 * scale,
+                "{}: sample {k} recorded E = {} against {legendre}",
+                path.display(),
+                traj.energy[k]
             );
         }
     }

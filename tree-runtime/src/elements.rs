@@ -425,20 +425,7 @@ pub fn springs<S: Scalar>(
             }
             SpringKind::Frames([a, b]) => {
                 let d = pair(plan, ws, a, b);
-                let s = dot3(&d, &d);
-                // With zero rest length V = ½k d·d, smooth through d = 0.
-                let (potential, beta, rest_over_r3) = if spring.rest == 0.0 {
-                    (S::constant(0.5) * k * s, S::constant(1.0), S::zero())
-                } else {
-                    let r = s.sqrt();
-                    let inv = r.recip();
-                    let stretch = r - rest;
-                    (
-                        S::constant(0.5) * k * stretch * stretch,
-                        S::constant(1.0) - rest * inv,
-                        rest * inv * inv * inv,
-                    )
-                };
+                let (potential, beta, rest_over_r3) = distance_spring(spring, dot3(&d, &d));
                 out.add(Output::L, -potential);
                 let sc = &mut ws.scratch;
                 for x in 0..sc.vars.len() {
@@ -465,28 +452,39 @@ pub fn springs<S: Scalar>(
     }
 }
 
-/// The springs' potential energy `V = Σ ½k(r − r₀)²` (`r` a variable's value or the distance
-/// between two frames) from the outward sweep's poses alone — the part of [`springs`]' `L`
-/// the total energy needs, without its derivatives.
+/// A spring between frames at squared distance `s = d·d`: its potential `½k(r − r₀)²`, and
+/// `ib = 1 − r₀/r`, `r₀/r³` for its derivatives ([`springs`]); with zero rest length
+/// `V = ½k d·d`, smooth through `d = 0`.
+fn distance_spring<S: Scalar>(spring: &tree_model::Spring, s: S) -> (S, S, S) {
+    let (k, rest) = (S::constant(spring.stiffness), S::constant(spring.rest));
+    if spring.rest == 0.0 {
+        return (S::constant(0.5) * k * s, S::constant(1.0), S::zero());
+    }
+    let r = s.sqrt();
+    let inv = r.recip();
+    let stretch = r - rest;
+    (
+        S::constant(0.5) * k * stretch * stretch,
+        S::constant(1.0) - rest * inv,
+        rest * inv * inv * inv,
+    )
+}
+
+/// The springs' potential energy `V` (as [`springs`] subtracts it from `L`) from the outward
+/// sweep's poses alone, without its derivatives: what the total energy needs.
 pub fn potential<S: Scalar>(plan: &TreePlan, tree: &Workspace<S>, q: &[S]) -> S {
-    let half = S::constant(0.5);
     let mut v = S::zero();
     for spring in &plan.springs {
-        let k = S::constant(spring.stiffness);
-        let rest = S::constant(spring.rest);
-        let stretch = match spring.kind {
-            SpringKind::Variable(i) => q[i] - rest,
+        v += match spring.kind {
+            SpringKind::Variable(i) => {
+                let x = q[i] - S::constant(spring.rest);
+                S::constant(0.5) * S::constant(spring.stiffness) * x * x
+            }
             SpringKind::Frames([a, b]) => {
                 let d = sub3(&tree.pose[a].p, &tree.pose[b].p);
-                let s = dot3(&d, &d);
-                if spring.rest == 0.0 {
-                    v += half * k * s;
-                    continue;
-                }
-                s.sqrt() - rest
+                distance_spring(spring, dot3(&d, &d)).0
             }
         };
-        v += half * k * stretch * stretch;
     }
     v
 }

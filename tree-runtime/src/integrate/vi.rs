@@ -111,6 +111,16 @@ pub enum Forcing {
     Left,
 }
 
+impl Forcing {
+    /// `(w⁻, w⁺)` with `f⁻ = w⁻Δt F`, `f⁺ = w⁺Δt F` at quadrature point `α`.
+    pub fn weights(self, alpha: f64) -> (f64, f64) {
+        match self {
+            Forcing::Split => (1.0 - alpha, alpha),
+            Forcing::Left => (1.0, 0.0),
+        }
+    }
+}
+
 /// Settings of the variational integrator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViSettings {
@@ -406,10 +416,7 @@ where
     {
         let (sys, force, t, dt) = (&mut *cx.sys, &mut *cx.force, cx.t, cx.dt);
         let a = self.settings.alpha;
-        let left = match self.settings.forcing {
-            Forcing::Split => 1.0 - a,
-            Forcing::Left => 1.0,
-        };
+        let (left, _) = self.settings.forcing.weights(a);
         let ld = DiscreteLagrangian { alpha: a, dt };
         ld.point(q1, q2, &mut self.q_alpha, &mut self.velocity);
         self.dt = dt;
@@ -459,39 +466,34 @@ where
             "the Jacobian is formed from second-order terms"
         );
         let (a, dt) = (self.settings.alpha, self.dt);
-        let left = match self.settings.forcing {
-            Forcing::Split => 1.0 - a,
-            Forcing::Left => 1.0,
-        };
+        let (left, _) = self.settings.forcing.weights(a);
         let ld = DiscreteLagrangian { alpha: a, dt };
-        {
-            // Column-major slices: entry (i, j) is at j·n + i.
-            let t = &self.terms;
-            let n = self.jacobian.nrows();
-            let jac = self.jacobian.as_mut_slice();
-            ld.d2d1(t, jac);
-            let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
-            match t.force_derivatives {
-                Sparsity::Zero => {}
-                Sparsity::Diagonal => {
-                    for i in 0..n {
-                        jac[i * n + i] += left * fv[i * n + i];
-                    }
-                }
-                Sparsity::Dense => {
-                    for ij in 0..n * n {
-                        jac[ij] += left * (a * dt * fq[ij] + fv[ij]);
-                    }
-                }
-            }
-            // Kinematic variables are not unknowns: identity rows and columns.
-            for &k in &self.split.kinematic {
+        // Column-major slices: entry (i, j) is at j·n + i.
+        let t = &self.terms;
+        let n = self.jacobian.nrows();
+        let jac = self.jacobian.as_mut_slice();
+        ld.d2d1(t, jac);
+        let (fq, fv) = (t.dforce_dq.as_slice(), t.dforce_ddq.as_slice());
+        match t.force_derivatives {
+            Sparsity::Zero => {}
+            Sparsity::Diagonal => {
                 for i in 0..n {
-                    jac[k * n + i] = 0.0;
-                    jac[i * n + k] = 0.0;
+                    jac[i * n + i] += left * fv[i * n + i];
                 }
-                jac[k * n + k] = 1.0;
             }
+            Sparsity::Dense => {
+                for ij in 0..n * n {
+                    jac[ij] += left * (a * dt * fq[ij] + fv[ij]);
+                }
+            }
+        }
+        // Kinematic variables are not unknowns: identity rows and columns.
+        for &k in &self.split.kinematic {
+            for i in 0..n {
+                jac[k * n + i] = 0.0;
+                jac[i * n + k] = 0.0;
+            }
+            jac[k * n + k] = 1.0;
         }
     }
 
@@ -878,11 +880,8 @@ where
     /// [`Self::residual`] (a step of length `dt`).
     fn end_momentum(&self, dt: f64, i: usize) -> f64 {
         let a = self.settings.alpha;
-        let plus = match self.settings.forcing {
-            Forcing::Split => a * dt,
-            Forcing::Left => 0.0,
-        };
-        DiscreteLagrangian { alpha: a, dt }.d2(&self.terms, i) + plus * self.force[i]
+        let (_, plus) = self.settings.forcing.weights(a);
+        DiscreteLagrangian { alpha: a, dt }.d2(&self.terms, i) + plus * dt * self.force[i]
     }
 
     /// `p₂ = D₂L_d(q₁, q₂) + f⁺` for the step from `q₁` at `cx.t` to `q₂` at `cx.t + cx.dt`,

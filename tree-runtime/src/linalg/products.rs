@@ -238,15 +238,14 @@ pub fn tr_mul_into_pair(
             && c.shape() == (a.ncols(), n),
         "tr_mul_into_pair: shapes"
     );
-    if n == 0 || p == 0 {
-        return;
-    }
-    packing.pack_right(b.as_slice(), (p, n));
-    for (out, left, upper) in [(&mut *s, a_s, true), (&mut *c, a, false)] {
-        let m = left.ncols();
-        if m > 0 {
-            packing.pack_left(left.as_slice(), (m, p), Left::Transposed);
-            tiles(out.as_mut_slice(), (m, n, p), packing, upper);
+    if n > 0 && p > 0 {
+        packing.pack_right(b.as_slice(), (p, n));
+        for (out, left, upper) in [(&mut *s, a_s, true), (&mut *c, a, false)] {
+            let m = left.ncols();
+            if m > 0 {
+                packing.pack_left(left.as_slice(), (m, p), Left::Transposed);
+                tiles(out.as_mut_slice(), (m, n, p), packing, upper);
+            }
         }
     }
     mirror_upper(s);

@@ -26,7 +26,7 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DVectorView, DefaultAllocator, Dim};
 
-use super::{Forcing, MidpointVi};
+use super::MidpointVi;
 use crate::context::StepContext;
 use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
@@ -275,27 +275,20 @@ fn contract_hessians_with<const FUSED: bool>(
             continue;
         }
         let h = h.as_slice();
-        let add = |row: &mut [f64], column: &[f64]| {
-            for (o, &x) in row.iter_mut().zip(column) {
-                *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x };
-            }
-        };
+        let add = |o: &mut f64, x: f64| *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x };
         match c.variables(s) {
             // Only the rows and columns of the row's own variables.
             Some(vars) => {
                 for &i in dynamic.iter().filter(|i| vars.binary_search(i).is_ok()) {
                     for &j in vars {
-                        out[i * n + j] = if FUSED {
-                            l.mul_add(h[i * n + j], out[i * n + j])
-                        } else {
-                            out[i * n + j] + l * h[i * n + j]
-                        };
+                        add(&mut out[i * n + j], h[i * n + j]);
                     }
                 }
             }
             None => {
                 for &i in dynamic {
-                    add(&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
+                    let (row, column) = (&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
+                    row.iter_mut().zip(column).for_each(|(o, &x)| add(o, x));
                 }
             }
         }
@@ -595,10 +588,8 @@ where
     {
         let (a, dt) = (self.settings.alpha, cx.dt);
         let n = q1.len();
-        let (left, plus) = match self.settings.forcing {
-            Forcing::Split => ((1.0 - a) * dt, a * dt),
-            Forcing::Left => (dt, 0.0),
-        };
+        let (left, plus) = self.settings.forcing.weights(a);
+        let (left, plus) = (left * dt, plus * dt);
         let ld = DiscreteLagrangian { alpha: a, dt };
         let mut lin = self.linearisation.take().unwrap_or_else(|| {
             let mut lin = Box::new(Linearisation::new(Shape {
