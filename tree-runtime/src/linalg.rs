@@ -404,24 +404,43 @@ fn combine_block<const W: usize, const FUSED: bool>(
     c[r0 * k + c0..r0 * k + c0 + W].copy_from_slice(&acc[0]);
 }
 
-/// `L y = b` (unit lower), then `U x = y`, on column-major factors.
+/// `L y = b` (unit lower), then `U x = y`, on column-major factors, two columns a step:
+/// each entry below (above) takes both columns' terms in one pass, in the order of a pass
+/// per column (the same sums), so the loop runs, and the solved entries come back from
+/// memory, half as often. `U`'s diagonal divides by its reciprocal, formed ahead of the
+/// chain of substitutions (a division's latency would sit on it).
 fn forward_backward(a: &[f64], n: usize, b: &mut [f64]) {
-    for j in 0..n {
-        let col = &a[j * n + j + 1..(j + 1) * n];
-        let (head, below) = b.split_at_mut(j + 1);
-        let bj = head[j];
-        for (x, l) in below.iter_mut().zip(col) {
-            *x -= l * bj;
+    let mut j = 0;
+    while j + 1 < n {
+        let (head, below) = b.split_at_mut(j + 2);
+        let b0 = head[j];
+        head[j + 1] -= a[j * n + j + 1] * b0;
+        let b1 = head[j + 1];
+        let l0 = &a[j * n + j + 2..(j + 1) * n];
+        let l1 = &a[(j + 1) * n + j + 2..(j + 2) * n];
+        for ((x, u), v) in below.iter_mut().zip(l0).zip(l1) {
+            *x = *x - u * b0 - v * b1;
         }
+        j += 2;
     }
-    for j in (0..n).rev() {
-        let col = &a[j * n..j * n + j + 1];
-        let (above, rest) = b.split_at_mut(j);
-        rest[0] /= col[j];
-        let bj = rest[0];
-        for (x, u) in above.iter_mut().zip(col) {
-            *x -= u * bj;
+    let mut j = n;
+    while j >= 2 {
+        let (hi, lo) = (j - 1, j - 2);
+        let (r_hi, r_lo) = (1.0 / a[hi * n + hi], 1.0 / a[lo * n + lo]);
+        let (above, rest) = b.split_at_mut(lo);
+        let x1 = rest[1] * r_hi;
+        rest[1] = x1;
+        let x0 = (rest[0] - a[hi * n + lo] * x1) * r_lo;
+        rest[0] = x0;
+        let u1 = &a[hi * n..hi * n + lo];
+        let u0 = &a[lo * n..lo * n + lo];
+        for ((x, u), v) in above.iter_mut().zip(u1).zip(u0) {
+            *x = *x - u * x1 - v * x0;
         }
+        j -= 2;
+    }
+    if j == 1 {
+        b[0] *= 1.0 / a[0];
     }
 }
 
@@ -486,7 +505,32 @@ fn factor_with<const FUSED: bool>(
         let m0 = &left[j * n + j + 2..(j + 1) * n];
         let m01 = left[j * n + j + 1];
         let m1 = &left[(j + 1) * n + j + 2..(j + 2) * n];
-        for col in right.chunks_exact_mut(n) {
+        // Trailing columns two at a time while the entries below fill vectors (one load of
+        // the multipliers for four updates), else (and the last) one at a time.
+        let singles = if n - (j + 2) >= 8 {
+            let mut pairs = right.chunks_exact_mut(2 * n);
+            for pair in &mut pairs {
+                let (c0, c1) = pair.split_at_mut(n);
+                let (h0, b0) = c0.split_at_mut(j + 2);
+                let (h1, b1) = c1.split_at_mut(j + 2);
+                h0[j + 1] -= m01 * h0[j];
+                h1[j + 1] -= m01 * h1[j];
+                let (s0, s1, r0, r1) = (h0[j], h0[j + 1], h1[j], h1[j + 1]);
+                for (((x, y), &u), &v) in b0.iter_mut().zip(b1.iter_mut()).zip(m0).zip(m1) {
+                    if FUSED {
+                        *x = (-v).mul_add(s1, (-u).mul_add(s0, *x));
+                        *y = (-v).mul_add(r1, (-u).mul_add(r0, *y));
+                    } else {
+                        *x = *x - u * s0 - v * s1;
+                        *y = *y - u * r0 - v * r1;
+                    }
+                }
+            }
+            pairs.into_remainder()
+        } else {
+            right
+        };
+        for col in singles.chunks_exact_mut(n) {
             let (head, below) = col.split_at_mut(j + 2);
             let t0 = head[j];
             head[j + 1] -= m01 * t0;
@@ -517,19 +561,24 @@ fn pivot_column(
     j: usize,
     swapped: &mut impl FnMut(usize, usize),
 ) -> Result<(), usize> {
-    // Pivot: the largest entry of column j at or below the diagonal.
+    // Pivot: the first of the largest entries of column j at or below the diagonal (a NaN
+    // on the diagonal is kept, and refused below), found as the largest magnitude, then
+    // where it is: two passes the compiler vectorises, where one comparing as it goes
+    // waits on each comparison.
     let col = &a[j * n..(j + 1) * n];
-    let mut p = j;
-    for i in j + 1..n {
-        if col[i].abs() > col[p].abs() {
-            p = i;
-        }
-    }
+    let largest_below = largest_magnitude(&col[j..]);
+    let p = if col[j].is_nan() {
+        j
+    } else {
+        (j..n).find(|&i| col[i].abs() == largest_below).unwrap_or(j)
+    };
     let pivot = col[p];
     // Singular when the pivot is lost in the rounding of its own column (U's part above
     // included): relative per column, so an unknown in other units (a multiplier scaled by
     // Δt beside momenta over Δt) is not taken for a singular one.
-    let scale = largest_magnitude(col).max(f64::MIN_POSITIVE);
+    let scale = largest_magnitude(&col[..j])
+        .max(largest_below)
+        .max(f64::MIN_POSITIVE);
     if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
         return Err(j);
     }
@@ -664,6 +713,42 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The pivot is the first of the largest entries at or below the diagonal (a NaN below
+    /// is passed over); a NaN on the diagonal, or a pivot lost in its column's rounding, is
+    /// refused with its column.
+    #[test]
+    fn pivots_are_the_first_largest_and_bad_ones_are_refused() {
+        // Column 0 (column-major): 1, −3, 3, NaN: rows 1 and 2 tie; row 1 comes first.
+        let mut a = vec![
+            1.0,
+            -3.0,
+            3.0,
+            f64::NAN,
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        ];
+        let mut pivots = vec![0; 4];
+        // The NaN stays in L's first column (the columns after it have zeros in the pivot
+        // row), so the factorisation goes through; its first pivot is row 1.
+        assert_eq!(lu_factor_packed(&mut a, 4, &mut pivots), Ok(()));
+        assert_eq!(pivots[0], 1, "the first of the two largest");
+        let mut nan_diagonal = vec![f64::NAN, 5.0, 1.0, 1.0];
+        assert_eq!(lu_factor_packed(&mut nan_diagonal, 2, &mut pivots), Err(0));
+        // A second column that is the first's times (1 + 1e-16): its pivot is rounding.
+        let mut rounding = vec![1.0, 2.0, 1.0 + 1e-16, 2.0 + 2e-16];
+        assert_eq!(lu_factor_packed(&mut rounding, 2, &mut pivots), Err(1));
     }
 
     /// `combine_rows` is `C + A D` with `A` read at chosen columns of a wider row-major matrix;
