@@ -7,11 +7,13 @@
 //! `Dh_d δq̈_d = −δDh q̈ − δ(q̇ᵀD²h q̇)`
 //!
 //! is solved for each direction (kinematic `q̈_k` are prescribed: they do not move). The
-//! right sides come from the recursive Newton–Euler inverse dynamics and the constraints over
-//! [`Jet`]s (eight directions a sweep, [`System::inverse_dynamics_jet`]); a system that does
-//! not offer those differentiates its whole evaluation over dual numbers, a direction at a
-//! time. For any [`System`] (generated ones run their compiled programs); without Baumgarte
-//! stabilisation.
+//! right sides along `q` come from the recursive Newton–Euler inverse dynamics and the
+//! constraints over [`Jet`]s (eight directions a sweep, [`System::inverse_dynamics_jet`]);
+//! along `q̇` from closed forms (`L` is quadratic in `q̇`: `∂τ/∂q̇ = Ṁ + B − Bᵀ`,
+//! docs/derivations.md §9) over one second-order evaluation and one over dual numbers along
+//! `q̇`. A system that offers no jets differentiates its whole evaluation over dual numbers,
+//! a direction at a time. For any [`System`] (generated ones run their compiled programs);
+//! without Baumgarte stabilisation.
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
@@ -21,7 +23,7 @@ use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows, mul_into, Packing};
 use crate::outputs::Output;
-use crate::system::{Order, System, Vector};
+use crate::system::{Order, Sparsity, System, Terms, Vector};
 
 /// The accelerations and constraint forces at a state and their first derivatives. Rows: the
 /// dynamic variables (`q̈`) or the constraint equations (`λ`); columns: all variables (`q`,
@@ -80,10 +82,13 @@ where
     kkt: Vec<f64>,
     pivots: Vec<usize>,
     /// The state over dual numbers, and the evaluation along one direction (made on first
-    /// use: only a system without jets needs it).
+    /// use): along `q̇` for `Ṁ` and `D²h q̇`, or, for a system without jets, along each
+    /// coordinate.
     qd: Vec<Dual>,
     vd: Vec<Dual>,
     along: Option<Box<DualOutputs>>,
+    /// The second-order evaluation at the state (the forces' `∂F/∂q̇`).
+    full: Terms<N>,
     /// The state over jets, and the inverse dynamics along LANES directions.
     qj: Vec<Jet<LANES>>,
     vj: Vec<Jet<LANES>>,
@@ -115,6 +120,7 @@ where
             qd: vec![Dual::default(); n],
             vd: vec![Dual::default(); n],
             along: None,
+            full: Terms::zeros(sys.dim()),
             qj: vec![Jet::default(); n],
             vj: vec![Jet::default(); n],
             jets: JetOutputs::new(n, sys.constraint_count()),
@@ -239,33 +245,29 @@ where
             b[nd + s] = x;
         }
     };
-    // The right sides come from the inverse dynamics over jets: along a direction, the
-    // dynamic rows are `−δr + δDh_dᵀλ` for the residual `r = τ(q, q̇, q̈) − ∂L_springs/∂q − F`
-    // at the solved q̈, and the constraint rows `−δ(q̇ᵀD²h q̇) − δDh q̈`: one recursive
-    // Newton–Euler sweep (and one of the constraints) for LANES directions at once
-    // (O(frames)), where differentiating the whole evaluation forms `δM`, `δ(∂²L/∂q̇∂q)`
-    // (O(frames · depth)) and contracts them with q̈ and q̇ (O(n²)) a direction.
+    // The right sides along `q` come from the inverse dynamics over jets: along a direction,
+    // the dynamic rows are `−δr + δDh_dᵀλ` for the residual `r = τ(q, q̇, q̈) −
+    // ∂L_springs/∂q − F` at the solved q̈, and the constraint rows `−δ(q̇ᵀD²h q̇) − δDh q̈`:
+    // one recursive Newton–Euler sweep (and one of the constraints) for LANES directions at
+    // once (O(frames)), where differentiating the whole evaluation forms `δM`,
+    // `δ(∂²L/∂q̇∂q)` (O(frames · depth)) and contracts them with q̈ and q̇ (O(n²)) a
+    // direction. Along `q̇` they are closed forms (below).
     let mut first = 0;
     // Every column's right side, row-major (row r at r·cols), solved at once.
     let cols = 2 * n + nu;
     ws.rows.resize(k * cols, 0.0);
     let (qj, vj, jets, rows) = (&mut ws.qj, &mut ws.vj, &mut ws.jets, &mut ws.rows);
     let mut offered = true;
-    for group in (0..2 * n).step_by(LANES) {
+    for group in (0..n).step_by(LANES) {
         for (x, &v) in qj.iter_mut().zip(q.iter()) {
             *x = Jet::constant(v);
         }
         for (x, &v) in vj.iter_mut().zip(dq.iter()) {
             *x = Jet::constant(v);
         }
-        let lanes = (2 * n - group).min(LANES);
+        let lanes = (n - group).min(LANES);
         for l in 0..lanes {
-            let j = group + l;
-            if j < n {
-                qj[j].d[l] = 1.0;
-            } else {
-                vj[j - n].d[l] = 1.0;
-            }
+            qj[group + l].d[l] = 1.0;
         }
         if !cx.sys.inverse_dynamics_jet(qj, vj, qdd.as_slice(), jets) {
             offered = false;
@@ -295,6 +297,44 @@ where
                 for (l, x) in row.iter_mut().enumerate() {
                     *x -= dh[l] * a;
                 }
+            }
+        }
+    }
+    if offered {
+        // Along q̇_j (docs/derivations.md §9, "Along q̇"): L is quadratic in q̇, so with
+        // B = ∂²L/∂q̇∂q, τ's derivative is Ṁ + B − Bᵀ (Ṁ = Σ_l ∂M/∂q_l q̇_l, the Christoffel
+        // terms' 2Γq̇) and the dynamic row i is `∂F_i/∂q̇_j − Ṁ_ij − B_ij + B_ji`; Dh, the
+        // springs and M do not move, and the constraint row s is `−2 (D²h_s q̇)_j`. Ṁ and
+        // D²h q̇ are one evaluation over dual numbers along q̇, ∂F/∂q̇ the forces' own
+        // derivatives: two evaluations for all n directions, where jets take n / LANES
+        // sweeps.
+        cx.sys.lagrangian(q, dq, Order::Full, &mut ws.full);
+        for ((x, &v), &w) in ws.qd.iter_mut().zip(q.iter()).zip(dq.iter()) {
+            *x = Dual::new(v, w);
+        }
+        for (x, &v) in ws.vd.iter_mut().zip(dq.iter()) {
+            *x = Dual::new(v, 0.0);
+        }
+        let along = ws
+            .along
+            .get_or_insert_with(|| Box::new(DualOutputs::new(n, m)));
+        cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, along);
+        let full = &ws.full;
+        for (r, &i) in dynamic.iter().enumerate() {
+            let row = &mut rows[r * cols + n..r * cols + 2 * n];
+            for (j, x) in row.iter_mut().enumerate() {
+                let force = match full.force_derivatives {
+                    Sparsity::Zero => 0.0,
+                    Sparsity::Diagonal if i != j => 0.0,
+                    _ => full.dforce_ddq[(i, j)],
+                };
+                *x = force - along.get(Output::Mass(i, j)).d - lvq[(i, j)] + lvq[(j, i)];
+            }
+        }
+        for c in 0..m {
+            let row = &mut rows[(nd + c) * cols + n..(nd + c) * cols + 2 * n];
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = -2.0 * along.get(Output::Dh(c, j)).d;
             }
         }
     }
