@@ -258,16 +258,28 @@ where
     ws.rows.resize(k * cols, 0.0);
     let (qj, vj, jets, rows) = (&mut ws.qj, &mut ws.vj, &mut ws.jets, &mut ws.rows);
     let mut offered = true;
-    for group in (0..n).step_by(LANES) {
+    // The q̇ directions ride in the q sweeps' spare lanes when they all fit there (n ≤
+    // LANES / 2: no sweep more); otherwise the closed forms below take them.
+    let swept = if 2 * n <= n.div_ceil(LANES) * LANES {
+        2 * n
+    } else {
+        n
+    };
+    for group in (0..swept).step_by(LANES) {
         for (x, &v) in qj.iter_mut().zip(q.iter()) {
             *x = Jet::constant(v);
         }
         for (x, &v) in vj.iter_mut().zip(dq.iter()) {
             *x = Jet::constant(v);
         }
-        let lanes = (n - group).min(LANES);
+        let lanes = (swept - group).min(LANES);
         for l in 0..lanes {
-            qj[group + l].d[l] = 1.0;
+            let j = group + l;
+            if j < n {
+                qj[j].d[l] = 1.0;
+            } else {
+                vj[j - n].d[l] = 1.0;
+            }
         }
         if !cx.sys.inverse_dynamics_jet(qj, vj, qdd.as_slice(), jets) {
             offered = false;
@@ -300,7 +312,7 @@ where
             }
         }
     }
-    if offered {
+    if offered && swept == n {
         // Along q̇_j (docs/derivations.md §9, "Along q̇"): L is quadratic in q̇, so with
         // B = ∂²L/∂q̇∂q, τ's derivative is Ṁ + B − Bᵀ (Ṁ = Σ_l ∂M/∂q_l q̇_l, the Christoffel
         // terms' 2Γq̇) and the dynamic row i is `∂F_i/∂q̇_j − Ṁ_ij − B_ij + B_ji`; Dh, the
