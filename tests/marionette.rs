@@ -6,6 +6,9 @@ mod common;
 use common::{interpreted, load, simulate_from_start, Rng};
 use nalgebra::Const;
 use tree_mech::integrate::{Method, SimOptions, ViSettings};
+use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
+use tree_mech::runtime::dual::{Dual, DualOutputs};
+use tree_mech::runtime::outputs::Field;
 use tree_mech::runtime::Vector;
 use tree_mech::{tree_model, ConstraintTerms, Order, System, Trajectory};
 
@@ -155,4 +158,46 @@ fn rk4_at_the_same_step_drifts_off_the_strings() {
 #[test]
 fn the_marionettes_statement_count_is_pinned() {
     assert_eq!(Marionette::STATEMENTS, 12888);
+}
+
+/// The constraints alone over dual numbers (what a step's second derivatives differentiate at
+/// `q₁` and `q₂`) are, compiled and interpreted, the whole dual evaluation's constraint
+/// outputs, value and derivative, with the Lagrangian's left zero.
+#[test]
+fn constraints_over_duals_alone_are_the_whole_evaluations() {
+    let model = load("marionette.toml");
+    constraints_alone(&mut Marionette::new());
+    constraints_alone(&mut interpreted(&model));
+}
+
+fn constraints_alone<S: System>(sys: &mut S)
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let mut rng = Rng::new(17);
+    let (q, dq) = (rng.vector(N, 0.5), rng.vector(N, 0.7));
+    let (dir_q, dir_dq) = (rng.vector(N, 1.0), rng.vector(N, 1.0));
+    let q = Dual::seed(q.as_slice(), dir_q.as_slice());
+    let dq = Dual::seed(dq.as_slice(), dir_dq.as_slice());
+    let rows = sys.constraint_count();
+    for order in [Order::First, Order::Dynamics, Order::Full] {
+        let (mut whole, mut alone) = (DualOutputs::new(N, rows), DualOutputs::new(N, rows));
+        sys.evaluate_dual(&q, &dq, order, &mut whole);
+        sys.constraints_dual(&q, &dq, order, &mut alone);
+        for field in [Field::H, Field::Dh, Field::DhDot, Field::D2h] {
+            for (a, b) in whole.field(field).iter().zip(alone.field(field)) {
+                assert_eq!((a.v, a.d), (b.v, b.d), "{field:?} at {order:?}");
+            }
+        }
+        if order == Order::Full {
+            assert!(alone.field(Field::D2h).iter().any(|x| x.d != 0.0));
+        }
+        for field in [Field::L, Field::DlDq, Field::Mass, Field::D2lDqDq] {
+            let zero = |x: &Dual| x.v == 0.0 && x.d == 0.0;
+            assert!(
+                alone.field(field).iter().all(zero),
+                "{field:?} at {order:?}"
+            );
+        }
+    }
 }

@@ -899,7 +899,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 order: ::tree_mech::runtime::Order,
                 out: &mut ::tree_mech::runtime::dual::DualOutputs,
             ) {
-                out.clear();
+                // The constraints first (that call clears `out`), then the Lagrangian.
+                <Self as ::tree_mech::runtime::System>::constraints_dual(self, q, dq, order, out);
                 let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
                     match (q.try_into(), dq.try_into()) {
                         (Ok(q), Ok(dq)) => (q, dq),
@@ -908,13 +909,30 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 match order {
                     // First-order outputs are among the Dynamics evaluation's.
                     ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
-                        { #d_dynamics_body }
-                        { #dc_dynamics_body }
+                        #d_dynamics_body
                     }
-                    ::tree_mech::runtime::Order::Full => {
-                        { #d_full_body }
-                        { #dc_full_body }
+                    ::tree_mech::runtime::Order::Full => { #d_full_body }
+                }
+            }
+
+            fn constraints_dual(
+                &mut self,
+                q: &[::tree_mech::runtime::dual::Dual],
+                dq: &[::tree_mech::runtime::dual::Dual],
+                order: ::tree_mech::runtime::Order,
+                out: &mut ::tree_mech::runtime::dual::DualOutputs,
+            ) {
+                out.clear();
+                let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
+                    match (q.try_into(), dq.try_into()) {
+                        (Ok(q), Ok(dq)) => (q, dq),
+                        _ => panic!("constraints_dual takes one dual number per variable ({})", #n),
+                    };
+                match order {
+                    ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
+                        #dc_dynamics_body
                     }
+                    ::tree_mech::runtime::Order::Full => { #dc_full_body }
                 }
             }
         }

@@ -451,6 +451,14 @@ where
     /// the linearisations differentiate.
     fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs);
 
+    /// The constraint outputs of [`Self::evaluate_dual`] alone (`h`, `Dh`, and up to `order`
+    /// `q̇ᵀD²h q̇` and `D²h`), the Lagrangian's left zero: what a step's second derivatives
+    /// differentiate at `q₁` and `q₂`. Clears `out` first. The default makes the whole
+    /// evaluation; the interpreted and generated systems evaluate the constraints only.
+    fn constraints_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
+        self.evaluate_dual(q, dq, order, out);
+    }
+
     /// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable) over
     /// [`Jet`]s ([`crate::kernel::inverse_dynamics`]: the bodies' `τ` by recursive
     /// Newton–Euler, the springs' `∂L/∂q` and `L`, the model's own forces; with constraints

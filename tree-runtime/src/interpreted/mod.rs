@@ -299,6 +299,13 @@ impl System for TreeSystem {
         kernel::constraints(plan, kernel, q, dq, order, out);
     }
 
+    fn constraints_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
+        out.clear();
+        let plan = &self.plan;
+        let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
+        kernel::constraints(plan, kernel, q, dq, order, out);
+    }
+
     fn inverse_dynamics_jet(
         &mut self,
         q: &[Jet<LANES>],

@@ -1098,7 +1098,8 @@ where
 /// Scratch for the Jacobians over dual numbers along one tangent direction.
 #[derive(Clone, Debug)]
 struct DualJacobians {
-    /// At the quadrature point (Full), at `q₁` (constraints, Full), at `q₂` (constraints).
+    /// At the quadrature point (Full), at `q₁` (constraints alone, Full), at `q₂`
+    /// (constraints alone).
     at_alpha: DualOutputs,
     at_q1: DualOutputs,
     at_q2: DualOutputs,
@@ -1165,8 +1166,8 @@ impl DualJacobians {
         }
         sys.evaluate_dual(&self.q_alpha, &self.v, Order::Full, &mut self.at_alpha);
         if m > 0 {
-            sys.evaluate_dual(&self.q1, &self.rest, Order::Full, &mut self.at_q1);
-            sys.evaluate_dual(&self.q2, &self.rest, Order::First, &mut self.at_q2);
+            sys.constraints_dual(&self.q1, &self.rest, Order::Full, &mut self.at_q1);
+            sys.constraints_dual(&self.q2, &self.rest, Order::First, &mut self.at_q2);
         }
         for s in 0..m {
             self.lambda[s] = Dual::new(lin.lambda[s], dir[sh.w_lambda() + s]);
