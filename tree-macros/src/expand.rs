@@ -909,9 +909,13 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 match order {
                     // First-order outputs are among the Dynamics evaluation's.
                     ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
+                        out.clear_lagrangian(::tree_mech::runtime::Order::Dynamics);
                         #d_dynamics_body
                     }
-                    ::tree_mech::runtime::Order::Full => { #d_full_body }
+                    ::tree_mech::runtime::Order::Full => {
+                        out.clear_lagrangian(::tree_mech::runtime::Order::Full);
+                        #d_full_body
+                    }
                 }
             }
 
@@ -922,7 +926,6 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 order: ::tree_mech::runtime::Order,
                 out: &mut ::tree_mech::runtime::dual::DualOutputs,
             ) {
-                out.clear();
                 let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
                     match (q.try_into(), dq.try_into()) {
                         (Ok(q), Ok(dq)) => (q, dq),
@@ -930,9 +933,13 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                     };
                 match order {
                     ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
+                        out.clear_constraints(::tree_mech::runtime::Order::Dynamics);
                         #dc_dynamics_body
                     }
-                    ::tree_mech::runtime::Order::Full => { #dc_full_body }
+                    ::tree_mech::runtime::Order::Full => {
+                        out.clear_constraints(::tree_mech::runtime::Order::Full);
+                        #dc_full_body
+                    }
                 }
             }
         }

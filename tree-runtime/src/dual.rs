@@ -4,6 +4,7 @@
 
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
+use crate::order::Order;
 use crate::outputs::{Field, Index, Output, Scratch, Sink};
 use crate::scalar::Scalar;
 
@@ -106,6 +107,9 @@ pub struct DualOutputs {
     n: usize,
     /// One buffer per [`Field`], in its declaration order.
     fields: Vec<Vec<Dual>>,
+    /// Each constraint row's variables, where known
+    /// ([`Self::with_constraint_variables`]): its `D²h` block is cleared on them alone.
+    variables: Vec<Vec<usize>>,
     /// Generated code's storage between its functions (not part of the outputs).
     #[doc(hidden)]
     pub scratch: Scratch<Dual>,
@@ -149,14 +153,72 @@ impl DualOutputs {
                 .iter()
                 .map(|&f| vec![Dual::default(); size(f)])
                 .collect(),
+            variables: Vec::new(),
             scratch: Scratch::default(),
         }
+    }
+
+    /// These outputs with constraint row r's `D²h` block known to lie on `variables[r]`
+    /// (as a system names them, `System::constraint_variables`): clearing `D²h` zeroes
+    /// each row's block on them alone, as `ConstraintTerms::of` does (an evaluation never
+    /// writes outside those blocks, so entries there stay zero). Empty: not known.
+    pub fn with_constraint_variables(mut self, variables: Vec<Vec<usize>>) -> Self {
+        self.variables = variables;
+        self
     }
 
     /// Zeroes every output.
     pub fn clear(&mut self) {
         for f in &mut self.fields {
             f.fill(Dual::default());
+        }
+    }
+
+    /// Zeroes the Lagrangian's and the forces' outputs an evaluation of `order` accumulates
+    /// (as `Terms::clear`); the constraints' are left as they are.
+    pub fn clear_lagrangian(&mut self, order: Order) {
+        let first = [
+            Field::L,
+            Field::Energy,
+            Field::DlDq,
+            Field::DlDdq,
+            Field::Force,
+        ];
+        let dynamics = [Field::Mass, Field::D2lDdqDq];
+        let full = [Field::D2lDqDq, Field::DforceDq, Field::DforceDdq];
+        let fields = first
+            .iter()
+            .chain(dynamics.iter().filter(|_| order >= Order::Dynamics))
+            .chain(full.iter().filter(|_| order >= Order::Full));
+        for &f in fields {
+            self.fields[f as usize].fill(Dual::default());
+        }
+    }
+
+    /// Zeroes the constraints' outputs an evaluation of `order` accumulates: `h`, `Dh`, from
+    /// `Order::Dynamics` on `q̇ᵀD²h q̇`, at `Order::Full` `D²h` (each row's block on its
+    /// variables alone where they are known, [`Self::with_constraint_variables`]).
+    pub fn clear_constraints(&mut self, order: Order) {
+        for f in [Field::H, Field::Dh, Field::DhDot] {
+            if f != Field::DhDot || order >= Order::Dynamics {
+                self.fields[f as usize].fill(Dual::default());
+            }
+        }
+        if order < Order::Full {
+            return;
+        }
+        let n = self.n;
+        let d2h = &mut self.fields[Field::D2h as usize];
+        if self.variables.is_empty() {
+            d2h.fill(Dual::default());
+        }
+        for (r, vars) in self.variables.iter().enumerate() {
+            let block = &mut d2h[r * n * n..(r + 1) * n * n];
+            for &i in vars {
+                for &j in vars {
+                    block[i * n + j] = Dual::default();
+                }
+            }
         }
     }
 

@@ -447,14 +447,16 @@ where
     /// forward-mode dual numbers: each value with its exact derivative along the direction
     /// seeded in `q`, `dq` ([`Dual::seed`]) — the same evaluation as [`Self::lagrangian`] and
     /// [`Self::constraints`] together, over another scalar (generated systems compile it
-    /// too). Clears `out` first; `out` is `DualOutputs::new(dof, constraint_count)`. What
-    /// the linearisations differentiate.
+    /// too). Zeroes first what it accumulates (`DualOutputs::clear_lagrangian` and
+    /// `clear_constraints` at its order: outputs of a higher order keep what they held); `out`
+    /// is `DualOutputs::new(dof, constraint_count)`. What the linearisations differentiate.
     fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs);
 
     /// The constraint outputs of [`Self::evaluate_dual`] alone (`h`, `Dh`, and up to `order`
-    /// `q̇ᵀD²h q̇` and `D²h`), the Lagrangian's left zero: what a step's second derivatives
-    /// differentiate at `q₁` and `q₂`. Clears `out` first. The default makes the whole
-    /// evaluation; the interpreted and generated systems evaluate the constraints only.
+    /// `q̇ᵀD²h q̇` and `D²h`): what a step's second derivatives differentiate at `q₁` and
+    /// `q₂`. Zeroes the constraints' outputs first (`DualOutputs::clear_constraints`); the
+    /// Lagrangian's are left as they are. The default makes the whole evaluation; the
+    /// interpreted and generated systems evaluate the constraints only.
     fn constraints_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
         self.evaluate_dual(q, dq, order, out);
     }

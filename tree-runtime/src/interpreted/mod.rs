@@ -292,7 +292,8 @@ impl System for TreeSystem {
     }
 
     fn evaluate_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
-        out.clear();
+        out.clear_lagrangian(order);
+        out.clear_constraints(order);
         let plan = &self.plan;
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::evaluate(plan, kernel, q, dq, order, out);
@@ -300,7 +301,7 @@ impl System for TreeSystem {
     }
 
     fn constraints_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
-        out.clear();
+        out.clear_constraints(order);
         let plan = &self.plan;
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::constraints(plan, kernel, q, dq, order, out);

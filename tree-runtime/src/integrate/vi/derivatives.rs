@@ -1128,10 +1128,16 @@ impl DualJacobians {
     {
         let (n, m) = (sys.dof(), sys.constraint_count());
         let zeros = |k| vec![Dual::default(); k];
+        // D²h cleared on each row's own variables, where the system names them.
+        let known: Option<Vec<Vec<usize>>> = (0..m)
+            .map(|r| sys.constraint_variables(r).map(<[usize]>::to_vec))
+            .collect();
+        let outputs =
+            || DualOutputs::new(n, m).with_constraint_variables(known.clone().unwrap_or_default());
         DualJacobians {
-            at_alpha: DualOutputs::new(n, m),
-            at_q1: DualOutputs::new(n, m),
-            at_q2: DualOutputs::new(n, m),
+            at_alpha: outputs(),
+            at_q1: outputs(),
+            at_q2: outputs(),
             q_alpha: zeros(n),
             v: zeros(n),
             q1: zeros(n),
