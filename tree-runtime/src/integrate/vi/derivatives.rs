@@ -157,12 +157,24 @@ struct StepTerms<'a, T> {
 }
 
 /// `out = Σ_s λ_s D²h_s` over the constraint equations (`d2h`: m symmetric n × n blocks, one
-/// after the other): the multipliers' term of `∂r/∂q₁`, formed once per linearisation.
-fn contract<T: Scalar>(lambda: &[T], d2h: &[T], out: &mut [T]) {
-    out.fill(T::zero());
-    for (&l, block) in lambda.iter().zip(d2h.chunks_exact(out.len())) {
-        for (o, &x) in out.iter_mut().zip(block) {
-            *o += l * x;
+/// after the other; `variables[s]`, when given, the variables block s lies on — it is zero
+/// elsewhere): the multipliers' term of `∂r/∂q₁` over dual numbers, once per direction.
+fn contract(lambda: &[Dual], d2h: &[Dual], variables: &[Vec<usize>], n: usize, out: &mut [Dual]) {
+    out.fill(Dual::default());
+    for (s, (&l, block)) in lambda.iter().zip(d2h.chunks_exact(n * n)).enumerate() {
+        match variables.get(s) {
+            Some(vars) => {
+                for &i in vars {
+                    for &j in vars {
+                        out[i * n + j] += l * block[i * n + j];
+                    }
+                }
+            }
+            None => {
+                for (o, &x) in out.iter_mut().zip(block) {
+                    *o += l * x;
+                }
+            }
         }
     }
 }
@@ -1119,6 +1131,8 @@ struct DualJacobians {
     pjac: Vec<Dual>,
     /// `c_j = μᵀ D_jJ + w_pᵀ D_jP` (length w).
     adjoint: Vec<f64>,
+    /// Each constraint row's variables, where the system names them (empty: unknown).
+    variables: Vec<Vec<usize>>,
 }
 
 impl DualJacobians {
@@ -1132,8 +1146,8 @@ impl DualJacobians {
         let known: Option<Vec<Vec<usize>>> = (0..m)
             .map(|r| sys.constraint_variables(r).map(<[usize]>::to_vec))
             .collect();
-        let outputs =
-            || DualOutputs::new(n, m).with_constraint_variables(known.clone().unwrap_or_default());
+        let variables = known.unwrap_or_default();
+        let outputs = || DualOutputs::new(n, m).with_constraint_variables(variables.clone());
         DualJacobians {
             at_alpha: outputs(),
             at_q1: outputs(),
@@ -1149,6 +1163,7 @@ impl DualJacobians {
             jac: zeros(sh.rows() * sh.w()),
             pjac: zeros(sh.nd() * sh.w()),
             adjoint: vec![0.0; sh.w()],
+            variables,
         }
     }
 
@@ -1181,6 +1196,8 @@ impl DualJacobians {
         contract(
             &self.lambda,
             self.at_q1.field(Field::D2h),
+            &self.variables,
+            n,
             &mut self.lambda_d2h1,
         );
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
@@ -1241,11 +1258,17 @@ impl DualJacobians {
 
     /// `c_j · δ`.
     fn dot_adjoint(&self, delta: DVectorView<f64>) -> f64 {
-        self.adjoint
-            .iter()
-            .zip(delta.iter())
-            .map(|(c, d)| c * d)
-            .sum()
+        // Four running sums (one would wait on each addition; they vectorise).
+        let (c, d) = (self.adjoint.as_slice(), delta.as_slice());
+        let mut sums = [0.0f64; 4];
+        for (c, d) in c.chunks_exact(4).zip(d.chunks_exact(4)) {
+            for l in 0..4 {
+                sums[l] += c[l] * d[l];
+            }
+        }
+        let tail = c.len() / 4 * 4;
+        let rest: f64 = c[tail..].iter().zip(&d[tail..]).map(|(c, d)| c * d).sum();
+        (sums[0] + sums[1]) + (sums[2] + sums[3]) + rest
     }
 }
 
