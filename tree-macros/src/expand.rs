@@ -581,6 +581,22 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     };
     let mark_force_derivatives = sparsity
         .map(|s| quote!(out.force_derivatives = ::tree_mech::runtime::system::Sparsity::#s;));
+    // A dual evaluation's slices as arrays of the model's size (a panic naming the method
+    // otherwise).
+    let dual_arrays = |method: &str| {
+        let wrong = format!("{method} takes one dual number per variable ({{}})");
+        quote! {
+            let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
+                match (q.try_into(), dq.try_into()) {
+                    (Ok(q), Ok(dq)) => (q, dq),
+                    _ => panic!(#wrong, #n),
+                };
+        }
+    };
+    let (evaluate_arrays, constraints_arrays) = (
+        dual_arrays("evaluate_dual"),
+        dual_arrays("constraints_dual"),
+    );
     let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
     let articulated = articulated_program(&plan, &kinematic).map(|program| {
         program.emit(
@@ -899,13 +915,9 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 order: ::tree_mech::runtime::Order,
                 out: &mut ::tree_mech::runtime::dual::DualOutputs,
             ) {
-                // The constraints first (that call clears `out`), then the Lagrangian.
+                // The constraints first (that call zeroes their outputs), then the Lagrangian.
                 <Self as ::tree_mech::runtime::System>::constraints_dual(self, q, dq, order, out);
-                let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
-                    match (q.try_into(), dq.try_into()) {
-                        (Ok(q), Ok(dq)) => (q, dq),
-                        _ => panic!("evaluate_dual takes one dual number per variable ({})", #n),
-                    };
+                #evaluate_arrays
                 match order {
                     // First-order outputs are among the Dynamics evaluation's.
                     ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
@@ -926,11 +938,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 order: ::tree_mech::runtime::Order,
                 out: &mut ::tree_mech::runtime::dual::DualOutputs,
             ) {
-                let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
-                    match (q.try_into(), dq.try_into()) {
-                        (Ok(q), Ok(dq)) => (q, dq),
-                        _ => panic!("constraints_dual takes one dual number per variable ({})", #n),
-                    };
+                #constraints_arrays
                 match order {
                     ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
                         out.clear_constraints(::tree_mech::runtime::Order::Dynamics);
