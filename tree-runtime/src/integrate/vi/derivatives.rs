@@ -1124,11 +1124,15 @@ struct DualJacobians {
     lambda: Vec<Dual>,
     /// `Σ_s λ_s D²h_s(q₁)` over duals.
     lambda_d2h1: Vec<Dual>,
-    /// `L_q̇q` transposed (row-major).
-    lvq_t: Vec<Dual>,
-    /// `J`, `P` over duals (row-major): their `.d` are `D_j J`, `D_j P`.
-    jac: Vec<Dual>,
-    pjac: Vec<Dual>,
+    /// The derivative parts of the step's terms along the direction, in the order of
+    /// [`StepTerms`]: `L_qq`, `L_q̇q`, its transpose, `M`, `F_q`, `F_q̇`, `Dh(q₁)`,
+    /// `Σ λ_s D²h_s(q₁)`, `Dh(q₂)`.
+    along_terms: [Vec<f64>; 9],
+    /// `D_j J`, `D_j P` (row-major): `J`, `P` are linear in the step's terms with constant
+    /// coefficients, so they are [`jacobians`] of the terms' derivative parts, the constant
+    /// entries (`∂r/∂p₁ = I`, the inputs' `left`, `plus`) zeroed.
+    jac: Vec<f64>,
+    pjac: Vec<f64>,
     /// `c_j = μᵀ D_jJ + w_pᵀ D_jP` (length w).
     adjoint: Vec<f64>,
     /// Each constraint row's variables, where the system names them (empty: unknown).
@@ -1159,15 +1163,26 @@ impl DualJacobians {
             rest: zeros(n),
             lambda: zeros(m),
             lambda_d2h1: zeros(n * n),
-            lvq_t: zeros(n * n),
-            jac: zeros(sh.rows() * sh.w()),
-            pjac: zeros(sh.nd() * sh.w()),
+            along_terms: [
+                n * n,
+                n * n,
+                n * n,
+                n * n,
+                n * n,
+                n * n,
+                m * n,
+                n * n,
+                m * n,
+            ]
+            .map(|len| vec![0.0; len]),
+            jac: vec![0.0; sh.rows() * sh.w()],
+            pjac: vec![0.0; sh.nd() * sh.w()],
             adjoint: vec![0.0; sh.w()],
             variables,
         }
     }
 
-    /// The Jacobians over duals along the tangent's column `j` (`D_j J`, `D_j P` in `.d`):
+    /// The Jacobians' derivatives along the tangent's column `j` (`D_j J`, `D_j P`):
     /// the quadrature point moves by `δq_α = (1−α)δq₁ + αδq₂`, `δv = (δq₂ − δq₁)/Δt`.
     fn along<S: System>(&mut self, sys: &mut S, lin: &Linearisation, j: usize)
     where
@@ -1201,21 +1216,46 @@ impl DualJacobians {
             &mut self.lambda_d2h1,
         );
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
-        let lvq = t.field(Field::D2lDdqDq);
-        row_major_into(lvq, n, &mut self.lvq_t);
+        let sources = [
+            t.field(Field::D2lDqDq),
+            t.field(Field::D2lDdqDq),
+            &[],
+            t.field(Field::Mass),
+            t.field(Field::DforceDq),
+            t.field(Field::DforceDdq),
+            c1.field(Field::Dh),
+            &self.lambda_d2h1,
+            c2.field(Field::Dh),
+        ];
+        for (to, from) in self.along_terms.iter_mut().zip(sources) {
+            for (x, y) in to.iter_mut().zip(from) {
+                *x = y.d;
+            }
+        }
+        let [lqq, lvq, lvq_t, mass, fq, fv, dh1, lambda_d2h1, dh2] = &mut self.along_terms;
+        row_major_into(lvq, n, lvq_t);
         let terms = StepTerms {
-            lqq: t.field(Field::D2lDqDq),
+            lqq,
             lvq,
-            lvq_t: &self.lvq_t,
-            mass: t.field(Field::Mass),
+            lvq_t,
+            mass,
             forces: lin.forces,
-            fq: t.field(Field::DforceDq),
-            fv: t.field(Field::DforceDdq),
-            dh1: c1.field(Field::Dh),
-            lambda_d2h1: &self.lambda_d2h1,
-            dh2: c2.field(Field::Dh),
+            fq,
+            fv,
+            dh1,
+            lambda_d2h1,
+            dh2,
         };
-        jacobians(sh, &terms, &mut self.jac, &mut self.pjac);
+        jacobians_f64(sh, &terms, &mut self.jac, &mut self.pjac);
+        // The constant entries' derivatives are zero.
+        let w = sh.w();
+        for r in 0..sh.nd() {
+            self.jac[r * w + sh.w_p1() + r] = 0.0;
+            for k in 0..sh.nu() {
+                self.jac[r * w + sh.w_u1() + k] = 0.0;
+                self.pjac[r * w + sh.w_u1() + k] = 0.0;
+            }
+        }
     }
 
     /// `out = (D_j J) δ`.
@@ -1225,7 +1265,7 @@ impl DualJacobians {
             *o = self.jac[r * w..(r + 1) * w]
                 .iter()
                 .zip(delta.iter())
-                .map(|(x, d)| x.d * d)
+                .map(|(x, d)| x * d)
                 .sum();
         }
     }
@@ -1236,7 +1276,7 @@ impl DualJacobians {
         self.pjac[r * w..(r + 1) * w]
             .iter()
             .zip(delta.iter())
-            .map(|(x, d)| x.d * d)
+            .map(|(x, d)| x * d)
             .sum()
     }
 
@@ -1246,12 +1286,12 @@ impl DualJacobians {
         self.adjoint.as_mut_slice().fill(0.0);
         for (r, &m) in mu.iter().enumerate() {
             for (c, x) in self.jac[r * w..(r + 1) * w].iter().enumerate() {
-                self.adjoint[c] += m * x.d;
+                self.adjoint[c] += m * x;
             }
         }
         for (r, &p) in wp.iter().enumerate() {
             for (c, x) in self.pjac[r * w..(r + 1) * w].iter().enumerate() {
-                self.adjoint[c] += p * x.d;
+                self.adjoint[c] += p * x;
             }
         }
     }
