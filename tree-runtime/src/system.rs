@@ -118,6 +118,18 @@ where
     }
 }
 
+/// Each constraint row's variables ([`System::constraint_variables`]), ascending, when the
+/// system names them for every row; empty otherwise (unknown).
+pub(crate) fn row_variables<S: System>(sys: &S) -> Vec<Vec<usize>>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let known: Option<Vec<Vec<usize>>> = (0..sys.constraint_count())
+        .map(|r| sys.constraint_variables(r).map(<[usize]>::to_vec))
+        .collect();
+    known.unwrap_or_default()
+}
+
 impl<N: Dim> Sink<f64> for Terms<N>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
@@ -224,12 +236,7 @@ impl ConstraintTerms {
     where
         DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
     {
-        let (rows, n) = (sys.constraint_count(), sys.dof());
-        let terms = Self::zeros(rows, n);
-        let known: Option<Vec<Vec<usize>>> = (0..rows)
-            .map(|r| sys.constraint_variables(r).map(<[usize]>::to_vec))
-            .collect();
-        terms.with_variables(known.unwrap_or_default())
+        Self::zeros(sys.constraint_count(), sys.dof()).with_variables(row_variables(sys))
     }
 
     /// These terms with row r's `D²h` block known to lie on `variables[r]` (ascending), as

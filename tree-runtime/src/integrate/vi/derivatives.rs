@@ -35,7 +35,7 @@ use crate::integrate::discrete::{DiscreteLagrangian, Slots};
 use crate::linalg::{combine_rows, lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
-use crate::system::{ConstraintTerms, Order, Sparsity, System, Vector};
+use crate::system::{row_variables, ConstraintTerms, Order, Sparsity, System, Vector};
 
 /// A block of the step's inputs `x = (q₁, p₁, u₁, k₂)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1147,10 +1147,7 @@ impl DualJacobians {
         let (n, m) = (sys.dof(), sys.constraint_count());
         let zeros = |k| vec![Dual::default(); k];
         // D²h cleared on each row's own variables, where the system names them.
-        let known: Option<Vec<Vec<usize>>> = (0..m)
-            .map(|r| sys.constraint_variables(r).map(<[usize]>::to_vec))
-            .collect();
-        let variables = known.unwrap_or_default();
+        let variables = row_variables(sys);
         let outputs = || DualOutputs::new(n, m).with_constraint_variables(variables.clone());
         DualJacobians {
             at_alpha: outputs(),
@@ -1262,22 +1259,14 @@ impl DualJacobians {
     fn times(&self, delta: DVectorView<f64>, out: &mut [f64]) {
         let w = delta.len();
         for (r, o) in out.iter_mut().enumerate() {
-            *o = self.jac[r * w..(r + 1) * w]
-                .iter()
-                .zip(delta.iter())
-                .map(|(x, d)| x * d)
-                .sum();
+            *o = dot(&self.jac[r * w..(r + 1) * w], delta.as_slice());
         }
     }
 
     /// `((D_j P) δ)_r`.
     fn p_times(&self, r: usize, delta: DVectorView<f64>) -> f64 {
         let w = delta.len();
-        self.pjac[r * w..(r + 1) * w]
-            .iter()
-            .zip(delta.iter())
-            .map(|(x, d)| x * d)
-            .sum()
+        dot(&self.pjac[r * w..(r + 1) * w], delta.as_slice())
     }
 
     /// `c_j = μᵀ D_jJ + w_pᵀ D_jP`.
@@ -1298,23 +1287,38 @@ impl DualJacobians {
 
     /// `c_j · δ`.
     fn dot_adjoint(&self, delta: DVectorView<f64>) -> f64 {
-        // Four running sums (one would wait on each addition; they vectorise).
-        let (c, d) = (self.adjoint.as_slice(), delta.as_slice());
-        let mut sums = [0.0f64; 4];
-        for (c, d) in c.chunks_exact(4).zip(d.chunks_exact(4)) {
-            for l in 0..4 {
-                sums[l] += c[l] * d[l];
-            }
-        }
-        let tail = c.len() / 4 * 4;
-        let rest: f64 = c[tail..].iter().zip(&d[tail..]).map(|(c, d)| c * d).sum();
-        (sums[0] + sums[1]) + (sums[2] + sums[3]) + rest
+        dot(&self.adjoint, delta.as_slice())
     }
+}
+
+/// `a · b` in four running sums (one would wait on each addition; four vectorise).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut sums = [0.0f64; 4];
+    for (a, b) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for l in 0..4 {
+            sums[l] += a[l] * b[l];
+        }
+    }
+    let tail = a.len().min(b.len()) / 4 * 4;
+    let rest: f64 = a[tail..].iter().zip(&b[tail..]).map(|(a, b)| a * b).sum();
+    (sums[0] + sums[1]) + (sums[2] + sums[3]) + rest
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The four-sum dot product equals the sum written out at every length (whole chunks,
+    /// tails, empty).
+    #[test]
+    fn dot_products_in_four_sums() {
+        for len in 0..11 {
+            let a: Vec<f64> = (0..len).map(|i| (i as f64 * 0.7).sin()).collect();
+            let b: Vec<f64> = (0..len).map(|i| 1.0 + i as f64 * 0.3).collect();
+            let plain: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+            assert!((dot(&a, &b) - plain).abs() < 1e-14, "length {len}");
+        }
+    }
 
     /// `Σ_s λ_s D²h_s` on the chosen rows, both roundings and the dispatched kernel, against
     /// the sum written out, with the rows' variables unknown and known (each block zero
