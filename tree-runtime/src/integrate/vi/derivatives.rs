@@ -967,48 +967,55 @@ impl Linearisation {
         let sh = &self.shape;
         let (nd, m, k) = (sh.nd(), sh.m, self.solved.len());
         use StepInput::*;
-        for b in [Q1, P1, U1, K2] {
+        let fit = |mat: &mut DMatrix<f64>, rows: usize, columns: usize| {
+            if mat.shape() != (rows, columns) {
+                *mat = DMatrix::zeros(rows, columns);
+            }
+        };
+        for (b, q2, p2, lambda) in [
+            (Q1, &mut out.q2_dq1, &mut out.p2_dq1, &mut out.lambda_dq1),
+            (P1, &mut out.q2_dp1, &mut out.p2_dp1, &mut out.lambda_dp1),
+            (K2, &mut out.q2_dk2, &mut out.p2_dk2, &mut out.lambda_dk2),
+        ] {
             let (c0, wc) = sh.x_block(b);
-            let fit = |mat: &mut DMatrix<f64>, rows: usize| {
-                if mat.shape() != (rows, wc) {
-                    *mat = DMatrix::zeros(rows, wc);
+            fit(q2, nd, wc);
+            fit(p2, nd, wc);
+            fit(lambda, m, wc);
+            // Solved columns c0.. (after the inputs: less nu) as they are, transposed.
+            let s0 = if b == K2 { c0 - sh.nu() } else { c0 };
+            transpose_into(&self.rhs, k, s0, q2.as_mut_slice(), nd);
+            transpose_into(&self.dp2, k, s0, p2.as_mut_slice(), nd);
+            transpose_into(&self.rhs[nd * k..], k, s0, lambda.as_mut_slice(), m);
+        }
+        // Column c of the input block: `left` times its variable's p₁ column (plus `plus` on
+        // p₂'s own row), zero for an input on no dynamic variable — read from the p₁ blocks
+        // just written, where the column is contiguous.
+        let (u0, nu) = sh.x_block(U1);
+        let p1 = (&out.q2_dp1, &out.p2_dp1, &out.lambda_dp1);
+        let (q2, p2, lambda) = (&mut out.q2_du1, &mut out.p2_du1, &mut out.lambda_du1);
+        fit(q2, nd, nu);
+        fit(p2, nd, nu);
+        fit(lambda, m, nu);
+        for c in 0..nu {
+            let own = match self.source(u0 + c) {
+                Some(Source::Input(_, own)) => Some(own),
+                _ => None,
+            };
+            let scaled = |from: &DMatrix<f64>, to: &mut DMatrix<f64>| {
+                let rows = to.nrows();
+                let to = &mut to.as_mut_slice()[c * rows..(c + 1) * rows];
+                match own {
+                    Some(r) => (to.iter_mut())
+                        .zip(&from.as_slice()[r * rows..(r + 1) * rows])
+                        .for_each(|(o, &x)| *o = sh.left * x),
+                    None => to.fill(0.0),
                 }
             };
-            let (q2, p2, lambda) = match b {
-                Q1 => (&mut out.q2_dq1, &mut out.p2_dq1, &mut out.lambda_dq1),
-                P1 => (&mut out.q2_dp1, &mut out.p2_dp1, &mut out.lambda_dp1),
-                U1 => (&mut out.q2_du1, &mut out.p2_du1, &mut out.lambda_du1),
-                K2 => (&mut out.q2_dk2, &mut out.p2_dk2, &mut out.lambda_dk2),
-            };
-            fit(q2, nd);
-            fit(p2, nd);
-            fit(lambda, m);
-            if b != U1 {
-                // Solved columns c0.. (after the inputs: less nu) as they are, transposed.
-                let s0 = if b == K2 { c0 - sh.nu() } else { c0 };
-                transpose_into(&self.rhs, k, s0, q2.as_mut_slice(), nd);
-                transpose_into(&self.dp2, k, s0, p2.as_mut_slice(), nd);
-                transpose_into(&self.rhs[nd * k..], k, s0, lambda.as_mut_slice(), m);
-                continue;
-            }
-            for c in 0..wc {
-                // Column c of the input block: left times its variable's p₁ column (plus
-                // `plus` on p₂'s own row), zero for an input on no dynamic variable.
-                let Some(Source::Input(s, own)) = self.source(c0 + c) else {
-                    q2.column_mut(c).fill(0.0);
-                    p2.column_mut(c).fill(0.0);
-                    lambda.column_mut(c).fill(0.0);
-                    continue;
-                };
-                let strided = |from: &[f64], rows: usize, to: &mut [f64]| {
-                    for (r, o) in to.iter_mut().enumerate().take(rows) {
-                        *o = sh.left * from[r * k + s];
-                    }
-                };
-                strided(&self.rhs, nd, q2.column_mut(c).as_mut_slice());
-                strided(&self.dp2, nd, p2.column_mut(c).as_mut_slice());
-                strided(&self.rhs[nd * k..], m, lambda.column_mut(c).as_mut_slice());
-                p2[(own, c)] += sh.plus;
+            scaled(p1.0, q2);
+            scaled(p1.1, p2);
+            scaled(p1.2, lambda);
+            if let Some(r) = own {
+                p2[(r, c)] += sh.plus;
             }
         }
     }
