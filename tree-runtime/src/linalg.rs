@@ -168,6 +168,27 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
     forward_backward(&a[..n * n], n, &mut b[..n]);
 }
 
+/// Solves `Aᵀ x = b[..n]` with the factors of `A` from [`lu_factor_packed`] (`P A = L U`, so
+/// `Aᵀ = Uᵀ Lᵀ P`): `Uᵀ w = b` forward, `Lᵀ y = w` backward — both reading U's and L's
+/// columns, contiguous in the column-major factor, as dot products — then `x = Pᵀ y`, the
+/// interchanges undone in reverse order. `b` becomes `x`. No factor of `Aᵀ` is needed.
+pub fn lu_solve_transposed_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
+    let (a, b) = (&a[..n * n], &mut b[..n]);
+    for i in 0..n {
+        let column = &a[i * n..i * n + i];
+        let s: f64 = column.iter().zip(&b[..i]).map(|(u, w)| u * w).sum();
+        b[i] = (b[i] - s) / a[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let below = &a[i * n + i + 1..(i + 1) * n];
+        let s: f64 = below.iter().zip(&b[i + 1..]).map(|(l, y)| l * y).sum();
+        b[i] -= s;
+    }
+    for (j, &p) in pivots[..n].iter().enumerate().rev() {
+        b.swap(p, j);
+    }
+}
+
 /// Solves `A X = B` for `k` right-hand sides at once with the factors from
 /// [`lu_factor_packed`]: `b` holds `B` row-major (`n × k`, row i at `i·k`) and becomes `X`.
 /// Both substitutions are taken in dot-product form, two rows at a time, on blocks of up to
@@ -749,6 +770,28 @@ mod tests {
         // A second column that is the first's times (1 + 1e-16): its pivot is rounding.
         let mut rounding = vec![1.0, 2.0, 1.0 + 1e-16, 2.0 + 2e-16];
         assert_eq!(lu_factor_packed(&mut rounding, 2, &mut pivots), Err(1));
+    }
+
+    /// The transposed solve with `A`'s factors solves `Aᵀ x = b`, for orders with row
+    /// interchanges (the scattered matrices swap their first pivot) and without.
+    #[test]
+    fn transposed_solve_uses_the_factors_of_a() {
+        for n in [1, 2, 5, 8, 19] {
+            let a = scattered(n);
+            let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
+            lu_factor_packed(&mut factor, n, &mut pivots).expect("regular");
+            let b: Vec<f64> = (0..n).map(|i| (1.0 + i as f64).ln() - 0.4).collect();
+            let mut x = b.clone();
+            lu_solve_transposed_packed(&factor, n, &pivots, &mut x);
+            for (r, &br) in b.iter().enumerate() {
+                // Row r of Aᵀ is column r of A.
+                let atx: f64 = (0..n).map(|j| a[r * n + j] * x[j]).sum();
+                assert!(
+                    (atx - br).abs() < 1e-12,
+                    "order {n}, row {r}: {atx} against {br}"
+                );
+            }
+        }
     }
 
     /// `combine_rows` is `C + A D` with `A` read at chosen columns of a wider row-major matrix;

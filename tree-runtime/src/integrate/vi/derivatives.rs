@@ -32,7 +32,10 @@ use crate::dual::{Dual, DualOutputs};
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
-use crate::linalg::{combine_rows, lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
+use crate::linalg::{
+    combine_rows, lu_factor_packed, lu_solve_packed, lu_solve_packed_rows,
+    lu_solve_transposed_packed,
+};
 use crate::outputs::Field;
 use crate::scalar::Scalar;
 use crate::system::{row_variables, ConstraintTerms, Order, Sparsity, System, Vector};
@@ -541,7 +544,6 @@ where
         F: GeneralizedForce<N>,
     {
         let lin = self.linearise(cx, q1, p1, q2)?;
-        (lin.factor_transposed()).map_err(|c| singular(cx, &lin.shape, c))?;
         lin.fill_tangent();
         let sh = &lin.shape;
         let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
@@ -556,7 +558,7 @@ where
         for s in 0..m {
             mu[nd + s] = w.lambda[s];
         }
-        lu_solve_packed(&lin.factor_t, rows, &lin.pivots_t, mu);
+        lu_solve_transposed_packed(&lin.factor, rows, &lin.pivots, mu);
         mu.iter_mut().for_each(|v| *v = -*v);
         if out.shape() != (x, x) {
             *out = DMatrix::zeros(x, x);
@@ -736,13 +738,10 @@ pub(crate) struct Linearisation {
     solved_runs: Vec<(usize, usize, usize)>,
     /// Each input's variable as a dynamic row (its `p₁` column), if it is dynamic.
     input_rows: Vec<Option<usize>>,
-    /// `R_z`'s LU factor (column-major, packed) and its pivots; `R_zᵀ`'s likewise.
+    /// `R_z`'s LU factor (column-major, packed) and its pivots (a contraction's adjoint solves
+    /// with `R_zᵀ` from the same factors).
     factor: Vec<f64>,
     pivots: Vec<usize>,
-    factor_t: Vec<f64>,
-    pivots_t: Vec<usize>,
-    /// Whether `factor_t` holds this linearisation's `R_zᵀ`.
-    transposed: bool,
     /// `Δ = dw/dx` (w × x), filled from `rhs` when second derivatives ask for it.
     tangent: DMatrix<f64>,
     tangent_ready: bool,
@@ -809,9 +808,6 @@ impl Linearisation {
             input_rows,
             factor: vec![0.0; rows * rows],
             pivots: vec![0; rows],
-            factor_t: vec![0.0; rows * rows],
-            pivots_t: vec![0; rows],
-            transposed: false,
             tangent,
             tangent_ready: false,
             column: vec![0.0; rows],
@@ -846,13 +842,12 @@ impl Linearisation {
             dh2: &self.dh2,
         };
         jacobians_f64(sh, &terms, &mut self.jac, &mut self.pjac);
-        // R_z, column-major, factored (R_zᵀ only when a contraction asks for it).
+        // R_z, column-major, factored.
         for (c, &zc) in self.z_columns.iter().enumerate() {
             for r in 0..rows {
                 self.factor[c * rows + r] = self.jac[r * w + zc];
             }
         }
-        self.transposed = false;
         lu_factor_packed(&mut self.factor, rows, &mut self.pivots)?;
         self.tangent_ready = false;
         // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve.
@@ -941,24 +936,6 @@ impl Linearisation {
             }
         }
         self.tangent_ready = true;
-    }
-
-    /// `R_zᵀ`'s factor, for the adjoint of a contraction (made once per linearisation).
-    fn factor_transposed(&mut self) -> Result<(), usize> {
-        if self.transposed {
-            return Ok(());
-        }
-        let (rows, w) = (self.shape.rows(), self.shape.w());
-        for (c, &zc) in self.z_columns.iter().enumerate() {
-            for r in 0..rows {
-                self.factor_t[r * rows + c] = self.jac[r * w + zc];
-            }
-        }
-        // Column c of R_zᵀ is row c of R_z, the equation of dynamic variable c (or of
-        // constraint c − n_d): a failure there is named as that unknown's.
-        lu_factor_packed(&mut self.factor_t, rows, &mut self.pivots_t)?;
-        self.transposed = true;
-        Ok(())
     }
 
     /// The first-derivative blocks into `out` (resized only when its shape differs): `dq₂/dx`
