@@ -532,9 +532,14 @@ where
         let dynamic = &self.split.dynamic;
         let (n, nd) = (self.jacobian.nrows(), dynamic.len());
         let (jac, packed) = (self.jacobian.as_slice(), self.factors.as_mut_slice());
-        for (cj, &j) in dynamic.iter().enumerate() {
-            for (ci, &i) in dynamic.iter().enumerate() {
-                packed[cj * nd + ci] = jac[j * n + i];
+        if nd == n {
+            // Every variable dynamic: the block is the whole Jacobian, copied as it is.
+            packed[..n * n].copy_from_slice(jac);
+        } else {
+            for (cj, &j) in dynamic.iter().enumerate() {
+                for (ci, &i) in dynamic.iter().enumerate() {
+                    packed[cj * nd + ci] = jac[j * n + i];
+                }
             }
         }
         lu_factor_packed(packed, nd, self.pivots.as_mut_slice()).map_err(|c| {
@@ -824,7 +829,9 @@ where
             let mut largest: f64 = 0.0;
             for &i in &self.split.dynamic {
                 q_next[i] += self.residual[i];
-                largest = largest.max(self.residual[i].abs());
+                let x = self.residual[i].abs();
+                // (A plain comparison: f64::max's NaN test made each row wait on the last.)
+                largest = if x > largest { x } else { largest };
             }
             if self.split.rows > 0 {
                 self.lambda += &self.dlambda;
