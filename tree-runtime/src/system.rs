@@ -301,6 +301,55 @@ impl Sink<f64> for ConstraintTerms {
     }
 }
 
+/// The [`System`] methods that describe the model — sizes, names, initial state, damping,
+/// inputs — for a system that holds its [`tree_model::Model`] in a field `model` and is
+/// `Dyn`-sized (the interpreted system and the paper's reference): written once here.
+macro_rules! described_by_model {
+    () => {
+        fn dim(&self) -> nalgebra::Dyn {
+            nalgebra::Dyn(self.model.variables.len())
+        }
+
+        fn variable_name(&self, i: usize) -> &str {
+            &self.model.variables[i].name
+        }
+
+        fn frame_count(&self) -> usize {
+            self.model.frames.len()
+        }
+
+        fn frame_name(&self, k: usize) -> &str {
+            &self.model.frames[k].name
+        }
+
+        fn initial(&self, i: usize) -> (f64, f64) {
+            let v = &self.model.variables[i];
+            (v.q0, v.dq0)
+        }
+
+        fn damping(&self, i: usize) -> f64 {
+            self.model.variables[i].damping
+        }
+
+        fn is_angle(&self, i: usize) -> bool {
+            self.model.is_angle(i)
+        }
+
+        fn input_count(&self) -> usize {
+            self.model.inputs.len()
+        }
+
+        fn input_name(&self, k: usize) -> &str {
+            &self.model.inputs[k].name
+        }
+
+        fn input_variable(&self, k: usize) -> usize {
+            self.model.inputs[k].variable
+        }
+    };
+}
+pub(crate) use described_by_model;
+
 /// A mechanical system in generalized coordinates: a tree whose Lagrangian and derivatives
 /// can be evaluated at any state. `N` is `Const<n>` for generated systems (nothing is
 /// allocated per evaluation) and `Dyn` for the interpreted one.

@@ -151,46 +151,7 @@ impl TreeSystem {
 impl System for TreeSystem {
     type N = Dyn;
 
-    fn dim(&self) -> Dyn {
-        Dyn(self.model.variables.len())
-    }
-
-    fn variable_name(&self, i: usize) -> &str {
-        &self.model.variables[i].name
-    }
-
-    fn frame_count(&self) -> usize {
-        self.model.frames.len()
-    }
-
-    fn frame_name(&self, k: usize) -> &str {
-        &self.model.frames[k].name
-    }
-
-    fn initial(&self, i: usize) -> (f64, f64) {
-        let v = &self.model.variables[i];
-        (v.q0, v.dq0)
-    }
-
-    fn damping(&self, i: usize) -> f64 {
-        self.model.variables[i].damping
-    }
-
-    fn is_angle(&self, i: usize) -> bool {
-        self.model.is_angle(i)
-    }
-
-    fn input_count(&self) -> usize {
-        self.model.inputs.len()
-    }
-
-    fn input_name(&self, k: usize) -> &str {
-        &self.model.inputs[k].name
-    }
-
-    fn input_variable(&self, k: usize) -> usize {
-        self.model.inputs[k].variable
-    }
+    crate::system::described_by_model!();
 
     fn motion(&self, i: usize) -> Option<Motion> {
         self.model.variables[i].motion.clone()
