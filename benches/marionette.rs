@@ -13,6 +13,7 @@ use tree_mech::integrate::{
     StepDerivatives, ViSettings,
 };
 use tree_mech::nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
+use tree_mech::runtime::batch::{trajectory, Rollout, StepLinearizer};
 use tree_mech::runtime::linearize::{
     continuous_derivatives_into, ContinuousDerivatives, ContinuousWorkspace,
 };
@@ -71,6 +72,18 @@ fn main() {
             "interpreted_us {:.2}",
             linearise_trajectory(&mut interpreted)
         );
+        // The same through `batch::linearize_trajectory` (a recorded run, its steps checked,
+        // the thread pool made per call): on one thread and on two.
+        for threads in [1, 2] {
+            println!(
+                "compiled_batch_{threads}_us {:.2}",
+                batch_linearise(&TrepPuppet, threads)
+            );
+            println!(
+                "interpreted_batch_{threads}_us {:.2}",
+                batch_linearise(&interpreted, threads)
+            );
+        }
         return;
     }
     println!("| 10 s, Δt = 0.01 | compiled [ms] | interpreted [ms] | interpreted / compiled | compiled per step [µs] | interpreted per step [µs] | Newton iterations / step |");
@@ -186,6 +199,34 @@ where
                 .expect("the step's derivatives");
         }
     }) / 100.0
+}
+
+/// Mean µs per step (best of 30 calls) of a `batch::StepLinearizer` on `threads` threads
+/// over a 1 s VI run of the model from its start at Δt = 0.01 (made once, as iLQR would).
+fn batch_linearise<S>(sys: &S, threads: usize) -> f64
+where
+    S: System + Clone + Send + Sync,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    MidpointVi<S::N>: Send,
+    tree_mech::runtime::Vector<S::N>: Send,
+{
+    let settings = ViSettings::default();
+    let (q0, dq0) = sys.initial_state();
+    let start = Rollout {
+        q0: q0.as_slice().to_vec(),
+        dq0: dq0.as_slice().to_vec(),
+        ..Rollout::default()
+    };
+    let options = SimOptions::new(Method::Vi(settings), 0.01, 1.0);
+    let run = trajectory(&mut sys.clone(), &start, &options, &mut |_| Ok(())).expect("the run");
+    let steps = (run.len() - 1) as f64;
+    let mut linearizer = StepLinearizer::new(sys, &settings, threads).expect("the threads");
+    let mut out = Vec::new();
+    best_of(30, 1, || {
+        linearizer
+            .linearize_into(&run, &mut out)
+            .expect("the steps");
+    }) / steps
 }
 
 /// `[step, step + first derivatives, contracted second derivatives, continuous

@@ -197,6 +197,35 @@ fn a_discrete_system_step_allocates_nothing() {
     assert_eq!(n, 0, "{n} allocations in 19 discrete steps");
 }
 
+/// A step linearizer on the caller's thread allocates nothing once its buffers fit the run:
+/// the second linearisation of a constrained run with a moving kinematic hand and an input
+/// (its first step's momentum formed again included).
+#[test]
+fn a_trajectory_linearisation_allocates_nothing_once_sized() {
+    use tree_mech::integrate::{InputSchedule, Method, SimOptions};
+    use tree_mech::runtime::batch::{trajectory, Rollout, StepLinearizer};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/trep-vi.toml");
+    let mut sys = TreeSystem::new(&tree_mech::model::from_toml_file(path).unwrap()).unwrap();
+    let start = Rollout {
+        q0: sys.initial_state().0.as_slice().to_vec(),
+        dq0: vec![0.0; sys.dof()],
+        inputs: InputSchedule::constant(vec![0.4]),
+    };
+    let settings = ViSettings::default();
+    let options = SimOptions::new(Method::Vi(settings), 0.01, 0.2);
+    let run = trajectory(&mut sys, &start, &options, &mut |_| Ok(())).unwrap();
+    let mut linearizer = StepLinearizer::new(&sys, &settings, 1).unwrap();
+    let mut out = Vec::new();
+    linearizer.linearize_into(&run, &mut out).unwrap();
+    let n = allocations(|| linearizer.linearize_into(&run, &mut out).unwrap());
+    assert_eq!(
+        n,
+        0,
+        "{n} allocations linearising {} steps again",
+        out.len()
+    );
+}
+
 /// No allocation between successive iterations' reports (`counts`: this thread's running
 /// count at each report), over at least three iterations.
 #[track_caller]

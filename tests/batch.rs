@@ -5,7 +5,7 @@
 use tree_mech::integrate::{run_with_inputs, InputSchedule, Method, SimOptions, ViSettings};
 use tree_mech::runtime::batch::{rollouts, Rollout};
 use tree_mech::runtime::ModelMotions;
-use tree_mech::{model, tree_model, NoForce, Trajectory, TreeSystem};
+use tree_mech::{model, tree_model, NoForce, System, Trajectory, TreeSystem};
 
 tree_model!(struct Cart from "tests/models/cart.toml");
 
@@ -190,4 +190,101 @@ fn a_sweep_runs_each_rollout_on_its_own_parameters() {
         err.to_string().contains("1 systems for 0 rollouts"),
         "{err}"
     );
+}
+
+/// A trajectory's steps linearised at once (`linearize_trajectory`) are each step's own
+/// derivatives: taken again from its recorded start (`λ` of the step as Newton's guess) and
+/// linearised right after it (`MidpointVi::derivatives`, the documented use), they agree to
+/// the step's tolerance — on a model with a constraint, a moving kinematic hand, an input
+/// that changes every step, damping and a spring, both forcings. Any thread count gives the
+/// same bits; a run recorded every second step, one of another integrator and another
+/// model's are refused with a sentence.
+#[test]
+fn trajectories_linearise_step_by_step_whatever_the_thread_count() {
+    use tree_mech::integrate::{Forcing, MidpointVi, StepContext};
+    use tree_mech::runtime::batch::{linearize_trajectory, trajectory};
+    use tree_mech::runtime::{ConstraintTerms, Order};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/trep-vi.toml");
+    let mut sys = TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap();
+    let rows = (0..30).map(|k| (0.01 * k as f64, vec![(0.7 * k as f64).sin()]));
+    let start = Rollout {
+        q0: sys.initial_state().0.as_slice().to_vec(),
+        dq0: vec![0.0; sys.dof()],
+        inputs: InputSchedule::from_rows(rows.collect()).unwrap(),
+    };
+    for forcing in [Forcing::Split, Forcing::Left] {
+        let settings = ViSettings {
+            forcing,
+            ..ViSettings::default()
+        };
+        let options = SimOptions::new(Method::Vi(settings), 0.01, 0.25);
+        let run = trajectory(&mut sys, &start, &options, &mut |_| Ok(())).unwrap();
+        let steps = linearize_trajectory(&sys, &run, &settings, 1).unwrap();
+        assert_eq!(steps.len(), run.len() - 1);
+        for threads in [2, 0] {
+            let again = linearize_trajectory(&sys, &run, &settings, threads).unwrap();
+            assert_eq!(again, steps, "{threads} threads");
+        }
+        let mut vi = MidpointVi::new(
+            &sys,
+            ViSettings {
+                derivatives: true,
+                ..settings
+            },
+        );
+        let mut motion = ModelMotions::of(&sys);
+        let vector = |x: &[f64]| tree_mech::nalgebra::DVector::from_column_slice(x);
+        for (k, step) in steps.iter().enumerate() {
+            let (q1, mut p1) = (vector(run.q(k)), vector(run.p(k).unwrap()));
+            if k == 0 {
+                // The run's first step starts from p₀⁻, not the p(0) recorded (a constraint).
+                let mut c = ConstraintTerms::zeros(1, sys.dof());
+                sys.constraints(&q1, &q1.map(|_| 0.0), Order::First, &mut c);
+                let lambda0 = vector(run.lambda(0));
+                vi.start_constrained(&c.dh, &lambda0, 0.01, &mut p1);
+            }
+            let (mut q, mut p, mut next) = (q1.clone(), p1.clone(), q1.clone());
+            vi.lambda.copy_from_slice(run.lambda(k + 1));
+            vi.predict_from(&vector(run.dq(k)));
+            let mut force = NoForce;
+            let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.01);
+            (cx.index, cx.t, cx.u) = (k, run.t[k], run.u(k));
+            vi.step(&mut cx, &mut q, &mut p, &mut next).unwrap();
+            let own = vi.derivatives(&mut cx, &q1, &p1, &q).unwrap();
+            for (a, b) in [
+                (&own.q2_dq1, &step.q2_dq1),
+                (&own.p2_dp1, &step.p2_dp1),
+                (&own.q2_du1, &step.q2_du1),
+                (&own.p2_dk2, &step.p2_dk2),
+                (&own.lambda_dq1, &step.lambda_dq1),
+            ] {
+                let scale = a.amax().max(1.0);
+                assert!((a - b).amax() < 1e-8 * scale, "step {k}: {a} against {b}");
+            }
+        }
+    }
+    // Samples every second step, RK4's samples (no momenta), another model's.
+    let settings = ViSettings::default();
+    let every = SimOptions {
+        every: 2,
+        ..SimOptions::new(Method::Vi(settings), 0.01, 0.1)
+    };
+    let sparse = trajectory(&mut sys, &start, &every, &mut |_| Ok(())).unwrap();
+    for threads in [1, 2] {
+        // Each worker stops at its own first bad step; the earliest is reported.
+        let e = linearize_trajectory(&sys, &sparse, &settings, threads).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("step 0 of the trajectory (t = 0) does not solve"),
+            "{threads} threads: {e}"
+        );
+    }
+    let rk4 = SimOptions::new(Method::Rk4, 0.01, 0.1);
+    let explicit = trajectory(&mut sys, &start, &rk4, &mut |_| Ok(())).unwrap();
+    let e = linearize_trajectory(&sys, &explicit, &settings, 1).unwrap_err();
+    assert!(e.to_string().contains("record one with the VI"), "{e}");
+    let cart_path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/cart.toml");
+    let cart = TreeSystem::new(&model::from_toml_file(cart_path).unwrap()).unwrap();
+    let e = linearize_trajectory(&cart, &sparse, &settings, 1).unwrap_err();
+    assert!(e.to_string().contains("are not the system's"), "{e}");
 }

@@ -955,6 +955,11 @@ where
         }
     }
 
+    /// `max |h(q₂)|` at the end of the last step evaluated (0 without constraints).
+    pub fn violation(&self) -> f64 {
+        self.residual_norms().1
+    }
+
     /// `(max |dynamic residual|, max |h(q₂)|)`.
     fn residual_norms(&self) -> (f64, f64) {
         let violation = if self.split.rows > 0 {

@@ -1,7 +1,8 @@
 //! Many rollouts at once: one [`run_with_inputs`] per start state and input schedule, spread
 //! over a pool of threads (rayon), each worker with its own copy of the system. Every
 //! rollout is computed by one thread from its own inputs alone, so the results are bitwise
-//! the same whatever the number of threads; each rollout's failure is its own.
+//! the same whatever the number of threads; each rollout's failure is its own. Likewise the
+//! first derivatives of every step of a VI trajectory ([`linearize_trajectory`]).
 //!
 //! ```
 //! use tree_runtime::batch::{rollouts, Rollout};
@@ -30,6 +31,10 @@ use crate::error::SimError;
 use crate::integrate::{run_with_inputs, InputSchedule, SimOptions};
 use crate::system::System;
 use crate::trajectory::Trajectory;
+
+mod steps;
+
+pub use steps::{linearize_trajectory, StepLinearizer};
 
 /// One rollout's start and inputs.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -101,7 +106,7 @@ where
 /// (a million) would try to start that many.
 const THREADS_PER_CORE: usize = 8;
 
-fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
+pub(crate) fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let most = (THREADS_PER_CORE * cores).max(64);
     if threads > most {
