@@ -9,7 +9,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use numpy::ndarray::{s, Array1, Array2, Array3, Ix1, Ix2};
-use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3};
+use numpy::{
+    AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3, PyReadonlyArray1,
+    PyReadonlyArray2,
+};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -20,11 +23,14 @@ use tree_mech::integrate::{
 };
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
-use tree_mech::runtime::batch::{rollouts as run_rollouts, rollouts_of, trajectory, Rollout};
+use tree_mech::runtime::batch::{
+    linearize_trajectory, rollouts as run_rollouts, rollouts_of, trajectory, Rollout,
+};
 use tree_mech::runtime::dynamics::inverse_dynamics;
 use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state_with};
 use tree_mech::runtime::kinematics::{Kinematics as FrameKinematics, Reference};
 use tree_mech::runtime::report::{self, Entry, Explicit, Request as ReportRequest};
+use tree_mech::runtime::trajectory::Sample;
 use tree_mech::runtime::Vector;
 use tree_mech::runtime::{ModelMotions, Prescription};
 use tree_mech::{
@@ -176,6 +182,66 @@ impl Model {
 
     fn system(&self) -> TreeSystem {
         self.sys.lock().expect("no panic holds the lock").clone()
+    }
+
+    /// The run `trajectory` holds, back as the runtime's (what `linearize_trajectory` reads:
+    /// times, q, q̇, the VI's momenta, λ and the inputs of every sample).
+    fn core_trajectory(&self, py: Python<'_>, trajectory: &Trajectory) -> PyResult<CoreTrajectory> {
+        let table = |what: &str, a: &Py<PyAny>| -> PyResult<Array2<f64>> {
+            let a: PyReadonlyArray2<'_, f64> = a.bind(py).extract().map_err(|_| {
+                bad(format!(
+                    "the trajectory's `{what}` is not a 2-D array of floats"
+                ))
+            })?;
+            Ok(a.as_array().to_owned())
+        };
+        if trajectory.p.is_none(py) {
+            return Err(bad(
+                "the trajectory has no momenta: linearise a run of simulate(..., integrator=\"vi\")",
+            ));
+        }
+        let t: PyReadonlyArray1<'_, f64> = trajectory.t.bind(py).extract()?;
+        let t = t.as_array();
+        let (q, dq, p) = (
+            table("q", &trajectory.q)?,
+            table("dq", &trajectory.dq)?,
+            table("p", &trajectory.p)?,
+        );
+        let (lam, u) = (table("lam", &trajectory.lam)?, table("u", &trajectory.u)?);
+        let (samples, n) = (t.len(), self.n());
+        let fits = |a: &Array2<f64>, width: usize| a.nrows() == samples && a.ncols() == width;
+        let m = self.model.constraint_row_names().len();
+        let inputs = self.model.inputs.len();
+        if !(fits(&q, n) && fits(&dq, n) && fits(&p, n) && fits(&lam, m) && fits(&u, inputs)) {
+            return Err(bad(format!(
+                "the trajectory's arrays are not ({samples}, …) samples of this model's {n} \
+                 variables, {m} constraint rows and {inputs} inputs"
+            )));
+        }
+        let mut run =
+            CoreTrajectory::new(trajectory.variables.clone(), self.constraints(), samples);
+        let row = |a: &Array2<f64>, k: usize| a.row(k).to_vec();
+        for k in 0..samples {
+            let (qk, dqk, pk, lk, uk) = (
+                row(&q, k),
+                row(&dq, k),
+                row(&p, k),
+                row(&lam, k),
+                row(&u, k),
+            );
+            run.push(&Sample {
+                step: k,
+                t: t[k],
+                q: &qk,
+                dq: &dqk,
+                p: Some(&pk),
+                energy: 0.0,
+                lambda: &lk,
+                violation: 0.0,
+                u: &uk,
+            });
+        }
+        Ok(run)
     }
 
     fn n(&self) -> usize {
@@ -356,6 +422,8 @@ struct Trajectory {
     q: Py<PyAny>,
     /// Velocities (samples, n).
     dq: Py<PyAny>,
+    /// The VI's discrete momenta (samples, n); None for another integrator.
+    p: Py<PyAny>,
     /// Total energy (samples,).
     energy: Py<PyAny>,
     /// Constraint forces (samples, constraint rows).
@@ -415,6 +483,12 @@ impl Trajectory {
             t: vector(py, &t.t),
             q: rows(py, len, n, |k| t.q(k).to_vec()),
             dq: rows(py, len, n, |k| t.dq(k).to_vec()),
+            p: match t.p(len.saturating_sub(1)) {
+                Some(_) => rows(py, len, n, |k| {
+                    t.p(k).map_or(vec![f64::NAN; n], <[f64]>::to_vec)
+                }),
+                None => py.None(),
+            },
             energy: vector(py, &t.energy),
             lam: rows(py, len, m, |k| t.lambda(k).to_vec()),
             violation: vector(py, &t.violation),
@@ -937,6 +1011,68 @@ impl Model {
                 step.set_item(name, entry(py, e))?;
             }
             out.set_item(*key, step)?;
+        }
+        Ok(out)
+    }
+
+    /// The first derivatives of every step of `trajectory`, a run of this model by the VI
+    /// (`simulate(..., integrator="vi")`, every step recorded, the same `alpha`, `forcing`,
+    /// `newton_tol`) — trep's `DSystem.linearize_trajectory`: a dict with the names of the
+    /// variables, dynamic, kinematic, inputs and constraints, and trep's `q2_dq1` …
+    /// `lambda1_dk2` (as `linearize`'s `vi` block), each stacked over the steps (steps,
+    /// rows, columns). The steps are shared out over `threads` threads (None: every core;
+    /// the same numbers whatever the count), the GIL released. A step whose recorded end
+    /// does not solve its equations (samples every second step, a subdivided step, other
+    /// settings) raises `SimulationError` naming it.
+    #[pyo3(signature = (trajectory, alpha=0.5, forcing="split", newton_tol=None, threads=None))]
+    fn linearize_trajectory<'py>(
+        &self,
+        py: Python<'py>,
+        trajectory: PyRef<'_, Trajectory>,
+        alpha: f64,
+        forcing: &str,
+        newton_tol: Option<f64>,
+        threads: Option<i64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let threads = threads.map(|k| count("threads", k, 1)).transpose()?;
+        let Method::Vi(settings) = method("vi", alpha, forcing, newton_tol, 0.0, 0.0)? else {
+            unreachable!("the VI's settings")
+        };
+        let run = self.core_trajectory(py, &trajectory)?;
+        let sys = self.system();
+        let steps = py
+            .detach(|| linearize_trajectory(&sys, &run, &settings, threads.unwrap_or(0)))
+            .map_err(|e| sim_error(py, &e))?;
+        let out = PyDict::new(py);
+        out.set_item("variables", self.names())?;
+        out.set_item("dynamic", self.dynamic())?;
+        out.set_item("kinematic", self.kinematic())?;
+        out.set_item("inputs", self.inputs())?;
+        out.set_item("constraints", self.constraints())?;
+        for of in StepOutput::ALL {
+            for by in StepInput::ALL {
+                let (rows, columns) = steps.first().map_or((0, 0), |s| s.block(of, by).shape());
+                let mut stack = Array3::zeros((steps.len(), rows, columns));
+                for (k, step) in steps.iter().enumerate() {
+                    // trep's λ₁ is −Δt times this integrator's force-scaled λ.
+                    let scale = match of {
+                        StepOutput::Lambda => run.t[k] - run.t[k + 1],
+                        _ => 1.0,
+                    };
+                    let m = step.block(of, by);
+                    stack
+                        .slice_mut(s![k, .., ..])
+                        .assign(&Array2::from_shape_fn((rows, columns), |(i, j)| {
+                            scale * m[(i, j)]
+                        }));
+                }
+                let name = match of {
+                    StepOutput::Q2 => "q2",
+                    StepOutput::P2 => "p2",
+                    StepOutput::Lambda => "lambda1",
+                };
+                out.set_item(format!("{name}_d{}", by.name()), stack.into_pyarray(py))?;
+            }
         }
         Ok(out)
     }

@@ -253,6 +253,37 @@ def test_linearize_gives_the_exact_step_derivatives():
         m.linearize(second_order=True)
 
 
+def test_a_trajectory_linearises_step_by_step():
+    # A constrained run with a moving kinematic hand and an input that changes each step.
+    m = tm.load(str(ROOT / "tests/models/trep-vi.toml"))
+    u = np.sin(0.7 * np.arange(25))[:, None]
+    run = m.simulate(0.25, 0.01, u=u)
+    assert run.p.shape == run.q.shape and run.p.dtype == np.float64
+    lin = m.linearize_trajectory(run, threads=1)
+    steps, nd, n = len(run) - 1, len(m.dynamic), len(m.variables)
+    assert lin["q2_dq1"].shape == (steps, nd, n)
+    assert lin["lambda1_dk2"].shape == (steps, len(m.constraints), len(m.kinematic))
+    assert lin["dynamic"] == m.dynamic
+    # Step k is the one-step linearisation from its recorded (q_k, p_k) with its inputs.
+    for k in (3, 17):
+        dynamic = [m.variables.index(v) for v in m.dynamic]
+        one = m.linearize(q=run.q[k], dq=run.dq[k], u=run.u[k], t=run.t[k], dt=0.01,
+                          p=run.p[k][dynamic])["vi"]
+        np.testing.assert_allclose(one["q2"], run.q[k + 1], rtol=1e-9, atol=1e-12)
+        for key in ("q2_dq1", "p2_dp1", "q2_du1", "lambda1_dq1"):
+            scale = max(np.abs(one[key]).max(), 1.0)
+            np.testing.assert_allclose(lin[key][k], one[key], rtol=0, atol=1e-7 * scale)
+    # The same numbers on any number of threads.
+    for threads in (2, None):
+        again = m.linearize_trajectory(run, threads=threads)
+        blocks = [key for key in lin if key.startswith(("q2", "p2", "lambda1"))]
+        assert all(np.array_equal(again[key], lin[key]) for key in blocks)
+    with pytest.raises(tm.SimulationError, match="step 0 of the trajectory"):
+        m.linearize_trajectory(m.simulate(0.1, 0.01, u=u[:10], every=2))
+    with pytest.raises(ValueError, match="no momenta"):
+        m.linearize_trajectory(m.simulate(0.1, 0.01, integrator="rk4"))
+
+
 def test_rollouts_take_a_model_each_for_a_sweep():
     m = tm.load(PENDULUM)
     heavy = m.with_parameters(masses={"bob": 3.0})

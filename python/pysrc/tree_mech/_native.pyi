@@ -17,6 +17,7 @@ class Trajectory:
     t: npt.NDArray[np.float64]
     q: npt.NDArray[np.float64]
     dq: npt.NDArray[np.float64]
+    p: Optional[npt.NDArray[np.float64]]
     energy: npt.NDArray[np.float64]
     lam: npt.NDArray[np.float64]
     violation: npt.NDArray[np.float64]
@@ -127,6 +128,14 @@ class Model:
         alpha: float = 0.5,
         second_order: bool = False,
         ddq: Optional[ArrayLike] = None,
+    ) -> dict: ...
+    def linearize_trajectory(
+        self,
+        trajectory: Trajectory,
+        alpha: float = 0.5,
+        forcing: str = "split",
+        newton_tol: Optional[float] = None,
+        threads: Optional[int] = None,
     ) -> dict: ...
     def rollouts(
         self,
