@@ -3,7 +3,8 @@
 # one run: trep's DSystem.linearize_trajectory over 100 steps at dt = 0.01 from rest (best of
 # 10 passes, tools/reference/trep_linearize.py) and tree-mech's first derivatives of the same steps,
 # compiled by tree_model! and interpreted (best of 30 passes, `cargo bench --bench marionette --
-# linearise`). Needs trep's Python 2.7 venv: TREP_PYTHON=/path/to/v27/bin/python.
+# linearise`), step by step and through batch::StepLinearizer on one thread and on two. Needs
+# trep's Python 2.7 venv: TREP_PYTHON=/path/to/v27/bin/python.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 py=${TREP_PYTHON:?set TREP_PYTHON to trep\'s Python 2.7}
@@ -12,9 +13,13 @@ times=$("$py" tools/reference/trep_linearize.py)
 echo "$times"
 trep=$(echo "$times" | awk '/trep_linearize_ms_per_step/ {print $2}')
 bench=$(cargo bench -q --bench marionette -- linearise)
-compiled=$(echo "$bench" | awk '/compiled_us/ {print $2}')
-interpreted=$(echo "$bench" | awk '/interpreted_us/ {print $2}')
+field() { echo "$bench" | awk -v k="$1" '$1 == k {print $2}'; }
 python3 -c "
-t, c, i = $trep * 1e3, $compiled, $interpreted
+t = $trep * 1e3
 print(f'trep linearize_trajectory {t:.0f} us a step')
-print(f'tree-mech compiled {c:.1f} us: {t / c:.1f}x; interpreted {i:.1f} us: {t / i:.1f}x')"
+for what, us in [('compiled', $(field compiled_us)), ('interpreted', $(field interpreted_us)),
+                 ('compiled, StepLinearizer on 1 thread', $(field compiled_batch_1_us)),
+                 ('interpreted, StepLinearizer on 1 thread', $(field interpreted_batch_1_us)),
+                 ('compiled, StepLinearizer on 2 threads', $(field compiled_batch_2_us)),
+                 ('interpreted, StepLinearizer on 2 threads', $(field interpreted_batch_2_us))]:
+    print(f'tree-mech {what} {us:.1f} us: {t / us:.1f}x')"
