@@ -184,6 +184,18 @@ impl Model {
         self.sys.lock().expect("no panic holds the lock").clone()
     }
 
+    /// A dict naming the model's parts in order (`variables`, `dynamic`, `kinematic`,
+    /// `inputs`, `constraints`): how a linearisation's dict begins.
+    fn named_parts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let out = PyDict::new(py);
+        out.set_item("variables", self.names())?;
+        out.set_item("dynamic", self.dynamic())?;
+        out.set_item("kinematic", self.kinematic())?;
+        out.set_item("inputs", self.inputs())?;
+        out.set_item("constraints", self.constraints())?;
+        Ok(out)
+    }
+
     /// The run `trajectory` holds, back as the runtime's (what `linearize_trajectory` reads:
     /// times, q, q̇, the VI's momenta, λ and the inputs of every sample).
     fn core_trajectory(&self, py: Python<'_>, trajectory: &Trajectory) -> PyResult<CoreTrajectory> {
@@ -996,12 +1008,7 @@ impl Model {
             .detach(move || report::linearize_with(sys, &q, &dq, &request, &mut motion))
             .map_err(|e| sim_error(py, &e))?;
         drop(guard);
-        let out = PyDict::new(py);
-        out.set_item("variables", self.names())?;
-        out.set_item("dynamic", self.dynamic())?;
-        out.set_item("kinematic", self.kinematic())?;
-        out.set_item("inputs", self.inputs())?;
-        out.set_item("constraints", self.constraints())?;
+        let out = self.named_parts(py)?;
         for (key, e) in &r.continuous {
             out.set_item(key, entry(py, e))?;
         }
@@ -1043,12 +1050,7 @@ impl Model {
         let steps = py
             .detach(|| linearize_trajectory(&sys, &run, &settings, threads.unwrap_or(0)))
             .map_err(|e| sim_error(py, &e))?;
-        let out = PyDict::new(py);
-        out.set_item("variables", self.names())?;
-        out.set_item("dynamic", self.dynamic())?;
-        out.set_item("kinematic", self.kinematic())?;
-        out.set_item("inputs", self.inputs())?;
-        out.set_item("constraints", self.constraints())?;
+        let out = self.named_parts(py)?;
         for of in StepOutput::ALL {
             for by in StepInput::ALL {
                 let (rows, columns) = steps.first().map_or((0, 0), |s| s.block(of, by).shape());
