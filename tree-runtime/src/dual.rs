@@ -5,7 +5,7 @@
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
 use crate::order::Order;
-use crate::outputs::{Field, Index, Output, Scratch, Sink};
+use crate::outputs::{clear_among, Field, Index, Output, Scratch, Sink};
 use crate::scalar::Scalar;
 
 /// `v + d·ε`.
@@ -199,10 +199,10 @@ impl DualOutputs {
     /// `Order::Dynamics` on `q̇ᵀD²h q̇`, at `Order::Full` `D²h` (each row's block on its
     /// variables alone where they are known, [`Self::with_constraint_variables`]).
     pub fn clear_constraints(&mut self, order: Order) {
-        for f in [Field::H, Field::Dh, Field::DhDot] {
-            if f != Field::DhDot || order >= Order::Dynamics {
-                self.fields[f as usize].fill(Dual::default());
-            }
+        self.fields[Field::H as usize].fill(Dual::default());
+        self.fields[Field::Dh as usize].fill(Dual::default());
+        if order >= Order::Dynamics {
+            self.fields[Field::DhDot as usize].fill(Dual::default());
         }
         if order < Order::Full {
             return;
@@ -212,13 +212,8 @@ impl DualOutputs {
         if self.variables.is_empty() {
             d2h.fill(Dual::default());
         }
-        for (r, vars) in self.variables.iter().enumerate() {
-            let block = &mut d2h[r * n * n..(r + 1) * n * n];
-            for &i in vars {
-                for &j in vars {
-                    block[i * n + j] = Dual::default();
-                }
-            }
+        for (block, vars) in d2h.chunks_exact_mut(n * n).zip(&self.variables) {
+            clear_among(block, n, vars, Dual::default());
         }
     }
 

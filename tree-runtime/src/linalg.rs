@@ -168,6 +168,19 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
     forward_backward(&a[..n * n], n, &mut b[..n]);
 }
 
+/// `a · b` in four running sums (one would wait on each addition; four vectorise).
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut sums = [0.0f64; 4];
+    for (a, b) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for l in 0..4 {
+            sums[l] += a[l] * b[l];
+        }
+    }
+    let tail = a.len().min(b.len()) / 4 * 4;
+    let rest: f64 = a[tail..].iter().zip(&b[tail..]).map(|(a, b)| a * b).sum();
+    (sums[0] + sums[1]) + (sums[2] + sums[3]) + rest
+}
+
 /// Solves `Aᵀ x = b[..n]` with the factors of `A` from [`lu_factor_packed`] (`P A = L U`, so
 /// `Aᵀ = Uᵀ Lᵀ P`): `Uᵀ w = b` forward, `Lᵀ y = w` backward — both reading U's and L's
 /// columns, contiguous in the column-major factor, as dot products — then `x = Pᵀ y`, the
@@ -175,14 +188,11 @@ pub fn lu_solve_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
 pub fn lu_solve_transposed_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
     let (a, b) = (&a[..n * n], &mut b[..n]);
     for i in 0..n {
-        let column = &a[i * n..i * n + i];
-        let s: f64 = column.iter().zip(&b[..i]).map(|(u, w)| u * w).sum();
+        let s = dot(&a[i * n..i * n + i], &b[..i]);
         b[i] = (b[i] - s) / a[i * n + i];
     }
     for i in (0..n).rev() {
-        let below = &a[i * n + i + 1..(i + 1) * n];
-        let s: f64 = below.iter().zip(&b[i + 1..]).map(|(l, y)| l * y).sum();
-        b[i] -= s;
+        b[i] -= dot(&a[i * n + i + 1..(i + 1) * n], &b[i + 1..]);
     }
     for (j, &p) in pivots[..n].iter().enumerate().rev() {
         b.swap(p, j);
@@ -770,6 +780,18 @@ mod tests {
         // A second column that is the first's times (1 + 1e-16): its pivot is rounding.
         let mut rounding = vec![1.0, 2.0, 1.0 + 1e-16, 2.0 + 2e-16];
         assert_eq!(lu_factor_packed(&mut rounding, 2, &mut pivots), Err(1));
+    }
+
+    /// The four-sum dot product equals the sum written out at every length (whole chunks,
+    /// tails, empty).
+    #[test]
+    fn dot_products_in_four_sums() {
+        for len in 0..11 {
+            let a: Vec<f64> = (0..len).map(|i| (i as f64 * 0.7).sin()).collect();
+            let b: Vec<f64> = (0..len).map(|i| 1.0 + i as f64 * 0.3).collect();
+            let plain: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+            assert!((dot(&a, &b) - plain).abs() < 1e-14, "length {len}");
+        }
     }
 
     /// The transposed solve with `A`'s factors solves `Aᵀ x = b`, for orders with row

@@ -191,3 +191,14 @@ impl<T> std::fmt::Debug for Scratch<T> {
         write!(f, "Scratch({} entries)", self.0.len())
     }
 }
+
+/// Zeroes the entries `(i, j)`, `i` and `j` both among `vars`, of the `n × n` column-major
+/// `block`: a constraint row's `D²h`, which an evaluation writes there alone.
+pub(crate) fn clear_among<T: Copy>(block: &mut [T], n: usize, vars: &[usize], zero: T) {
+    for &j in vars {
+        let column = &mut block[j * n..(j + 1) * n];
+        for &i in vars {
+            column[i] = zero;
+        }
+    }
+}

@@ -8,7 +8,7 @@ use tree_model::Motion;
 
 use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 pub use crate::order::Order;
-use crate::outputs::{Field, Index, Output, Scratch, Sink};
+use crate::outputs::{clear_among, Field, Index, Output, Scratch, Sink};
 use crate::se3::Pose;
 
 /// A vector over the system's configuration variables.
@@ -271,12 +271,7 @@ impl ConstraintTerms {
             }
             for (m, vars) in self.d2h.iter_mut().zip(&self.variables) {
                 let n = m.nrows();
-                for &j in vars {
-                    let column = &mut m.as_mut_slice()[j * n..(j + 1) * n];
-                    for &i in vars {
-                        column[i] = 0.0;
-                    }
-                }
+                clear_among(m.as_mut_slice(), n, vars, 0.0);
             }
         }
     }

@@ -33,7 +33,7 @@ use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
 use crate::linalg::{
-    combine_rows, lu_factor_packed, lu_solve_packed, lu_solve_packed_rows,
+    combine_rows, dot, lu_factor_packed, lu_solve_packed, lu_solve_packed_rows,
     lu_solve_transposed_packed,
 };
 use crate::outputs::Field;
@@ -159,29 +159,6 @@ struct StepTerms<'a, T> {
     dh2: &'a [T],
 }
 
-/// `out = Σ_s λ_s D²h_s` over the constraint equations (`d2h`: m symmetric n × n blocks, one
-/// after the other; `variables[s]`, when given, the variables block s lies on — it is zero
-/// elsewhere): the multipliers' term of `∂r/∂q₁` over dual numbers, once per direction.
-fn contract(lambda: &[Dual], d2h: &[Dual], variables: &[Vec<usize>], n: usize, out: &mut [Dual]) {
-    out.fill(Dual::default());
-    for (s, (&l, block)) in lambda.iter().zip(d2h.chunks_exact(n * n)).enumerate() {
-        match variables.get(s) {
-            Some(vars) => {
-                for &i in vars {
-                    for &j in vars {
-                        out[i * n + j] += l * block[i * n + j];
-                    }
-                }
-            }
-            None => {
-                for (o, &x) in out.iter_mut().zip(block) {
-                    *o += l * x;
-                }
-            }
-        }
-    }
-}
-
 /// `J = ∂R/∂w` (rows × w) and `P = ∂p₂/∂w` (n_d × w), row-major, from the step's terms:
 ///
 /// * `∂r_i/∂q₁ⱼ = D₁D₁L_d + f⁻·∂F/∂q₁ + Δt Σ_s λ_s D²h_s(q₁)`, `∂r_i/∂q₂ⱼ = D₂D₁L_d +
@@ -255,14 +232,55 @@ fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut
     }
 }
 
-/// `Σ_s λ_s D²h_s` into `out`'s rows `dynamic` (row-major, rows of `n`; D²h_s is symmetric,
-/// so its row i is its column-major column i); a multiplier at zero is skipped. Compiled also
-/// for AVX2 with fused multiply-adds and for AVX, chosen at run time.
+/// `Σ_s λ_s D²h_s` into `out`'s rows chosen by `rows[i]` (row-major, rows of `n`; D²h_s is
+/// symmetric, so its row i is its column-major column i): the multipliers' term of
+/// `∂r/∂q₁`. `d2h` holds one n × n block per constraint row, zero outside the row's
+/// variables where `variables(s)` names them; `add(o, λ, x)` is `o += λx`. A multiplier at
+/// zero adds nothing. Over `f64` at the solution ([`contract_hessians`]) and over dual
+/// numbers along each direction of the second derivatives.
+#[inline(always)]
+fn contract_on_rows<'a, T: Scalar + PartialEq + 'a>(
+    out: &mut [T],
+    n: usize,
+    rows: &[bool],
+    lambda: &[T],
+    d2h: impl Iterator<Item = &'a [T]>,
+    variables: impl Fn(usize) -> Option<&'a [usize]>,
+    add: impl Fn(&mut T, T, T),
+) {
+    for i in (0..n).filter(|&i| rows[i]) {
+        out[i * n..(i + 1) * n].fill(T::zero());
+    }
+    for (s, (&l, h)) in lambda.iter().zip(d2h).enumerate() {
+        if l == T::zero() {
+            continue;
+        }
+        match variables(s) {
+            // Only the rows and columns of the row's own variables.
+            Some(vars) => {
+                for &i in vars.iter().filter(|&&i| rows[i]) {
+                    for &j in vars {
+                        add(&mut out[i * n + j], l, h[i * n + j]);
+                    }
+                }
+            }
+            None => {
+                for i in (0..n).filter(|&i| rows[i]) {
+                    let (row, column) = (&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
+                    row.iter_mut().zip(column).for_each(|(o, &x)| add(o, l, x));
+                }
+            }
+        }
+    }
+}
+
+/// [`contract_on_rows`] over `f64` on the dynamic rows (`dynamic[i]`), from the constraints'
+/// terms. Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 fn contract_hessians(
     out: &mut [f64],
     n: usize,
-    dynamic: &[usize],
+    dynamic: &[bool],
     lambda: &[f64],
     c: &ConstraintTerms,
 ) {
@@ -278,36 +296,20 @@ fn contract_hessians(
 fn contract_hessians_with<const FUSED: bool>(
     out: &mut [f64],
     n: usize,
-    dynamic: &[usize],
+    dynamic: &[bool],
     lambda: &[f64],
     c: &ConstraintTerms,
 ) {
-    for &i in dynamic {
-        out[i * n..(i + 1) * n].fill(0.0);
-    }
-    for (s, (&l, h)) in lambda.iter().zip(&c.d2h).enumerate() {
-        if l == 0.0 {
-            continue;
-        }
-        let h = h.as_slice();
-        let add = |o: &mut f64, x: f64| *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x };
-        match c.variables(s) {
-            // Only the rows and columns of the row's own variables.
-            Some(vars) => {
-                for &i in dynamic.iter().filter(|i| vars.binary_search(i).is_ok()) {
-                    for &j in vars {
-                        add(&mut out[i * n + j], h[i * n + j]);
-                    }
-                }
-            }
-            None => {
-                for &i in dynamic {
-                    let (row, column) = (&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
-                    row.iter_mut().zip(column).for_each(|(o, &x)| add(o, x));
-                }
-            }
-        }
-    }
+    let blocks = c.d2h.iter().map(|h| h.as_slice());
+    contract_on_rows(
+        out,
+        n,
+        dynamic,
+        lambda,
+        blocks,
+        |s| c.variables(s),
+        |o, l, x| *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x },
+    );
 }
 
 /// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (the same
@@ -688,7 +690,7 @@ where
         contract_hessians(
             &mut lin.lambda_d2h1,
             n,
-            dynamic,
+            &lin.is_dynamic,
             self.lambda.as_slice(),
             &lin.c1,
         );
@@ -723,6 +725,8 @@ pub(crate) struct Linearisation {
     lambda_d2h1: Vec<f64>,
     dh2: Vec<f64>,
     lambda: Vec<f64>,
+    /// Whether each variable is dynamic (the rows `Σ_s λ_s D²h_s(q₁)` is formed on).
+    is_dynamic: Vec<bool>,
     /// The constraints at `q₁` up to `D²h`.
     c1: ConstraintTerms,
     /// `J` (rows × w) and `P` (n_d × w), row-major.
@@ -799,6 +803,7 @@ impl Linearisation {
             lambda_d2h1: vec![0.0; n * n],
             dh2: vec![0.0; m * n],
             lambda: vec![0.0; m],
+            is_dynamic: (0..n).map(|i| shape.dynamic.contains(&i)).collect(),
             c1: ConstraintTerms::zeros(m, n),
             jac: vec![0.0; rows * w],
             pjac: vec![0.0; nd * w],
@@ -1121,6 +1126,8 @@ struct DualJacobians {
     adjoint: Vec<f64>,
     /// Each constraint row's variables, where the system names them (empty: unknown).
     variables: Vec<Vec<usize>>,
+    /// Every variable (`Σ_s λ_s D²h_s` over duals is formed on every row).
+    every_row: Vec<bool>,
 }
 
 impl DualJacobians {
@@ -1160,6 +1167,7 @@ impl DualJacobians {
             pjac: vec![0.0; sh.nd() * sh.w()],
             adjoint: vec![0.0; sh.w()],
             variables,
+            every_row: vec![true; n],
         }
     }
 
@@ -1189,12 +1197,15 @@ impl DualJacobians {
         for s in 0..m {
             self.lambda[s] = Dual::new(lin.lambda[s], dir[sh.w_lambda() + s]);
         }
-        contract(
-            &self.lambda,
-            self.at_q1.field(Field::D2h),
-            &self.variables,
-            n,
+        let variables = &self.variables;
+        contract_on_rows(
             &mut self.lambda_d2h1,
+            n,
+            &self.every_row,
+            &self.lambda,
+            self.at_q1.field(Field::D2h).chunks_exact(n * n),
+            |s| variables.get(s).map(Vec::as_slice),
+            |o, l, x| *o += l * x,
         );
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
         let sources = [
@@ -1275,34 +1286,9 @@ impl DualJacobians {
     }
 }
 
-/// `a · b` in four running sums (one would wait on each addition; four vectorise).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut sums = [0.0f64; 4];
-    for (a, b) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
-        for l in 0..4 {
-            sums[l] += a[l] * b[l];
-        }
-    }
-    let tail = a.len().min(b.len()) / 4 * 4;
-    let rest: f64 = a[tail..].iter().zip(&b[tail..]).map(|(a, b)| a * b).sum();
-    (sums[0] + sums[1]) + (sums[2] + sums[3]) + rest
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The four-sum dot product equals the sum written out at every length (whole chunks,
-    /// tails, empty).
-    #[test]
-    fn dot_products_in_four_sums() {
-        for len in 0..11 {
-            let a: Vec<f64> = (0..len).map(|i| (i as f64 * 0.7).sin()).collect();
-            let b: Vec<f64> = (0..len).map(|i| 1.0 + i as f64 * 0.3).collect();
-            let plain: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
-            assert!((dot(&a, &b) - plain).abs() < 1e-14, "length {len}");
-        }
-    }
 
     /// `Σ_s λ_s D²h_s` on the chosen rows, both roundings and the dispatched kernel, against
     /// the sum written out, with the rows' variables unknown and known (each block zero
@@ -1322,11 +1308,11 @@ mod tests {
             .collect();
         let mut dense = ConstraintTerms::zeros(3, n);
         dense.d2h.clone_from(&d2h);
-        let sparse = dense.clone().with_variables(variables);
+        let sparse = dense.clone().with_variables(variables.clone());
         let lambda = [0.5, 0.0, -2.0];
-        let dynamic = [0, 2, 3];
+        let dynamic = [true, false, true, true, false];
         let expected = |i: usize, j: usize| 0.5 * d2h[0][(i, j)] - 2.0 * d2h[2][(i, j)];
-        type Kernel = fn(&mut [f64], usize, &[usize], &[f64], &ConstraintTerms);
+        type Kernel = fn(&mut [f64], usize, &[bool], &[f64], &ConstraintTerms);
         let kernels: [Kernel; 3] = [
             contract_hessians_with::<false>,
             contract_hessians_with::<true>,
@@ -1337,13 +1323,36 @@ mod tests {
             kernel(&mut out, n, &dynamic, &lambda, c);
             for i in 0..n {
                 for j in 0..n {
-                    let want = if dynamic.contains(&i) {
-                        expected(i, j)
-                    } else {
-                        7.0
-                    };
+                    let want = if dynamic[i] { expected(i, j) } else { 7.0 };
                     assert!((out[i * n + j] - want).abs() < 1e-14, "({i}, {j})");
                 }
+            }
+        }
+        // Over dual numbers on every row (the second derivatives' form): the value part is
+        // the same sum, the derivative part the multipliers' derivatives' sum.
+        let blocks: Vec<Vec<Dual>> = (d2h.iter())
+            .map(|h| h.iter().map(|&x| Dual::new(x, 0.0)).collect())
+            .collect();
+        let lambda_d = [
+            Dual::new(0.5, 1.0),
+            Dual::new(0.0, 0.0),
+            Dual::new(-2.0, 3.0),
+        ];
+        let mut out = vec![Dual::new(7.0, 7.0); n * n];
+        contract_on_rows(
+            &mut out,
+            n,
+            &[true; 5],
+            &lambda_d,
+            blocks.iter().map(Vec::as_slice),
+            |s| variables.get(s).map(Vec::as_slice),
+            |o, l, x| *o += l * x,
+        );
+        for i in 0..n {
+            for j in 0..n {
+                let d = d2h[0][(i, j)] + 3.0 * d2h[2][(i, j)];
+                let got = out[i * n + j];
+                assert!((got.v - expected(i, j)).abs() < 1e-14 && (got.d - d).abs() < 1e-14);
             }
         }
     }
