@@ -287,4 +287,28 @@ fn trajectories_linearise_step_by_step_whatever_the_thread_count() {
     let cart = TreeSystem::new(&model::from_toml_file(cart_path).unwrap()).unwrap();
     let e = linearize_trajectory(&cart, &sparse, &settings, 1).unwrap_err();
     assert!(e.to_string().contains("are not the system's"), "{e}");
+    // The system's variables but no constraint rows: refused before any step.
+    let names: Vec<String> = (0..sys.dof())
+        .map(|i| sys.variable_name(i).to_string())
+        .collect();
+    let mut bare = Trajectory::new(names, Vec::new(), 2);
+    for k in 0..2 {
+        bare.push(&tree_mech::runtime::trajectory::Sample {
+            step: k,
+            t: 0.01 * k as f64,
+            q: sparse.q(k),
+            dq: sparse.dq(k),
+            p: sparse.p(k),
+            energy: 0.0,
+            lambda: &[],
+            violation: 0.0,
+            u: &[],
+        });
+    }
+    let e = linearize_trajectory(&sys, &bare, &settings, 1).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("the trajectory has 0 constraint rows, the system 1"),
+        "{e}"
+    );
 }

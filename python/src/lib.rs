@@ -4,11 +4,12 @@
 
 mod numbers;
 
+use std::borrow::Cow;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use numpy::ndarray::{s, Array1, Array2, Array3, Ix1, Ix2};
+use numpy::ndarray::{s, Array1, Array2, Array3, ArrayView2, Axis, Ix1, Ix2};
 use numpy::{
     AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayLike3, PyReadonlyArray1,
     PyReadonlyArray2,
@@ -199,13 +200,12 @@ impl Model {
     /// The run `trajectory` holds, back as the runtime's (what `linearize_trajectory` reads:
     /// times, q, q̇, the VI's momenta, λ and the inputs of every sample).
     fn core_trajectory(&self, py: Python<'_>, trajectory: &Trajectory) -> PyResult<CoreTrajectory> {
-        let table = |what: &str, a: &Py<PyAny>| -> PyResult<Array2<f64>> {
-            let a: PyReadonlyArray2<'_, f64> = a.bind(py).extract().map_err(|_| {
+        let table = |what: &str, a: &Py<PyAny>| -> PyResult<PyReadonlyArray2<'_, f64>> {
+            a.bind(py).extract().map_err(|_| {
                 bad(format!(
                     "the trajectory's `{what}` is not a 2-D array of floats"
                 ))
-            })?;
-            Ok(a.as_array().to_owned())
+            })
         };
         if trajectory.p.is_none(py) {
             return Err(bad(
@@ -220,37 +220,43 @@ impl Model {
             table("p", &trajectory.p)?,
         );
         let (lam, u) = (table("lam", &trajectory.lam)?, table("u", &trajectory.u)?);
+        let (q, dq, p, lam, u) = (
+            q.as_array(),
+            dq.as_array(),
+            p.as_array(),
+            lam.as_array(),
+            u.as_array(),
+        );
         let (samples, n) = (t.len(), self.n());
-        let fits = |a: &Array2<f64>, width: usize| a.nrows() == samples && a.ncols() == width;
+        let fits = |a: &ArrayView2<'_, f64>, width: usize| a.dim() == (samples, width);
         let m = self.model.constraint_row_names().len();
         let inputs = self.model.inputs.len();
         if !(fits(&q, n) && fits(&dq, n) && fits(&p, n) && fits(&lam, m) && fits(&u, inputs)) {
             return Err(bad(format!(
-                "the trajectory's arrays are not ({samples}, …) samples of this model's {n} \
-                 variables, {m} constraint rows and {inputs} inputs"
+                "the trajectory's arrays do not fit this model: q, dq and p must be \
+                 ({samples}, {n}), lam ({samples}, {m}) and u ({samples}, {inputs})"
             )));
         }
         let mut run =
             CoreTrajectory::new(trajectory.variables.clone(), self.constraints(), samples);
-        let row = |a: &Array2<f64>, k: usize| a.row(k).to_vec();
+        // Each row read where it lies (the package's arrays are contiguous) and copied once,
+        // into the run.
+        fn row<'a>(a: &ArrayView2<'a, f64>, k: usize) -> Cow<'a, [f64]> {
+            let r = a.index_axis_move(Axis(0), k);
+            r.to_slice()
+                .map_or_else(|| Cow::Owned(r.to_vec()), Cow::Borrowed)
+        }
         for k in 0..samples {
-            let (qk, dqk, pk, lk, uk) = (
-                row(&q, k),
-                row(&dq, k),
-                row(&p, k),
-                row(&lam, k),
-                row(&u, k),
-            );
             run.push(&Sample {
                 step: k,
                 t: t[k],
-                q: &qk,
-                dq: &dqk,
-                p: Some(&pk),
+                q: &row(&q, k),
+                dq: &row(&dq, k),
+                p: Some(&row(&p, k)),
                 energy: 0.0,
-                lambda: &lk,
+                lambda: &row(&lam, k),
                 violation: 0.0,
-                u: &uk,
+                u: &row(&u, k),
             });
         }
         Ok(run)
@@ -1054,26 +1060,16 @@ impl Model {
         for of in StepOutput::ALL {
             for by in StepInput::ALL {
                 let (rows, columns) = steps.first().map_or((0, 0), |s| s.block(of, by).shape());
-                let mut stack = Array3::zeros((steps.len(), rows, columns));
-                for (k, step) in steps.iter().enumerate() {
-                    // trep's λ₁ is −Δt times this integrator's force-scaled λ.
-                    let scale = match of {
-                        StepOutput::Lambda => run.t[k] - run.t[k + 1],
-                        _ => 1.0,
-                    };
-                    let m = step.block(of, by);
-                    stack
-                        .slice_mut(s![k, .., ..])
-                        .assign(&Array2::from_shape_fn((rows, columns), |(i, j)| {
-                            scale * m[(i, j)]
-                        }));
-                }
-                let name = match of {
-                    StepOutput::Q2 => "q2",
-                    StepOutput::P2 => "p2",
-                    StepOutput::Lambda => "lambda1",
+                // trep's λ₁ is −Δt times this integrator's force-scaled λ.
+                let scale = |k: usize| match of {
+                    StepOutput::Lambda => run.t[k] - run.t[k + 1],
+                    _ => 1.0,
                 };
-                out.set_item(format!("{name}_d{}", by.name()), stack.into_pyarray(py))?;
+                let stack = Array3::from_shape_fn((steps.len(), rows, columns), |(k, i, j)| {
+                    scale(k) * steps[k].block(of, by)[(i, j)]
+                });
+                let key = format!("{}_d{}", of.name(), by.name());
+                out.set_item(key, stack.into_pyarray(py))?;
             }
         }
         Ok(out)

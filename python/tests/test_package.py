@@ -282,6 +282,10 @@ def test_a_trajectory_linearises_step_by_step():
         m.linearize_trajectory(m.simulate(0.1, 0.01, u=u[:10], every=2))
     with pytest.raises(ValueError, match="no momenta"):
         m.linearize_trajectory(m.simulate(0.1, 0.01, integrator="rk4"))
+    # Another model's run: its arrays are not this model's samples.
+    cart_run = tm.load(CART).simulate(0.1, 0.01)
+    with pytest.raises(ValueError, match=r"do not fit this model: q, dq and p must be \(11, 4\)"):
+        m.linearize_trajectory(cart_run)
 
 
 def test_rollouts_take_a_model_each_for_a_sweep():

@@ -268,7 +268,7 @@ where
                 StepOutput::Lambda => trep(m),
                 _ => Entry::Matrix(m.clone()),
             };
-            step.push((format!("{}_d{}", output_name(of), by.name()), entry));
+            step.push((format!("{}_d{}", of.name(), by.name()), entry));
         }
     }
     if let Some(second) = second {
@@ -279,7 +279,7 @@ where
                 for &b in &StepInput::ALL[k..] {
                     let rows = second.block(of, a, b).iter().map(|h| h * scale).collect();
                     step.push((
-                        format!("{}_d{}d{}", output_name(of), a.name(), b.name()),
+                        format!("{}_d{}d{}", of.name(), a.name(), b.name()),
                         Entry::Stack(rows),
                     ));
                 }
@@ -290,13 +290,4 @@ where
         continuous,
         step: Some(("vi", step)),
     })
-}
-
-/// trep's name of a step output (`lambda1` for this integrator's −Δt-scaled λ).
-fn output_name(of: StepOutput) -> &'static str {
-    match of {
-        StepOutput::Q2 => "q2",
-        StepOutput::P2 => "p2",
-        StepOutput::Lambda => "lambda1",
-    }
 }

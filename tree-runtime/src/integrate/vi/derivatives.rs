@@ -82,6 +82,16 @@ pub enum StepOutput {
 impl StepOutput {
     /// Every block.
     pub const ALL: [StepOutput; 3] = [StepOutput::Q2, StepOutput::P2, StepOutput::Lambda];
+
+    /// trep's name of the block (`q2`, `p2`, `lambda1`: trep's `λ₁` is −Δt times this
+    /// integrator's force-scaled λ, as the reports scale it).
+    pub fn name(self) -> &'static str {
+        match self {
+            StepOutput::Q2 => "q2",
+            StepOutput::P2 => "p2",
+            StepOutput::Lambda => "lambda1",
+        }
+    }
 }
 
 /// Sizes of one step and where each block sits in `w = (q₁, q₂, p₁, u₁, λ)` and in `x`.
