@@ -597,6 +597,26 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
         dual_arrays("evaluate_dual"),
         dual_arrays("constraints_dual"),
     );
+    // A dual evaluation by its order: `clear` (a `DualOutputs` method) zeroes what that
+    // order accumulates, then the body runs (first-order outputs are among the Dynamics
+    // evaluation's).
+    let dual_by_order = |clear: &str, dynamics: &TokenStream, full: &TokenStream| {
+        let clear = format_ident!("{clear}");
+        quote! {
+            match order {
+                ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
+                    out.#clear(::tree_mech::runtime::Order::Dynamics);
+                    #dynamics
+                }
+                ::tree_mech::runtime::Order::Full => {
+                    out.#clear(::tree_mech::runtime::Order::Full);
+                    #full
+                }
+            }
+        }
+    };
+    let lagrangian_dual = dual_by_order("clear_lagrangian", d_dynamics_body, d_full_body);
+    let constraints_dual = dual_by_order("clear_constraints", dc_dynamics_body, dc_full_body);
     let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
     let articulated = articulated_program(&plan, &kinematic).map(|program| {
         program.emit(
@@ -918,17 +938,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 // The constraints first (that call zeroes their outputs), then the Lagrangian.
                 <Self as ::tree_mech::runtime::System>::constraints_dual(self, q, dq, order, out);
                 #evaluate_arrays
-                match order {
-                    // First-order outputs are among the Dynamics evaluation's.
-                    ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
-                        out.clear_lagrangian(::tree_mech::runtime::Order::Dynamics);
-                        #d_dynamics_body
-                    }
-                    ::tree_mech::runtime::Order::Full => {
-                        out.clear_lagrangian(::tree_mech::runtime::Order::Full);
-                        #d_full_body
-                    }
-                }
+                #lagrangian_dual
             }
 
             fn constraints_dual(
@@ -939,16 +949,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 out: &mut ::tree_mech::runtime::dual::DualOutputs,
             ) {
                 #constraints_arrays
-                match order {
-                    ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
-                        out.clear_constraints(::tree_mech::runtime::Order::Dynamics);
-                        #dc_dynamics_body
-                    }
-                    ::tree_mech::runtime::Order::Full => {
-                        out.clear_constraints(::tree_mech::runtime::Order::Full);
-                        #dc_full_body
-                    }
-                }
+                #constraints_dual
             }
         }
     })
