@@ -15,6 +15,7 @@ tree_model!(struct Pendulum19 from "models/pendulum-19.toml");
 tree_model!(struct Humanoid from "models/humanoid.toml");
 tree_model!(struct FreeBody from "models/free-body.toml");
 tree_model!(struct Specialised from "tests/models/specialised.toml");
+tree_model!(struct Elements from "tests/models/elements.toml");
 
 tree_model! {
     /// Declared inline.
@@ -340,6 +341,64 @@ fn generated_equals_interpreted_on_every_model() {
     check_equal(Pendulum19, &file_model("models/pendulum-19.toml"), 3);
     check_equal(Humanoid, &file_model("models/humanoid.toml"), 4);
     check_equal(FreeBody, &file_model("models/free-body.toml"), 5);
+}
+
+/// The recorded variant of the compiled code and its fused one (AVX2 with fused
+/// multiply-adds, run where the CPU has them: `tree_mech::runtime::cpu`) both equal the
+/// interpreted runtime — every output, whole trajectories, constraints — and, on a CPU that
+/// runs the fused variant, differ from each other in the last bits (so both ran). The switch
+/// is process-wide: the other tests here compare to tolerances, whichever variant they get.
+#[test]
+fn both_variants_of_the_compiled_code_equal_the_interpreted() {
+    use tree_mech::runtime::cpu;
+    use tree_mech::ConstraintTerms;
+    let fused_here = cpu::fused();
+    #[cfg(target_arch = "x86_64")]
+    assert_eq!(
+        fused_here,
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+    );
+    let mut rng = Rng::new(17);
+    let q = Vector::<nalgebra::Const<7>>::from_fn(|_, _| rng.uniform());
+    let dq = Vector::<nalgebra::Const<7>>::from_fn(|_, _| rng.uniform());
+    let elements = file_model("tests/models/elements.toml");
+    let mut interpreted = TreeSystem::new(&elements).unwrap();
+    let (qd, dqd) = (to_dyn::<Elements>(&q), to_dyn::<Elements>(&dq));
+    let m = elements.constraints.len();
+    let (mut ct, mut c) = (ConstraintTerms::zeros(m, 7), ConstraintTerms::zeros(m, 7));
+    interpreted.constraints(&qd, &dqd, Order::Full, &mut ct);
+    let mut outputs = Vec::new();
+    for plain in [true, false] {
+        cpu::force_plain(plain);
+        check_equal(Humanoid, &file_model("models/humanoid.toml"), 4);
+        check_equal(Specialised, &file_model("tests/models/specialised.toml"), 6);
+        check_equal(Elements, &elements, 7);
+        Elements.constraints(&q, &dq, Order::Full, &mut c);
+        let scale = ct.d2h.iter().fold(1.0f64, |s, d| s.max(d.amax()));
+        assert!((&c.h - &ct.h).amax() <= 1e-12 * scale);
+        assert!((&c.dh - &ct.dh).amax() <= 1e-12 * scale);
+        assert!((&c.dh_dot - &ct.dh_dot).amax() <= 1e-12 * scale);
+        for r in 0..m {
+            assert!((&c.d2h[r] - &ct.d2h[r]).amax() <= 1e-12 * scale);
+        }
+        type HumanoidVector = Vector<nalgebra::Const<{ Humanoid::DOF }>>;
+        let t = Humanoid.evaluate(
+            &HumanoidVector::from_fn(|i, _| 0.1 * i as f64),
+            &HumanoidVector::from_fn(|i, _| 0.3 - 0.05 * i as f64),
+            Order::Full,
+        );
+        outputs.push((t.l, t.d2l_dq_dq, c.d2h.clone()));
+    }
+    cpu::force_plain(false);
+    assert_eq!(cpu::fused(), fused_here);
+    if fused_here {
+        assert_ne!(
+            outputs[0], outputs[1],
+            "the fused variant computed the same bits"
+        );
+    } else {
+        assert_eq!(outputs[0], outputs[1], "one variant on a CPU without FMA");
+    }
 }
 
 #[test]

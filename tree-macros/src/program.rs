@@ -1,6 +1,9 @@
 //! A recorded tape turned into Rust: dead statements dropped, the rest split into functions
 //! of bounded size (rustc and LLVM stay linear in the model's size), values that cross a
-//! function boundary passed through one scratch array.
+//! function boundary passed through one scratch array. An `f64` program is emitted twice on
+//! x86-64: as recorded, and for AVX2 with fused multiply-adds (a product read by one sum
+//! fused into it, [`fusions`]), the second called where the CPU has them
+//! (`tree_runtime::cpu::fused`).
 
 use proc_macro2::{Ident, TokenStream};
 use quote::{format_ident, quote};
@@ -172,6 +175,69 @@ fn expression(node: &Node, names: &Names, generic: bool) -> TokenStream {
     }
 }
 
+/// The fused multiply-adds of the `kept` statements: for each sum or difference that reads
+/// a product no other statement or output reads (`uses`), computed in the same function
+/// (`chunk_of`) and not passed on through the scratch (`slot`), its expression as one
+/// `mul_add` — `a·b + c`, `c − a·b = (−a)·b + c`, `a·b − c` rounded once — and the product
+/// marked `absorbed` (not emitted). Negation is exact, so each is the recorded operation
+/// with one rounding fewer.
+fn fusions(
+    nodes: &[Node],
+    kept: &[usize],
+    (uses, chunk_of, slot): (&[usize], &[usize], &[usize]),
+    names: &Names,
+) -> (Vec<Option<TokenStream>>, Vec<bool>) {
+    let n = nodes.len();
+    let mut fused: Vec<Option<TokenStream>> = vec![None; n];
+    let mut absorbed = vec![false; n];
+    let term = |t| names.term(t, false);
+    for &i in kept {
+        // The product `t` names, if it can be fused into statement i.
+        let product = |t: Term, absorbed: &[bool]| match t {
+            Term::Var(m) => match nodes[m as usize] {
+                Node::Mul(x, y)
+                    if uses[m as usize] == 1
+                        && chunk_of[m as usize] == chunk_of[i]
+                        && slot[m as usize] == usize::MAX
+                        && !absorbed[m as usize] =>
+                {
+                    Some((term(x), term(y), m as usize))
+                }
+                _ => None,
+            },
+            Term::Const(_) => None,
+        };
+        let (expression, m) = match nodes[i] {
+            Node::Add(a, b) => match (product(a, &absorbed), product(b, &absorbed)) {
+                (Some((x, y, m)), _) => {
+                    let c = term(b);
+                    (quote!((#x).mul_add(#y, #c)), m)
+                }
+                (None, Some((x, y, m))) => {
+                    let c = term(a);
+                    (quote!((#x).mul_add(#y, #c)), m)
+                }
+                (None, None) => continue,
+            },
+            Node::Sub(a, b) => match (product(b, &absorbed), product(a, &absorbed)) {
+                (Some((x, y, m)), _) => {
+                    let c = term(a);
+                    (quote!((-(#x)).mul_add(#y, #c)), m)
+                }
+                (None, Some((x, y, m))) => {
+                    let c = term(b);
+                    (quote!((#x).mul_add(#y, -(#c))), m)
+                }
+                (None, None) => continue,
+            },
+            _ => continue,
+        };
+        fused[i] = Some(expression);
+        absorbed[m] = true;
+    }
+    (fused, absorbed)
+}
+
 /// The emitted functions of one program.
 pub struct Emitted {
     /// Helper functions (associated functions of the generated type).
@@ -272,38 +338,96 @@ impl Program {
                 }) as Box<dyn Fn(&Ident) -> TokenStream>,
             ),
         };
-        let mut functions = TokenStream::new();
-        let mut body = TokenStream::new();
-        for c in 0..chunks {
-            let name = format_ident!("{}_{}", prefix, c);
-            let mut stmts = TokenStream::new();
-            for &v in &imports[c] {
-                let (id, s) = (names.var(v), slot[v as usize]);
-                stmts.extend(quote!(let #id: #ty = s[#s];));
+        // Each statement's readers among the kept statements and the outputs (for the fusions).
+        let mut uses = vec![0usize; n];
+        let read = (kept.iter().flat_map(|&i| operands(&self.nodes[i])))
+            .chain(self.outputs.iter().map(|(_, t)| *t));
+        for t in read {
+            if let Term::Var(v) = t {
+                uses[v as usize] += 1;
             }
-            for &i in kept.iter().filter(|&&i| chunk_of[i] == c) {
-                let id = names.var(i as u32);
-                let e = expression(&self.nodes[i], &names, generic);
-                stmts.extend(quote!(let #id: #ty = #e;));
-                if slot[i] != usize::MAX {
-                    let s = slot[i];
-                    stmts.extend(quote!(s[#s] = #id;));
-                }
-            }
-            for o in &outputs_by_chunk[c] {
-                stmts.extend(o.clone());
-            }
-            let signature = signature_of(&name);
-            functions.extend(quote! {
-                #[doc(hidden)]
-                #inline
-                #[allow(unused_variables, clippy::all)]
-                #signature {
-                    #stmts
-                }
-            });
-            body.extend(quote!(Self::#name(q, dq, s, out);));
         }
+        let mut functions = TokenStream::new();
+        let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
+        // The recorded program, then (f64 only) its fused variant.
+        for fused_variant in [false, true] {
+            if fused_variant && generic {
+                break;
+            }
+            let (fused, absorbed) = if fused_variant {
+                fusions(&self.nodes, &kept, (&uses, &chunk_of, &slot), &names)
+            } else {
+                (vec![None; n], vec![false; n])
+            };
+            for c in 0..chunks {
+                let name = if fused_variant {
+                    format_ident!("{}_fma_{}", prefix, c)
+                } else {
+                    format_ident!("{}_{}", prefix, c)
+                };
+                let mut stmts = TokenStream::new();
+                for &v in &imports[c] {
+                    let (id, s) = (names.var(v), slot[v as usize]);
+                    stmts.extend(quote!(let #id: #ty = s[#s];));
+                }
+                for &i in kept.iter().filter(|&&i| chunk_of[i] == c && !absorbed[i]) {
+                    let id = names.var(i as u32);
+                    let e = match &fused[i] {
+                        Some(e) => e.clone(),
+                        None => expression(&self.nodes[i], &names, generic),
+                    };
+                    stmts.extend(quote!(let #id: #ty = #e;));
+                    if slot[i] != usize::MAX {
+                        let s = slot[i];
+                        stmts.extend(quote!(s[#s] = #id;));
+                    }
+                }
+                for o in &outputs_by_chunk[c] {
+                    stmts.extend(o.clone());
+                }
+                let signature = signature_of(&name);
+                // (A function with target features may be inlined, not always.)
+                let attributes = match (fused_variant, chunks) {
+                    (false, _) => inline.clone(),
+                    (true, 1) => quote! {
+                        #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
+                        #[inline]
+                    },
+                    (true, _) => quote! {
+                        #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
+                        #[inline(never)]
+                    },
+                };
+                functions.extend(quote! {
+                    #[doc(hidden)]
+                    #attributes
+                    #[allow(unused_variables, clippy::all)]
+                    #signature {
+                        #stmts
+                    }
+                });
+                let calls = if fused_variant {
+                    &mut fused_calls
+                } else {
+                    &mut plain_calls
+                };
+                calls.extend(quote!(Self::#name(q, dq, s, out);));
+            }
+        }
+        let body = if generic {
+            plain_calls
+        } else {
+            quote! {
+                if ::tree_mech::runtime::cpu::fused() {
+                    // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
+                    // the functions have no target features and the block is plain.
+                    #[allow(unused_unsafe)]
+                    let () = unsafe { #fused_calls };
+                } else {
+                    #plain_calls
+                }
+            }
+        };
         // The values passed between functions: the outputs' scratch (allocated once, never
         // cleared: each slot is written before it is read), or a local array.
         let body = match flavour {
@@ -333,6 +457,49 @@ impl Program {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A product read once, in its own function, is fused into the sum or difference that
+    /// reads it (each form with the right sign); one read twice, or passed to another
+    /// function, is not.
+    #[test]
+    fn products_read_once_are_fused_into_their_sums() {
+        use Term::{Const, Var};
+        let nodes = [
+            Node::Q(0),                    // 0
+            Node::Dq(0),                   // 1
+            Node::Mul(Var(0), Var(1)),     // 2: read by 3 alone
+            Node::Add(Var(1), Var(2)),     // 3: dq + q·dq
+            Node::Mul(Var(0), Const(2.0)), // 4: read by 5 alone
+            Node::Sub(Var(3), Var(4)),     // 5: t3 − 2q
+            Node::Mul(Var(1), Var(1)),     // 6: read by 7 alone
+            Node::Sub(Var(6), Var(5)),     // 7: dq² − t5
+            Node::Mul(Var(0), Var(0)),     // 8: read by 9 and 10
+            Node::Add(Var(8), Var(7)),     // 9
+            Node::Add(Var(8), Var(9)),     // 10
+            Node::Mul(Var(1), Var(3)),     // 11: in another function
+            Node::Add(Var(11), Var(10)),   // 12
+        ];
+        let names = Names::of(&nodes, &["x"]);
+        let kept: Vec<usize> = (0..nodes.len()).collect();
+        let mut uses = vec![0; nodes.len()];
+        for t in kept.iter().flat_map(|&i| operands(&nodes[i])) {
+            if let Var(v) = t {
+                uses[v as usize] += 1;
+            }
+        }
+        uses[12] += 1; // the output
+        let mut chunk_of = vec![0; nodes.len()];
+        chunk_of[12] = 1;
+        let slot = vec![usize::MAX; nodes.len()];
+        let (fused, absorbed) = fusions(&nodes, &kept, (&uses, &chunk_of, &slot), &names);
+        let shown = |i: usize| fused[i].as_ref().map(|e| e.to_string().replace(' ', ""));
+        assert_eq!(shown(3).as_deref(), Some("(q0_x).mul_add(dq0_x,dq0_x)"));
+        assert_eq!(shown(5).as_deref(), Some("(-(q0_x)).mul_add(2f64,t3)"));
+        assert_eq!(shown(7).as_deref(), Some("(dq0_x).mul_add(dq0_x,-(t5))"));
+        assert_eq!((shown(9), shown(10), shown(12)), (None, None, None));
+        let gone: Vec<usize> = (0..nodes.len()).filter(|&i| absorbed[i]).collect();
+        assert_eq!(gone, [2, 4, 6]);
+    }
 
     /// What reads a variable is named after it (sanitised, indexed: unique), the rest `t{n}`.
     #[test]

@@ -26,6 +26,8 @@
 // The kernel: the recursions, over any scalar (what `tree_model!` needs), hidden from the
 // documented API. Bottom up: scalar, order, se3, plan, outputs, sweeps, elements, kernel.
 #[doc(hidden)]
+pub mod cpu;
+#[doc(hidden)]
 pub mod dual;
 #[doc(hidden)]
 pub mod elements;

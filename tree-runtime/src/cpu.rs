@@ -1,0 +1,51 @@
+//! Which variant of the generated code this CPU runs. `tree_model!` emits each `f64`
+//! program twice: as recorded, and with every product that one sum alone reads fused into it
+//! (`a·b + c` rounded once, `f64::mul_add`), compiled on x86-64 for AVX2 and FMA. The fused
+//! variant runs where the CPU has those instructions (every aarch64 CPU has them); both
+//! equal the interpreted runtime to rounding (tests/generated.rs runs both).
+
+use std::sync::atomic::{AtomicU8, Ordering};
+
+const UNKNOWN: u8 = 0;
+const PLAIN: u8 = 1;
+const FUSED: u8 = 2;
+
+/// The choice, made on the first call (or forced by [`force_plain`]).
+static CHOICE: AtomicU8 = AtomicU8::new(UNKNOWN);
+
+/// Whether the generated code's fused variant runs here: detected once, then one load.
+#[inline]
+pub fn fused() -> bool {
+    match CHOICE.load(Ordering::Relaxed) {
+        FUSED => true,
+        PLAIN => false,
+        _ => {
+            let choice = if detected() { FUSED } else { PLAIN };
+            CHOICE.store(choice, Ordering::Relaxed);
+            choice == FUSED
+        }
+    }
+}
+
+/// Whether the CPU runs the fused variant: AVX2 and FMA on x86-64; always on aarch64.
+fn detected() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    }
+    #[cfg(target_arch = "aarch64")]
+    {
+        true
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    {
+        false
+    }
+}
+
+/// Runs the recorded (unfused) variant from now on (`true`), or the one the CPU supports
+/// again (`false`): for tests that compare the two. Process-wide.
+pub fn force_plain(plain: bool) {
+    let choice = if !plain && detected() { FUSED } else { PLAIN };
+    CHOICE.store(choice, Ordering::Relaxed);
+}
