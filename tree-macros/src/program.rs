@@ -1,8 +1,8 @@
 //! A recorded tape turned into Rust: dead statements dropped, the rest split into functions
 //! of bounded size (rustc and LLVM stay linear in the model's size), values that cross a
-//! function boundary passed through one scratch array. An `f64` program is emitted twice on
-//! x86-64: as recorded, and for AVX2 with fused multiply-adds (a product read by one sum
-//! fused into it, [`fusions`]), the second called where the CPU has them
+//! function boundary passed through one scratch array. Each program is emitted twice: as
+//! recorded, and compiled on x86-64 for AVX2 and FMA — over `f64` with a product read by one
+//! sum fused into it ([`fusions`]) — the second called where the CPU has them
 //! (`tree_runtime::cpu::fused`).
 
 use proc_macro2::{Ident, TokenStream};
@@ -250,8 +250,9 @@ pub struct Emitted {
 
 impl Program {
     /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)`, over
-    /// `flavour`'s number type; `variables` names the model's variables (the statements
-    /// reading them are named after them).
+    /// `flavour`'s number type, and their variant `{prefix}_fma_{n}` for AVX2 and FMA; the
+    /// body calls one or the other by the CPU. `variables` names the model's variables (the
+    /// statements reading them are named after them).
     pub fn emit(&self, prefix: &str, variables: &[&str], flavour: Flavour) -> Emitted {
         let generic = matches!(flavour, Flavour::Generic);
         let dof = variables.len();
@@ -349,12 +350,10 @@ impl Program {
         }
         let mut functions = TokenStream::new();
         let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
-        // The recorded program, then (f64 only) its fused variant.
+        // The recorded program, then its variant for AVX2 and FMA (over f64 with the fusions;
+        // over a generic scalar as recorded, the dual numbers' lanes then vectorised).
         for fused_variant in [false, true] {
-            if fused_variant && generic {
-                break;
-            }
-            let (fused, absorbed) = if fused_variant {
+            let (fused, absorbed) = if fused_variant && !generic {
                 fusions(&self.nodes, &kept, (&uses, &chunk_of, &slot), &names)
             } else {
                 (vec![None; n], vec![false; n])
@@ -414,18 +413,14 @@ impl Program {
                 calls.extend(quote!(Self::#name(q, dq, s, out);));
             }
         }
-        let body = if generic {
-            plain_calls
-        } else {
-            quote! {
-                if ::tree_mech::runtime::cpu::fused() {
-                    // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
-                    // the functions have no target features and the block is plain.
-                    #[allow(unused_unsafe)]
-                    let () = unsafe { #fused_calls };
-                } else {
-                    #plain_calls
-                }
+        let body = quote! {
+            if ::tree_mech::runtime::cpu::fused() {
+                // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
+                // the functions have no target features and the block is plain.
+                #[allow(unused_unsafe)]
+                let () = unsafe { #fused_calls };
+            } else {
+                #plain_calls
             }
         };
         // The values passed between functions: the outputs' scratch (allocated once, never
