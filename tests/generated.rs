@@ -391,13 +391,13 @@ fn both_variants_of_the_compiled_code_equal_the_interpreted() {
     }
     cpu::force_plain(false);
     assert_eq!(cpu::fused(), fused_here);
-    if fused_here {
+    if fused_here && !cpu::FUSED_ONLY {
         assert_ne!(
             outputs[0], outputs[1],
             "the fused variant computed the same bits"
         );
     } else {
-        assert_eq!(outputs[0], outputs[1], "one variant on a CPU without FMA");
+        assert_eq!(outputs[0], outputs[1], "one variant ran");
     }
 }
 

@@ -387,7 +387,13 @@ impl Program {
                 let signature = signature_of(&name);
                 // (A function with target features may be inlined, not always.)
                 let attributes = match (fused_variant, chunks) {
-                    (false, _) => inline.clone(),
+                    (false, _) => quote! {
+                        #[cfg(not(any(
+                            target_arch = "aarch64",
+                            all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
+                        )))]
+                        #inline
+                    },
                     (true, 1) => quote! {
                         #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
                         #[inline]
@@ -413,6 +419,8 @@ impl Program {
                 calls.extend(quote!(Self::#name(q, dq, s, out);));
             }
         }
+        // Where every CPU the build targets runs the fused variant (aarch64, or x86-64 built
+        // for AVX2 and FMA), the recorded one is not compiled (`cpu::fused` is then `true`).
         let body = quote! {
             if ::tree_mech::runtime::cpu::fused() {
                 // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
@@ -420,7 +428,11 @@ impl Program {
                 #[allow(unused_unsafe)]
                 let () = unsafe { #fused_calls };
             } else {
-                #plain_calls
+                #[cfg(not(any(
+                    target_arch = "aarch64",
+                    all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
+                )))]
+                let () = { #plain_calls };
             }
         };
         // The values passed between functions: the outputs' scratch (allocated once, never

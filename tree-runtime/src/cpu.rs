@@ -13,9 +13,24 @@ const FUSED: u8 = 2;
 /// The choice, made on the first call (or forced by [`force_plain`]).
 static CHOICE: AtomicU8 = AtomicU8::new(UNKNOWN);
 
+/// Whether every CPU this build targets runs the fused variant (aarch64, or x86-64 built
+/// for AVX2 and FMA, e.g. `-C target-cpu=x86-64-v3`): `tree_model!` then compiles that
+/// variant alone, which halves the generated code's build time.
+pub const FUSED_ONLY: bool = cfg!(any(
+    target_arch = "aarch64",
+    all(
+        target_arch = "x86_64",
+        target_feature = "avx2",
+        target_feature = "fma"
+    )
+));
+
 /// Whether the generated code's fused variant runs here: detected once, then one load.
 #[inline]
 pub fn fused() -> bool {
+    if FUSED_ONLY {
+        return true;
+    }
     match CHOICE.load(Ordering::Relaxed) {
         FUSED => true,
         PLAIN => false,
@@ -44,7 +59,8 @@ fn detected() -> bool {
 }
 
 /// Runs the recorded (unfused) variant from now on (`true`), or the one the CPU supports
-/// again (`false`): for tests that compare the two. Process-wide.
+/// again (`false`): for tests that compare the two. Process-wide; no effect where
+/// [`FUSED_ONLY`] (there is no recorded variant).
 pub fn force_plain(plain: bool) {
     let choice = if !plain && detected() { FUSED } else { PLAIN };
     CHOICE.store(choice, Ordering::Relaxed);
