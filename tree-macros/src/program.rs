@@ -238,6 +238,18 @@ fn fusions(
     (fused, absorbed)
 }
 
+/// The targets every CPU of which runs the fused variant: aarch64, and x86-64 built for AVX2
+/// and FMA (`tree_runtime::cpu::FUSED_ONLY` is the same condition). There the recorded
+/// variant is not emitted.
+fn fused_only() -> TokenStream {
+    quote! {
+        any(
+            target_arch = "aarch64",
+            all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
+        )
+    }
+}
+
 /// The emitted functions of one program.
 pub struct Emitted {
     /// Helper functions (associated functions of the generated type).
@@ -348,6 +360,7 @@ impl Program {
                 uses[v as usize] += 1;
             }
         }
+        let fused_only = fused_only();
         let mut functions = TokenStream::new();
         let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
         // The recorded program, then its variant for AVX2 and FMA (over f64 with the fusions;
@@ -388,10 +401,7 @@ impl Program {
                 // (A function with target features may be inlined, not always.)
                 let attributes = match (fused_variant, chunks) {
                     (false, _) => quote! {
-                        #[cfg(not(any(
-                            target_arch = "aarch64",
-                            all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
-                        )))]
+                        #[cfg(not(#fused_only))]
                         #inline
                     },
                     (true, 1) => quote! {
@@ -419,8 +429,8 @@ impl Program {
                 calls.extend(quote!(Self::#name(q, dq, s, out);));
             }
         }
-        // Where every CPU the build targets runs the fused variant (aarch64, or x86-64 built
-        // for AVX2 and FMA), the recorded one is not compiled (`cpu::fused` is then `true`).
+        // Where every CPU the build targets runs the fused variant ([`fused_only`]), the
+        // recorded one is not compiled (`cpu::fused` is then `true`).
         let body = quote! {
             if ::tree_mech::runtime::cpu::fused() {
                 // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
@@ -428,10 +438,7 @@ impl Program {
                 #[allow(unused_unsafe)]
                 let () = unsafe { #fused_calls };
             } else {
-                #[cfg(not(any(
-                    target_arch = "aarch64",
-                    all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
-                )))]
+                #[cfg(not(#fused_only))]
                 let () = { #plain_calls };
             }
         };
