@@ -7,7 +7,9 @@
 //! step with its first derivatives, and the step's contracted second derivatives, against
 //! Pinocchio's `computeABADerivatives`. Same timing method on both sides: best of 5 batches,
 //! mean per call.
-//! Run: `cargo bench --bench robots`.
+//! Run: `cargo bench --bench robots`. `cargo bench --bench robots -- variants` times the
+//! compiled robots with the generated code's recorded variant and its AVX2-and-FMA one
+//! (`tree_mech::runtime::cpu`), alternated, side by side.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -164,7 +166,59 @@ fn pinocchio(label: &str) -> Option<[f64; 4]> {
     ])
 }
 
+/// The compiled robots with the recorded variant of the generated code and with the fused
+/// one, alternated three times (best of each): every figure of [`measure`], and the ratio.
+fn variants() {
+    use tree_mech::runtime::cpu;
+    if !cpu::fused() || cpu::FUSED_ONLY {
+        println!("one variant runs here (fused: {})", cpu::fused());
+        return;
+    }
+    let names = [
+        "M",
+        "q̈",
+        "full evaluation",
+        "VI step",
+        "RK4 step",
+        "∂q̈/∂(q, q̇, u)",
+        "VI step + first derivatives",
+        "contracted second derivatives",
+    ];
+    println!("| robot | | {} |", names.join(" | "));
+    println!("|---|---|{}", "---:|".repeat(names.len()));
+    for (robot, run) in [
+        ("UR5", (|| measure(Ur5)) as fn() -> [f64; 8]),
+        ("Panda", || measure(Panda)),
+        ("Solo-12", || measure(Solo12)),
+    ] {
+        let (mut plain, mut fused) = ([f64::INFINITY; 8], [f64::INFINITY; 8]);
+        for _ in 0..3 {
+            for (forced, best) in [(true, &mut plain), (false, &mut fused)] {
+                cpu::force_plain(forced);
+                for (b, t) in best.iter_mut().zip(run()) {
+                    *b = b.min(t);
+                }
+            }
+        }
+        let row = |x: &[f64; 8]| {
+            (x.iter().map(|t| format!("{:.2} µs", t / 1e3)))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        };
+        println!("| {robot} | recorded | {} |", row(&plain));
+        println!("| | fused (AVX2, FMA) | {} |", row(&fused));
+        let ratios: Vec<String> = (plain.iter().zip(&fused))
+            .map(|(p, f)| format!("{:.2}×", f / p))
+            .collect();
+        println!("| | fused / recorded | {} |", ratios.join(" | "));
+    }
+}
+
 fn main() {
+    if std::env::args().any(|a| a == "variants") {
+        variants();
+        return;
+    }
     let rows = [
         (
             "UR5 (6)",
