@@ -1,8 +1,9 @@
-//! Which variant of the generated code this CPU runs. `tree_model!` emits each `f64`
-//! program twice: as recorded, and with every product that one sum alone reads fused into it
-//! (`a·b + c` rounded once, `f64::mul_add`), compiled on x86-64 for AVX2 and FMA. The fused
-//! variant runs where the CPU has those instructions (every aarch64 CPU has them); both
-//! equal the interpreted runtime to rounding (tests/generated.rs runs both).
+//! Which variant of the generated code this CPU runs. `tree_model!` emits each program
+//! twice: as recorded, and compiled on x86-64 for AVX2 and FMA — over `f64` with every
+//! product that one sum alone reads fused into it (`a·b + c` rounded once, `f64::mul_add`),
+//! over dual numbers and jets as recorded. The second ("fused") variant runs where the CPU
+//! has those instructions (every aarch64 CPU has them); both equal the interpreted runtime
+//! to rounding (tests/generated.rs runs both).
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
