@@ -17,8 +17,7 @@ fn tree_mech(args: &[&str]) -> (bool, String, String) {
 
 #[test]
 fn simulate_writes_a_trajectory_and_a_picture() {
-    let dir = std::env::temp_dir().join(format!("tree-mech-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("cli");
     let csv = dir.join("t.csv");
     let png = dir.join("t.png");
     for integrator in ["vi", "rk4", "rk45"] {
@@ -160,7 +159,8 @@ fn constrained_models_report_constraints_everywhere() {
         "λ = {lambda}"
     );
     // simulate: λ and violation columns, every second step recorded, worst violation said.
-    let csv = std::env::temp_dir().join(format!("tree-mech-string-{}.csv", std::process::id()));
+    let dir = scratch("string");
+    let csv = dir.join("t.csv");
     let (ok, stdout, stderr) = tree_mech(&[
         "simulate",
         model,
@@ -226,7 +226,8 @@ fn check_draws_the_tree() {
 
 #[test]
 fn bad_input_is_a_short_error_and_a_failing_exit() {
-    let bad = std::env::temp_dir().join(format!("tree-mech-bad-{}.toml", std::process::id()));
+    let dir = scratch("bad");
+    let bad = dir.join("bad.toml");
     std::fs::write(&bad, "name = \"bad\"\n[[frame]]\nname = \"a\"\nbogus = 2\n").unwrap();
     let bad_shown = format!("{}:4: TOML error: unknown field `bogus`", bad.display());
     let cases: [(&[&str], &str); 10] = [
@@ -275,8 +276,7 @@ fn bad_input_is_a_short_error_and_a_failing_exit() {
 
 #[test]
 fn simulate_animates_the_marionette_and_plots_its_constraint_forces() {
-    let dir = std::env::temp_dir().join(format!("tree-mech-anim-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("anim");
     let (gif, png) = (dir.join("m.gif"), dir.join("m.png"));
     let (ok, stdout, stderr) = tree_mech(&[
         "simulate",
@@ -313,8 +313,7 @@ fn simulate_animates_the_marionette_and_plots_its_constraint_forces() {
 
 #[test]
 fn huge_energies_are_printed_in_scientific_notation() {
-    let dir = std::env::temp_dir().join(format!("tree-mech-huge-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("huge");
     let model = dir.join("heavy.toml");
     std::fs::write(
         &model,
@@ -399,8 +398,7 @@ fn urdf_models_are_read_wherever_toml_is() {
 
 #[test]
 fn a_sparsely_recorded_animation_still_plays_in_real_time() {
-    let dir = std::env::temp_dir().join(format!("tree-mech-anim-every-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("anim-every");
     let gif = dir.join("p.gif");
     // Δt = 0.01 recorded every 10th step: a picture each 0.1 s, shown for 100 ms.
     let (ok, _, stderr) = tree_mech(&[
@@ -426,12 +424,36 @@ fn a_sparsely_recorded_animation_still_plays_in_real_time() {
     assert_eq!(frames, 11);
 }
 
-/// A fresh scratch directory for one test.
-fn scratch(name: &str) -> std::path::PathBuf {
+/// A fresh scratch directory for one test, removed when the test passes (a failing test's
+/// files stay, to be looked at).
+struct Scratch(std::path::PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for Scratch {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("tree-mech-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 /// A shipped task file's text with its model path made absolute (to be written elsewhere).

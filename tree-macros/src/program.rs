@@ -238,18 +238,6 @@ fn fusions(
     (fused, absorbed)
 }
 
-/// The targets every CPU of which runs the fused variant: aarch64, and x86-64 built for AVX2
-/// and FMA (`tree_runtime::cpu::FUSED_ONLY` is the same condition). There the recorded
-/// variant is not emitted.
-fn fused_only() -> TokenStream {
-    quote! {
-        any(
-            target_arch = "aarch64",
-            all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
-        )
-    }
-}
-
 /// The emitted functions of one program.
 pub struct Emitted {
     /// Helper functions (associated functions of the generated type).
@@ -360,7 +348,6 @@ impl Program {
                 uses[v as usize] += 1;
             }
         }
-        let fused_only = fused_only();
         let mut functions = TokenStream::new();
         let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
         // The recorded program, then its variant for AVX2 and FMA (over f64 with the fusions;
@@ -400,10 +387,7 @@ impl Program {
                 let signature = signature_of(&name);
                 // (A function with target features may be inlined, not always.)
                 let attributes = match (fused_variant, chunks) {
-                    (false, _) => quote! {
-                        #[cfg(not(#fused_only))]
-                        #inline
-                    },
+                    (false, _) => quote!(#inline),
                     (true, 1) => quote! {
                         #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
                         #[inline]
@@ -413,13 +397,20 @@ impl Program {
                         #[inline(never)]
                     },
                 };
-                functions.extend(quote! {
+                let function = quote! {
                     #[doc(hidden)]
                     #attributes
                     #[allow(unused_variables, clippy::all)]
                     #signature {
                         #stmts
                     }
+                };
+                // The recorded variant only where some CPU the build targets needs it
+                // (not on aarch64, nor on x86-64 built for AVX2 and FMA).
+                functions.extend(if fused_variant {
+                    function
+                } else {
+                    quote!(::tree_mech::runtime::__unless_fused_only! { #function })
                 });
                 let calls = if fused_variant {
                     &mut fused_calls
@@ -429,8 +420,8 @@ impl Program {
                 calls.extend(quote!(Self::#name(q, dq, s, out);));
             }
         }
-        // Where every CPU the build targets runs the fused variant ([`fused_only`]), the
-        // recorded one is not compiled (`cpu::fused` is then `true`).
+        // Where every CPU the build targets runs the fused variant, the recorded one is not
+        // compiled (`__unless_fused_only`; `cpu::fused` is then `true`).
         let body = quote! {
             if ::tree_mech::runtime::cpu::fused() {
                 // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
@@ -438,8 +429,7 @@ impl Program {
                 #[allow(unused_unsafe)]
                 let () = unsafe { #fused_calls };
             } else {
-                #[cfg(not(#fused_only))]
-                let () = { #plain_calls };
+                ::tree_mech::runtime::__unless_fused_only! { let () = { #plain_calls }; }
             }
         };
         // The values passed between functions: the outputs' scratch (allocated once, never

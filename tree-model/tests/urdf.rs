@@ -194,6 +194,7 @@ fn from_file_reads_urdf_by_extension_and_refuses_a_floating_toml() {
             .contains("floating base is added to URDF models only"),
         "{e}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

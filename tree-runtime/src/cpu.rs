@@ -14,17 +14,34 @@ const FUSED: u8 = 2;
 /// The choice, made on the first call (or forced by [`force_plain`]).
 static CHOICE: AtomicU8 = AtomicU8::new(UNKNOWN);
 
+/// Keeps the one item or statement it wraps only where some CPU the build targets lacks the fused
+/// variant's instructions; elsewhere (aarch64, or x86-64 built for AVX2 and FMA, e.g.
+/// `-C target-cpu=x86-64-v3`) they are not compiled. `tree_model!` wraps each function and
+/// the call of the recorded variant in it, and [`FUSED_ONLY`] is read from it: the condition is written here alone.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __unless_fused_only {
+    ($($one_item_or_statement:tt)*) => {
+        #[cfg(not(any(
+            target_arch = "aarch64",
+            all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")
+        )))]
+        $($one_item_or_statement)*
+    };
+}
+
 /// Whether every CPU this build targets runs the fused variant (aarch64, or x86-64 built
-/// for AVX2 and FMA, e.g. `-C target-cpu=x86-64-v3`): `tree_model!` then compiles that
-/// variant alone, which halves the generated code's build time.
-pub const FUSED_ONLY: bool = cfg!(any(
-    target_arch = "aarch64",
-    all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )
-));
+/// for AVX2 and FMA): `tree_model!` then compiles that variant alone, which halves the
+/// generated code's build time.
+pub const FUSED_ONLY: bool = !recorded_variant_compiled();
+
+/// Whether [`__unless_fused_only`] keeps what it wraps.
+#[allow(unused_mut, unused_assignments)]
+const fn recorded_variant_compiled() -> bool {
+    let mut compiled = false;
+    crate::__unless_fused_only! { { compiled = true; } }
+    compiled
+}
 
 /// Whether the generated code's fused variant runs here: detected once, then one load.
 #[inline]
