@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite: the Rust tests, then the Python package built into a fresh venv
 # (pip builds it with maturin from PyPI; only the Rust toolchain and Python ≥ 3.9 are
-# needed) with pytest and Ray (for the sweep example), and its pytest suite.
+# needed) with pytest, Ray (for the sweep example) and mypy, its pytest suite, and mypy's
+# stubtest on its type stubs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -14,5 +15,9 @@ venv=target/python-venv
 rm -rf "$venv"
 python3 -m venv "$venv"
 "$venv/bin/pip" install --quiet --upgrade pip
-"$venv/bin/pip" install --quiet ./python pytest ray
+"$venv/bin/pip" install --quiet ./python pytest ray mypy==2.4.1
 "$venv/bin/python" -m pytest -q python/tests
+# The type stubs (`.pyi`) against the module as built: a name, parameter or default that
+# differs fails here.
+"$venv/bin/python" -m mypy.stubtest tree_mech --concise --ignore-disjoint-bases \
+  --mypy-config-file python/pyproject.toml --allowlist python/stubtest-allowlist.txt

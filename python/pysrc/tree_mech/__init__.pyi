@@ -11,6 +11,18 @@ from ._native import (
     loads as loads,
 )
 
+__all__ = [
+    "Model",
+    "ModelError",
+    "Rollouts",
+    "SimulationError",
+    "Trajectory",
+    "load",
+    "loads",
+    "optimize",
+    "__version__",
+]
+
 __version__: str
 
 def optimize(

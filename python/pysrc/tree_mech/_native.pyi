@@ -1,10 +1,21 @@
 from os import PathLike
-from typing import Any, Callable, Optional, Sequence, Union
+from typing import Any, Callable, Optional, Sequence, Union, final
 
 import numpy as np
 import numpy.typing as npt
+from numpy.typing import ArrayLike
 
-ArrayLike = npt.ArrayLike
+__all__ = [
+    "Model",
+    "Trajectory",
+    "Rollouts",
+    "VariationalStepper",
+    "load",
+    "loads",
+    "optimize_text",
+    "ModelError",
+    "SimulationError",
+]
 
 class ModelError(ValueError):
     file: Optional[str]
@@ -13,6 +24,7 @@ class ModelError(ValueError):
 class SimulationError(RuntimeError):
     step: Optional[int]
 
+@final
 class Trajectory:
     t: npt.NDArray[np.float64]
     q: npt.NDArray[np.float64]
@@ -27,6 +39,7 @@ class Trajectory:
     dissipated: float
     def __len__(self) -> int: ...
 
+@final
 class Rollouts:
     t: npt.NDArray[np.float64]
     q: npt.NDArray[np.float64]
@@ -34,6 +47,7 @@ class Rollouts:
     energy: npt.NDArray[np.float64]
     errors: list[Optional[str]]
 
+@final
 class Model:
     name: str
     variables: list[str]
@@ -156,9 +170,12 @@ class Model:
         gravity: Optional[Sequence[float]] = None,
     ) -> "Model": ...
 
+@final
 class VariationalStepper:
     """The midpoint VI one step at a time with everything given (tree_mech.trep's engine)."""
-    def __init__(self, model: Model, forcing: str = "left", tolerance: Optional[float] = None) -> None: ...
+    def __new__(
+        cls, model: Model, forcing: str = "left", tolerance: Optional[float] = None
+    ) -> "VariationalStepper": ...
     def step(
         self,
         t1: float,
