@@ -64,18 +64,22 @@ class Config:
 
     @property
     def name(self) -> str:
+        """The config's name."""
         return self._name
 
     @property
     def system(self) -> "System":
+        """The system the config belongs to."""
         return self._system
 
     @property
     def kinematic(self) -> bool:
+        """Whether the config is kinematic (prescribed) rather than dynamic."""
         return self._kinematic
 
     @property
     def frame(self) -> Optional["Frame"]:
+        """The frame whose transform the config drives (None until one does)."""
         return self._frame
 
     q = property(lambda self: self._get("_q"), lambda self, v: self._put("_q", v),
@@ -242,30 +246,37 @@ class Frame:
 
     @property
     def system(self) -> "System":
+        """The system the frame belongs to."""
         return self._system
 
     @property
     def name(self) -> Optional[str]:
+        """The frame's name (None for an unnamed frame)."""
         return self._name
 
     @property
     def parent(self) -> Optional["Frame"]:
+        """The parent frame (None for the world frame)."""
         return self._parent
 
     @property
     def children(self) -> tuple:
+        """The frames whose parent this is, in the order they were made."""
         return tuple(self._children)
 
     @property
     def config(self) -> Optional[Config]:
+        """The config driving the frame's transform (None for a constant one)."""
         return self._config
 
     @property
     def transform_type(self) -> str:
+        """The primitive transform: ``trep.TX`` … ``trep.RZ``, or ``trep.CONST_SE3``."""
         return self._transform
 
     @property
     def transform_value(self) -> float:
+        """The transform's value: its config's ``q``, or the constant (settable)."""
         return self._config.q if self._config else self._value
 
     @transform_value.setter
@@ -278,6 +289,7 @@ class Frame:
 
     @property
     def mass(self) -> float:
+        """The frame's mass (settable; ``set_mass`` sets the inertia too)."""
         return self._mass
 
     @mass.setter
@@ -286,14 +298,17 @@ class Frame:
 
     @property
     def Ixx(self) -> float:
+        """The moment of inertia about the frame's x axis."""
         return self._inertia[0]
 
     @property
     def Iyy(self) -> float:
+        """The moment of inertia about the frame's y axis."""
         return self._inertia[1]
 
     @property
     def Izz(self) -> float:
+        """The moment of inertia about the frame's z axis."""
         return self._inertia[2]
 
     def set_mass(self, mass: float, Ixx: float = 0.0, Iyy: float = 0.0,
@@ -458,10 +473,12 @@ class Input:
 
     @property
     def system(self) -> "System":
+        """The system the input belongs to."""
         return self._system
 
     @property
     def u(self) -> float:
+        """The input's current value (settable)."""
         return float(self._system._u[self.index])
 
     @u.setter
@@ -567,6 +584,7 @@ class System:
     # Lookups ------------------------------------------------------------------------
     @property
     def world_frame(self) -> Frame:
+        """The world frame, the root of the tree."""
         return self._world
 
     def import_frames(self, children: Sequence[Any]) -> None:
@@ -575,58 +593,72 @@ class System:
 
     @property
     def frames(self) -> tuple:
+        """Every frame, the world frame first."""
         return (self._world,) + tuple(self._frames_created)
 
     @property
     def configs(self) -> tuple:
+        """Every config: the dynamic ones, then the kinematic ones."""
         return self._configs
 
     @property
     def dyn_configs(self) -> tuple:
+        """The dynamic configs."""
         return self._dyn
 
     @property
     def kin_configs(self) -> tuple:
+        """The kinematic (prescribed) configs."""
         return self._kin
 
     @property
     def potentials(self) -> tuple:
+        """The potentials (gravity, springs)."""
         return tuple(self._potentials)
 
     @property
     def forces(self) -> tuple:
+        """The forces (damping, config forces, dampers)."""
         return tuple(self._forces)
 
     @property
     def inputs(self) -> tuple:
+        """The inputs, every force's in the order they were made."""
         return tuple(self._inputs)
 
     @property
     def constraints(self) -> tuple:
+        """The constraints."""
         return tuple(self._constraints)
 
     @property
     def masses(self) -> tuple:
+        """The frames that carry a mass or an inertia."""
         return tuple(f for f in self._frames_created if f.mass or any(f._inertia))
 
     @property
     def nQ(self) -> int:
+        """The number of configs."""
         return len(self._configs)
 
     @property
     def nQd(self) -> int:
+        """The number of dynamic configs."""
         return len(self._dyn)
 
     @property
     def nQk(self) -> int:
+        """The number of kinematic configs."""
         return len(self._kin)
 
     @property
     def nu(self) -> int:
+        """The number of inputs."""
         return len(self._inputs)
 
     @property
     def nc(self) -> int:
+        """The number of constraints."""
         return len(self._constraints)
 
     @staticmethod
@@ -640,6 +672,7 @@ class System:
         raise KeyError(f"no {what} {identifier!r} in the system")
 
     def get_frame(self, identifier: Any) -> Frame:
+        """The frame named (or given) by `identifier`; KeyError if there is none."""
         if isinstance(identifier, Frame):
             return identifier
         f = self._frame_named(identifier) if isinstance(identifier, str) else None
@@ -648,18 +681,23 @@ class System:
         return f
 
     def get_config(self, identifier: Any) -> Config:
+        """The config named, indexed or given by `identifier` (KeyError if none)."""
         return self._find(self._configs, "config", identifier)
 
     def get_potential(self, identifier: Any) -> Any:
+        """The potential named, indexed or given by `identifier` (KeyError if none)."""
         return self._find(self._potentials, "potential", identifier)
 
     def get_constraint(self, identifier: Any) -> Any:
+        """The constraint named, indexed or given by `identifier` (KeyError if none)."""
         return self._find(self._constraints, "constraint", identifier)
 
     def get_force(self, identifier: Any) -> Any:
+        """The force named, indexed or given by `identifier` (KeyError if none)."""
         return self._find(self._forces, "force", identifier)
 
     def get_input(self, identifier: Any) -> Input:
+        """The input named, indexed or given by `identifier` (KeyError if none)."""
         return self._find(self._inputs, "input", identifier)
 
     # State ----------------------------------------------------------------------------
@@ -678,26 +716,36 @@ class System:
         self._state_changed()
 
     q = property(lambda self: self._q.copy(),
-                 lambda self, v: self._set(self._q, v, self._configs))
+                 lambda self, v: self._set(self._q, v, self._configs),
+                 doc="Every config's value, in ``configs`` order (settable).")
     dq = property(lambda self: self._dq.copy(),
-                  lambda self, v: self._set(self._dq, v, self._configs))
+                  lambda self, v: self._set(self._dq, v, self._configs),
+                  doc="Every config's velocity (settable).")
     ddq = property(lambda self: self._ddq.copy(),
-                   lambda self, v: self._set(self._ddq, v, self._configs))
+                   lambda self, v: self._set(self._ddq, v, self._configs),
+                   doc="Every config's acceleration (settable; ``f`` gives the dynamic ones).")
     qd = property(lambda self: self._q[: self.nQd].copy(),
-                  lambda self, v: self._set(self._q, v, self.dyn_configs))
+                  lambda self, v: self._set(self._q, v, self.dyn_configs),
+                  doc="The dynamic configs' values (settable).")
     dqd = property(lambda self: self._dq[: self.nQd].copy(),
-                   lambda self, v: self._set(self._dq, v, self.dyn_configs))
+                   lambda self, v: self._set(self._dq, v, self.dyn_configs),
+                   doc="The dynamic configs' velocities (settable).")
     ddqd = property(lambda self: self._ddq[: self.nQd].copy(),
-                    lambda self, v: self._set(self._ddq, v, self.dyn_configs))
+                    lambda self, v: self._set(self._ddq, v, self.dyn_configs),
+                    doc="The dynamic configs' accelerations (settable).")
     qk = property(lambda self: self._q[self.nQd:].copy(),
-                  lambda self, v: self._set(self._q, v, self.kin_configs))
+                  lambda self, v: self._set(self._q, v, self.kin_configs),
+                  doc="The kinematic configs' values (settable).")
     dqk = property(lambda self: self._dq[self.nQd:].copy(),
-                   lambda self, v: self._set(self._dq, v, self.kin_configs))
+                   lambda self, v: self._set(self._dq, v, self.kin_configs),
+                   doc="The kinematic configs' velocities (settable).")
     ddqk = property(lambda self: self._ddq[self.nQd:].copy(),
-                    lambda self, v: self._set(self._ddq, v, self.kin_configs))
+                    lambda self, v: self._set(self._ddq, v, self.kin_configs),
+                    doc="The kinematic configs' accelerations (settable).")
 
     @property
     def u(self) -> np.ndarray:
+        """The inputs' current values (settable)."""
         return self._u.copy()
 
     @u.setter
@@ -833,18 +881,23 @@ class System:
         return int(self._perm[c.index])
 
     def L_dq(self, q1: Config) -> float:
+        """∂L/∂q for config `q1` at the current state."""
         return float(self._state()["dL_dq"][self._i(q1)])
 
     def L_ddq(self, dq1: Config) -> float:
+        """∂L/∂q̇ for config `dq1` at the current state."""
         return float(self._state()["dL_ddq"][self._i(dq1)])
 
     def L_dqdq(self, q1: Config, q2: Config) -> float:
+        """∂²L/∂q∂q for configs `q1`, `q2` at the current state."""
         return float(self._state()["d2L_dqdq"][self._i(q1), self._i(q2)])
 
     def L_ddqdq(self, dq1: Config, q2: Config) -> float:
+        """∂²L/∂q̇∂q for configs `dq1`, `q2` at the current state."""
         return float(self._state()["d2L_ddqdq"][self._i(dq1), self._i(q2)])
 
     def L_ddqddq(self, dq1: Config, dq2: Config) -> float:
+        """∂²L/∂q̇∂q̇ (the mass matrix's entry) for configs `dq1`, `dq2`."""
         return float(self._state()["M"][self._i(dq1), self._i(dq2)])
 
     # The dynamics ---------------------------------------------------------------------
@@ -879,14 +932,17 @@ class System:
         return self._dperm
 
     def f_dq(self, q: Optional[Config] = None, q1: Optional[Config] = None) -> Any:
+        """``∂q̈_d/∂q`` (one entry, given both configs; a row or column, given one)."""
         m = self._block("qdd_dq", self._rows_d(), self._perm)
         return m[self._index("d", q), self._index("q", q1)]
 
     def f_ddq(self, q: Optional[Config] = None, dq1: Optional[Config] = None) -> Any:
+        """``∂q̈_d/∂q̇`` (one entry, given both configs; a row or column, given one)."""
         m = self._block("qdd_ddq", self._rows_d(), self._perm)
         return m[self._index("d", q), self._index("q", dq1)]
 
     def f_du(self, q: Optional[Config] = None, u1: Optional[Input] = None) -> Any:
+        """``∂q̈_d/∂u`` (an entry, given a config and an input; a row or column, given one)."""
         m = self._block("qdd_du", self._rows_d(), np.arange(self.nu))
         return m[self._index("d", q), self._index("u", u1)]
 
@@ -934,16 +990,19 @@ class System:
         return np.asarray(self._linear()[key])[:, cols] * self._signs()[:, None]
 
     def lambda_dq(self, constraint: Any = None, q1: Optional[Config] = None) -> Any:
+        """``∂λ/∂q`` (trep's rows and signs)."""
         self._native_model()
         m = self._lambda_derivative("lambda_dq", self._perm)
         return m[self._index("c", constraint), self._index("q", q1)]
 
     def lambda_ddq(self, constraint: Any = None, dq1: Optional[Config] = None) -> Any:
+        """``∂λ/∂q̇`` (trep's rows and signs)."""
         self._native_model()
         m = self._lambda_derivative("lambda_ddq", self._perm)
         return m[self._index("c", constraint), self._index("q", dq1)]
 
     def lambda_du(self, constraint: Any = None, u1: Optional[Input] = None) -> Any:
+        """``∂λ/∂u`` (trep's rows and signs)."""
         self._native_model()
         m = self._lambda_derivative("lambda_du", np.arange(self.nu))
         return m[self._index("c", constraint), self._index("u", u1)]
@@ -1204,9 +1263,11 @@ class _Damping(Force):
         super().__init__(system, name)
 
     def get_damping_coefficient(self, config: Config) -> float:
+        """The damping coefficient on ``config`` (the default where none was set)."""
         return self._damping.get(config.name, self.default_damping)
 
     def set_damping_coefficient(self, config: Config, coefficient: float) -> None:
+        """Sets the damping coefficient on ``config``."""
         self._damping[config.name] = float(coefficient)
         self._system._structure_changed()
 
@@ -1255,6 +1316,7 @@ class Constraint:
 
     @property
     def system(self) -> System:
+        """The system the constraint belongs to."""
         return self._system
 
     def _frames(self) -> tuple:
@@ -1291,6 +1353,7 @@ class _Distance(_BetweenFrames, Constraint):
 
     @property
     def distance(self) -> float:
+        """The distance held: its kinematic config's ``q``, or the constant."""
         return self.config.q if self.config else self._distance
 
     def _toml(self) -> List[str]:
@@ -1436,13 +1499,14 @@ class MidpointVI:
     # State ----------------------------------------------------------------------------
     @property
     def system(self) -> System:
+        """The system the integrator steps."""
         return self._system
 
-    nq = property(lambda self: self._system.nQ)
-    nd = property(lambda self: self._system.nQd)
-    nk = property(lambda self: self._system.nQk)
-    nu = property(lambda self: self._system.nu)
-    nc = property(lambda self: self._system.nc)
+    nq = property(lambda self: self._system.nQ, doc="The number of configs.")
+    nd = property(lambda self: self._system.nQd, doc="The number of dynamic configs.")
+    nk = property(lambda self: self._system.nQk, doc="The number of kinematic configs.")
+    nu = property(lambda self: self._system.nu, doc="The number of inputs.")
+    nc = property(lambda self: self._system.nc, doc="The number of constraints.")
 
     def _vec(self, value: Any, n: int, what: str) -> np.ndarray:
         v = np.asarray(value, dtype=float).reshape(-1)
@@ -1451,17 +1515,23 @@ class MidpointVI:
         return v.copy()
 
     q1 = property(lambda self: self._q1.copy(),
-                  lambda self, v: setattr(self, "_q1", self._vec(v, self.nq, "q1")))
+                  lambda self, v: setattr(self, "_q1", self._vec(v, self.nq, "q1")),
+                  doc="The configuration at ``t1`` (every config; settable).")
     q2 = property(lambda self: self._q2.copy(),
-                  lambda self, v: setattr(self, "_q2", self._vec(v, self.nq, "q2")))
+                  lambda self, v: setattr(self, "_q2", self._vec(v, self.nq, "q2")),
+                  doc="The configuration at ``t2`` (every config; settable).")
     p1 = property(lambda self: self._p1.copy(),
-                  lambda self, v: setattr(self, "_p1", self._vec(v, self.nd, "p1")))
+                  lambda self, v: setattr(self, "_p1", self._vec(v, self.nd, "p1")),
+                  doc="The dynamic configs' momenta at ``t1`` (settable).")
     p2 = property(lambda self: self._p2.copy(),
-                  lambda self, v: setattr(self, "_p2", self._vec(v, self.nd, "p2")))
+                  lambda self, v: setattr(self, "_p2", self._vec(v, self.nd, "p2")),
+                  doc="The dynamic configs' momenta at ``t2`` (settable).")
     u1 = property(lambda self: self._u1.copy(),
-                  lambda self, v: setattr(self, "_u1", self._vec(v, self.nu, "u1")))
+                  lambda self, v: setattr(self, "_u1", self._vec(v, self.nu, "u1")),
+                  doc="The inputs over the step from ``t1`` to ``t2`` (settable).")
     lambda1 = property(lambda self: self._lambda1.copy(),
-                       lambda self, v: setattr(self, "_lambda1", self._vec(v, self.nc, "lambda1")))
+                       lambda self, v: setattr(self, "_lambda1", self._vec(v, self.nc, "lambda1")),
+                       doc="The constraint forces over the step, trep's ``λ₁`` (settable).")
 
     @property
     def v2(self) -> Optional[np.ndarray]:
@@ -1593,25 +1663,52 @@ class MidpointVI:
         s = self._system
         return m[tuple(s._index(k, x) for k, x in zip(kinds, args))]
 
-    def q2_dq1(self, q=None, q1=None): return self._pick(self._first("q2", "q1"), "dq", (q, q1))
-    def q2_dp1(self, q=None, p1=None): return self._pick(self._first("q2", "p1"), "dd", (q, p1))
-    def q2_du1(self, q=None, u1=None): return self._pick(self._first("q2", "u1"), "du", (q, u1))
-    def q2_dk2(self, q=None, k2=None): return self._pick(self._first("q2", "k2"), "dk", (q, k2))
-    def p2_dq1(self, p=None, q1=None): return self._pick(self._first("p2", "q1"), "dq", (p, q1))
-    def p2_dp1(self, p=None, p1=None): return self._pick(self._first("p2", "p1"), "dd", (p, p1))
-    def p2_du1(self, p=None, u1=None): return self._pick(self._first("p2", "u1"), "du", (p, u1))
-    def p2_dk2(self, p=None, k2=None): return self._pick(self._first("p2", "k2"), "dk", (p, k2))
+    def q2_dq1(self, q=None, q1=None):
+        """∂q2/∂q1 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("q2", "q1"), "dq", (q, q1))
+
+    def q2_dp1(self, q=None, p1=None):
+        """∂q2/∂p1 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("q2", "p1"), "dd", (q, p1))
+
+    def q2_du1(self, q=None, u1=None):
+        """∂q2/∂u1 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("q2", "u1"), "du", (q, u1))
+
+    def q2_dk2(self, q=None, k2=None):
+        """∂q2/∂k2 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("q2", "k2"), "dk", (q, k2))
+
+    def p2_dq1(self, p=None, q1=None):
+        """∂p2/∂q1 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("p2", "q1"), "dq", (p, q1))
+
+    def p2_dp1(self, p=None, p1=None):
+        """∂p2/∂p1 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("p2", "p1"), "dd", (p, p1))
+
+    def p2_du1(self, p=None, u1=None):
+        """∂p2/∂u1 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("p2", "u1"), "du", (p, u1))
+
+    def p2_dk2(self, p=None, k2=None):
+        """∂p2/∂k2 (trep's first derivative of the last step; one entry, given both)."""
+        return self._pick(self._first("p2", "k2"), "dk", (p, k2))
 
     def lambda1_dq1(self, constraint=None, q1=None):
+        """∂λ₁/∂q1 (trep's first derivative of the last step, its rows and signs)."""
         return self._pick(self._first("lambda1", "q1"), "cq", (constraint, q1))
 
     def lambda1_dp1(self, constraint=None, p1=None):
+        """∂λ₁/∂p1 (trep's first derivative of the last step, its rows and signs)."""
         return self._pick(self._first("lambda1", "p1"), "cd", (constraint, p1))
 
     def lambda1_du1(self, constraint=None, u1=None):
+        """∂λ₁/∂u1 (trep's first derivative of the last step, its rows and signs)."""
         return self._pick(self._first("lambda1", "u1"), "cu", (constraint, u1))
 
     def lambda1_dk2(self, constraint=None, k2=None):
+        """∂λ₁/∂k2 (trep's first derivative of the last step, its rows and signs)."""
         return self._pick(self._first("lambda1", "k2"), "ck", (constraint, k2))
 
 

@@ -295,16 +295,36 @@ class DOptimizerMonitor:
     """Hears of an optimisation's progress; this base class does nothing (a silent
     monitor). Save copies of what it is given: the optimiser may reuse its arrays."""
 
-    def optimize_begin(self, X, U): pass
-    def optimize_end(self, converged, X, U, cost): pass
-    def step_begin(self, iteration): pass
-    def step_info(self, method, cost, dcost, X, U, dX, dU, Kproj): pass
-    def step_method_failure(self, method, cost, dcost, fallback_method): pass
-    def step_termination(self, cost, dcost): pass
-    def step_completed(self, method, cost, nX, nU): pass
-    def armijo_simulation_failure(self, armijo_iteration, nX, nU, bX, bU): pass
-    def armijo_search_failure(self, X, U, dX, dU, cost0, dcost0, Kproj): pass
-    def armijo_evaluation(self, armijo_iteration, nX, nU, bX, bU, cost, max_cost): pass
+    def optimize_begin(self, X, U):
+        """An optimisation begins from the trajectory ``(X, U)``."""
+
+    def optimize_end(self, converged, X, U, cost):
+        """An optimisation ended at ``(X, U)`` with ``cost``, converged or not."""
+
+    def step_begin(self, iteration):
+        """Step ``iteration`` of the optimisation begins."""
+
+    def step_info(self, method, cost, dcost, X, U, dX, dU, Kproj):
+        """The step's descent direction ``(dX, dU)`` by ``method``, at ``cost`` with slope
+        ``dcost``."""
+
+    def step_method_failure(self, method, cost, dcost, fallback_method):
+        """``method``'s direction does not descend; ``fallback_method`` is tried."""
+
+    def step_termination(self, cost, dcost):
+        """The optimisation stops: the slope ``dcost`` is within the tolerance."""
+
+    def step_completed(self, method, cost, nX, nU):
+        """The step by ``method`` reached ``(nX, nU)`` with ``cost``."""
+
+    def armijo_simulation_failure(self, armijo_iteration, nX, nU, bX, bU):
+        """The simulation of Armijo trial ``armijo_iteration`` failed."""
+
+    def armijo_search_failure(self, X, U, dX, dU, cost0, dcost0, Kproj):
+        """The Armijo search found no sufficient decrease along ``(dX, dU)``."""
+
+    def armijo_evaluation(self, armijo_iteration, nX, nU, bX, bU, cost, max_cost):
+        """Armijo trial ``armijo_iteration`` cost ``cost``, against at most ``max_cost``."""
 
 
 class DOptimizerDefaultMonitor(DOptimizerMonitor):
