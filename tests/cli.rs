@@ -259,7 +259,7 @@ fn bad_input_is_a_short_error_and_a_failing_exit() {
         ),
         (
             &["simulate", "models/pendulum.toml", "--dt", "-1"],
-            "time step must be positive",
+            "time step must be a positive finite number",
         ),
         (&["check", bad.to_str().unwrap()], &bad_shown),
     ];

@@ -89,6 +89,17 @@ fn bad(message: impl Into<String>) -> PyErr {
     PyValueError::new_err(message.into())
 }
 
+/// An array's shape as Python writes it: `(3, 1)`, `(4,)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [one] => format!("({one},)"),
+        _ => {
+            let parts: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+            format!("({})", parts.join(", "))
+        }
+    }
+}
+
 /// A count the caller gives (`every`, `max_steps`, `threads`) as a `usize`, or a `ValueError`
 /// naming it — for the whole call, not an error per rollout, and not Python's
 /// `OverflowError` for a negative one.
@@ -1127,12 +1138,18 @@ impl Model {
         let (batch, n) = (q0.nrows(), self.n());
         if q0.ncols() != n || dq0.shape() != q0.shape() {
             return Err(bad(format!(
-                "q0 and dq0 must both be (batch, {n}); got {:?} and {:?}",
-                q0.shape(),
-                dq0.shape()
+                "q0 and dq0 must both be (batch, {n}); got {} and {}",
+                shape_text(q0.shape()),
+                shape_text(dq0.shape())
             )));
         }
         let width = self.model.inputs.len();
+        // What `u` may be, said in the error of a wrong one.
+        let expected = if width == 0 {
+            format!("the model has no inputs: leave u out, or give ({batch}, 0)")
+        } else {
+            format!("u must be ({batch}, {width}) or ({batch}, steps, {width})")
+        };
         let schedules: Vec<InputSchedule> = match u {
             None => vec![InputSchedule::default(); batch],
             Some(u) if u.is_none() => vec![InputSchedule::default(); batch],
@@ -1140,10 +1157,7 @@ impl Model {
                 if let Ok(a) = u.extract::<PyArrayLike2<f64, AllowTypeChange>>() {
                     let a = a.as_array();
                     if a.shape() != [batch, width] {
-                        return Err(bad(format!(
-                            "u must be ({batch}, {width}) or ({batch}, steps, {width}); got {:?}",
-                            a.shape()
-                        )));
+                        return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));
                     }
                     let names = self.input_names();
                     (0..batch)
@@ -1161,10 +1175,7 @@ impl Model {
                         })?;
                     let a = a.as_array();
                     if a.shape()[0] != batch || a.shape()[2] != width {
-                        return Err(bad(format!(
-                            "u must be ({batch}, steps, {width}); got {:?}",
-                            a.shape()
-                        )));
+                        return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));
                     }
                     check_rows(a.shape()[1], duration, dt)?;
                     let mut out = Vec::with_capacity(batch);

@@ -168,8 +168,21 @@ def test_a_failing_rollout_fails_alone():
     assert r.errors[0] is None and r.errors[2] is None
     assert "not finite" in r.errors[1]
     assert np.isnan(r.q[1]).all() and np.isfinite(r.q[0]).all()
-    with pytest.raises(ValueError, match="must both be"):
+    with pytest.raises(ValueError, match=r"must both be \(batch, 2\); got \(3, 3\)"):
         m.rollouts(np.zeros((3, 3)), np.zeros((3, 3)), 0.1, 0.01)
+    with pytest.raises(ValueError, match=r"u must be \(3, 1\) or \(3, steps, 1\); got \(3, 2\)"):
+        m.rollouts(np.zeros((3, 2)), np.zeros((3, 2)), 0.1, 0.01, u=np.zeros((3, 2)))
+    pendulum = tm.load(str(ROOT / "models/pendulum.toml"))
+    with pytest.raises(ValueError, match="the model has no inputs: leave u out"):
+        pendulum.rollouts(np.zeros((2, 1)), np.zeros((2, 1)), 0.1, 0.01, u=np.ones((2, 1)))
+
+
+def test_a_model_read_from_text_names_the_line_of_its_error():
+    with pytest.raises(tm.ModelError, match=r"^line 2: TOML error: invalid type") as e:
+        tm.loads("[[frame]]\nname = 1\n")
+    assert e.value.line == 2 and e.value.file is None
+    with pytest.raises(tm.SimulationError, match="duration must be a positive finite number"):
+        tm.load(CART).simulate(float("inf"), 0.01)
 
 
 def test_long_calls_release_the_gil():

@@ -82,7 +82,7 @@ pub struct Problem {
     pub site: Site,
     /// What is wrong, naming the thing at fault.
     pub message: String,
-    /// 1-based line in the source file, when the model came from a file.
+    /// 1-based line in the source text, when the model came from one (a file or a string).
     pub line: Option<usize>,
 }
 
@@ -121,7 +121,8 @@ impl fmt::Display for ModelError {
             match (&self.source_name, p.line) {
                 (Some(file), Some(line)) => write!(f, "{file}:{line}: {}", p.message)?,
                 (Some(file), None) => write!(f, "{file}: {}", p.message)?,
-                (None, _) => write!(f, "{}", p.message)?,
+                (None, Some(line)) => write!(f, "line {line}: {}", p.message)?,
+                (None, None) => write!(f, "{}", p.message)?,
             }
         }
         Ok(())

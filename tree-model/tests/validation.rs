@@ -219,6 +219,13 @@ fn toml_syntax_errors_and_unknown_fields_name_their_line() {
         &format!("{GOOD_HEAD}mass = \"heavy\"\n"),
         &["m.toml:5:", "TOML error"],
     );
+    // Read from a string with no file name, the message still names the line.
+    let e = tree_model::from_toml_str("[[frame]]\nname = 1\n", None).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("line 2: TOML error: invalid type"),
+        "{e}"
+    );
 }
 
 /// A two-link arm with a hook, a control point moved by kinematic `cx`, and room for elements.

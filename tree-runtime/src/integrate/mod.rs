@@ -109,13 +109,13 @@ pub struct RunSummary {
 fn check_options(o: &SimOptions) -> Result<usize, SimError> {
     if !(o.dt > 0.0 && o.dt.is_finite()) {
         return Err(SimError::InvalidInput(format!(
-            "time step must be positive, got {}",
+            "time step must be a positive finite number, got {}",
             Seconds(o.dt)
         )));
     }
     if !(o.duration > 0.0 && o.duration.is_finite()) {
         return Err(SimError::InvalidInput(format!(
-            "duration must be positive, got {} s",
+            "duration must be a positive finite number of seconds, got {} s",
             Seconds(o.duration)
         )));
     }
