@@ -1,0 +1,338 @@
+//! The step's Jacobians `J = ∂R/∂w` and `P = ∂p₂/∂w` from its terms, written once over any
+//! [`Scalar`] (docs/derivations.md §9): over `f64` at the solution for the first derivatives,
+//! over dual numbers for their derivatives; and the multipliers' term `Σ_s λ_s D²h_s(q₁)`.
+
+use super::StepInput;
+use crate::integrate::discrete::{DiscreteLagrangian, Slots};
+use crate::scalar::Scalar;
+use crate::system::ConstraintTerms;
+
+/// Sizes of one step and where each block sits in `w = (q₁, q₂, p₁, u₁, λ)` and in `x`.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Shape {
+    pub(super) n: usize,
+    pub(super) dynamic: Vec<usize>,
+    pub(super) kinematic: Vec<usize>,
+    /// Constraint equations.
+    pub(super) m: usize,
+    /// The variable each input pushes on.
+    pub(super) inputs: Vec<usize>,
+    pub(super) ld: DiscreteLagrangian,
+    /// `f⁻ = left·F`, `f⁺ = plus·F` (Δt included).
+    pub(super) left: f64,
+    pub(super) plus: f64,
+}
+
+impl Shape {
+    pub(super) fn nd(&self) -> usize {
+        self.dynamic.len()
+    }
+    pub(super) fn nu(&self) -> usize {
+        self.inputs.len()
+    }
+    /// `R`'s rows: the dynamic residuals, then `h(q₂)`.
+    pub(super) fn rows(&self) -> usize {
+        self.nd() + self.m
+    }
+    /// Offsets of `q₂`, `p₁`, `u₁`, `λ` in `w` (`q₁` at 0).
+    pub(super) fn w_q2(&self) -> usize {
+        self.n
+    }
+    pub(super) fn w_p1(&self) -> usize {
+        2 * self.n
+    }
+    pub(super) fn w_u1(&self) -> usize {
+        2 * self.n + self.nd()
+    }
+    pub(super) fn w_lambda(&self) -> usize {
+        2 * self.n + self.nd() + self.nu()
+    }
+    pub(super) fn w(&self) -> usize {
+        self.w_lambda() + self.m
+    }
+    /// Where block `b` sits in `x`, and its width.
+    pub(super) fn x_block(&self, b: StepInput) -> (usize, usize) {
+        let (n, nd, nu) = (self.n, self.nd(), self.nu());
+        match b {
+            StepInput::Q1 => (0, n),
+            StepInput::P1 => (n, nd),
+            StepInput::U1 => (n + nd, nu),
+            StepInput::K2 => (n + nd + nu, self.kinematic.len()),
+        }
+    }
+    pub(super) fn x(&self) -> usize {
+        self.n + self.nd() + self.nu() + self.kinematic.len()
+    }
+}
+
+/// What the step's Jacobians are built from, over a scalar: the continuous terms at the
+/// quadrature point (`L_qq`, `L_q̇q` and its transpose, `M`, `F_q`, `F_q̇`, row-major n × n;
+/// `forces`: whether `F_q`, `F_q̇` may be non-zero), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (n × n,
+/// [`contract`]) and `Dh(q₂)`.
+pub(super) struct StepTerms<'a, T> {
+    pub(super) lqq: &'a [T],
+    pub(super) lvq: &'a [T],
+    pub(super) lvq_t: &'a [T],
+    pub(super) mass: &'a [T],
+    pub(super) forces: bool,
+    pub(super) fq: &'a [T],
+    pub(super) fv: &'a [T],
+    pub(super) dh1: &'a [T],
+    pub(super) lambda_d2h1: &'a [T],
+    pub(super) dh2: &'a [T],
+}
+
+/// `J = ∂R/∂w` (rows × w) and `P = ∂p₂/∂w` (n_d × w), row-major, from the step's terms:
+///
+/// * `∂r_i/∂q₁ⱼ = D₁D₁L_d + f⁻·∂F/∂q₁ + Δt Σ_s λ_s D²h_s(q₁)`, `∂r_i/∂q₂ⱼ = D₂D₁L_d +
+///   f⁻·∂F/∂q₂`, `∂r_i/∂p₁ = I`, `∂r_i/∂u_k = left·B`, `∂r_i/∂λ_s = Δt Dh_s(q₁)ᵢ`;
+/// * `∂h_s/∂q₂ = Dh_s(q₂)`;
+/// * `∂p₂ᵢ/∂q₁ⱼ = (D₂D₁L_d)ⱼᵢ + f⁺·∂F/∂q₁`, `∂p₂ᵢ/∂q₂ⱼ = D₂D₂L_d + f⁺·∂F/∂q₂`,
+///   `∂p₂ᵢ/∂u_k = plus·B`,
+///
+/// with `∂F/∂q₁ = (1−α)F_q − F_q̇/Δt`, `∂F/∂q₂ = αF_q + F_q̇/Δt` (F at `(q_α, v)`).
+#[inline(always)]
+pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut [T]) {
+    let (n, m, w) = (sh.n, sh.m, sh.w());
+    let (a, dt) = (sh.ld.alpha, sh.ld.dt);
+    let c = T::constant;
+    // Every entry this writes is written on every call; the others stay zero from the
+    // buffers' making (so nothing is cleared here).
+    let [d1d1, d2d1, d2d2] = [Slots::D1D1, Slots::D2D1, Slots::D2D2].map(|s| sh.ld.slot::<T>(s));
+    let (cdt, left, plus) = (c(dt), c(sh.left), c(sh.plus));
+    // Row i of an n × n term (the transpose's row is the term's column).
+    pub(super) fn row<T>(x: &[T], i: usize, n: usize) -> &[T] {
+        &x[i * n..(i + 1) * n]
+    }
+    for (r, &i) in sh.dynamic.iter().enumerate() {
+        let at = |x| row(x, i, n);
+        let (lqq, lvq, lvq_t, mass, l_d2h) = (
+            at(st.lqq),
+            at(st.lvq),
+            at(st.lvq_t),
+            at(st.mass),
+            at(st.lambda_d2h1),
+        );
+        let (by_q1, rest) = jac[r * w..(r + 1) * w].split_at_mut(n);
+        let (by_q2, rest) = rest.split_at_mut(n);
+        rest[r] = c(1.0);
+        let (p_by_q1, p_rest) = pjac[r * w..(r + 1) * w].split_at_mut(n);
+        let p_by_q2 = &mut p_rest[..n];
+        for j in 0..n {
+            let (qq, vq, vq_t, mm) = (lqq[j], lvq[j], lvq_t[j], mass[j]);
+            by_q1[j] = d1d1.at(qq, vq, vq_t, mm) + cdt * l_d2h[j];
+            by_q2[j] = d2d1.at(qq, vq, vq_t, mm);
+            // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁ (L_qq and M symmetric).
+            p_by_q1[j] = d2d1.at(qq, vq_t, vq, mm);
+            p_by_q2[j] = d2d2.at(qq, vq, vq_t, mm);
+        }
+        if st.forces {
+            // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt.
+            let (fq, fv) = (at(st.fq), at(st.fv));
+            let (q1_q, v1, q2_q) = (c(1.0 - a), c(1.0 / dt), c(a));
+            for j in 0..n {
+                let f1 = q1_q * fq[j] - v1 * fv[j];
+                let f2 = q2_q * fq[j] + v1 * fv[j];
+                by_q1[j] += left * f1;
+                by_q2[j] += left * f2;
+                p_by_q1[j] += plus * f1;
+                p_by_q2[j] += plus * f2;
+            }
+        }
+        for (k, &v) in sh.inputs.iter().enumerate() {
+            if v == i {
+                jac[r * w + sh.w_u1() + k] = left;
+                pjac[r * w + sh.w_u1() + k] = plus;
+            }
+        }
+        for s in 0..m {
+            jac[r * w + sh.w_lambda() + s] = cdt * st.dh1[s * n + i];
+        }
+    }
+    for s in 0..m {
+        let row = &mut jac[(sh.nd() + s) * w..(sh.nd() + s + 1) * w];
+        row[sh.w_q2()..sh.w_q2() + n].copy_from_slice(&st.dh2[s * n..(s + 1) * n]);
+    }
+}
+
+/// `Σ_s λ_s D²h_s` into `out`'s rows chosen by `rows[i]` (row-major, rows of `n`; D²h_s is
+/// symmetric, so its row i is its column-major column i): the multipliers' term of
+/// `∂r/∂q₁`. `d2h` holds one n × n block per constraint row, zero outside the row's
+/// variables where `variables(s)` names them; `add(o, λ, x)` is `o += λx`. A multiplier at
+/// zero adds nothing. Over `f64` at the solution ([`contract_hessians`]) and over dual
+/// numbers along each direction of the second derivatives.
+#[inline(always)]
+pub(super) fn contract_on_rows<'a, T: Scalar + PartialEq + 'a>(
+    out: &mut [T],
+    n: usize,
+    rows: &[bool],
+    lambda: &[T],
+    d2h: impl Iterator<Item = &'a [T]>,
+    variables: impl Fn(usize) -> Option<&'a [usize]>,
+    add: impl Fn(&mut T, T, T),
+) {
+    for i in (0..n).filter(|&i| rows[i]) {
+        out[i * n..(i + 1) * n].fill(T::zero());
+    }
+    for (s, (&l, h)) in lambda.iter().zip(d2h).enumerate() {
+        if l == T::zero() {
+            continue;
+        }
+        match variables(s) {
+            // Only the rows and columns of the row's own variables.
+            Some(vars) => {
+                for &i in vars.iter().filter(|&&i| rows[i]) {
+                    for &j in vars {
+                        add(&mut out[i * n + j], l, h[i * n + j]);
+                    }
+                }
+            }
+            None => {
+                for i in (0..n).filter(|&i| rows[i]) {
+                    let (row, column) = (&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
+                    row.iter_mut().zip(column).for_each(|(o, &x)| add(o, l, x));
+                }
+            }
+        }
+    }
+}
+
+/// [`contract_on_rows`] over `f64` on the dynamic rows (`dynamic[i]`), from the constraints'
+/// terms. Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+pub(super) fn contract_hessians(
+    out: &mut [f64],
+    n: usize,
+    dynamic: &[bool],
+    lambda: &[f64],
+    c: &ConstraintTerms,
+) {
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        contract_hessians_with::<true>(out, n, dynamic, lambda, c);
+    } else {
+        contract_hessians_with::<false>(out, n, dynamic, lambda, c);
+    }
+}
+
+/// [`contract_hessians`] with fused multiply-adds or without (both tested on any CPU).
+#[inline(always)]
+fn contract_hessians_with<const FUSED: bool>(
+    out: &mut [f64],
+    n: usize,
+    dynamic: &[bool],
+    lambda: &[f64],
+    c: &ConstraintTerms,
+) {
+    let blocks = c.d2h.iter().map(|h| h.as_slice());
+    contract_on_rows(
+        out,
+        n,
+        dynamic,
+        lambda,
+        blocks,
+        |s| c.variables(s),
+        |o, l, x| *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x },
+    );
+}
+
+/// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (the same
+/// operations in the same order on every CPU: no fused multiply-adds here).
+#[multiversion::multiversion(targets("x86_64+avx"))]
+pub(super) fn jacobians_f64(sh: &Shape, st: &StepTerms<f64>, jac: &mut [f64], pjac: &mut [f64]) {
+    jacobians(sh, st, jac, pjac);
+}
+
+/// Rows `rows` of the n × n matrix stored column-major in `a`, into the same rows of the
+/// row-major `out` (other rows untouched).
+pub(super) fn gather_rows<T: Copy>(
+    a: &[T],
+    n: usize,
+    rows: impl IntoIterator<Item = usize>,
+    out: &mut [T],
+) {
+    for i in rows {
+        for (j, o) in out[i * n..(i + 1) * n].iter_mut().enumerate() {
+            *o = a[j * n + i];
+        }
+    }
+}
+
+/// `out` = the n × n matrix stored column-major in `a`, stored row-major (its transpose).
+pub(super) fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
+    gather_rows(a, n, 0..n, out);
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::DMatrix;
+
+    use super::*;
+    use crate::dual::Dual;
+
+    /// `Σ_s λ_s D²h_s` on the chosen rows, both roundings and the dispatched kernel, against
+    /// the sum written out, with the rows' variables unknown and known (each block zero
+    /// outside them); rows not chosen are left as they were, a zero multiplier adds nothing.
+    #[test]
+    fn hessians_contract_on_the_dynamic_rows() {
+        let n = 5;
+        let variables = vec![vec![0, 2, 3], vec![1, 2], vec![1, 2, 4]];
+        let d2h: Vec<DMatrix<f64>> = (0..3)
+            .map(|s| {
+                DMatrix::from_fn(n, n, |i, j| {
+                    let inside = variables[s].contains(&i) && variables[s].contains(&j);
+                    inside as u8 as f64 * ((i + j + 3 * s) as f64 * 0.7).sin()
+                })
+            })
+            .map(|h| &h + h.transpose())
+            .collect();
+        let mut dense = ConstraintTerms::zeros(3, n);
+        dense.d2h.clone_from(&d2h);
+        let sparse = dense.clone().with_variables(variables.clone());
+        let lambda = [0.5, 0.0, -2.0];
+        let dynamic = [true, false, true, true, false];
+        let expected = |i: usize, j: usize| 0.5 * d2h[0][(i, j)] - 2.0 * d2h[2][(i, j)];
+        type Kernel = fn(&mut [f64], usize, &[bool], &[f64], &ConstraintTerms);
+        let kernels: [Kernel; 3] = [
+            contract_hessians_with::<false>,
+            contract_hessians_with::<true>,
+            contract_hessians,
+        ];
+        for (kernel, c) in kernels.iter().flat_map(|k| [(k, &dense), (k, &sparse)]) {
+            let mut out = vec![7.0; n * n];
+            kernel(&mut out, n, &dynamic, &lambda, c);
+            for i in 0..n {
+                for j in 0..n {
+                    let want = if dynamic[i] { expected(i, j) } else { 7.0 };
+                    assert!((out[i * n + j] - want).abs() < 1e-14, "({i}, {j})");
+                }
+            }
+        }
+        // Over dual numbers on every row (the second derivatives' form): the value part is
+        // the same sum, the derivative part the multipliers' derivatives' sum.
+        let blocks: Vec<Vec<Dual>> = (d2h.iter())
+            .map(|h| h.iter().map(|&x| Dual::new(x, 0.0)).collect())
+            .collect();
+        let lambda_d = [
+            Dual::new(0.5, 1.0),
+            Dual::new(0.0, 0.0),
+            Dual::new(-2.0, 3.0),
+        ];
+        let mut out = vec![Dual::new(7.0, 7.0); n * n];
+        contract_on_rows(
+            &mut out,
+            n,
+            &[true; 5],
+            &lambda_d,
+            blocks.iter().map(Vec::as_slice),
+            |s| variables.get(s).map(Vec::as_slice),
+            |o, l, x| *o += l * x,
+        );
+        for i in 0..n {
+            for j in 0..n {
+                let d = d2h[0][(i, j)] + 3.0 * d2h[2][(i, j)];
+                let got = out[i * n + j];
+                assert!((got.v - expected(i, j)).abs() < 1e-14 && (got.d - d).abs() < 1e-14);
+            }
+        }
+    }
+}
