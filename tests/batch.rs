@@ -1,9 +1,12 @@
 //! Many rollouts (runtime::batch): each equals its own single run bitwise, the results do
-//! not depend on the number of threads, compiled systems too, inputs per rollout, and a
-//! failing rollout fails alone.
+//! not depend on the number of threads, compiled systems too, inputs per rollout, a
+//! failing rollout fails alone, and a watched batch counts what it finished and stops when
+//! told.
 
+use std::sync::atomic::Ordering;
 use tree_mech::integrate::{run_with_inputs, InputSchedule, Method, SimOptions, ViSettings};
-use tree_mech::runtime::batch::{rollouts, Rollout};
+
+use tree_mech::runtime::batch::{rollouts, rollouts_watched, stopped, Rollout, Watch};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{model, tree_model, NoForce, System, Trajectory, TreeSystem};
 
@@ -311,4 +314,40 @@ fn trajectories_linearise_step_by_step_whatever_the_thread_count() {
             .contains("the trajectory has 0 constraint rows, the system 1"),
         "{e}"
     );
+}
+
+#[test]
+fn a_watched_batch_counts_its_rollouts_and_stops_when_told() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/cart.toml");
+    let sys = TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap();
+    let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 0.5);
+    let starts = starts(12);
+    // Watched to the end: every rollout counted, the results those of the unwatched batch.
+    let watch = Watch::default();
+    let watched = rollouts_watched(&sys, &starts, &options, 2, &watch).unwrap();
+    assert_eq!(watch.done.load(Ordering::Relaxed), 12);
+    let plain = rollouts(&sys, &starts, &options, 2).unwrap();
+    for (a, b) in watched.iter().zip(&plain) {
+        assert_eq!(bits(a.as_ref().unwrap()), bits(b.as_ref().unwrap()));
+    }
+    // Stopped before it starts: nothing runs, the batch says it was stopped.
+    let watch = Watch::default();
+    watch.stop.store(true, Ordering::Relaxed);
+    let e = rollouts_watched(&sys, &starts, &options, 2, &watch).unwrap_err();
+    assert_eq!(e, stopped());
+    assert!(e.to_string().contains("stopped before it finished"), "{e}");
+    // Stopped from another thread once the first rollout is done: the batch ends early.
+    let long = SimOptions::new(Method::Vi(ViSettings::default()), 0.001, 20.0);
+    let many = self::starts(64);
+    let watch = Watch::default();
+    let result = std::thread::scope(|scope| {
+        scope.spawn(|| {
+            while watch.done.load(Ordering::Relaxed) == 0 {
+                std::thread::yield_now();
+            }
+            watch.stop.store(true, Ordering::Relaxed);
+        });
+        rollouts_watched(&sys, &many, &long, 2, &watch)
+    });
+    assert_eq!(result.unwrap_err(), stopped());
 }

@@ -7,6 +7,7 @@ mod numbers;
 use std::borrow::Cow;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 use numpy::ndarray::{s, Array1, Array2, Array3, ArrayView2, Axis, Ix1, Ix2};
@@ -25,7 +26,7 @@ use tree_mech::integrate::{
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{
-    linearize_trajectory, rollouts as run_rollouts, rollouts_of, trajectory, Rollout,
+    linearize_trajectory, rollouts_of_watched, rollouts_watched, trajectory, Rollout, Watch,
 };
 use tree_mech::runtime::dynamics::inverse_dynamics;
 use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state_with};
@@ -87,6 +88,61 @@ fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
 
 fn bad(message: impl Into<String>) -> PyErr {
     PyValueError::new_err(message.into())
+}
+
+/// Runs a batch (`run`, under `watch`) on a thread of its own with the GIL released, while
+/// this thread waits for it: every 50 ms, and when it finishes, Ctrl-C is checked and
+/// `progress(done, batch)` called with the GIL taken back for the moment. Ctrl-C or an
+/// exception from `progress` stops the batch (`watch.stop`) and is returned.
+fn watched<T: Send>(
+    py: Python<'_>,
+    run: impl FnOnce() -> T + Send,
+    watch: &Watch,
+    batch: usize,
+    progress: Option<&Py<PyAny>>,
+) -> PyResult<T> {
+    let mut raised: Option<PyErr> = None;
+    let result = py.detach(|| {
+        let finished = AtomicBool::new(false);
+        let waiting = std::thread::current();
+        std::thread::scope(|scope| {
+            let worker = scope.spawn(|| {
+                let result = run();
+                // Set before the wake-up: a wait that starts after it returns at once.
+                finished.store(true, Ordering::Release);
+                waiting.unpark();
+                result
+            });
+            let mut reported = None;
+            loop {
+                let finished = finished.load(Ordering::Acquire);
+                let done = watch.done.load(Ordering::Relaxed);
+                let checked = Python::attach(|py| {
+                    py.check_signals()?;
+                    match progress {
+                        Some(f) if reported != Some(done) => f.call1(py, (done, batch)).map(drop),
+                        _ => Ok(()),
+                    }
+                });
+                reported = Some(done);
+                if let Err(e) = checked {
+                    raised = Some(e);
+                    watch.stop.store(true, Ordering::Relaxed);
+                    break;
+                }
+                if finished {
+                    break;
+                }
+                std::thread::park_timeout(std::time::Duration::from_millis(50));
+            }
+            worker.join()
+        })
+    });
+    match (raised, result) {
+        (Some(e), _) => Err(e),
+        (None, Ok(result)) => Ok(result),
+        (None, Err(_)) => Err(PyRuntimeError::new_err("a batch's thread panicked")),
+    }
 }
 
 /// An array's shape as Python writes it: `(3, 1)`, `(4,)`.
@@ -1116,8 +1172,10 @@ impl Model {
     /// (batch, steps, inputs) per step; `threads` None: every core. Each rollout's error is
     /// reported in `errors`, not raised. `models`: one model per rollout (this one's
     /// variables, other parameters: `with_parameters`). The GIL is released while it runs;
-    /// results are the same whatever the thread count.
-    #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1, models=None))]
+    /// results are the same whatever the thread count. `progress(done, batch)`, if given, is
+    /// called as rollouts finish (at most every 50 ms, and once at the end); Ctrl-C, or an
+    /// exception from `progress`, stops the batch and is raised.
+    #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1, models=None, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn rollouts(
         &self,
@@ -1131,6 +1189,7 @@ impl Model {
         threads: Option<i64>,
         every: i64,
         models: Option<Vec<PyRef<'_, Model>>>,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Rollouts> {
         let every = count("every", every, 1)?;
         let threads = threads.map(|k| count("threads", k, 1)).transpose()?;
@@ -1210,10 +1269,12 @@ impl Model {
             )
         };
         let threads = threads.unwrap_or(0);
+        let watch = Watch::default();
         let results = match models {
             None => {
                 let sys = self.system();
-                py.detach(move || run_rollouts(&sys, &starts, &options, threads))
+                let run = || rollouts_watched(&sys, &starts, &options, threads, &watch);
+                watched(py, run, &watch, batch, progress.as_ref())?
             }
             Some(models) => {
                 if models.len() != batch {
@@ -1226,7 +1287,8 @@ impl Model {
                     )));
                 }
                 let systems: Vec<TreeSystem> = models.iter().map(|m| m.system()).collect();
-                py.detach(move || rollouts_of(systems, &starts, &options, threads))
+                let run = || rollouts_of_watched(systems, &starts, &options, threads, &watch);
+                watched(py, run, &watch, batch, progress.as_ref())?
             }
         }
         .map_err(|e| sim_error(py, &e))?;

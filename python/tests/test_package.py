@@ -1,5 +1,6 @@
 """The Python package over the Rust runtime: every call, numpy shapes and dtypes, errors,
 the GIL released, rollouts against single runs and across thread counts, optimisation."""
+import _thread
 import math
 import pathlib
 import threading
@@ -340,6 +341,34 @@ def test_progress_is_reported_and_an_exception_in_it_stops_the_run():
     with pytest.raises(KeyError, match="enough"):
         m.simulate(2.0, 0.001, progress=stop)
     assert 0.5 < calls[-1] < 0.6
+
+
+def test_a_batch_reports_its_progress_and_stops_on_an_exception_or_ctrl_c():
+    m = tm.load(CART)
+    seen = []
+    r = m.rollouts(np.zeros((16, 2)) + [0.0, 0.2], np.zeros((16, 2)), 2.0, 0.001,
+                   progress=lambda done, total: seen.append((done, total)))
+    assert all(e is None for e in r.errors)
+    done = [d for d, _ in seen]
+    assert done == sorted(done) and len(set(done)) == len(done), seen
+    assert seen[-1] == (16, 16) and all(total == 16 for _, total in seen)
+
+    def stop(done, total):
+        if done > 0:
+            raise KeyError("enough")
+
+    many = np.zeros((64, 2)) + [0.0, 0.2]
+    with pytest.raises(KeyError, match="enough"):
+        m.rollouts(many, np.zeros((64, 2)), 20.0, 0.001, threads=2, progress=stop)
+    # Ctrl-C (SIGINT to this thread) stops a long batch too, without a callback.
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        m.rollouts(many, np.zeros((64, 2)), 200.0, 0.001, threads=2)
+    timer.join()
+    # And the next batch runs as before.
+    again = m.rollouts(np.zeros((2, 2)) + [0.0, 0.2], np.zeros((2, 2)), 0.1, 0.01)
+    assert all(e is None for e in again.errors)
 
 
 def test_non_finite_states_and_inputs_and_mismatched_schedules_are_refused():

@@ -162,6 +162,7 @@ class Model:
         threads: Optional[int] = None,
         every: int = 1,
         models: Optional[Sequence["Model"]] = None,
+        progress: Optional[Callable[[int, int], object]] = None,
     ) -> Rollouts: ...
     def with_parameters(
         self,

@@ -23,6 +23,8 @@
 //! assert_eq!(runs[3].as_ref().unwrap().len(), 51);
 //! ```
 
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
 use nalgebra::{allocator::Allocator, DefaultAllocator};
 use rayon::prelude::*;
 
@@ -47,6 +49,61 @@ pub struct Rollout {
     pub inputs: InputSchedule,
 }
 
+/// A running batch's progress, and its caller's way to stop it: shared between the caller's
+/// thread and the workers (a progress bar reads `done`; Ctrl-C sets `stop`).
+#[derive(Debug, Default)]
+pub struct Watch {
+    /// Rollouts finished so far (their result known, failed ones too).
+    pub done: AtomicUsize,
+    /// Set to stop the batch: a rollout not yet started is not run, a running one ends at
+    /// its next recorded sample, and the batch returns [`stopped`].
+    pub stop: AtomicBool,
+}
+
+impl Watch {
+    fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// One rollout under watch: not started once stopped, ended at a sample once stopped,
+    /// counted when done.
+    fn run(
+        &self,
+        go: impl FnOnce(&mut dyn FnMut(f64) -> Result<(), SimError>) -> Result<Trajectory, SimError>,
+    ) -> Result<Trajectory, SimError> {
+        let result = if self.stopped() {
+            Err(stopped())
+        } else {
+            go(&mut |_| {
+                if self.stopped() {
+                    Err(stopped())
+                } else {
+                    Ok(())
+                }
+            })
+        };
+        self.done.fetch_add(1, Ordering::Relaxed);
+        result
+    }
+
+    /// The batch's results, or [`stopped`] for the whole of a stopped one.
+    fn close(
+        &self,
+        results: Vec<Result<Trajectory, SimError>>,
+    ) -> Result<Vec<Result<Trajectory, SimError>>, SimError> {
+        if self.stopped() {
+            Err(stopped())
+        } else {
+            Ok(results)
+        }
+    }
+}
+
+/// The error of a batch stopped through its [`Watch`].
+pub fn stopped() -> SimError {
+    SimError::InvalidInput("the batch was stopped before it finished".into())
+}
+
 /// Runs every rollout of `sys` under `options` on `threads` threads (0: as many as the
 /// machine has). Returns one result per rollout, in order: its recorded trajectory, or the
 /// error that ended it. Fails as a whole only when the thread pool cannot be made.
@@ -60,16 +117,33 @@ where
     S: System + Clone + Send + Sync,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    rollouts_watched(sys, starts, options, threads, &Watch::default())
+}
+
+/// [`rollouts`] under `watch`: `watch.done` counts the rollouts finished as they finish, and
+/// setting `watch.stop` (from another thread) ends the batch early with [`stopped`].
+pub fn rollouts_watched<S>(
+    sys: &S,
+    starts: &[Rollout],
+    options: &SimOptions,
+    threads: usize,
+    watch: &Watch,
+) -> Result<Vec<Result<Trajectory, SimError>>, SimError>
+where
+    S: System + Clone + Send + Sync,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let pool = pool(threads)?;
-    Ok(pool.install(|| {
+    let results = pool.install(|| {
         starts
             .par_iter()
             .map_init(
                 || sys.clone(),
-                |sys, start| trajectory(sys, start, options, &mut |_| Ok(())),
+                |sys, start| watch.run(|tick| trajectory(sys, start, options, tick)),
             )
             .collect()
-    }))
+    });
+    watch.close(results)
 }
 
 /// [`rollouts`] with a system of its own per rollout (`systems[k]` runs `starts[k]`): a
@@ -85,6 +159,21 @@ where
     S: System + Send,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    rollouts_of_watched(systems, starts, options, threads, &Watch::default())
+}
+
+/// [`rollouts_of`] under `watch` (as [`rollouts_watched`]).
+pub fn rollouts_of_watched<S>(
+    systems: Vec<S>,
+    starts: &[Rollout],
+    options: &SimOptions,
+    threads: usize,
+    watch: &Watch,
+) -> Result<Vec<Result<Trajectory, SimError>>, SimError>
+where
+    S: System + Send,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     if systems.len() != starts.len() {
         return Err(SimError::InvalidInput(format!(
             "{} systems for {} rollouts: give one each",
@@ -93,13 +182,14 @@ where
         )));
     }
     let pool = pool(threads)?;
-    Ok(pool.install(|| {
+    let results = pool.install(|| {
         systems
             .into_par_iter()
             .zip(starts.par_iter())
-            .map(|(mut sys, start)| trajectory(&mut sys, start, options, &mut |_| Ok(())))
+            .map(|(mut sys, start)| watch.run(|tick| trajectory(&mut sys, start, options, tick)))
             .collect()
-    }))
+    });
+    watch.close(results)
 }
 
 /// The most threads a batch starts per core: more only add switching, and a mistyped count
