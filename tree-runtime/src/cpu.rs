@@ -14,10 +14,11 @@ const FUSED: u8 = 2;
 /// The choice, made on the first call (or forced by [`force_plain`]).
 static CHOICE: AtomicU8 = AtomicU8::new(UNKNOWN);
 
-/// Keeps the one item or statement it wraps only where some CPU the build targets lacks the fused
-/// variant's instructions; elsewhere (aarch64, or x86-64 built for AVX2 and FMA, e.g.
-/// `-C target-cpu=x86-64-v3`) they are not compiled. `tree_model!` wraps each function and
-/// the call of the recorded variant in it, and [`FUSED_ONLY`] is read from it: the condition is written here alone.
+/// Keeps the one item or statement it wraps only where some CPU the build targets lacks the
+/// fused variant's instructions; elsewhere (aarch64, or x86-64 built for AVX2 and FMA, e.g.
+/// `-C target-cpu=x86-64-v3`) it is not compiled. `tree_model!` wraps each function of the
+/// recorded variant and its call in it, and [`FUSED_ONLY`] is read from it: the condition is
+/// written here alone.
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __unless_fused_only {

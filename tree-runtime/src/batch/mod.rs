@@ -69,7 +69,7 @@ impl Watch {
     /// counted when done.
     fn run(
         &self,
-        go: impl FnOnce(&mut dyn FnMut(f64) -> Result<(), SimError>) -> Result<Trajectory, SimError>,
+        go: impl FnOnce(&mut Tick) -> Result<Trajectory, SimError>,
     ) -> Result<Trajectory, SimError> {
         let result = if self.stopped() {
             Err(stopped())
@@ -98,6 +98,10 @@ impl Watch {
         }
     }
 }
+
+/// What a rollout calls at each recorded sample (its time); an error ends it
+/// ([`trajectory`]'s `tick`).
+type Tick<'a> = dyn FnMut(f64) -> Result<(), SimError> + 'a;
 
 /// The error of a batch stopped through its [`Watch`].
 pub fn stopped() -> SimError {
