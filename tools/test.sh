@@ -15,7 +15,8 @@ venv=target/python-venv
 rm -rf "$venv"
 python3 -m venv "$venv"
 "$venv/bin/pip" install --quiet --upgrade pip
-"$venv/bin/pip" install --quiet ./python pytest ray mypy==2.4.1
+# The test tools at the versions last seen to pass, so a new release cannot break CI unseen.
+"$venv/bin/pip" install --quiet ./python pytest==9.2.0 ray==2.60.0 mypy==2.4.1
 "$venv/bin/python" -m pytest -q python/tests
 # The type stubs (`.pyi`) against the module as built: a name, parameter or default that
 # differs fails here.
