@@ -1229,9 +1229,7 @@ impl Model {
                 } else {
                     let a = u
                         .extract::<PyArrayLike3<f64, AllowTypeChange>>()
-                        .map_err(|_| {
-                            bad("u must be None, (batch, inputs) or (batch, steps, inputs)")
-                        })?;
+                        .map_err(|_| bad(format!("{expected}; got no array of numbers")))?;
                     let a = a.as_array();
                     if a.shape()[0] != batch || a.shape()[2] != width {
                         return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));

@@ -176,6 +176,8 @@ def test_a_failing_rollout_fails_alone():
     pendulum = tm.load(str(ROOT / "models/pendulum.toml"))
     with pytest.raises(ValueError, match="the model has no inputs: leave u out"):
         pendulum.rollouts(np.zeros((2, 1)), np.zeros((2, 1)), 0.1, 0.01, u=np.ones((2, 1)))
+    with pytest.raises(ValueError, match=r"u must be \(3, 1\) or .*; got no array of numbers"):
+        m.rollouts(np.zeros((3, 2)), np.zeros((3, 2)), 0.1, 0.01, u="fast")
 
 
 def test_a_model_read_from_text_names_the_line_of_its_error():

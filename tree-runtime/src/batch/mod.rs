@@ -53,7 +53,8 @@ pub struct Rollout {
 /// thread and the workers (a progress bar reads `done`; Ctrl-C sets `stop`).
 #[derive(Debug, Default)]
 pub struct Watch {
-    /// Rollouts finished so far (their result known, failed ones too).
+    /// Rollouts finished so far (their result known: failed ones, and once stopped the
+    /// ones skipped, too).
     pub done: AtomicUsize,
     /// Set to stop the batch: a rollout not yet started is not run, a running one ends at
     /// its next recorded sample, and the batch returns [`stopped`].
