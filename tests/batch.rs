@@ -6,7 +6,9 @@
 use std::sync::atomic::Ordering;
 use tree_mech::integrate::{run_with_inputs, InputSchedule, Method, SimOptions, ViSettings};
 
-use tree_mech::runtime::batch::{rollouts, rollouts_watched, stopped, Rollout, Watch};
+use tree_mech::runtime::batch::{
+    rollouts, rollouts_watched, run_in_lanes, stopped, trajectory, Rollout, Watch,
+};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{model, tree_model, NoForce, System, Trajectory, TreeSystem};
 
@@ -350,4 +352,136 @@ fn a_watched_batch_counts_its_rollouts_and_stops_when_told() {
         rollouts_watched(&sys, &many, &long, 2, &watch)
     });
     assert_eq!(result.unwrap_err(), stopped());
+}
+
+/// The elements model (tests/models/elements.toml: springs, a damper, damping, kinematic
+/// variables moved by a sinusoid and a spline) without its constraints, with two inputs.
+fn elements_unconstrained() -> model::Model {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/elements.toml");
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut kept = String::new();
+    for block in text.split("\n[") {
+        let block = if kept.is_empty() {
+            block.to_string()
+        } else {
+            format!("\n[{block}")
+        };
+        if !block.starts_with("\n[[constraint]]") && !block.starts_with("\n[variables.len]") {
+            kept += &block;
+        }
+    }
+    kept += "\n[[input]]\nname = \"turn\"\nvariable = \"yaw\"\n[[input]]\nname = \"lift\"\nvariable = \"slide\"\n";
+    model::from_toml_str(&kept, None).unwrap()
+}
+
+/// A batch of RK4 rollouts runs four at a time in SIMD lanes (`runtime::lanes`), and each
+/// result is still its own single run's, bit for bit — on the 8-link chain, the UR5 (full
+/// inertias) and the elements model (springs, a damper, damping, kinematic variables,
+/// inputs per rollout as a schedule), every 3rd step recorded over a duration no multiple of
+/// the step, groups of four and a padded group of three; any thread count gives the same.
+/// A group with a failing rollout, or a model with constraints, runs each alone.
+#[test]
+fn rk4_rollouts_run_in_lanes_and_equal_single_runs_bitwise() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let models = [
+        model::from_toml_file(format!("{root}/benches/models/pendulum-8.toml")).unwrap(),
+        model::from_urdf_file(format!("{root}/models/ur5.urdf"), Default::default()).unwrap(),
+        elements_unconstrained(),
+    ];
+    let mut options = SimOptions::new(Method::Rk4, 0.01, 0.735);
+    options.every = 3;
+    for m in &models {
+        let sys = TreeSystem::new(m).unwrap();
+        let n = m.variables.len();
+        let starts: Vec<Rollout> = (0..7)
+            .map(|k| {
+                let wave = |s: f64| (0..n).map(move |i| 0.3 * (1.7 * (i + 3 * k) as f64 + s).sin());
+                let inputs = (0..sys.input_count())
+                    .map(|i| 0.5 * (k as f64 - 2.0) + i as f64)
+                    .collect::<Vec<_>>();
+                let later = inputs.iter().map(|u| -0.5 * u).collect();
+                Rollout {
+                    q0: wave(0.1).map(|x| x + 0.2).collect(),
+                    dq0: wave(0.9).collect(),
+                    inputs: InputSchedule::from_rows(vec![(0.0, inputs), (0.31, later)]).unwrap(),
+                }
+            })
+            .collect();
+        let alone: Vec<Trajectory> = (starts.iter())
+            .map(|s| trajectory(&mut sys.clone(), s, &options, &mut |_| Ok(())).unwrap())
+            .collect();
+        let same = |a: &Trajectory, b: &Trajectory| {
+            bits(a) == bits(b) && a.dissipated.to_bits() == b.dissipated.to_bits()
+        };
+        // The laned run itself, for each group.
+        for group in [&starts[..4], &starts[4..]] {
+            let first = if group.len() == 4 { 0 } else { 4 };
+            let laned =
+                run_in_lanes(&mut sys.clone(), group, &options).expect("the group runs in lanes");
+            assert_eq!(laned.len(), group.len());
+            for (k, t) in laned.iter().enumerate() {
+                assert_eq!(t.len(), 26, "{}", m.name);
+                assert!(
+                    same(t, &alone[first + k]),
+                    "{} rollout {}",
+                    m.name,
+                    first + k
+                );
+            }
+        }
+        for threads in [1, 2] {
+            let batch = rollouts(&sys, &starts, &options, threads).unwrap();
+            for (k, got) in batch.iter().enumerate() {
+                assert!(
+                    same(got.as_ref().unwrap(), &alone[k]),
+                    "{} rollout {k}",
+                    m.name
+                );
+            }
+        }
+        // The rollouts differ, and the model's own forces took energy out where it has them.
+        assert!(alone.windows(2).all(|w| w[0].last_q() != w[1].last_q()));
+        assert_eq!(
+            alone[0].dissipated != 0.0,
+            m.name == "elements",
+            "{}",
+            m.name
+        );
+    }
+    // A rollout whose state overflows fails alone, with its single run's error; the laned run
+    // of its group gives up.
+    let sys = TreeSystem::new(&models[0]).unwrap();
+    let mut starts: Vec<Rollout> = (0..4)
+        .map(|k| Rollout {
+            q0: vec![0.1 * k as f64; 8],
+            dq0: vec![0.0; 8],
+            inputs: InputSchedule::default(),
+        })
+        .collect();
+    starts[2].dq0[3] = 1e200;
+    assert!(run_in_lanes(&mut sys.clone(), &starts, &options).is_none());
+    let batch = rollouts(&sys, &starts, &options, 2).unwrap();
+    let alone = trajectory(&mut sys.clone(), &starts[2], &options, &mut |_| Ok(())).unwrap_err();
+    assert_eq!(
+        batch[2].as_ref().unwrap_err().to_string(),
+        alone.to_string()
+    );
+    assert!(alone.to_string().contains("not finite"), "{alone}");
+    for k in [0, 1, 3] {
+        let single = trajectory(&mut sys.clone(), &starts[k], &options, &mut |_| Ok(())).unwrap();
+        assert_eq!(bits(batch[k].as_ref().unwrap()), bits(&single));
+    }
+    // Constraints: each alone (the elements model as it is).
+    let path = format!("{}/tests/models/elements.toml", env!("CARGO_MANIFEST_DIR"));
+    let constrained = TreeSystem::new(&model::from_toml_file(path).unwrap()).unwrap();
+    let (q0, dq0) = constrained.initial_state();
+    let start = Rollout {
+        q0: q0.as_slice().to_vec(),
+        dq0: dq0.as_slice().to_vec(),
+        inputs: InputSchedule::default(),
+    };
+    assert!(run_in_lanes(&mut constrained.clone(), &[start.clone(), start], &options).is_none());
+    // VI batches run one at a time.
+    let vi = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 0.1);
+    assert!(run_in_lanes(&mut sys.clone(), &starts[..2], &vi).is_none());
 }

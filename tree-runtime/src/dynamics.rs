@@ -305,6 +305,39 @@ where
         }
     }
 
+    /// Whether the articulated-body algorithm is to give `q̈` (asked for, and the model has
+    /// no constraints); if so, its inputs at `(cx.t, q, q̇)`: the generalized force from
+    /// outside the model (the caller's force, `B u`) into [`Self::external_force`], the
+    /// kinematic variables' prescribed `q̈` into `qdd`.
+    pub(crate) fn articulated_inputs<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q: &Vector<N>,
+        dq: &Vector<N>,
+        qdd: &mut Vector<N>,
+    ) -> bool
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        if !self.articulated || self.split.rows > 0 {
+            return false;
+        }
+        self.rhs.as_mut_slice().fill(0.0);
+        cx.force.add_force(cx.t, q, dq, &mut self.rhs);
+        cx.add_inputs(&mut self.rhs);
+        for &i in &self.split.kinematic {
+            qdd[i] = cx.motion.kinematic(i, cx.t)[2];
+        }
+        true
+    }
+
+    /// The generalized force from outside the model that [`Self::articulated_inputs`] left.
+    pub(crate) fn external_force(&self) -> &Vector<N> {
+        &self.rhs
+    }
+
     /// `q̈` at `(cx.t, q, q̇)` into `qdd` (eq. (14)); the kinematic entries of `q`, `q̇` must
     /// hold their prescription at `cx.t`, and `qdd`'s kinematic entries are set from it.
     /// `cx.index` labels errors.
@@ -320,21 +353,14 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        if self.articulated && self.split.rows == 0 {
-            // The articulated-body algorithm, O(frames), where the system has it: τ from
-            // outside the model (the caller's force, B u), kinematic q̈ prescribed.
-            self.rhs.as_mut_slice().fill(0.0);
-            cx.force.add_force(cx.t, q, dq, &mut self.rhs);
-            cx.add_inputs(&mut self.rhs);
-            for &i in &self.split.kinematic {
-                qdd[i] = cx.motion.kinematic(i, cx.t)[2];
-            }
-            if cx
+        // The articulated-body algorithm, O(frames), where the system has it (else, or when
+        // a pivot is lost, M is formed and factored below).
+        if self.articulated_inputs(cx, q, dq, qdd)
+            && cx
                 .sys
                 .articulated_acceleration(q, dq, &self.rhs, qdd, &mut self.terms)
-            {
-                return finite(qdd, &self.lambda, cx.index, cx.t);
-            }
+        {
+            return finite(qdd, &self.lambda, cx.index, cx.t);
         }
         cx.sys.lagrangian(q, dq, Order::Dynamics, &mut self.terms);
         // rhs = F + u + B u_inputs + ∂L/∂q − (∂²L/∂q̇∂q) q̇
@@ -419,7 +445,7 @@ where
 }
 
 /// `q̈` and `λ` finite, or the error naming the step.
-fn finite<N: Dim>(
+pub(crate) fn finite<N: Dim>(
     qdd: &Vector<N>,
     lambda: &DVector<f64>,
     step: usize,

@@ -33,6 +33,7 @@ pub mod dual;
 pub mod elements;
 #[doc(hidden)]
 pub mod kernel;
+pub mod lanes;
 pub mod order;
 #[doc(hidden)]
 pub mod outputs;

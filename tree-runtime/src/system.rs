@@ -7,6 +7,7 @@ use nalgebra::{
 use tree_model::Motion;
 
 use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+use crate::lanes::{ElementForces, Lanes, WIDTH};
 pub use crate::order::Order;
 use crate::outputs::{clear_among, Field, Index, Output, Scratch, Sink};
 use crate::se3::Pose;
@@ -488,6 +489,32 @@ where
     ) -> bool {
         let _ = (q, dq, tau, qdd, own);
         false
+    }
+
+    /// [`Self::articulated_acceleration`] of [`WIDTH`](crate::lanes::WIDTH) states at once,
+    /// one per lane of [`Lanes`] (every entry of `q`, `dq`, `tau`, `qdd` one variable, the
+    /// model's own forces left in `own`): each lane's `q̈` has the bits the one-state call
+    /// gives, and each lane says whether its pivots held. `None` when the system has no laned
+    /// evaluation (the default) or the model has constraints; the interpreted system runs
+    /// [`crate::articulated`] over [`Lanes`].
+    fn articulated_acceleration_lanes(
+        &mut self,
+        q: &[Lanes],
+        dq: &[Lanes],
+        tau: &[Lanes],
+        qdd: &mut [Lanes],
+        own: &mut ElementForces,
+    ) -> Option<[bool; WIDTH]> {
+        let _ = (q, dq, tau, qdd, own);
+        None
+    }
+
+    /// [`Self::energy`] of [`WIDTH`](crate::lanes::WIDTH) states at once, each lane's with
+    /// the bits of the one-state call; `None` where [`Self::articulated_acceleration_lanes`]
+    /// is.
+    fn energy_lanes(&mut self, q: &[Lanes], dq: &[Lanes]) -> Option<Lanes> {
+        let _ = (q, dq);
+        None
     }
 
     /// Every frame's pose in the world, `g_sk(q)` (eq. (1)); `out.len()` must be

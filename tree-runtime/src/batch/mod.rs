@@ -30,9 +30,11 @@ use rayon::prelude::*;
 
 use crate::dynamics::{ModelMotions, NoForce};
 use crate::error::SimError;
-use crate::integrate::{run_with_inputs, InputSchedule, SimOptions};
+use crate::integrate::laned::{rk4_lanes, LaneStart, Observer};
+use crate::integrate::{run_with_inputs, InputSchedule, RunSummary, SimOptions};
+use crate::lanes::WIDTH;
 use crate::system::System;
-use crate::trajectory::Trajectory;
+use crate::trajectory::{Sample, Trajectory};
 
 mod steps;
 
@@ -66,6 +68,15 @@ impl Watch {
         self.stop.load(Ordering::Relaxed)
     }
 
+    /// What a rollout under watch hears at each sample: the stopped error once stopped.
+    fn tick(&self) -> Result<(), SimError> {
+        if self.stopped() {
+            Err(stopped())
+        } else {
+            Ok(())
+        }
+    }
+
     /// One rollout under watch: not started once stopped, ended at a sample once stopped,
     /// counted when done.
     fn run(
@@ -75,13 +86,7 @@ impl Watch {
         let result = if self.stopped() {
             Err(stopped())
         } else {
-            go(&mut |_| {
-                if self.stopped() {
-                    Err(stopped())
-                } else {
-                    Ok(())
-                }
-            })
+            go(&mut |_| self.tick())
         };
         self.done.fetch_add(1, Ordering::Relaxed);
         result
@@ -141,14 +146,101 @@ where
     let pool = pool(threads)?;
     let results = pool.install(|| {
         starts
-            .par_iter()
+            .par_chunks(WIDTH)
             .map_init(
                 || sys.clone(),
-                |sys, start| watch.run(|tick| trajectory(sys, start, options, tick)),
+                |sys, group| run_group(sys, group, options, watch),
             )
+            .flat_map_iter(|group| group.into_iter())
             .collect()
     });
     watch.close(results)
+}
+
+/// A group of at most [`WIDTH`] rollouts of one system: run together in SIMD lanes where
+/// they can be ([`crate::integrate::laned`]: RK4 on a system with a laned evaluation, a model
+/// without constraints), else — and whenever a laned run gives up — one at a time. Either
+/// way each result is the one its rollout alone gives, bit for bit.
+fn run_group<S>(
+    sys: &mut S,
+    group: &[Rollout],
+    options: &SimOptions,
+    watch: &Watch,
+) -> Vec<Result<Trajectory, SimError>>
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    // Lanes pay from two rollouts on (four take about the time of two alone).
+    if group.len() >= 2 && !watch.stopped() {
+        if let Some(runs) = laned(sys, group, options, watch) {
+            watch.done.fetch_add(group.len(), Ordering::Relaxed);
+            return runs.into_iter().map(Ok).collect();
+        }
+    }
+    let one = |start| watch.run(|tick| trajectory(sys, start, options, tick));
+    group.iter().map(one).collect()
+}
+
+/// Runs `group` (at most [`WIDTH`] rollouts; padded with copies of its first) together in
+/// SIMD lanes, RK4 stage by stage, each recorded as [`trajectory`] records it and with its
+/// bits — what [`rollouts`] does with each group of an RK4 batch. `None` when the laned run
+/// does not apply or gives up (another method, a model with constraints, a system without a
+/// laned evaluation; a rollout that fails or whose articulated-body pivot is lost): then
+/// [`rollouts`] runs each alone.
+pub fn run_in_lanes<S>(
+    sys: &mut S,
+    group: &[Rollout],
+    options: &SimOptions,
+) -> Option<Vec<Trajectory>>
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    if group.is_empty() || group.len() > WIDTH {
+        return None;
+    }
+    laned(sys, group, options, &Watch::default())
+}
+
+/// [`run_in_lanes`] under a watch.
+fn laned<S>(
+    sys: &mut S,
+    group: &[Rollout],
+    options: &SimOptions,
+    watch: &Watch,
+) -> Option<Vec<Trajectory>>
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let start = |l: usize| {
+        let r = group.get(l).unwrap_or(&group[0]);
+        LaneStart {
+            q0: &r.q0,
+            dq0: &r.dq0,
+            inputs: &r.inputs,
+        }
+    };
+    let mut runs: Vec<Trajectory> = (0..WIDTH).map(|_| recording(sys, options)).collect();
+    let mut observers: Vec<_> = (runs.iter_mut())
+        .map(|traj| {
+            move |s: &Sample| {
+                traj.push(s);
+                watch.tick()
+            }
+        })
+        .collect();
+    let mut each = observers.iter_mut();
+    let observe: [Observer; WIDTH] =
+        std::array::from_fn(|_| each.next().expect("an observer a lane") as Observer);
+    let summaries = rk4_lanes(sys, std::array::from_fn(start), options, observe)?;
+    drop(observers);
+    for (traj, summary) in runs.iter_mut().zip(&summaries) {
+        finish(traj, summary);
+    }
+    runs.truncate(group.len());
+    Some(runs)
 }
 
 /// [`rollouts`] with a system of its own per rollout (`systems[k]` runs `starts[k]`): a
@@ -239,12 +331,7 @@ where
     let (mut q0, mut dq0) = (sys.zero_vector(), sys.zero_vector());
     q0.as_mut_slice().copy_from_slice(&start.q0);
     dq0.as_mut_slice().copy_from_slice(&start.dq0);
-    let names = (0..n).map(|i| sys.variable_name(i).to_string()).collect();
-    let constraints = (0..sys.constraint_count())
-        .map(|r| sys.constraint_name(r).to_string())
-        .collect();
-    let samples = (options.duration / options.dt / options.every.max(1) as f64).ceil() as usize + 2;
-    let mut traj = Trajectory::new(names, constraints, samples.min(1 << 24));
+    let mut traj = recording(sys, options);
     let mut motion = ModelMotions::of(sys);
     let summary = run_with_inputs(
         sys,
@@ -259,8 +346,30 @@ where
             tick(s.t)
         },
     )?;
+    finish(&mut traj, &summary);
+    Ok(traj)
+}
+
+/// An empty trajectory of `sys`'s variables and constraints, with room for the samples a run
+/// under `options` records.
+fn recording<S>(sys: &S, options: &SimOptions) -> Trajectory
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let names = (0..sys.dof())
+        .map(|i| sys.variable_name(i).to_string())
+        .collect();
+    let constraints = (0..sys.constraint_count())
+        .map(|r| sys.constraint_name(r).to_string())
+        .collect();
+    let samples = (options.duration / options.dt / options.every.max(1) as f64).ceil() as usize + 2;
+    Trajectory::new(names, constraints, samples.min(1 << 24))
+}
+
+/// A recorded run's totals, from its summary.
+fn finish(traj: &mut Trajectory, summary: &RunSummary) {
     traj.newton_iterations = summary.newton_iterations;
     traj.subdivided_steps = summary.subdivided_steps;
     traj.dissipated = summary.dissipated;
-    Ok(traj)
 }

@@ -4,6 +4,7 @@
 //! them into a [`Trajectory`]).
 
 mod discrete;
+pub(crate) mod laned;
 mod projection;
 mod rk4;
 pub(crate) mod rk45;

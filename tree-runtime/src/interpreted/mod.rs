@@ -9,6 +9,7 @@ use crate::articulated::{self, Articulated};
 use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 use crate::error::SimError;
 use crate::kernel::{self, Kernel};
+use crate::lanes::{ElementForces, EnergySink, Lanes, WIDTH};
 use crate::plan::TreePlan;
 use crate::se3::{Pose, Twist};
 use crate::sweeps::{self, Reach, Workspace};
@@ -39,6 +40,17 @@ pub struct TreeSystem {
     /// [`System::inverse_dynamics_jet`] (made on first use).
     jet_kernel: Option<Box<Kernel<Jet<LANES>>>>,
     qdd_jet: Vec<Jet<LANES>>,
+    /// The kernel and articulated-body storage over [`Lanes`], for the laned evaluations
+    /// (made on first use).
+    laned: Option<Box<Laned>>,
+}
+
+/// What the laned evaluations work in.
+#[derive(Clone, Debug)]
+struct Laned {
+    kernel: Kernel<Lanes>,
+    articulated: Articulated<Lanes>,
+    tau: Vec<Lanes>,
 }
 
 /// An error when `model` would need more Jacobian columns than the runtime allocates (each
@@ -70,6 +82,34 @@ fn dispatched_elements_at(
     kernel::elements_at(plan, k, q, dq, own);
 }
 
+/// [`TreeSystem::articulated_acceleration`]'s evaluation over [`Lanes`] — the outward sweep
+/// and the elements, `τ` completed by the model's own forces, the articulated-body step —
+/// dispatched as [`dispatched_elements_at`] (for AVX2 the four lanes fill one register).
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+fn dispatched_lanes(
+    plan: &TreePlan,
+    laned: &mut Laned,
+    kinematic: &[bool],
+    (q, dq, tau): (&[Lanes], &[Lanes], &[Lanes]),
+    qdd: &mut [Lanes],
+    own: &mut ElementForces,
+) {
+    own.clear();
+    kernel::elements_at(plan, &mut laned.kernel, q, dq, own);
+    for (i, t) in laned.tau.iter_mut().enumerate() {
+        *t = tau[i] + own.force[i] + own.dl_dq[i];
+    }
+    articulated::accelerations(
+        plan,
+        &laned.kernel.tree,
+        &mut laned.articulated,
+        dq,
+        &laned.tau,
+        kinematic,
+        qdd,
+    );
+}
+
 /// [`kernel::evaluate`] (the two sweeps, then the elements' terms), dispatched as
 /// [`dispatched_elements_at`].
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
@@ -82,6 +122,16 @@ fn dispatched_evaluate(
     out: &mut Terms<Dyn>,
 ) {
     kernel::evaluate(plan, k, q, dq, order, out);
+}
+
+impl Laned {
+    fn new(plan: &TreePlan) -> Self {
+        Laned {
+            kernel: Kernel::new(plan),
+            articulated: Articulated::new(plan),
+            tau: vec![Lanes::default(); plan.variable_frames.len()],
+        }
+    }
 }
 
 impl TreeSystem {
@@ -101,6 +151,7 @@ impl TreeSystem {
             tau: vec![0.0; model.variables.len()],
             jet_kernel: None,
             qdd_jet: vec![Jet::default(); model.variables.len()],
+            laned: None,
             plan,
         })
     }
@@ -248,6 +299,40 @@ impl System for TreeSystem {
         )
     }
 
+    fn articulated_acceleration_lanes(
+        &mut self,
+        q: &[Lanes],
+        dq: &[Lanes],
+        tau: &[Lanes],
+        qdd: &mut [Lanes],
+        own: &mut ElementForces,
+    ) -> Option<[bool; WIDTH]> {
+        let plan = &self.plan;
+        if plan.rows > 0 || !articulated::resolvable(plan, &self.kinematic) {
+            return None;
+        }
+        let laned = self.laned.get_or_insert_with(|| Box::new(Laned::new(plan)));
+        dispatched_lanes(plan, laned, &self.kinematic, (q, dq, tau), qdd, own);
+        let art = &laned.articulated;
+        Some(std::array::from_fn(|lane| {
+            articulated::pivots_hold(&self.kinematic, |i| {
+                let k = plan.variable_frames[i].expect("a resolvable variable drives a frame");
+                (art.pivot[k].0[lane], art.pivot_scale[k].0[lane])
+            })
+        }))
+    }
+
+    fn energy_lanes(&mut self, q: &[Lanes], dq: &[Lanes]) -> Option<Lanes> {
+        let plan = &self.plan;
+        if plan.rows > 0 {
+            return None;
+        }
+        let laned = self.laned.get_or_insert_with(|| Box::new(Laned::new(plan)));
+        let mut out = EnergySink::default();
+        kernel::energy(plan, &mut laned.kernel, q, dq, &mut out);
+        Some(out.0)
+    }
+
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
         sweeps::poses(&self.full_plan, q.as_slice(), out);
     }
@@ -350,6 +435,56 @@ mod tests {
                 &mut expected,
             );
             assert_eq!(bits(qdd.as_slice()), bits(&expected), "{}", model.name);
+        }
+    }
+
+    /// Four states in the lanes of one evaluation give each state's own bits: the
+    /// accelerations, the model's own forces and the energy.
+    #[test]
+    fn the_laned_evaluations_give_each_states_bits() {
+        for (model, _, _) in models_and_states() {
+            let mut sys = TreeSystem::new(&model).expect("the system builds");
+            let n = model.variables.len();
+            let states: Vec<[Vector<Dyn>; 3]> = (0..WIDTH)
+                .map(|l| {
+                    let s = 0.4 * l as f64;
+                    [
+                        wave(n, s, 1.0),
+                        wave(n, s + 0.9, 2.0),
+                        wave(n, s + 1.7, 1.0),
+                    ]
+                })
+                .collect();
+            let lanes = |k: usize| -> Vec<Lanes> {
+                (0..n)
+                    .map(|i| Lanes(std::array::from_fn(|l| states[l][k][i])))
+                    .collect()
+            };
+            let (q, dq, tau) = (lanes(0), lanes(1), lanes(2));
+            let mut qdd = vec![Lanes::default(); n];
+            let mut own = ElementForces::zeros(n);
+            let held = sys
+                .articulated_acceleration_lanes(&q, &dq, &tau, &mut qdd, &mut own)
+                .expect("a model without constraints has the laned evaluation");
+            assert_eq!(held, [true; WIDTH]);
+            let energy = sys.energy_lanes(&q, &dq).expect("and the laned energy");
+            for (l, [q, dq, tau]) in states.iter().enumerate() {
+                let mut terms = Terms::zeros(Dyn(n));
+                let mut alone = Vector::<Dyn>::zeros(n);
+                assert!(sys.articulated_acceleration(q, dq, tau, &mut alone, &mut terms));
+                let lane = |v: &[Lanes]| v.iter().map(|x| x.0[l]).collect::<Vec<_>>();
+                assert_eq!(bits(&lane(&qdd)), bits(alone.as_slice()), "{}", model.name);
+                assert_eq!(bits(&lane(&own.force)), bits(terms.force.as_slice()));
+                let e = sys.energy(q, dq, &mut terms);
+                assert_eq!(energy.0[l].to_bits(), e.to_bits(), "{}", model.name);
+            }
+            // The model's damping acts (the humanoid's), so the forces were compared.
+            assert_eq!(
+                own.force.iter().any(|f| f.0 != [0.0; WIDTH]),
+                model.name != "pendulum-8",
+                "{}",
+                model.name
+            );
         }
     }
 
