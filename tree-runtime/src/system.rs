@@ -491,7 +491,7 @@ where
         false
     }
 
-    /// [`Self::articulated_acceleration`] of [`WIDTH`](crate::lanes::WIDTH) states at once,
+    /// [`Self::articulated_acceleration`] of [`WIDTH`] states at once,
     /// one per lane of [`Lanes`] (every entry of `q`, `dq`, `tau`, `qdd` one variable, the
     /// model's own forces left in `own`): each lane's `q̈` has the bits the one-state call
     /// gives, and each lane says whether its pivots held. `None` when the system has no laned
@@ -509,7 +509,7 @@ where
         None
     }
 
-    /// [`Self::energy`] of [`WIDTH`](crate::lanes::WIDTH) states at once, each lane's with
+    /// [`Self::energy`] of [`WIDTH`] states at once, each lane's with
     /// the bits of the one-state call; `None` where [`Self::articulated_acceleration_lanes`]
     /// is.
     fn energy_lanes(&mut self, q: &[Lanes], dq: &[Lanes]) -> Option<Lanes> {
