@@ -7,7 +7,7 @@ use std::sync::atomic::Ordering;
 use tree_mech::integrate::{run_with_inputs, InputSchedule, Method, SimOptions, ViSettings};
 
 use tree_mech::runtime::batch::{
-    rollouts, rollouts_watched, run_in_lanes, stopped, trajectory, Rollout, Watch,
+    rollouts, rollouts_watched, run_in_lanes, stopped, trajectory, Rollout, StepLinearizer, Watch,
 };
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{model, tree_model, NoForce, System, Trajectory, TreeSystem};
@@ -352,6 +352,28 @@ fn a_watched_batch_counts_its_rollouts_and_stops_when_told() {
         rollouts_watched(&sys, &many, &long, 2, &watch)
     });
     assert_eq!(result.unwrap_err(), stopped());
+    // An RK4 batch (run in lanes, four at a time) counts each rollout once too.
+    let watch = Watch::default();
+    let rk4 = SimOptions::new(Method::Rk4, 0.01, 0.5);
+    rollouts_watched(&sys, &starts, &rk4, 2, &watch).unwrap();
+    assert_eq!(watch.done.load(Ordering::Relaxed), 12);
+    // Linearising a trajectory counts its steps, and stops when told.
+    let settings = ViSettings::default();
+    let run =
+        tree_mech::runtime::batch::trajectory(&mut sys.clone(), &starts[3], &options, &mut |_| {
+            Ok(())
+        })
+        .unwrap();
+    let mut linearizer = StepLinearizer::new(&sys, &settings, 2).unwrap();
+    let (watch, mut steps) = (Watch::default(), Vec::new());
+    linearizer
+        .linearize_into_watched(&run, &mut steps, &watch)
+        .unwrap();
+    assert_eq!(watch.done.load(Ordering::Relaxed), 50);
+    assert_eq!(steps.len(), 50);
+    watch.stop.store(true, Ordering::Relaxed);
+    let e = linearizer.linearize_into_watched(&run, &mut steps, &watch);
+    assert_eq!(e.unwrap_err(), stopped());
 }
 
 /// The elements model (tests/models/elements.toml: springs, a damper, damping, kinematic

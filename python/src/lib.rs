@@ -26,7 +26,7 @@ use tree_mech::integrate::{
 use tree_mech::model::{self, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{
-    linearize_trajectory, rollouts_of_watched, rollouts_watched, trajectory, Rollout, Watch,
+    rollouts_of_watched, rollouts_watched, trajectory, Rollout, StepLinearizer, Watch,
 };
 use tree_mech::runtime::dynamics::inverse_dynamics;
 use tree_mech::runtime::evaluation::{continuous_dynamics, evaluate_state_with};
@@ -1103,8 +1103,11 @@ impl Model {
     /// rows, columns). The steps are shared out over `threads` threads (None: every core;
     /// the same numbers whatever the count), the GIL released. A step whose recorded end
     /// does not solve its equations (samples every second step, a subdivided step, other
-    /// settings) raises `SimulationError` naming it.
-    #[pyo3(signature = (trajectory, alpha=0.5, forcing="split", newton_tol=None, threads=None))]
+    /// settings) raises `SimulationError` naming it. `progress(done, steps)`, if given, is
+    /// called as steps are linearised (at most every 50 ms, and once at the end); Ctrl-C, or
+    /// an exception from `progress`, stops the call and is raised.
+    #[pyo3(signature = (trajectory, alpha=0.5, forcing="split", newton_tol=None, threads=None, progress=None))]
+    #[allow(clippy::too_many_arguments)]
     fn linearize_trajectory<'py>(
         &self,
         py: Python<'py>,
@@ -1113,6 +1116,7 @@ impl Model {
         forcing: &str,
         newton_tol: Option<f64>,
         threads: Option<i64>,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let threads = threads.map(|k| count("threads", k, 1)).transpose()?;
         let Method::Vi(settings) = method("vi", alpha, forcing, newton_tol, 0.0, 0.0)? else {
@@ -1120,8 +1124,15 @@ impl Model {
         };
         let run = self.core_trajectory(py, &trajectory)?;
         let sys = self.system();
-        let steps = py
-            .detach(|| linearize_trajectory(&sys, &run, &settings, threads.unwrap_or(0)))
+        let watch = Watch::default();
+        let linearise = || {
+            let mut steps = Vec::new();
+            StepLinearizer::new(&sys, &settings, threads.unwrap_or(0))?
+                .linearize_into_watched(&run, &mut steps, &watch)
+                .map(|()| steps)
+        };
+        let count = run.len().saturating_sub(1);
+        let steps = watched(py, linearise, &watch, count, progress.as_ref())?
             .map_err(|e| sim_error(py, &e))?;
         let out = self.named_parts(py)?;
         for of in StepOutput::ALL {

@@ -378,6 +378,26 @@ def test_a_batch_reports_its_progress_and_stops_on_an_exception_or_ctrl_c():
     assert all(e is None for e in again.errors)
 
 
+def test_linearising_a_trajectory_reports_its_progress_and_stops_on_an_exception():
+    m = tm.load(str(ROOT / "models/marionette.toml"))
+    traj = m.simulate(1.0, 0.01)
+    seen = []
+    steps = m.linearize_trajectory(traj, threads=2,
+                                   progress=lambda done, total: seen.append((done, total)))
+    assert steps["q2_dq1"].shape[0] == 100
+    done = [d for d, _ in seen]
+    assert done == sorted(done) and len(set(done)) == len(done), seen
+    assert seen[-1] == (100, 100) and all(total == 100 for _, total in seen)
+    # The same numbers as without a callback.
+    np.testing.assert_array_equal(m.linearize_trajectory(traj)["q2_dq1"], steps["q2_dq1"])
+
+    def stop(done, total):
+        raise KeyError("enough")
+
+    with pytest.raises(KeyError, match="enough"):
+        m.linearize_trajectory(traj, progress=stop)
+
+
 def test_non_finite_states_and_inputs_and_mismatched_schedules_are_refused():
     m = tm.load(CART)
     # A NaN is named where it is given, not reported later as a failure of the dynamics.

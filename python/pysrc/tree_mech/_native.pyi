@@ -150,6 +150,7 @@ class Model:
         forcing: str = "split",
         newton_tol: Optional[float] = None,
         threads: Optional[int] = None,
+        progress: Optional[Callable[[int, int], object]] = None,
     ) -> dict: ...
     def rollouts(
         self,

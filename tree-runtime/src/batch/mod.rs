@@ -52,11 +52,12 @@ pub struct Rollout {
 }
 
 /// A running batch's progress, and its caller's way to stop it: shared between the caller's
-/// thread and the workers (a progress bar reads `done`; Ctrl-C sets `stop`).
+/// thread and the workers (a progress bar reads `done`; Ctrl-C sets `stop`). A batch of
+/// rollouts counts rollouts, [`StepLinearizer::linearize_into_watched`] steps.
 #[derive(Debug, Default)]
 pub struct Watch {
-    /// Rollouts finished so far (their result known: failed ones, and once stopped the
-    /// ones skipped, too).
+    /// Rollouts (or steps) finished so far (for rollouts, their result known: failed ones,
+    /// and once stopped the ones skipped, too).
     pub done: AtomicUsize,
     /// Set to stop the batch: a rollout not yet started is not run, a running one ends at
     /// its next recorded sample, and the batch returns [`stopped`].

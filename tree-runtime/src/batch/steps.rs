@@ -7,7 +7,9 @@
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 use rayon::prelude::*;
 
-use super::pool;
+use std::sync::atomic::Ordering;
+
+use super::{pool, stopped, Watch};
 use crate::context::StepContext;
 use crate::dynamics::{ModelMotions, NoForce};
 use crate::error::SimError;
@@ -103,6 +105,18 @@ where
         run: &Trajectory,
         out: &mut Vec<StepDerivatives>,
     ) -> Result<(), SimError> {
+        self.linearize_into_watched(run, out, &Watch::default())
+    }
+
+    /// [`Self::linearize_into`] under `watch`: `watch.done` counts the steps linearised as
+    /// they are, and setting `watch.stop` (from another thread) ends the call early with
+    /// [`stopped`] (each worker looks before each step).
+    pub fn linearize_into_watched(
+        &mut self,
+        run: &Trajectory,
+        out: &mut Vec<StepDerivatives>,
+        watch: &Watch,
+    ) -> Result<(), SimError> {
         self.workers[0].fits(run)?;
         let steps = run.len() - 1;
         out.resize_with(steps, StepDerivatives::empty);
@@ -112,7 +126,14 @@ where
         let each = |(c, (worker, outs)): (usize, (&mut StepWorker<S>, &mut [StepDerivatives]))| {
             let first = c * share;
             worker.error = (outs.iter_mut().enumerate())
-                .try_for_each(|(i, o)| worker.linearise_into(run, first + i, o))
+                .try_for_each(|(i, o)| {
+                    if watch.stop.load(Ordering::Relaxed) {
+                        return Err(stopped());
+                    }
+                    worker.linearise_into(run, first + i, o)?;
+                    watch.done.fetch_add(1, Ordering::Relaxed);
+                    Ok(())
+                })
                 .err();
         };
         self.workers.iter_mut().for_each(|w| w.error = None);
@@ -122,6 +143,9 @@ where
                 let work = self.workers.par_iter_mut().zip(out.par_chunks_mut(share));
                 pool.install(|| work.enumerate().for_each(each));
             }
+        }
+        if watch.stop.load(Ordering::Relaxed) {
+            return Err(stopped());
         }
         // The runs are in step order: the first error is the earliest step's.
         match self.workers.iter_mut().find_map(|w| w.error.take()) {
