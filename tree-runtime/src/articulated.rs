@@ -65,6 +65,7 @@ impl<S: Scalar> Articulated<S> {
 
 /// `v ×* w = (ω × f, v × f + ω × τ)`: the rate of change of a momentum `w = (f, τ)` carried by
 /// a body moving with twist `v = (v, ω)` (body-frame Newton–Euler).
+#[inline(always)]
 pub(crate) fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
     let (lin, ang) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
     let (f, tau) = ([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
@@ -78,7 +79,15 @@ pub(crate) fn cross_force<S: Scalar>(v: &Twist<S>, w: &Wrench<S>) -> Wrench<S> {
 /// that every body's inertial wrench carries its weight.
 pub(crate) fn base_acceleration<S: Scalar>(plan: &TreePlan) -> Twist<S> {
     let g = plan.gravity;
-    [-g[0], -g[1], -g[2], 0.0, 0.0, 0.0].map(S::constant)
+    let c = S::constant;
+    [
+        c(-g[0]),
+        c(-g[1]),
+        c(-g[2]),
+        S::zero(),
+        S::zero(),
+        S::zero(),
+    ]
 }
 
 /// The parent's acceleration `a_par` (`base` for a root) seen from frame `k`:
@@ -101,9 +110,10 @@ pub(crate) fn from_parent<S: Scalar>(
 
 /// `c_k = (∂v_k/∂q_k) q̇_k`: the acceleration frame `k`'s own joint adds at constant speed
 /// (the velocity-product term); zero for a constant frame.
+#[inline(always)]
 pub(crate) fn velocity_product<S: Scalar>(f: &FramePlan, ws: &Workspace<S>, dq: &[S]) -> Twist<S> {
     match (f.own(), f.joint) {
-        (Some(d), Joint::Variable(i)) => ws.dv_dq[f.col_offset + d].map(|x| x * dq[i]),
+        (Some(d), Joint::Variable(i)) => scaled(&ws.dv_dq[f.col_offset + d], dq[i]),
         _ => zero6(),
     }
 }
@@ -129,7 +139,19 @@ pub(crate) fn outward_acceleration<S: Scalar>(
     a
 }
 
+/// `a s` (an array's `map` is left as a call over a wide scalar such as
+/// [`crate::lanes::Lanes`]).
+#[inline(always)]
+fn scaled<S: Scalar>(a: &[S; 6], s: S) -> [S; 6] {
+    let mut out = *a;
+    for x in &mut out {
+        *x = *x * s;
+    }
+    out
+}
+
 /// `a += b`.
+#[inline(always)]
 pub(crate) fn add6<S: Scalar>(a: &mut [S; 6], b: &[S; 6]) {
     for (x, y) in a.iter_mut().zip(b) {
         *x += *y;
@@ -227,7 +249,7 @@ pub fn accelerations<S: Scalar>(
             (Some((u_col, u, inverse)), _) => {
                 inertia.sub_outer(&u_col, inverse);
                 add6(&mut bias, &inertia.times(&c));
-                add6(&mut bias, &u_col.map(|x| x * (u * inverse)));
+                add6(&mut bias, &scaled(&u_col, u * inverse));
             }
             // A kinematic variable: its prescribed acceleration is known.
             (None, Joint::Variable(i)) => {

@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use crate::dynamics::{ModelMotions, NoForce};
 use crate::error::SimError;
 use crate::integrate::laned::{rk4_lanes, LaneStart, Observer};
-use crate::integrate::{run_with_inputs, InputSchedule, RunSummary, SimOptions};
+use crate::integrate::{finish, recording, run_with_inputs, InputSchedule, SimOptions};
 use crate::lanes::WIDTH;
 use crate::system::System;
 use crate::trajectory::{Sample, Trajectory};
@@ -349,28 +349,4 @@ where
     )?;
     finish(&mut traj, &summary);
     Ok(traj)
-}
-
-/// An empty trajectory of `sys`'s variables and constraints, with room for the samples a run
-/// under `options` records.
-fn recording<S>(sys: &S, options: &SimOptions) -> Trajectory
-where
-    S: System,
-    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
-{
-    let names = (0..sys.dof())
-        .map(|i| sys.variable_name(i).to_string())
-        .collect();
-    let constraints = (0..sys.constraint_count())
-        .map(|r| sys.constraint_name(r).to_string())
-        .collect();
-    let samples = (options.duration / options.dt / options.every.max(1) as f64).ceil() as usize + 2;
-    Trajectory::new(names, constraints, samples.min(1 << 24))
-}
-
-/// A recorded run's totals, from its summary.
-fn finish(traj: &mut Trajectory, summary: &RunSummary) {
-    traj.newton_iterations = summary.newton_iterations;
-    traj.subdivided_steps = summary.subdivided_steps;
-    traj.dissipated = summary.dissipated;
 }

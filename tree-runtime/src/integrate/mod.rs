@@ -190,24 +190,38 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let mut motion = ModelMotions::of(sys);
+    let mut traj = recording(sys, options);
+    let summary = run(sys, q0, dq0, options, force, &mut motion, &mut |s| {
+        traj.push(s);
+        progress(s.t);
+        Ok(())
+    })?;
+    finish(&mut traj, &summary);
+    Ok(traj)
+}
+
+/// An empty trajectory of `sys`'s variables and constraints, with room for the samples a run
+/// under `options` records.
+pub(crate) fn recording<S>(sys: &S, options: &SimOptions) -> Trajectory
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let names = (0..sys.dof())
         .map(|i| sys.variable_name(i).to_string())
         .collect();
     let constraints = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
-    let capacity =
-        (options.duration / options.dt / options.every.max(1) as f64).clamp(0.0, 1e6) as usize + 2;
-    let mut traj = Trajectory::new(names, constraints, capacity);
-    let summary = run(sys, q0, dq0, options, force, &mut motion, &mut |s| {
-        traj.push(s);
-        progress(s.t);
-        Ok(())
-    })?;
+    let samples = (options.duration / options.dt / options.every.max(1) as f64).ceil() as usize + 2;
+    Trajectory::new(names, constraints, samples.min(1 << 24))
+}
+
+/// A recorded run's totals, from its summary.
+pub(crate) fn finish(traj: &mut Trajectory, summary: &RunSummary) {
     traj.newton_iterations = summary.newton_iterations;
     traj.subdivided_steps = summary.subdivided_steps;
     traj.dissipated = summary.dissipated;
-    Ok(traj)
 }
 
 /// Runs `options.method` from `(q0, q̇0)` — first projected onto the constraints, kinematic

@@ -110,6 +110,19 @@ fn dispatched_lanes(
     );
 }
 
+/// [`kernel::energy`] over [`Lanes`], dispatched as [`dispatched_lanes`].
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+fn dispatched_energy_lanes(
+    plan: &TreePlan,
+    kernel: &mut Kernel<Lanes>,
+    q: &[Lanes],
+    dq: &[Lanes],
+) -> Lanes {
+    let mut out = EnergySink::default();
+    kernel::energy(plan, kernel, q, dq, &mut out);
+    out.0
+}
+
 /// [`kernel::evaluate`] (the two sweeps, then the elements' terms), dispatched as
 /// [`dispatched_elements_at`].
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
@@ -328,9 +341,7 @@ impl System for TreeSystem {
             return None;
         }
         let laned = self.laned.get_or_insert_with(|| Box::new(Laned::new(plan)));
-        let mut out = EnergySink::default();
-        kernel::energy(plan, &mut laned.kernel, q, dq, &mut out);
-        Some(out.0)
+        Some(dispatched_energy_lanes(plan, &mut laned.kernel, q, dq))
     }
 
     fn poses(&mut self, q: &Vector<Dyn>, out: &mut [Pose]) {
