@@ -491,6 +491,12 @@ where
         false
     }
 
+    /// Whether [`Self::articulated_acceleration_lanes`] and [`Self::energy_lanes`] evaluate
+    /// (default `false`): what a batch asks before it runs rollouts in lanes.
+    fn has_lanes(&self) -> bool {
+        false
+    }
+
     /// [`Self::articulated_acceleration`] of [`WIDTH`] states at once,
     /// one per lane of [`Lanes`] (every entry of `q`, `dq`, `tau`, `qdd` one variable, the
     /// model's own forces left in `own`): each lane's `q̈` has the bits the one-state call

@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use crate::dynamics::{ModelMotions, NoForce};
 use crate::error::SimError;
 use crate::integrate::laned::{rk4_lanes, LaneStart, Observer};
-use crate::integrate::{finish, recording, run_with_inputs, InputSchedule, SimOptions};
+use crate::integrate::{finish, recording, run_with_inputs, InputSchedule, Method, SimOptions};
 use crate::lanes::WIDTH;
 use crate::system::System;
 use crate::trajectory::{Sample, Trajectory};
@@ -145,17 +145,32 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let pool = pool(threads)?;
+    let alone = |sys: &mut S, start| watch.run(|tick| trajectory(sys, start, options, tick));
     let results = pool.install(|| {
-        starts
-            .par_chunks(WIDTH)
-            .map_init(
-                || sys.clone(),
-                |sys, group| run_group(sys, group, options, watch),
-            )
-            .flat_map_iter(|group| group.into_iter())
-            .collect()
+        if in_lanes(sys, options) {
+            starts
+                .par_chunks(WIDTH)
+                .map_init(
+                    || sys.clone(),
+                    |sys, group| run_group(sys, group, options, watch),
+                )
+                .flat_map_iter(|group| group.into_iter())
+                .collect()
+        } else {
+            starts.par_iter().map_init(|| sys.clone(), alone).collect()
+        }
     });
     watch.close(results)
+}
+
+/// Whether a batch of `sys` under `options` runs its rollouts in lanes: RK4, on a system with
+/// a laned evaluation (which a model with constraints has not).
+fn in_lanes<S>(sys: &S, options: &SimOptions) -> bool
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    matches!(options.method, Method::Rk4) && sys.has_lanes()
 }
 
 /// A group of at most [`WIDTH`] rollouts of one system: run together in SIMD lanes where
@@ -198,7 +213,7 @@ where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    if group.is_empty() || group.len() > WIDTH {
+    if group.is_empty() || group.len() > WIDTH || !in_lanes(sys, options) {
         return None;
     }
     laned(sys, group, options, &Watch::default())

@@ -312,6 +312,10 @@ impl System for TreeSystem {
         )
     }
 
+    fn has_lanes(&self) -> bool {
+        self.plan.rows == 0 && articulated::resolvable(&self.plan, &self.kinematic)
+    }
+
     fn articulated_acceleration_lanes(
         &mut self,
         q: &[Lanes],
@@ -320,10 +324,10 @@ impl System for TreeSystem {
         qdd: &mut [Lanes],
         own: &mut ElementForces,
     ) -> Option<[bool; WIDTH]> {
-        let plan = &self.plan;
-        if plan.rows > 0 || !articulated::resolvable(plan, &self.kinematic) {
+        if !self.has_lanes() {
             return None;
         }
+        let plan = &self.plan;
         let laned = self.laned.get_or_insert_with(|| Box::new(Laned::new(plan)));
         dispatched_lanes(plan, laned, &self.kinematic, (q, dq, tau), qdd, own);
         let art = &laned.articulated;
@@ -336,10 +340,10 @@ impl System for TreeSystem {
     }
 
     fn energy_lanes(&mut self, q: &[Lanes], dq: &[Lanes]) -> Option<Lanes> {
-        let plan = &self.plan;
-        if plan.rows > 0 {
+        if !self.has_lanes() {
             return None;
         }
+        let plan = &self.plan;
         let laned = self.laned.get_or_insert_with(|| Box::new(Laned::new(plan)));
         Some(dispatched_energy_lanes(plan, &mut laned.kernel, q, dq))
     }
