@@ -482,6 +482,14 @@ fn rk4_rollouts_run_in_lanes_and_equal_single_runs_bitwise() {
         .collect();
     starts[2].dq0[3] = 1e200;
     assert!(run_in_lanes(&mut sys.clone(), &starts, &options).is_none());
+    // So does a group with a start of the wrong size (refused alone, with its sentence).
+    let mut short = starts.clone();
+    short[1].q0.pop();
+    assert!(run_in_lanes(&mut sys.clone(), &short[..2], &options).is_none());
+    let batch = rollouts(&sys, &short[..2], &options, 1).unwrap();
+    let e = batch[1].as_ref().unwrap_err().to_string();
+    assert!(e.contains("7 positions and 8 velocities"), "{e}");
+    assert!(batch[0].is_ok());
     let batch = rollouts(&sys, &starts, &options, 2).unwrap();
     let alone = trajectory(&mut sys.clone(), &starts[2], &options, &mut |_| Ok(())).unwrap_err();
     assert_eq!(
