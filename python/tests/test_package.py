@@ -142,8 +142,8 @@ def test_an_array_of_the_wrong_dimensions_is_refused_in_a_sentence():
 
 @pytest.mark.parametrize("integrator", ["vi", "rk4"])
 def test_rollouts_equal_single_runs_whatever_the_threads(integrator):
-    # RK4 batches run four rollouts at a time in SIMD lanes (here a group of four and one
-    # of two): each still the single run's, bit for bit.
+    # RK4 batches run four rollouts at a time in SIMD lanes (here a group of four; the two
+    # left run alone): each still the single run's, bit for bit.
     m = tm.load(CART)
     rng = np.random.default_rng(7)
     q0 = np.column_stack([np.zeros(6), rng.uniform(-0.5, 0.5, 6)])

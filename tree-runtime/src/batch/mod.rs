@@ -187,8 +187,9 @@ where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    // Lanes pay from two rollouts on (four take about the time of two alone).
-    if group.len() >= 2 && !watch.stopped() {
+    // Four lanes take about the time of two rollouts alone (`cargo bench --bench
+    // rollouts`): a group of three gains, one of two does not.
+    if group.len() > WIDTH / 2 && !watch.stopped() {
         if let Some(runs) = laned(sys, group, options, watch) {
             watch.done.fetch_add(group.len(), Ordering::Relaxed);
             return runs.into_iter().map(Ok).collect();
