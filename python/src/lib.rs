@@ -1183,7 +1183,10 @@ impl Model {
     /// (batch, steps, inputs) per step; `threads` None: every core. Each rollout's error is
     /// reported in `errors`, not raised. `models`: one model per rollout (this one's
     /// variables, other parameters: `with_parameters`). The GIL is released while it runs;
-    /// results are the same whatever the thread count. `progress(done, batch)`, if given, is
+    /// results are the same whatever the thread count, each rollout's those of `simulate`
+    /// from its start. With `integrator="rk4"` on a model without constraints, four
+    /// rollouts run at a time in SIMD lanes (the same numbers, about 1.7× the throughput).
+    /// `progress(done, batch)`, if given, is
     /// called as rollouts finish (at most every 50 ms, and once at the end); Ctrl-C, or an
     /// exception from `progress`, stops the batch and is raised.
     #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1, models=None, progress=None))]
