@@ -8,7 +8,8 @@ Models: the N-link pendulums of benches/models, N = 8, 19 and 40 (1 kg point mas
 links, every q0 0.5 rad; in MuJoCo the same chain of hinges with 1 kg bodies whose inertia is 10⁻⁹ kg m²,
 no contacts, no damping) and the UR5 (models/ur5.urdf; MuJoCo reads the same URDF with its
 meshes left out). Both at Δt = 0.01, a batch of 64 rollouts of 1000 steps, zero controls.
-tree-mech runs its midpoint VI and RK4; MuJoCo its default semi-implicit Euler and RK4.
+tree-mech runs its midpoint VI (one rollout at a time) and RK4 (four rollouts at a time in
+SIMD lanes, each bitwise its single run); MuJoCo its default semi-implicit Euler and RK4.
 Each figure is the best of 3 runs. Prints Markdown tables.
 """
 from __future__ import annotations
