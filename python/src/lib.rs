@@ -1186,9 +1186,9 @@ impl Model {
     /// results are the same whatever the thread count, each rollout's those of `simulate`
     /// from its start. With `integrator="rk4"` on a model without constraints, four
     /// rollouts run at a time in SIMD lanes (the same numbers, about 1.7× the throughput).
-    /// `progress(done, batch)`, if given, is
-    /// called as rollouts finish (at most every 50 ms, and once at the end); Ctrl-C, or an
-    /// exception from `progress`, stops the batch and is raised.
+    /// `progress(done, batch)`, if given, is called as rollouts finish (at most every 50 ms,
+    /// and once at the end); Ctrl-C, or an exception from `progress`, stops the batch and is
+    /// raised.
     #[pyo3(signature = (q0, dq0, duration, dt, integrator="vi", u=None, threads=None, every=1, models=None, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn rollouts(

@@ -5,6 +5,17 @@
 //! exactly the operations an `f64` evaluation of its state does (IEEE-754 operations are
 //! correctly rounded, and `sin_cos` is the same library call), so each lane's result has the
 //! bits of that evaluation: batching changes the speed, never the numbers.
+//!
+//! ```
+//! use tree_runtime::lanes::Lanes;
+//! use tree_runtime::scalar::Scalar;
+//! let x = Lanes([0.1, 0.7, -2.0, 1e3]);
+//! let (s, c) = (x * x + Lanes::splat(0.5)).sin_cos();
+//! for (k, &v) in x.0.iter().enumerate() {
+//!     let (s1, c1) = (v * v + 0.5).sin_cos();
+//!     assert_eq!((s.0[k].to_bits(), c.0[k].to_bits()), (s1.to_bits(), c1.to_bits()));
+//! }
+//! ```
 
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 

@@ -202,9 +202,9 @@ where
 /// Runs `group` (at most [`WIDTH`] rollouts; padded with copies of its first) together in
 /// SIMD lanes, RK4 stage by stage, each recorded as [`trajectory`] records it and with its
 /// bits — what [`rollouts`] does with each group of an RK4 batch. `None` when the laned run
-/// does not apply or gives up (another method, a model with constraints, a system without a
-/// laned evaluation; a rollout that fails or whose articulated-body pivot is lost): then
-/// [`rollouts`] runs each alone.
+/// does not apply (an empty group or one of more than [`WIDTH`], another method, a model
+/// with constraints, a system without a laned evaluation) or gives up (a rollout that fails
+/// or whose articulated-body pivot is lost): then [`rollouts`] runs each alone.
 pub fn run_in_lanes<S>(
     sys: &mut S,
     group: &[Rollout],

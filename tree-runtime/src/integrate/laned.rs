@@ -90,7 +90,7 @@ pub(crate) fn rk4_lanes<'o, S: System>(
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    if !matches!(options.method, Method::Rk4) || sys.constraint_count() > 0 {
+    if !matches!(options.method, Method::Rk4) || !sys.has_lanes() {
         return None;
     }
     let steps = check_options(options).ok()?;

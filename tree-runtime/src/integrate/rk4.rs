@@ -9,9 +9,9 @@ use crate::error::SimError;
 use crate::system::{System, Vector};
 
 /// The stages' times, as fractions of the step.
-pub(crate) const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
+const C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
 /// The stages' weights (over 6).
-pub(crate) const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
+const W: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
 
 /// RK4 workspace (nothing allocated per step).
 #[derive(Clone, Debug)]
@@ -78,7 +78,7 @@ where
     }
 
     /// Stage `s`'s state from the step's start `(q, q̇)` at `t`: `(q, q̇) + C_s Δt k_{s−1}`
-    /// into [`Self::stage`], the kinematic variables prescribed, and its velocity kept as
+    /// into the stage's buffers ([`Self::stage_parts`]), the kinematic variables prescribed, and its velocity kept as
     /// the stage's `k_q`. Returns the stage's time `t + C_s Δt`.
     pub(crate) fn stage_state(
         &mut self,
