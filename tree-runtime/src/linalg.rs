@@ -6,8 +6,10 @@ use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
 use crate::system::{Matrix, Vector};
 
+mod compact;
 mod products;
 
+pub use compact::{combine_compact_rows, lu_solve_compact_rows, CompactCombination, CompactFactor};
 pub use products::{
     mul_into, mul_into_pair, tr_mul_into, tr_mul_into_pair, tr_mul_into_symmetric, Packing,
 };
@@ -145,7 +147,7 @@ where
 {
     let n = b.len();
     let b = b.as_mut_slice();
-    lu_core_factor(a.as_mut_slice(), n, |j, p| b.swap(j, p))?;
+    lu_core_factor(a.as_mut_slice(), n, 1.0, |j, p| b.swap(j, p))?;
     forward_backward(a.as_slice(), n, b);
     Ok(())
 }
@@ -157,7 +159,24 @@ pub type Pivots<N> = nalgebra::OVector<usize, N>;
 /// pivoting), recording the interchanges in `pivots[..n]`. The caller may pack a smaller
 /// system into larger fixed-size storage. On failure returns the column whose pivot vanished.
 pub fn lu_factor_packed(a: &mut [f64], n: usize, pivots: &mut [usize]) -> Result<(), usize> {
-    lu_core_factor(&mut a[..n * n], n, |j, p| pivots[j] = p)
+    lu_core_factor(&mut a[..n * n], n, 1.0, |j, p| pivots[j] = p)
+}
+
+/// [`lu_factor_packed`] with threshold pivoting: the diagonal entry stays the pivot while
+/// its magnitude is at least `threshold` (in (0, 1]) times the largest below it, else the
+/// first of the largest is swapped in. Each multiplier is then at most `1/threshold` in
+/// magnitude (partial pivoting's bound is 1, its `threshold` 1), and the rows stay in the
+/// order the caller chose: a matrix ordered so that elimination makes no fill (a tree's
+/// variables, leaves first) keeps its zeros in the factor, where partial pivoting would
+/// swap a heavier row up and fill it (the sparse solvers' rule, with 0.1 their usual
+/// threshold).
+pub fn lu_factor_packed_threshold(
+    a: &mut [f64],
+    n: usize,
+    pivots: &mut [usize],
+    threshold: f64,
+) -> Result<(), usize> {
+    lu_core_factor(&mut a[..n * n], n, threshold, |j, p| pivots[j] = p)
 }
 
 /// Solves `A x = b[..n]` with the factors from [`lu_factor_packed`]; `b` becomes `x`.
@@ -499,11 +518,16 @@ fn largest_magnitude(x: &[f64]) -> f64 {
 /// for two multiply-adds). Compiled also for AVX2 with fused multiply-adds and for AVX,
 /// chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-fn lu_core_factor(a: &mut [f64], n: usize, swapped: impl FnMut(usize, usize)) -> Result<(), usize> {
+fn lu_core_factor(
+    a: &mut [f64],
+    n: usize,
+    threshold: f64,
+    swapped: impl FnMut(usize, usize),
+) -> Result<(), usize> {
     if multiversion::target::target_cfg_f!(target_feature = "fma") {
-        factor_with::<true>(a, n, swapped)
+        factor_with::<true>(a, n, threshold, swapped)
     } else {
-        factor_with::<false>(a, n, swapped)
+        factor_with::<false>(a, n, threshold, swapped)
     }
 }
 
@@ -512,11 +536,12 @@ fn lu_core_factor(a: &mut [f64], n: usize, swapped: impl FnMut(usize, usize)) ->
 fn factor_with<const FUSED: bool>(
     a: &mut [f64],
     n: usize,
+    threshold: f64,
     mut swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
     let mut j = 0;
     while j < n {
-        pivot_column(a, n, j, &mut swapped)?;
+        pivot_column(a, n, j, threshold, &mut swapped)?;
         if j + 1 == n {
             break;
         }
@@ -530,7 +555,7 @@ fn factor_with<const FUSED: bool>(
                 *x -= m * t0;
             }
         }
-        pivot_column(a, n, j + 1, &mut swapped)?;
+        pivot_column(a, n, j + 1, threshold, &mut swapped)?;
         // The trailing columns: entry j + 1 from entry j, then both updates below.
         let (left, right) = a.split_at_mut((j + 2) * n);
         let m0 = &left[j * n + j + 2..(j + 1) * n];
@@ -547,6 +572,10 @@ fn factor_with<const FUSED: bool>(
                 h0[j + 1] -= m01 * h0[j];
                 h1[j + 1] -= m01 * h1[j];
                 let (s0, s1, r0, r1) = (h0[j], h0[j + 1], h1[j], h1[j + 1]);
+                if [s0, s1, r0, r1] == [0.0; 4] {
+                    // Columns the pair does not reach (a sparse factor's): nothing to add.
+                    continue;
+                }
                 for (((x, y), &u), &v) in b0.iter_mut().zip(b1.iter_mut()).zip(m0).zip(m1) {
                     if FUSED {
                         *x = (-v).mul_add(s1, (-u).mul_add(s0, *x));
@@ -590,15 +619,16 @@ fn pivot_column(
     a: &mut [f64],
     n: usize,
     j: usize,
+    threshold: f64,
     swapped: &mut impl FnMut(usize, usize),
 ) -> Result<(), usize> {
-    // Pivot: the first of the largest entries of column j at or below the diagonal (a NaN
-    // on the diagonal is kept, and refused below), found as the largest magnitude, then
-    // where it is: two passes the compiler vectorises, where one comparing as it goes
-    // waits on each comparison.
+    // Pivot: the diagonal entry when it is within `threshold` of the largest at or below it
+    // (a NaN there is kept, and refused below), else the first of the largest, found as the
+    // largest magnitude, then where it is: two passes the compiler vectorises, where one
+    // comparing as it goes waits on each comparison.
     let col = &a[j * n..(j + 1) * n];
     let largest_below = largest_magnitude(&col[j..]);
-    let p = if col[j].is_nan() {
+    let p = if col[j].is_nan() || col[j].abs() >= threshold * largest_below {
         j
     } else {
         (j..n).find(|&i| col[i].abs() == largest_below).unwrap_or(j)
@@ -663,7 +693,7 @@ mod tests {
 
     /// A test matrix of order `n` with zeros scattered through it and a zero first entry, so
     /// that pivots are swapped and the kernels' zero skips are taken.
-    fn scattered(n: usize) -> Vec<f64> {
+    pub(super) fn scattered(n: usize) -> Vec<f64> {
         (0..n * n)
             .map(|k| {
                 let diagonal = k % (n + 1) == 0;
@@ -702,7 +732,7 @@ mod tests {
         for n in [1, 2, 5, 8, 19] {
             let a = scattered(n);
             let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
-            factor_with::<FUSED>(&mut factor, n, |j, p| pivots[j] = p).expect("regular");
+            factor_with::<FUSED>(&mut factor, n, 1.0, |j, p| pivots[j] = p).expect("regular");
             if n > 1 {
                 assert_ne!(pivots[0], 0, "the first pivot is swapped");
             }
@@ -780,6 +810,44 @@ mod tests {
         // A second column that is the first's times (1 + 1e-16): its pivot is rounding.
         let mut rounding = vec![1.0, 2.0, 1.0 + 1e-16, 2.0 + 2e-16];
         assert_eq!(lu_factor_packed(&mut rounding, 2, &mut pivots), Err(1));
+    }
+
+    /// Threshold pivoting keeps a diagonal within the threshold of the largest below it and
+    /// swaps one under it (for the first of the largest); `P A = L U` either way, each
+    /// multiplier at most 1/threshold; threshold 1 is partial pivoting.
+    #[test]
+    fn threshold_pivoting_keeps_the_diagonal_within_the_threshold() {
+        // Column 0: 0.5 on the diagonal against 4 below (within 0.1 of it); column 1's
+        // diagonal, once updated, is 0.001 against 1 below (outside 0.1, within 0.0001).
+        let a = [0.5, 4.0, 1.0, 1.0, 8.001, 3.0, 2.0, 1.0, 5.0];
+        let n = 3;
+        for (threshold, want) in [(0.1, [0, 2, 2]), (1.0, [1, 2, 2]), (0.0001, [0, 1, 2])] {
+            let (mut factor, mut pivots) = (a.to_vec(), vec![0; n]);
+            lu_factor_packed_threshold(&mut factor, n, &mut pivots, threshold).expect("regular");
+            assert_eq!(pivots, want, "threshold {threshold}");
+            let mut pa = a.to_vec();
+            for (j, &p) in pivots.iter().enumerate() {
+                for c in 0..n {
+                    pa.swap(c * n + p, c * n + j);
+                }
+            }
+            for (r, c) in (0..n).flat_map(|r| (0..n).map(move |c| (r, c))) {
+                let l = |k: usize| if k == r { 1.0 } else { factor[k * n + r] };
+                let lu: f64 = (0..=r.min(c)).map(|k| l(k) * factor[c * n + k]).sum();
+                assert!(
+                    (lu - pa[c * n + r]).abs() < 1e-12,
+                    "{threshold}: ({r}, {c})"
+                );
+                if r > c {
+                    assert!(factor[c * n + r].abs() <= 1.0 / threshold + 1e-12);
+                }
+            }
+        }
+        let (mut partial, mut pivots) = (a.to_vec(), vec![0; n]);
+        lu_factor_packed(&mut partial, n, &mut pivots).expect("regular");
+        let mut threshold_one = a.to_vec();
+        lu_factor_packed_threshold(&mut threshold_one, n, &mut pivots, 1.0).expect("regular");
+        assert_eq!(partial, threshold_one);
     }
 
     /// The four-sum dot product equals the sum written out at every length (whole chunks,

@@ -1,13 +1,23 @@
 //! The first derivatives of a converged step: `R_z`'s LU factor, `dz/dx = −R_z⁻¹ R_x` for
 //! every input direction in one solve, `dp₂/dx = P Δ`, and the blocks (trep's `q2_dq1` …)
 //! copied out (docs/derivations.md §9).
+//!
+//! `R_z` is factored with its unknowns (and their equations) in the tree's elimination
+//! order: the dynamic variables last to first — each after every variable below it in the
+//! tree, so eliminating it couples only its ancestors, which already are — then the
+//! multipliers ([`OrderedFactor`]). With threshold pivoting the rows stay in that order and
+//! the factor keeps the tree's zeros (about half of trep's Puppet's: a floating torso and
+//! four limbs), which the solve then skips.
 
 use nalgebra::DMatrix;
 
 use super::jacobians::{jacobians_f64, Shape, StepTerms};
 use super::second::DualJacobians;
 use super::{StepDerivatives, StepInput};
-use crate::linalg::{combine_rows, lu_factor_packed, lu_solve_packed_rows};
+use crate::linalg::{
+    combine_compact_rows, lu_factor_packed_threshold, lu_solve_compact_rows, lu_solve_packed,
+    lu_solve_transposed_packed, CompactCombination, CompactFactor,
+};
 use crate::system::ConstraintTerms;
 
 /// The step linearised at its solution, and the buffers for it: sized on the first call,
@@ -44,19 +54,25 @@ pub(crate) struct Linearisation {
     solved_runs: Vec<(usize, usize, usize)>,
     /// Each input's variable as a dynamic row (its `p₁` column), if it is dynamic.
     input_rows: Vec<Option<usize>>,
-    /// `R_z`'s LU factor (column-major, packed) and its pivots (a contraction's adjoint solves
-    /// with `R_zᵀ` from the same factors).
-    pub(super) factor: Vec<f64>,
-    pub(super) pivots: Vec<usize>,
+    /// `R_z` factored in the elimination order (a contraction's adjoint solves with `R_zᵀ`
+    /// from the same factors).
+    pub(super) lu: OrderedFactor,
+    /// `z_columns` in the elimination order: the column of `w` of each row of `dz/dx` as
+    /// the solve leaves it.
+    ordered_z: Vec<usize>,
     /// `Δ = dw/dx` (w × x), filled from `rhs` when second derivatives ask for it.
     pub(super) tangent: DMatrix<f64>,
     tangent_ready: bool,
     pub(super) column: Vec<f64>,
+    /// Scratch of one vector's solve in the elimination order.
+    pub(super) scratch: Vec<f64>,
     /// `−R_x`, then `dz/dx`, over the solved columns: row-major `rows × solved` (all
-    /// right-hand sides of one solve).
+    /// right-hand sides of one solve), its rows in the elimination order.
     rhs: Vec<f64>,
     /// `dp₂/dx = P Δ` over the solved columns, row-major `n_d × solved`.
     dp2: Vec<f64>,
+    /// `P_z`'s non-zeros (the tree's, as `R_z`'s) for the product `P_z dz/dx`.
+    combination: CompactCombination,
     /// The point: `q₁`, `q₂` (all variables).
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
@@ -89,6 +105,8 @@ impl Linearisation {
             tangent[(xc, c)] = 1.0;
         }
         let ks = solved.len();
+        let lu = OrderedFactor::new(shape.nd(), m);
+        let ordered_z = lu.order.iter().map(|&o| z_columns[o]).collect();
         let mut solved_runs: Vec<(usize, usize, usize)> = Vec::new();
         for (c, &xc) in solved.iter().enumerate() {
             match solved_runs.last_mut() {
@@ -113,13 +131,15 @@ impl Linearisation {
             solved,
             solved_runs,
             input_rows,
-            factor: vec![0.0; rows * rows],
-            pivots: vec![0; rows],
+            lu,
+            ordered_z,
             tangent,
             tangent_ready: false,
             column: vec![0.0; rows],
+            scratch: vec![0.0; rows],
             rhs: vec![0.0; rows * ks],
             dp2: vec![0.0; nd * ks],
+            combination: CompactCombination::default(),
             q1: vec![0.0; n],
             q2: vec![0.0; n],
             duals: None,
@@ -135,7 +155,7 @@ impl Linearisation {
     pub(super) fn solve(&mut self, in_place: (&[f64], &[f64], &[f64])) -> Result<(), usize> {
         let (lqq, mass, lvq_t) = in_place;
         let sh = &self.shape;
-        let (rows, w, nd) = (sh.rows(), sh.w(), sh.nd());
+        let (w, nd) = (sh.w(), sh.nd());
         let terms = StepTerms {
             lqq,
             lvq: &self.lvq,
@@ -149,18 +169,14 @@ impl Linearisation {
             dh2: &self.dh2,
         };
         jacobians_f64(sh, &terms, &mut self.jac, &mut self.pjac);
-        // R_z, column-major, factored.
-        for (c, &zc) in self.z_columns.iter().enumerate() {
-            for r in 0..rows {
-                self.factor[c * rows + r] = self.jac[r * w + zc];
-            }
-        }
-        lu_factor_packed(&mut self.factor, rows, &mut self.pivots)?;
+        // R_z, column-major in the elimination order, factored.
+        self.lu.factor(|r, c| self.jac[r * w + self.z_columns[c]])?;
         self.tangent_ready = false;
-        // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve.
+        // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve (the equations, then
+        // the unknowns, in the elimination order).
         let k = self.solved.len();
-        for r in 0..rows {
-            let row = &self.jac[r * w..(r + 1) * w];
+        for (r, &equation) in self.lu.order.iter().enumerate() {
+            let row = &self.jac[equation * w..(equation + 1) * w];
             let out = &mut self.rhs[r * k..(r + 1) * k];
             for &(from, to, len) in &self.solved_runs {
                 for (o, &x) in out[to..to + len].iter_mut().zip(&row[from..from + len]) {
@@ -168,7 +184,7 @@ impl Linearisation {
                 }
             }
         }
-        lu_solve_packed_rows(&self.factor, rows, &self.pivots, &mut self.rhs, k);
+        self.lu.solve_rows(&mut self.rhs, k);
         // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z):
         // P_x's rows, then each dz/dx row (contiguous in `rhs`) scaled into them.
         for r in 0..nd {
@@ -178,14 +194,8 @@ impl Linearisation {
                 out[to..to + len].copy_from_slice(&prow[from..from + len]);
             }
         }
-        combine_rows(
-            &mut self.dp2[..nd * k],
-            k,
-            &self.pjac[..nd * w],
-            w,
-            &self.z_columns[..nd],
-            &self.rhs,
-        );
+        (self.combination).gather(nd, &self.pjac[..nd * w], w, &self.ordered_z[..nd]);
+        combine_compact_rows(&mut self.dp2[..nd * k], k, &self.combination, &self.rhs);
         Ok(())
     }
 
@@ -207,7 +217,7 @@ impl Linearisation {
 
     /// Entry `(r, c)` of `dz/dx` (`r` over the unknowns: `q₂_d`, then `λ`).
     fn dz(&self, r: usize, c: usize) -> f64 {
-        let k = self.solved.len();
+        let (k, r) = (self.solved.len(), self.lu.position[r]);
         match self.source(c) {
             Some(Source::Solved(s)) => self.rhs[r * k + s],
             Some(Source::Input(s, _)) => self.shape.left * self.rhs[r * k + s],
@@ -267,9 +277,11 @@ impl Linearisation {
             fit(lambda, m, wc);
             // Solved columns c0.. (after the inputs: less nu) as they are, transposed.
             let s0 = if b == K2 { c0 - sh.nu() } else { c0 };
-            transpose_into(&self.rhs, k, s0, q2.as_mut_slice(), nd);
-            transpose_into(&self.dp2, k, s0, p2.as_mut_slice(), nd);
-            transpose_into(&self.rhs[nd * k..], k, s0, lambda.as_mut_slice(), m);
+            let solved = |r| self.lu.position[r];
+            transpose_into(&self.rhs, k, s0, q2.as_mut_slice(), nd, solved);
+            transpose_into(&self.dp2, k, s0, p2.as_mut_slice(), nd, |r| r);
+            let multiplier = |s| self.lu.position[nd + s];
+            transpose_into(&self.rhs, k, s0, lambda.as_mut_slice(), m, multiplier);
         }
         // Column c of the input block: `left` times its variable's p₁ column (plus `plus` on
         // p₂'s own row), zero for an input on no dynamic variable — read from the p₁ blocks
@@ -316,13 +328,20 @@ enum Source {
 }
 
 /// `to` (column-major, `rows` rows) = the `rows × (to.len()/rows)` block of the row-major
-/// `from` (row stride `k`) starting at column `s0`.
-fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize) {
+/// `from` (row stride `k`) starting at column `s0`, row `r` of `to` from row `row_of(r)`.
+fn transpose_into(
+    from: &[f64],
+    k: usize,
+    s0: usize,
+    to: &mut [f64],
+    rows: usize,
+    row_of: impl Fn(usize) -> usize,
+) {
     if rows == 0 {
         return;
     }
     let cols = to.len() / rows;
-    let row = |r: usize| &from[r * k + s0..r * k + s0 + cols];
+    let row = |r: usize| &from[row_of(r) * k + s0..row_of(r) * k + s0 + cols];
     // Four rows at a time, each read in order, each column's four entries stored together
     // (a column at a time, the reads strided by a whole row, cost twice as much).
     let mut r = 0;
@@ -337,6 +356,84 @@ fn transpose_into(from: &[f64], k: usize, s0: usize, to: &mut [f64], rows: usize
     for r in r..rows {
         for (column, &x) in to.chunks_exact_mut(rows).zip(row(r)) {
             column[r] = x;
+        }
+    }
+}
+
+/// Multipliers at most this many times the largest in their column (threshold pivoting,
+/// [`lu_factor_packed_threshold`]): the sparse solvers' usual 0.1.
+const PIVOT_THRESHOLD: f64 = 0.1;
+
+/// `R_z` factored with its unknowns and equations in the elimination order (the module
+/// docs): `P Π R_z Πᵀ = L U` with `Π` the order, by threshold pivoting, and the factor's
+/// non-zeros gathered for the solve by rows.
+#[derive(Clone, Debug)]
+pub(crate) struct OrderedFactor {
+    rows: usize,
+    /// The unknown (and its equation) at each position: `q₂_d`'s dynamic variables last to
+    /// first, then the multipliers.
+    order: Vec<usize>,
+    /// Each unknown's position (`order`'s inverse).
+    position: Vec<usize>,
+    /// The factor (column-major) and its interchanges.
+    factor: Vec<f64>,
+    pivots: Vec<usize>,
+    compact: CompactFactor,
+}
+
+impl OrderedFactor {
+    fn new(nd: usize, m: usize) -> Self {
+        let rows = nd + m;
+        let order: Vec<usize> = (0..nd).rev().chain(nd..rows).collect();
+        let mut position = vec![0; rows];
+        for (i, &o) in order.iter().enumerate() {
+            position[o] = i;
+        }
+        OrderedFactor {
+            rows,
+            order,
+            position,
+            factor: vec![0.0; rows * rows],
+            pivots: vec![0; rows],
+            compact: CompactFactor::default(),
+        }
+    }
+
+    /// Factors the matrix whose entry `(equation, unknown)` is `entry(equation, unknown)`.
+    /// On a vanished pivot, the unknown (in `z`'s order) whose it was.
+    fn factor(&mut self, entry: impl Fn(usize, usize) -> f64) -> Result<(), usize> {
+        let rows = self.rows;
+        for (c, &unknown) in self.order.iter().enumerate() {
+            for (r, &equation) in self.order.iter().enumerate() {
+                self.factor[c * rows + r] = entry(equation, unknown);
+            }
+        }
+        lu_factor_packed_threshold(&mut self.factor, rows, &mut self.pivots, PIVOT_THRESHOLD)
+            .map_err(|c| self.order[c])?;
+        self.compact.gather(&self.factor, rows);
+        Ok(())
+    }
+
+    /// Solves for `k` right-hand sides at once, row-major, rows in the elimination order.
+    fn solve_rows(&self, b: &mut [f64], k: usize) {
+        lu_solve_compact_rows(&self.factor, self.rows, &self.pivots, &self.compact, b, k);
+    }
+
+    /// Solves `R_z x = b` (`transposed`: `R_zᵀ x = b`), `b` in `z`'s order, `scratch` as
+    /// long: `Π R_z Πᵀ` is what is factored, so `b` is put in the elimination order and the
+    /// solution taken back out of it.
+    pub(super) fn solve(&self, b: &mut [f64], scratch: &mut [f64], transposed: bool) {
+        let rows = self.rows;
+        for (s, &o) in scratch[..rows].iter_mut().zip(&self.order) {
+            *s = b[o];
+        }
+        if transposed {
+            lu_solve_transposed_packed(&self.factor, rows, &self.pivots, scratch);
+        } else {
+            lu_solve_packed(&self.factor, rows, &self.pivots, scratch);
+        }
+        for (&s, &o) in scratch[..rows].iter().zip(&self.order) {
+            b[o] = s;
         }
     }
 }

@@ -36,7 +36,6 @@ use crate::context::StepContext;
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::DiscreteLagrangian;
-use crate::linalg::{lu_solve_packed, lu_solve_transposed_packed};
 use crate::system::{ConstraintTerms, Order, Sparsity, System, Vector};
 
 mod first;
@@ -268,7 +267,7 @@ where
             .duals
             .take()
             .unwrap_or_else(|| DualJacobians::new(&sh, cx.sys));
-        let mut g = vec![0.0; rows];
+        let (mut g, mut scratch) = (vec![0.0; rows], vec![0.0; rows]);
         for j in 0..x {
             if let Some(from) = lin.input_direction(j) {
                 // An input's direction moves J and P as `left` times its variable's p₁
@@ -288,7 +287,7 @@ where
             for i in 0..x {
                 let di = lin.tangent.column(i);
                 duals.times(di, &mut g);
-                lu_solve_packed(&lin.factor, rows, &lin.pivots, &mut g);
+                lin.lu.solve(&mut g, &mut scratch, false);
                 for r in 0..nd {
                     second.q2[r][(i, j)] = -g[r];
                 }
@@ -330,7 +329,7 @@ where
         let lin = self.linearise(cx, q1, p1, q2)?;
         lin.fill_tangent();
         let sh = &lin.shape;
-        let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
+        let (nd, m, x, wl) = (sh.nd(), sh.m, sh.x(), sh.w());
         // μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p), w_z = (w_q, w_λ).
         let mu = &mut lin.column;
         for (c, &k) in sh.dynamic.iter().enumerate() {
@@ -342,7 +341,7 @@ where
         for s in 0..m {
             mu[nd + s] = w.lambda[s];
         }
-        lu_solve_transposed_packed(&lin.factor, rows, &lin.pivots, mu);
+        lin.lu.solve(mu, &mut lin.scratch, true);
         mu.iter_mut().for_each(|v| *v = -*v);
         if out.shape() != (x, x) {
             *out = DMatrix::zeros(x, x);
