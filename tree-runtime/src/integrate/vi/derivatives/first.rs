@@ -11,14 +11,14 @@
 
 use nalgebra::DMatrix;
 
-use super::jacobians::{jacobians_f64, Shape, StepTerms};
+use super::jacobians::{jacobians, JacobianSink, Shape, StepTerms};
 use super::second::DualJacobians;
 use super::{StepDerivatives, StepInput};
 use crate::linalg::{
     combine_compact_rows, lu_factor_packed_threshold, lu_solve_compact_rows, lu_solve_packed,
     lu_solve_transposed_packed, CompactCombination, CompactFactor,
 };
-use crate::system::ConstraintTerms;
+use crate::system::{ConstraintTerms, Sparsity};
 
 /// The step linearised at its solution, and the buffers for it: sized on the first call,
 /// reused after (nothing allocated per step).
@@ -27,8 +27,9 @@ pub(crate) struct Linearisation {
     pub(super) shape: Shape,
     /// `L_q̇q` at the quadrature point, row-major n × n (the dynamic variables' rows).
     pub(super) lvq: Vec<f64>,
-    /// Whether the model has forces with derivatives (`fq`, `fv` are read only then).
-    pub(super) forces: bool,
+    /// Where the model's forces have derivatives (`fq`, `fv` are read there only: nowhere,
+    /// `fv`'s diagonal, or everywhere).
+    pub(super) forces: Sparsity,
     pub(super) fq: Vec<f64>,
     pub(super) fv: Vec<f64>,
     /// `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (the dynamic variables' rows), `Dh(q₂)` row-major,
@@ -41,25 +42,21 @@ pub(crate) struct Linearisation {
     pub(super) is_dynamic: Vec<bool>,
     /// The constraints at `q₁` up to `D²h`.
     pub(super) c1: ConstraintTerms,
-    /// `J` (rows × w) and `P` (n_d × w), row-major.
-    pub(super) jac: Vec<f64>,
-    pub(super) pjac: Vec<f64>,
-    /// The columns of `w` that are the unknowns `z`, and those of `x` the solve
-    /// works for (`q₁`, `p₁`, `k₂`: an input's column is `left` times its variable's `p₁`
-    /// column, since `∂R/∂u_k = left·∂R/∂p₁` there and `∂p₂/∂p₁ = 0`).
+    /// `P_z = ∂p₂/∂q₂` on the dynamic variables, row-major n_d × n_d (`J` and `P` are
+    /// otherwise formed only where the solve reads them: [`Pieces`]).
+    pub(super) pz: Vec<f64>,
+    /// Rows of `∂r/∂q₁`, `∂r/∂q₂`, `∂p₂/∂q₂` (n each) as [`jacobians`] writes them.
+    rows_scratch: Vec<f64>,
+    /// The columns of `w` that are the unknowns `z`, and the number of columns of `x` the
+    /// solve works for: `q₁`, `p₁`, `k₂` (an input's column is `left` times its variable's
+    /// `p₁` column, since `∂R/∂u_k = left·∂R/∂p₁` there and `∂p₂/∂p₁ = 0`).
     z_columns: Vec<usize>,
-    solved: Vec<usize>,
-    /// `solved` as runs of consecutive columns `(first column of w, first solved index,
-    /// length)`: the right-hand sides are gathered a run at a time.
-    solved_runs: Vec<(usize, usize, usize)>,
+    solved: usize,
     /// Each input's variable as a dynamic row (its `p₁` column), if it is dynamic.
     input_rows: Vec<Option<usize>>,
     /// `R_z` factored in the elimination order (a contraction's adjoint solves with `R_zᵀ`
     /// from the same factors).
     pub(super) lu: OrderedFactor,
-    /// `z_columns` in the elimination order: the column of `w` of each row of `dz/dx` as
-    /// the solve leaves it.
-    ordered_z: Vec<usize>,
     /// `Δ = dw/dx` (w × x), filled from `rhs` when second derivatives ask for it.
     pub(super) tangent: DMatrix<f64>,
     tangent_ready: bool,
@@ -92,10 +89,7 @@ impl Linearisation {
             .chain((0..shape.nu()).map(|k| shape.w_u1() + k))
             .chain(shape.kinematic.iter().map(|&k| shape.w_q2() + k))
             .collect();
-        let solved: Vec<usize> = (0..n)
-            .chain((0..nd).map(|r| shape.w_p1() + r))
-            .chain(shape.kinematic.iter().map(|&k| shape.w_q2() + k))
-            .collect();
+        let solved = n + nd + shape.kinematic.len();
         let input_rows = (shape.inputs.iter())
             .map(|v| shape.dynamic.iter().position(|d| d == v))
             .collect();
@@ -104,19 +98,11 @@ impl Linearisation {
         for (c, &xc) in x_columns.iter().enumerate() {
             tangent[(xc, c)] = 1.0;
         }
-        let ks = solved.len();
+        let ks = solved;
         let lu = OrderedFactor::new(shape.nd(), m);
-        let ordered_z = lu.order.iter().map(|&o| z_columns[o]).collect();
-        let mut solved_runs: Vec<(usize, usize, usize)> = Vec::new();
-        for (c, &xc) in solved.iter().enumerate() {
-            match solved_runs.last_mut() {
-                Some((from, _, len)) if *from + *len == xc => *len += 1,
-                _ => solved_runs.push((xc, c, 1)),
-            }
-        }
         Linearisation {
             lvq: vec![0.0; n * n],
-            forces: false,
+            forces: Sparsity::Zero,
             fq: vec![0.0; n * n],
             fv: vec![0.0; n * n],
             dh1: vec![0.0; m * n],
@@ -125,14 +111,12 @@ impl Linearisation {
             lambda: vec![0.0; m],
             is_dynamic: (0..n).map(|i| shape.dynamic.contains(&i)).collect(),
             c1: ConstraintTerms::zeros(m, n),
-            jac: vec![0.0; rows * w],
-            pjac: vec![0.0; nd * w],
+            pz: vec![0.0; nd * nd],
+            rows_scratch: vec![0.0; 3 * n],
             z_columns,
             solved,
-            solved_runs,
             input_rows,
             lu,
-            ordered_z,
             tangent,
             tangent_ready: false,
             column: vec![0.0; rows],
@@ -155,7 +139,7 @@ impl Linearisation {
     pub(super) fn solve(&mut self, in_place: (&[f64], &[f64], &[f64])) -> Result<(), usize> {
         let (lqq, mass, lvq_t) = in_place;
         let sh = &self.shape;
-        let (w, nd) = (sh.w(), sh.nd());
+        let (nd, k) = (sh.nd(), self.solved);
         let terms = StepTerms {
             lqq,
             lvq: &self.lvq,
@@ -168,33 +152,30 @@ impl Linearisation {
             lambda_d2h1: &self.lambda_d2h1,
             dh2: &self.dh2,
         };
-        jacobians_f64(sh, &terms, &mut self.jac, &mut self.pjac);
-        // R_z, column-major in the elimination order, factored.
-        self.lu.factor(|r, c| self.jac[r * w + self.z_columns[c]])?;
+        // R_z into the factor's storage, −R_x into the right-hand sides (the equations and
+        // unknowns in the elimination order), P_x into dp₂/dx, P_z: then R_z factored.
+        let (factor, position) = self.lu.storage();
+        let mut pieces = Pieces {
+            n: sh.n,
+            nd,
+            k,
+            dynamic: &sh.dynamic,
+            kinematic: &sh.kinematic,
+            position,
+            factor,
+            rhs: &mut self.rhs,
+            dp2: &mut self.dp2,
+            pz: &mut self.pz,
+            scratch: &mut self.rows_scratch,
+        };
+        jacobians_in_pieces(sh, &terms, &mut pieces);
+        self.lu.factor()?;
         self.tangent_ready = false;
-        // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve (the equations, then
-        // the unknowns, in the elimination order).
-        let k = self.solved.len();
-        for (r, &equation) in self.lu.order.iter().enumerate() {
-            let row = &self.jac[equation * w..(equation + 1) * w];
-            let out = &mut self.rhs[r * k..(r + 1) * k];
-            for &(from, to, len) in &self.solved_runs {
-                for (o, &x) in out[to..to + len].iter_mut().zip(&row[from..from + len]) {
-                    *o = -x;
-                }
-            }
-        }
+        // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve.
         self.lu.solve_rows(&mut self.rhs, k);
-        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z):
-        // P_x's rows, then each dz/dx row (contiguous in `rhs`) scaled into them.
-        for r in 0..nd {
-            let prow = &self.pjac[r * w..(r + 1) * w];
-            let out = &mut self.dp2[r * k..(r + 1) * k];
-            for &(from, to, len) in &self.solved_runs {
-                out[to..to + len].copy_from_slice(&prow[from..from + len]);
-            }
-        }
-        (self.combination).gather(nd, &self.pjac[..nd * w], w, &self.ordered_z[..nd]);
+        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z),
+        // dz/dx's rows in the elimination order (the dynamic ones first).
+        (self.combination).gather(nd, &self.pz, nd, &self.lu.order[..nd]);
         combine_compact_rows(&mut self.dp2[..nd * k], k, &self.combination, &self.rhs);
         Ok(())
     }
@@ -217,7 +198,7 @@ impl Linearisation {
 
     /// Entry `(r, c)` of `dz/dx` (`r` over the unknowns: `q₂_d`, then `λ`).
     fn dz(&self, r: usize, c: usize) -> f64 {
-        let (k, r) = (self.solved.len(), self.lu.position[r]);
+        let (k, r) = (self.solved, self.lu.position[r]);
         match self.source(c) {
             Some(Source::Solved(s)) => self.rhs[r * k + s],
             Some(Source::Input(s, _)) => self.shape.left * self.rhs[r * k + s],
@@ -259,7 +240,7 @@ impl Linearisation {
     /// from the tangent's `q₂` rows, `dλ/dx` from its `λ` rows, `dp₂/dx = P Δ`.
     pub(super) fn first_into(&self, out: &mut StepDerivatives) {
         let sh = &self.shape;
-        let (nd, m, k) = (sh.nd(), sh.m, self.solved.len());
+        let (nd, m, k) = (sh.nd(), sh.m, self.solved);
         use StepInput::*;
         let fit = |mat: &mut DMatrix<f64>, rows: usize, columns: usize| {
             if mat.shape() != (rows, columns) {
@@ -399,15 +380,17 @@ impl OrderedFactor {
         }
     }
 
-    /// Factors the matrix whose entry `(equation, unknown)` is `entry(equation, unknown)`.
-    /// On a vanished pivot, the unknown (in `z`'s order) whose it was.
-    fn factor(&mut self, entry: impl Fn(usize, usize) -> f64) -> Result<(), usize> {
+    /// The matrix's storage (column-major, entry `(equation, unknown)` at
+    /// `position[unknown]·rows + position[equation]`) and the positions, to be written
+    /// whole before [`Self::factor`].
+    fn storage(&mut self) -> (&mut [f64], &[usize]) {
+        (&mut self.factor, &self.position)
+    }
+
+    /// Factors the matrix written into [`Self::storage`]. On a vanished pivot, the unknown
+    /// (in `z`'s order) whose it was.
+    fn factor(&mut self) -> Result<(), usize> {
         let rows = self.rows;
-        for (c, &unknown) in self.order.iter().enumerate() {
-            for (r, &equation) in self.order.iter().enumerate() {
-                self.factor[c * rows + r] = entry(equation, unknown);
-            }
-        }
         lu_factor_packed_threshold(&mut self.factor, rows, &mut self.pivots, PIVOT_THRESHOLD)
             .map_err(|c| self.order[c])?;
         self.compact.gather(&self.factor, rows);
@@ -436,4 +419,108 @@ impl OrderedFactor {
             b[o] = s;
         }
     }
+}
+
+/// The first derivatives' [`JacobianSink`]: `R_z` straight into the factor's storage and
+/// `−R_x` on the solved columns (`q₁`, `p₁`, `k₂`) into the right-hand sides' rows, both in
+/// the elimination order; `P_x` into `dp₂/dx`'s rows, `P_z` into `pz`. Every entry the solve
+/// reads is written on every call, zeros included (as `−0.0` where `−R_x` negates one), and
+/// nothing else of `J` and `P` is formed.
+struct Pieces<'a> {
+    n: usize,
+    nd: usize,
+    /// Solved columns.
+    k: usize,
+    dynamic: &'a [usize],
+    kinematic: &'a [usize],
+    position: &'a [usize],
+    factor: &'a mut [f64],
+    rhs: &'a mut [f64],
+    dp2: &'a mut [f64],
+    pz: &'a mut [f64],
+    /// `∂r/∂q₁`, `∂r/∂q₂`, `∂p₂/∂q₂` of the row being written.
+    scratch: &'a mut [f64],
+}
+
+impl Pieces<'_> {
+    /// Where entry `(equation, unknown)` of `R_z` is stored.
+    #[inline(always)]
+    fn at(&self, equation: usize, unknown: usize) -> usize {
+        self.position[unknown] * self.position.len() + self.position[equation]
+    }
+}
+
+impl JacobianSink<f64> for Pieces<'_> {
+    #[inline(always)]
+    fn rows(&mut self, r: usize) -> [&mut [f64]; 4] {
+        let (n, k) = (self.n, self.k);
+        let (by_q1, rest) = self.scratch.split_at_mut(n);
+        let (by_q2, p_by_q2) = rest.split_at_mut(n);
+        // ∂p₂/∂q₁ is P_x's q₁ block, the first solved columns of dp₂/dx's row.
+        [by_q1, by_q2, &mut self.dp2[r * k..r * k + n], p_by_q2]
+    }
+
+    #[inline(always)]
+    fn end_row(&mut self, r: usize) {
+        let (n, nd, k) = (self.n, self.nd, self.k);
+        let (by_q1, rest) = self.scratch.split_at(n);
+        let (by_q2, p_by_q2) = rest.split_at(n);
+        for (c, &d) in self.dynamic.iter().enumerate() {
+            let at = self.at(r, c);
+            self.factor[at] = by_q2[d];
+            self.pz[r * nd + c] = p_by_q2[d];
+        }
+        let out = &mut self.rhs[self.position[r] * k..(self.position[r] + 1) * k];
+        let (q1, rest) = out.split_at_mut(n);
+        let (p1, k2) = rest.split_at_mut(nd);
+        q1.iter_mut().zip(by_q1).for_each(|(o, &x)| *o = -x);
+        p1.fill(-0.0);
+        p1[r] = -1.0;
+        k2.iter_mut()
+            .zip(self.kinematic)
+            .for_each(|(o, &v)| *o = -by_q2[v]);
+        let (_, rest) = self.dp2[r * k..(r + 1) * k].split_at_mut(n);
+        let (p1, k2) = rest.split_at_mut(nd);
+        p1.fill(0.0);
+        k2.iter_mut()
+            .zip(self.kinematic)
+            .for_each(|(o, &v)| *o = p_by_q2[v]);
+    }
+
+    /// An input's columns are not solved for (its `p₁` column's, scaled).
+    fn input(&mut self, _: usize, _: usize, _: f64, _: f64) {}
+
+    #[inline(always)]
+    fn multiplier(&mut self, r: usize, s: usize, x: f64) {
+        let at = self.at(r, self.nd + s);
+        self.factor[at] = x;
+    }
+
+    fn constraint(&mut self, s: usize, dh2: &[f64]) {
+        let (n, nd, k) = (self.n, self.nd, self.k);
+        let equation = nd + s;
+        for (c, &d) in self.dynamic.iter().enumerate() {
+            let at = self.at(equation, c);
+            self.factor[at] = dh2[d];
+        }
+        // h does not depend on the multipliers.
+        for unknown in nd..self.position.len() {
+            let at = self.at(equation, unknown);
+            self.factor[at] = 0.0;
+        }
+        let out = &mut self.rhs[self.position[equation] * k..(self.position[equation] + 1) * k];
+        let (q1_p1, k2) = out.split_at_mut(n + nd);
+        q1_p1.fill(-0.0);
+        k2.iter_mut()
+            .zip(self.kinematic)
+            .for_each(|(o, &v)| *o = -dh2[v]);
+    }
+}
+
+/// [`jacobians`] into [`Pieces`], compiled also for AVX and chosen at run time (no fused
+/// multiply-adds: the same operations as [`jacobians_f64`](super::jacobians::jacobians_f64)
+/// on every CPU).
+#[multiversion::multiversion(targets("x86_64+avx"))]
+fn jacobians_in_pieces(sh: &Shape, st: &StepTerms<f64>, pieces: &mut Pieces) {
+    jacobians(sh, st, pieces);
 }

@@ -5,7 +5,7 @@
 use super::StepInput;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
 use crate::scalar::Scalar;
-use crate::system::ConstraintTerms;
+use crate::system::{ConstraintTerms, Sparsity};
 
 /// Sizes of one step and where each block sits in `w = (q₁, q₂, p₁, u₁, λ)` and in `x`.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,14 +67,14 @@ impl Shape {
 
 /// What the step's Jacobians are built from, over a scalar: the continuous terms at the
 /// quadrature point (`L_qq`, `L_q̇q` and its transpose, `M`, `F_q`, `F_q̇`, row-major n × n;
-/// `forces`: whether `F_q`, `F_q̇` may be non-zero), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (n × n,
+/// `forces`: where `F_q`, `F_q̇` may be non-zero, and are read), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (n × n,
 /// [`contract`]) and `Dh(q₂)`.
 pub(super) struct StepTerms<'a, T> {
     pub(super) lqq: &'a [T],
     pub(super) lvq: &'a [T],
     pub(super) lvq_t: &'a [T],
     pub(super) mass: &'a [T],
-    pub(super) forces: bool,
+    pub(super) forces: Sparsity,
     pub(super) fq: &'a [T],
     pub(super) fv: &'a [T],
     pub(super) dh1: &'a [T],
@@ -82,7 +82,82 @@ pub(super) struct StepTerms<'a, T> {
     pub(super) dh2: &'a [T],
 }
 
-/// `J = ∂R/∂w` (rows × w) and `P = ∂p₂/∂w` (n_d × w), row-major, from the step's terms:
+/// Where [`jacobians`] puts `J` and `P`: whole ([`Whole`]: the second derivatives' `D_jJ`,
+/// `D_jP`), or cut into the first derivatives' pieces where the solve reads them (the
+/// first-order linearisation's sink). Each dynamic row `r` is written as four rows over all
+/// variables — `∂r_r/∂q₁`, `∂r_r/∂q₂`, `∂p₂,r/∂q₁`, `∂p₂,r/∂q₂` — then [`Self::end_row`];
+/// the constant and sparse entries are given one by one.
+pub(super) trait JacobianSink<T> {
+    /// Row `r`'s four rows, each to be written whole.
+    fn rows(&mut self, r: usize) -> [&mut [T]; 4];
+    /// Row `r` written (its `∂r_r/∂p₁ = e_r` is the sink's to place).
+    fn end_row(&mut self, r: usize);
+    /// `∂r_r/∂u_k = left`, `∂p₂,r/∂u_k = plus` (input `k` pushes on row `r`'s variable).
+    fn input(&mut self, r: usize, k: usize, left: T, plus: T);
+    /// `∂r_r/∂λ_s`.
+    fn multiplier(&mut self, r: usize, s: usize, x: T);
+    /// `∂h_s/∂q₂ = Dh_s(q₂)`, over all variables.
+    fn constraint(&mut self, s: usize, dh2: &[T]);
+}
+
+/// `J` (rows × w) and `P` (n_d × w), row-major, whole. Entries never written (`J`'s `q₁`
+/// columns on the constraint rows, …) stay as the buffers were made: zero.
+pub(super) struct Whole<'a, T> {
+    pub(super) w: usize,
+    pub(super) n: usize,
+    /// Offsets of `p₁`, `u₁`, `λ` in `w`.
+    pub(super) p1: usize,
+    pub(super) u1: usize,
+    pub(super) lambda: usize,
+    pub(super) nd: usize,
+    pub(super) jac: &'a mut [T],
+    pub(super) pjac: &'a mut [T],
+}
+
+impl<'a, T> Whole<'a, T> {
+    pub(super) fn new(sh: &Shape, jac: &'a mut [T], pjac: &'a mut [T]) -> Self {
+        let (w, n, nd) = (sh.w(), sh.n, sh.nd());
+        let (p1, u1, lambda) = (sh.w_p1(), sh.w_u1(), sh.w_lambda());
+        Whole {
+            w,
+            n,
+            p1,
+            u1,
+            lambda,
+            nd,
+            jac,
+            pjac,
+        }
+    }
+}
+
+impl<T: Scalar> JacobianSink<T> for Whole<'_, T> {
+    #[inline(always)]
+    fn rows(&mut self, r: usize) -> [&mut [T]; 4] {
+        let (w, n) = (self.w, self.n);
+        let (by_q1, rest) = self.jac[r * w..(r + 1) * w].split_at_mut(n);
+        let (p_by_q1, p_rest) = self.pjac[r * w..(r + 1) * w].split_at_mut(n);
+        [by_q1, &mut rest[..n], p_by_q1, &mut p_rest[..n]]
+    }
+    #[inline(always)]
+    fn end_row(&mut self, r: usize) {
+        self.jac[r * self.w + self.p1 + r] = T::constant(1.0);
+    }
+    fn input(&mut self, r: usize, k: usize, left: T, plus: T) {
+        self.jac[r * self.w + self.u1 + k] = left;
+        self.pjac[r * self.w + self.u1 + k] = plus;
+    }
+    #[inline(always)]
+    fn multiplier(&mut self, r: usize, s: usize, x: T) {
+        self.jac[r * self.w + self.lambda + s] = x;
+    }
+    fn constraint(&mut self, s: usize, dh2: &[T]) {
+        let row = &mut self.jac[(self.nd + s) * self.w..(self.nd + s + 1) * self.w];
+        row[self.n..2 * self.n].copy_from_slice(dh2);
+    }
+}
+
+/// `J = ∂R/∂w` (rows × w) and `P = ∂p₂/∂w` (n_d × w) into `sink`, from the step's terms:
 ///
 /// * `∂r_i/∂q₁ⱼ = D₁D₁L_d + f⁻·∂F/∂q₁ + Δt Σ_s λ_s D²h_s(q₁)`, `∂r_i/∂q₂ⱼ = D₂D₁L_d +
 ///   f⁻·∂F/∂q₂`, `∂r_i/∂p₁ = I`, `∂r_i/∂u_k = left·B`, `∂r_i/∂λ_s = Δt Dh_s(q₁)ᵢ`;
@@ -92,12 +167,11 @@ pub(super) struct StepTerms<'a, T> {
 ///
 /// with `∂F/∂q₁ = (1−α)F_q − F_q̇/Δt`, `∂F/∂q₂ = αF_q + F_q̇/Δt` (F at `(q_α, v)`).
 #[inline(always)]
-pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T], pjac: &mut [T]) {
-    let (n, m, w) = (sh.n, sh.m, sh.w());
+pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut impl JacobianSink<T>) {
+    let (n, m) = (sh.n, sh.m);
     let (a, dt) = (sh.ld.alpha, sh.ld.dt);
     let c = T::constant;
-    // Every entry this writes is written on every call; the others stay zero from the
-    // buffers' making (so nothing is cleared here).
+    // Every entry this writes is written on every call; the others are the sink's.
     let [d1d1, d2d1, d2d2] = [Slots::D1D1, Slots::D2D1, Slots::D2D2].map(|s| sh.ld.slot::<T>(s));
     let (cdt, left, plus) = (c(dt), c(sh.left), c(sh.plus));
     // Row i of an n × n term (the transpose's row is the term's column).
@@ -113,11 +187,9 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T],
             at(st.mass),
             at(st.lambda_d2h1),
         );
-        let (by_q1, rest) = jac[r * w..(r + 1) * w].split_at_mut(n);
-        let (by_q2, rest) = rest.split_at_mut(n);
-        rest[r] = c(1.0);
-        let (p_by_q1, p_rest) = pjac[r * w..(r + 1) * w].split_at_mut(n);
-        let p_by_q2 = &mut p_rest[..n];
+        let [by_q1, by_q2, p_by_q1, p_by_q2] = sink.rows(r);
+        let (by_q1, by_q2) = (&mut by_q1[..n], &mut by_q2[..n]);
+        let (p_by_q1, p_by_q2) = (&mut p_by_q1[..n], &mut p_by_q2[..n]);
         for j in 0..n {
             let (qq, vq, vq_t, mm) = (lqq[j], lvq[j], lvq_t[j], mass[j]);
             by_q1[j] = d1d1.at(qq, vq, vq_t, mm) + cdt * l_d2h[j];
@@ -126,11 +198,16 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T],
             p_by_q1[j] = d2d1.at(qq, vq_t, vq, mm);
             p_by_q2[j] = d2d2.at(qq, vq, vq_t, mm);
         }
-        if st.forces {
-            // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt.
+        if st.forces != Sparsity::Zero {
+            // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt; on the diagonal alone
+            // for per-variable damping.
             let (fq, fv) = (at(st.fq), at(st.fv));
             let (q1_q, v1, q2_q) = (c(1.0 - a), c(1.0 / dt), c(a));
-            for j in 0..n {
+            let columns = match st.forces {
+                Sparsity::Diagonal => i..i + 1,
+                _ => 0..n,
+            };
+            for j in columns {
                 let f1 = q1_q * fq[j] - v1 * fv[j];
                 let f2 = q2_q * fq[j] + v1 * fv[j];
                 by_q1[j] += left * f1;
@@ -139,19 +216,18 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, jac: &mut [T],
                 p_by_q2[j] += plus * f2;
             }
         }
+        sink.end_row(r);
         for (k, &v) in sh.inputs.iter().enumerate() {
             if v == i {
-                jac[r * w + sh.w_u1() + k] = left;
-                pjac[r * w + sh.w_u1() + k] = plus;
+                sink.input(r, k, left, plus);
             }
         }
         for s in 0..m {
-            jac[r * w + sh.w_lambda() + s] = cdt * st.dh1[s * n + i];
+            sink.multiplier(r, s, cdt * st.dh1[s * n + i]);
         }
     }
     for s in 0..m {
-        let row = &mut jac[(sh.nd() + s) * w..(sh.nd() + s + 1) * w];
-        row[sh.w_q2()..sh.w_q2() + n].copy_from_slice(&st.dh2[s * n..(s + 1) * n]);
+        sink.constraint(s, &st.dh2[s * n..(s + 1) * n]);
     }
 }
 
@@ -235,11 +311,11 @@ fn contract_hessians_with<const FUSED: bool>(
     );
 }
 
-/// [`jacobians`] over `f64`, compiled also for AVX and chosen at run time (the same
+/// [`jacobians`] over `f64`, whole, compiled also for AVX and chosen at run time (the same
 /// operations in the same order on every CPU: no fused multiply-adds here).
 #[multiversion::multiversion(targets("x86_64+avx"))]
 pub(super) fn jacobians_f64(sh: &Shape, st: &StepTerms<f64>, jac: &mut [f64], pjac: &mut [f64]) {
-    jacobians(sh, st, jac, pjac);
+    jacobians(sh, st, &mut Whole::new(sh, jac, pjac));
 }
 
 /// Rows `rows` of the n × n matrix stored column-major in `a`, into the same rows of the

@@ -256,7 +256,7 @@ where
         let mut first = StepDerivatives::empty();
         lin.first_into(&mut first);
         let sh = lin.shape.clone();
-        let (nd, m, x, rows, wl) = (sh.nd(), sh.m, sh.x(), sh.rows(), sh.w());
+        let (nd, m, x, rows) = (sh.nd(), sh.m, sh.x(), sh.rows());
         let mut second = StepSecondDerivatives {
             shape: sh.clone(),
             q2: vec![DMatrix::zeros(x, x); nd],
@@ -295,10 +295,10 @@ where
                     second.lambda[s][(i, j)] = -g[nd + s];
                 }
                 for r in 0..nd {
-                    let prow = &lin.pjac[r * wl..(r + 1) * wl];
+                    let pz = &lin.pz[r * nd..(r + 1) * nd];
                     let mut p = duals.p_times(r, di);
-                    for (c, &k) in sh.dynamic.iter().enumerate() {
-                        p -= prow[sh.w_q2() + k] * g[c];
+                    for (c, &x) in pz.iter().enumerate() {
+                        p -= x * g[c];
                     }
                     second.p2[r][(i, j)] = p;
                 }
@@ -329,13 +329,13 @@ where
         let lin = self.linearise(cx, q1, p1, q2)?;
         lin.fill_tangent();
         let sh = &lin.shape;
-        let (nd, m, x, wl) = (sh.nd(), sh.m, sh.x(), sh.w());
+        let (nd, m, x) = (sh.nd(), sh.m, sh.x());
         // μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p), w_z = (w_q, w_λ).
         let mu = &mut lin.column;
-        for (c, &k) in sh.dynamic.iter().enumerate() {
+        for c in 0..nd {
             mu[c] = w.q2[c];
             for r in 0..nd {
-                mu[c] += lin.pjac[r * wl + sh.w_q2() + k] * w.p2[r];
+                mu[c] += lin.pz[r * nd + c] * w.p2[r];
             }
         }
         for s in 0..m {
@@ -435,14 +435,14 @@ where
             dynamic.iter().copied(),
             &mut lin.lvq,
         );
-        // Only the entries the evaluation wrote (its sparsity) hold force derivatives.
-        lin.forces = t.force_derivatives != Sparsity::Zero;
+        // Only the entries the evaluation wrote (its sparsity) hold force derivatives, and
+        // only those are read.
+        lin.forces = t.force_derivatives;
         match t.force_derivatives {
             Sparsity::Zero => {}
             Sparsity::Diagonal => {
                 for &i in dynamic {
-                    lin.fq[i * n..(i + 1) * n].fill(0.0);
-                    lin.fv[i * n..(i + 1) * n].fill(0.0);
+                    lin.fq[i * n + i] = 0.0;
                     lin.fv[i * n + i] = t.dforce_ddq[(i, i)];
                 }
             }

@@ -10,7 +10,7 @@ use super::jacobians::{contract_on_rows, jacobians_f64, row_major_into, Shape, S
 use crate::dual::{Dual, DualOutputs};
 use crate::linalg::dot;
 use crate::outputs::Field;
-use crate::system::{row_variables, Order, System};
+use crate::system::{row_variables, Order, Sparsity, System};
 
 /// Scratch for the Jacobians over dual numbers along one tangent direction.
 #[derive(Clone, Debug)]
@@ -147,7 +147,11 @@ impl DualJacobians {
             lvq,
             lvq_t,
             mass,
-            forces: lin.forces,
+            // The derivative parts are whole matrices (zero where the terms are constant).
+            forces: match lin.forces {
+                Sparsity::Zero => Sparsity::Zero,
+                _ => Sparsity::Dense,
+            },
             fq,
             fv,
             dh1,
