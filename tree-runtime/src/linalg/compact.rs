@@ -61,11 +61,13 @@ impl Pairs {
     }
 }
 
-/// The off-diagonal non-zeros of an `n × n` LU factor by row pair, in the order of the
-/// substitutions of [`lu_solve_packed_rows`](super::lu_solve_packed_rows): forward, rows
-/// `(1, 2), (3, 4), …` over `j < i` (an odd last row alone); backward, rows
-/// `(n−1, n−2), (n−3, n−4), …` over `j > i` (row 0 alone last when `n` is odd). Buffers grow
-/// to the largest factor gathered and are reused.
+/// The off-diagonal non-zeros of an `n × n` LU factor by row pair, in the order the
+/// substitutions take them: forward, rows `(0, 1), (2, 3), …` over `j < i` (an odd last row
+/// alone); backward, rows `(n−1, n−2), (n−3, n−4), …` over `j > i` (row 0 alone last when
+/// `n` is odd). Forward pairs start at row 0 (the dense kernel's, with nothing to add to
+/// row 0, at row 1), so that they fall within the blocks of a tree's leaves-first order: each
+/// row still sums its own terms in the same order. Buffers grow to the largest factor
+/// gathered and are reused.
 #[derive(Clone, Debug, Default)]
 pub struct CompactFactor {
     n: usize,
@@ -82,7 +84,7 @@ impl CompactFactor {
         // Rows r0 and r1 over the unknowns `js`; a row alone.
         let two = |r0: usize, r1: usize| move |j: usize| [a[j * n + r0], a[j * n + r1]];
         let one = |r: usize| move |j: usize| [a[j * n + r], 0.0];
-        let mut i = 1;
+        let mut i = 0;
         while i + 1 < n {
             pairs.pair(0..i, two(i, i + 1));
             i += 2;
@@ -181,7 +183,7 @@ fn substitute<const W: usize, const FUSED: bool>(
         }
     };
     // L y = b (unit lower, L_ij = a[j n + i]).
-    let mut i = 1;
+    let mut i = 0;
     while i + 1 < n {
         let mut acc = [at(b, i), at(b, i + 1)];
         sum_pair(b, &mut acc, next());
@@ -332,16 +334,16 @@ mod tests {
     };
     use super::*;
 
-    /// A tree's matrix, leaves first: three 3 × 3 blocks each coupled to the last 4 rows and
+    /// A tree's matrix, leaves first: three 4 × 4 blocks each coupled to the last 4 rows and
     /// columns (a floating base), the rest zero; the base's rows heavier in the blocks'
     /// columns than the blocks' diagonals, so that partial pivoting swaps them up.
     fn arrow() -> (Vec<f64>, usize) {
-        let n = 13;
-        let base = |i: usize| i >= 9;
+        let n = 16;
+        let base = |i: usize| i >= 12;
         let a = (0..n * n)
             .map(|at| {
                 let (i, j) = (at % n, at / n);
-                let coupled = base(i) || base(j) || i / 3 == j / 3;
+                let coupled = base(i) || base(j) || i / 4 == j / 4;
                 let diagonal = if i == j {
                     2.0 + 38.0 * base(i) as u8 as f64
                 } else {
@@ -363,16 +365,14 @@ mod tests {
         let (arrow, n) = arrow();
         let dense = super::super::tests::scattered(n);
         for (name, a) in [("arrow", &arrow), ("dense", &dense)] {
+            let mut kept = Vec::new();
             for threshold in [1.0, 0.1] {
                 let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
                 lu_factor_packed_threshold(&mut factor, n, &mut pivots, threshold)
                     .expect("regular");
                 let mut compact = CompactFactor::default();
                 compact.gather(&factor, n);
-                if name == "arrow" {
-                    let kept = compact.density();
-                    assert_eq!(threshold == 0.1, kept < 0.7, "{name}, {threshold}: {kept}");
-                }
+                kept.push(compact.density());
                 for k in [1, 3, 7, 21, 37] {
                     let b: Vec<f64> = (0..n * k).map(|i| (i as f64).sin()).collect();
                     let (mut x, mut y, mut z, mut w) = (b.clone(), b.clone(), b.clone(), b.clone());
@@ -390,6 +390,10 @@ mod tests {
                         assert!((ax - b[r * k + c]).abs() < 1e-11, "{name} ({r}, {c})");
                     }
                 }
+            }
+            if name == "arrow" {
+                // Partial pivoting fills the factor; the threshold keeps the tree's zeros.
+                assert!(kept[1] < 0.6 && kept[1] < 0.8 * kept[0], "{kept:?}");
             }
         }
         // A compact factor of another size is refused.
