@@ -238,6 +238,22 @@ pub fn lu_solve_packed_rows(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]
 /// [`lu_solve_packed_rows`] with fused multiply-adds or without (both tested on any CPU).
 #[inline(always)]
 fn solve_rows<const FUSED: bool>(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64], k: usize) {
+    let b = interchange_rows(pivots, n, b, k);
+    let a = &a[..n * n];
+    for (c0, width) in blocks(k) {
+        let terms = &mut InFactor { a, n };
+        match width {
+            BLOCK => substitute::<BLOCK, FUSED>(a, n, terms, b, (k, c0)),
+            4 => substitute::<4, FUSED>(a, n, terms, b, (k, c0)),
+            _ => substitute::<1, FUSED>(a, n, terms, b, (k, c0)),
+        }
+    }
+}
+
+/// The factorisation's row interchanges applied in order to the `n × k` row-major `b`;
+/// returns `b`'s `n × k` part.
+#[inline(always)]
+fn interchange_rows<'b>(pivots: &[usize], n: usize, b: &'b mut [f64], k: usize) -> &'b mut [f64] {
     let b = &mut b[..n * k];
     for (j, &p) in pivots[..n].iter().enumerate() {
         if p != j {
@@ -246,14 +262,7 @@ fn solve_rows<const FUSED: bool>(a: &[f64], n: usize, pivots: &[usize], b: &mut 
             }
         }
     }
-    let a = &a[..n * n];
-    for (c0, width) in blocks(k) {
-        match width {
-            BLOCK => substitute::<BLOCK, FUSED>(a, n, b, k, c0),
-            4 => substitute::<4, FUSED>(a, n, b, k, c0),
-            _ => substitute::<1, FUSED>(a, n, b, k, c0),
-        }
-    }
+    b
 }
 
 /// Right-hand sides summed in registers at once by the row kernels (four AVX vectors).
@@ -311,82 +320,100 @@ fn subtract_scaled_pair<const W: usize, const FUSED: bool>(
     }
 }
 
+/// Where the substitutions find the terms of a pair of rows: the factor itself, each entry
+/// tested for zero ([`InFactor`]), or its non-zeros gathered beforehand
+/// ([`CompactFactor`]). Either way each row sums its non-zero terms in the order of the
+/// unknowns, so both give the same bits.
+pub(crate) trait RowTerms {
+    /// `acc −= (L or U)_{r, j} x_j` over the unknowns `js` for the `rows` `(r0, r1)` (a row
+    /// alone is paired with itself), `x_j` the `columns` `(k, c0)`: `c0..c0 + W` of `b`'s row
+    /// `j` (row-major, rows of `k`).
+    fn subtract<const W: usize, const FUSED: bool>(
+        &mut self,
+        b: &[f64],
+        columns: (usize, usize),
+        acc: &mut [[f64; W]; 2],
+        rows: (usize, usize),
+        js: std::ops::Range<usize>,
+    );
+}
+
+/// The factor's own entries, read as the substitutions go, zero pairs skipped.
+struct InFactor<'a> {
+    a: &'a [f64],
+    n: usize,
+}
+
+impl RowTerms for InFactor<'_> {
+    #[inline(always)]
+    fn subtract<const W: usize, const FUSED: bool>(
+        &mut self,
+        b: &[f64],
+        (k, c0): (usize, usize),
+        acc: &mut [[f64; W]; 2],
+        (r0, r1): (usize, usize),
+        js: std::ops::Range<usize>,
+    ) {
+        let (a, n) = (self.a, self.n);
+        for j in js {
+            let (l0, l1) = (a[j * n + r0], a[j * n + r1]);
+            if l0 != 0.0 || l1 != 0.0 {
+                subtract_scaled_pair::<W, FUSED>(acc, (l0, l1), &b[j * k + c0..j * k + c0 + W]);
+            }
+        }
+    }
+}
+
 /// The substitutions of [`lu_solve_packed_rows`] on columns `c0..c0 + W` of `b`, two rows at
 /// a time: each loaded row of solved unknowns feeds both rows' sums, and the two sums are
-/// independent chains of multiply-adds (one row's would wait on each addition).
+/// independent chains of multiply-adds (one row's would wait on each addition). The terms
+/// come from `terms`; the diagonal and the pair's own term from the factor `a`.
 #[inline(always)]
 fn substitute<const W: usize, const FUSED: bool>(
     a: &[f64],
     n: usize,
+    terms: &mut impl RowTerms,
     b: &mut [f64],
-    k: usize,
-    c0: usize,
+    (k, c0): (usize, usize),
 ) {
+    let at = |b: &[f64], r: usize| block::<W>(&b[r * k..], c0);
+    let store = |b: &mut [f64], r: usize, x: &[f64; W]| {
+        b[r * k + c0..r * k + c0 + W].copy_from_slice(x);
+    };
     // L y = b (unit lower, L_ij = a[j n + i]): rows i and i + 1 over j < i, then row i + 1's
-    // own term in y_i.
-    let mut i = 1;
-    while i + 1 < n {
-        let mut acc = [
-            block::<W>(&b[i * k..], c0),
-            block::<W>(&b[(i + 1) * k..], c0),
-        ];
-        for j in 0..i {
-            let (l0, l1) = (a[j * n + i], a[j * n + i + 1]);
-            if l0 != 0.0 || l1 != 0.0 {
-                subtract_scaled_pair::<W, FUSED>(
-                    &mut acc,
-                    (l0, l1),
-                    &b[j * k + c0..j * k + c0 + W],
-                );
-            }
+    // own term in y_i (an odd last row alone).
+    let mut i = 0;
+    while i < n {
+        let next = (i + 1).min(n - 1);
+        let mut acc = [at(b, i), at(b, next)];
+        terms.subtract::<W, FUSED>(b, (k, c0), &mut acc, (i, next), 0..i);
+        if next != i {
+            let first = acc[0];
+            subtract_scaled::<W, FUSED>(&mut acc[1], a[i * n + next], &first);
+            store(b, next, &acc[1]);
         }
-        let first = acc[0];
-        subtract_scaled::<W, FUSED>(&mut acc[1], a[i * n + i + 1], &first);
-        b[i * k + c0..i * k + c0 + W].copy_from_slice(&acc[0]);
-        b[(i + 1) * k + c0..(i + 1) * k + c0 + W].copy_from_slice(&acc[1]);
+        store(b, i, &acc[0]);
         i += 2;
     }
-    if i < n {
-        let mut acc = block::<W>(&b[i * k..], c0);
-        for j in 0..i {
-            subtract_scaled::<W, FUSED>(&mut acc, a[j * n + i], &b[j * k + c0..j * k + c0 + W]);
-        }
-        b[i * k + c0..i * k + c0 + W].copy_from_slice(&acc);
-    }
-    // U x = y (U_ij = a[j n + i], j ≥ i): rows i and i − 1 over j > i, then row i − 1's own
-    // term in x_i.
+    // U x = y (U_ij = a[j n + i], j ≥ i): rows hi and lo = hi − 1 over j > hi, hi divided by
+    // its pivot, then row lo's own term in x_hi and its pivot (row 0 alone last for odd n).
     let mut i = n;
-    while i >= 2 {
-        let (hi, lo) = (i - 1, i - 2);
-        let mut acc = [block::<W>(&b[hi * k..], c0), block::<W>(&b[lo * k..], c0)];
-        for j in i..n {
-            let (u0, u1) = (a[j * n + hi], a[j * n + lo]);
-            if u0 != 0.0 || u1 != 0.0 {
-                subtract_scaled_pair::<W, FUSED>(
-                    &mut acc,
-                    (u0, u1),
-                    &b[j * k + c0..j * k + c0 + W],
-                );
-            }
-        }
+    while i > 0 {
+        let hi = i - 1;
+        let lo = hi.saturating_sub(1);
+        let mut acc = [at(b, hi), at(b, lo)];
+        terms.subtract::<W, FUSED>(b, (k, c0), &mut acc, (hi, lo), i..n);
         let inverse = 1.0 / a[hi * n + hi];
         acc[0].iter_mut().for_each(|x| *x *= inverse);
-        let first = acc[0];
-        subtract_scaled::<W, FUSED>(&mut acc[1], a[hi * n + lo], &first);
-        let inverse = 1.0 / a[lo * n + lo];
-        acc[1].iter_mut().for_each(|x| *x *= inverse);
-        b[hi * k + c0..hi * k + c0 + W].copy_from_slice(&acc[0]);
-        b[lo * k + c0..lo * k + c0 + W].copy_from_slice(&acc[1]);
-        i -= 2;
-    }
-    if i == 1 {
-        let mut acc = block::<W>(b, c0);
-        for j in 1..n {
-            subtract_scaled::<W, FUSED>(&mut acc, a[j * n], &b[j * k + c0..j * k + c0 + W]);
+        if lo != hi {
+            let first = acc[0];
+            subtract_scaled::<W, FUSED>(&mut acc[1], a[hi * n + lo], &first);
+            let inverse = 1.0 / a[lo * n + lo];
+            acc[1].iter_mut().for_each(|x| *x *= inverse);
+            store(b, lo, &acc[1]);
         }
-        let inverse = 1.0 / a[0];
-        acc.iter_mut().for_each(|x| *x *= inverse);
-        b[c0..c0 + W].copy_from_slice(&acc);
+        store(b, hi, &acc[0]);
+        i = lo;
     }
 }
 

@@ -11,7 +11,7 @@
 //! [`CompactCombination`] and [`combine_compact_rows`] do the same for
 //! [`combine_rows`](super::combine_rows).
 
-use super::{block, blocks, subtract_scaled, subtract_scaled_pair, BLOCK};
+use super::{block, blocks, interchange_rows, substitute, subtract_scaled_pair, RowTerms, BLOCK};
 
 /// One term of a pair of rows: the unknown `j` and the two rows' coefficients on it.
 type Term = (usize, [f64; 2]);
@@ -62,11 +62,10 @@ impl Pairs {
 }
 
 /// The off-diagonal non-zeros of an `n × n` LU factor by row pair, in the order the
-/// substitutions take them: forward, rows `(0, 1), (2, 3), …` over `j < i` (an odd last row
-/// alone); backward, rows `(n−1, n−2), (n−3, n−4), …` over `j > i` (row 0 alone last when
-/// `n` is odd). Forward pairs start at row 0 (the dense kernel's, with nothing to add to
-/// row 0, at row 1), so that they fall within the blocks of a tree's leaves-first order: each
-/// row still sums its own terms in the same order. Buffers grow to the largest factor
+/// substitutions take them: forward, rows `(0, 1), (2, 3), …` over `j < i`; backward, rows
+/// `(n−1, n−2), (n−3, n−4), …` over `j > i` (an odd last row paired with itself). The pairs
+/// fall within the blocks of a tree's leaves-first order (four variables to a limb), so their
+/// union of non-zeros is little more than each row's. Buffers grow to the largest factor
 /// gathered and are reused.
 #[derive(Clone, Debug, Default)]
 pub struct CompactFactor {
@@ -81,24 +80,19 @@ impl CompactFactor {
         self.n = n;
         let (a, pairs) = (&a[..n * n], &mut self.pairs);
         pairs.clear(n * n);
-        // Rows r0 and r1 over the unknowns `js`; a row alone.
+        // Rows r0 and r1 over the unknowns `js` (a row alone paired with itself), in the
+        // order of the substitutions.
         let two = |r0: usize, r1: usize| move |j: usize| [a[j * n + r0], a[j * n + r1]];
-        let one = |r: usize| move |j: usize| [a[j * n + r], 0.0];
         let mut i = 0;
-        while i + 1 < n {
-            pairs.pair(0..i, two(i, i + 1));
+        while i < n {
+            pairs.pair(0..i, two(i, (i + 1).min(n - 1)));
             i += 2;
         }
-        if i < n {
-            pairs.pair(0..i, one(i));
-        }
         let mut i = n;
-        while i >= 2 {
-            pairs.pair(i..n, two(i - 1, i - 2));
-            i -= 2;
-        }
-        if i == 1 {
-            pairs.pair(1..n, one(0));
+        while i > 0 {
+            let (hi, lo) = (i - 1, (i - 1).saturating_sub(1));
+            pairs.pair(i..n, two(hi, lo));
+            i = lo;
         }
     }
 
@@ -140,91 +134,44 @@ fn solve_compact<const FUSED: bool>(
     k: usize,
 ) {
     assert_eq!(compact.n, n, "the compact factor is of this factor");
-    let b = &mut b[..n * k];
-    for (j, &p) in pivots[..n].iter().enumerate() {
-        if p != j {
-            for c in 0..k {
-                b.swap(p * k + c, j * k + c);
-            }
-        }
-    }
+    let b = interchange_rows(pivots, n, b, k);
     let a = &a[..n * n];
     for (c0, width) in blocks(k) {
+        let terms = &mut Gathered {
+            spans: compact.pairs.spans(),
+        };
         match width {
-            BLOCK => substitute::<BLOCK, FUSED>(a, n, compact, b, k, c0),
-            4 => substitute::<4, FUSED>(a, n, compact, b, k, c0),
-            _ => substitute::<1, FUSED>(a, n, compact, b, k, c0),
+            BLOCK => substitute::<BLOCK, FUSED>(a, n, terms, b, (k, c0)),
+            4 => substitute::<4, FUSED>(a, n, terms, b, (k, c0)),
+            _ => substitute::<1, FUSED>(a, n, terms, b, (k, c0)),
         }
     }
 }
 
-/// The substitutions on columns `c0..c0 + W` of `b` (as `lu_solve_packed_rows`'
-/// `substitute`, each pair summing its gathered terms).
-#[inline(always)]
-fn substitute<const W: usize, const FUSED: bool>(
-    a: &[f64],
-    n: usize,
-    compact: &CompactFactor,
-    b: &mut [f64],
-    k: usize,
-    c0: usize,
-) {
-    let mut spans = compact.pairs.spans();
-    let mut next = || spans.next().expect("a pair of the factor");
-    let at = |b: &[f64], j: usize| -> [f64; W] { block::<W>(&b[j * k..], c0) };
-    let sum_pair = |b: &[f64], acc: &mut [[f64; W]; 2], span: &[Term]| {
-        for &(j, l) in span {
+/// A compact factor's pairs of rows, read in the substitutions' order (one pass per block of
+/// right-hand sides).
+struct Gathered<'a, I: Iterator<Item = &'a [Term]>> {
+    spans: I,
+}
+
+impl<'a, I: Iterator<Item = &'a [Term]>> RowTerms for Gathered<'a, I> {
+    #[inline(always)]
+    fn subtract<const W: usize, const FUSED: bool>(
+        &mut self,
+        b: &[f64],
+        (k, c0): (usize, usize),
+        acc: &mut [[f64; W]; 2],
+        _: (usize, usize),
+        _: std::ops::Range<usize>,
+    ) {
+        for &(j, l) in self.spans.next().expect("a pair of the factor") {
             subtract_scaled_pair::<W, FUSED>(acc, (l[0], l[1]), &b[j * k + c0..j * k + c0 + W]);
         }
-    };
-    let sum_one = |b: &[f64], acc: &mut [f64; W], span: &[Term]| {
-        for &(j, l) in span {
-            subtract_scaled::<W, FUSED>(acc, l[0], &b[j * k + c0..j * k + c0 + W]);
-        }
-    };
-    // L y = b (unit lower, L_ij = a[j n + i]).
-    let mut i = 0;
-    while i + 1 < n {
-        let mut acc = [at(b, i), at(b, i + 1)];
-        sum_pair(b, &mut acc, next());
-        let first = acc[0];
-        subtract_scaled::<W, FUSED>(&mut acc[1], a[i * n + i + 1], &first);
-        b[i * k + c0..i * k + c0 + W].copy_from_slice(&acc[0]);
-        b[(i + 1) * k + c0..(i + 1) * k + c0 + W].copy_from_slice(&acc[1]);
-        i += 2;
-    }
-    if i < n {
-        let mut acc = at(b, i);
-        sum_one(b, &mut acc, next());
-        b[i * k + c0..i * k + c0 + W].copy_from_slice(&acc);
-    }
-    // U x = y (U_ij = a[j n + i], j ≥ i).
-    let mut i = n;
-    while i >= 2 {
-        let (hi, lo) = (i - 1, i - 2);
-        let mut acc = [at(b, hi), at(b, lo)];
-        sum_pair(b, &mut acc, next());
-        let inverse = 1.0 / a[hi * n + hi];
-        acc[0].iter_mut().for_each(|x| *x *= inverse);
-        let first = acc[0];
-        subtract_scaled::<W, FUSED>(&mut acc[1], a[hi * n + lo], &first);
-        let inverse = 1.0 / a[lo * n + lo];
-        acc[1].iter_mut().for_each(|x| *x *= inverse);
-        b[hi * k + c0..hi * k + c0 + W].copy_from_slice(&acc[0]);
-        b[lo * k + c0..lo * k + c0 + W].copy_from_slice(&acc[1]);
-        i -= 2;
-    }
-    if i == 1 {
-        let mut acc = at(b, 0);
-        sum_one(b, &mut acc, next());
-        let inverse = 1.0 / a[0];
-        acc.iter_mut().for_each(|x| *x *= inverse);
-        b[c0..c0 + W].copy_from_slice(&acc);
     }
 }
 
 /// `A`'s non-zeros for [`combine_compact_rows`], by pairs of rows `(0, 1), (2, 3), …` (an
-/// odd last row alone), each over the rows of `D` in order: what
+/// odd last row paired with itself), each over the rows of `D` in order: what
 /// [`combine_rows`](super::combine_rows) reads, gathered once per `A`.
 #[derive(Clone, Debug, Default)]
 pub struct CompactCombination {
@@ -240,15 +187,11 @@ impl CompactCombination {
         self.rows = rows;
         let pairs = &mut self.pairs;
         pairs.clear(rows.div_ceil(2) * cols.len());
-        // Kept negated: the kernel subtracts.
+        // Kept negated: the kernel subtracts. A last row alone is paired with itself.
         for r in (0..rows).step_by(2) {
             let row = &a[r * w..(r + 1) * w];
-            if r + 1 < rows {
-                let next = &a[(r + 1) * w..(r + 2) * w];
-                pairs.pair(0..cols.len(), |s| [-row[cols[s]], -next[cols[s]]]);
-            } else {
-                pairs.pair(0..cols.len(), |s| [-row[cols[s]], 0.0]);
-            }
+            let next = &a[(r + 1).min(rows - 1) * w..][..w];
+            pairs.pair(0..cols.len(), |s| [-row[cols[s]], -next[cols[s]]]);
         }
     }
 }
@@ -275,56 +218,34 @@ fn combine_compact<const FUSED: bool>(
 ) {
     let rows = compact.rows;
     for (r, span) in (0..rows).step_by(2).zip(compact.pairs.spans()) {
-        let alone = r + 1 == rows;
+        // A last row alone is its own pair (computed twice, stored once).
+        let pair = (r, (r + 1).min(rows - 1));
         for (c0, width) in blocks(k) {
-            match (width, alone) {
-                (BLOCK, false) => combine_pair::<BLOCK, FUSED>(c, r, span, d, k, c0),
-                (4, false) => combine_pair::<4, FUSED>(c, r, span, d, k, c0),
-                (_, false) => combine_pair::<1, FUSED>(c, r, span, d, k, c0),
-                (BLOCK, true) => combine_one::<BLOCK, FUSED>(c, r, span, d, k, c0),
-                (4, true) => combine_one::<4, FUSED>(c, r, span, d, k, c0),
-                (_, true) => combine_one::<1, FUSED>(c, r, span, d, k, c0),
+            match width {
+                BLOCK => combine_pair::<BLOCK, FUSED>(c, pair, span, d, k, c0),
+                4 => combine_pair::<4, FUSED>(c, pair, span, d, k, c0),
+                _ => combine_pair::<1, FUSED>(c, pair, span, d, k, c0),
             }
         }
     }
 }
 
-/// Columns `c0..c0 + W` of rows `r`, `r + 1` of [`combine_compact_rows`].
+/// Columns `c0..c0 + W` of rows `r0`, `r1` of [`combine_compact_rows`].
 #[inline(always)]
 fn combine_pair<const W: usize, const FUSED: bool>(
     c: &mut [f64],
-    r: usize,
+    (r0, r1): (usize, usize),
     span: &[Term],
     d: &[f64],
     k: usize,
     c0: usize,
 ) {
-    let mut acc = [
-        block::<W>(&c[r * k..], c0),
-        block::<W>(&c[(r + 1) * k..], c0),
-    ];
+    let mut acc = [block::<W>(&c[r0 * k..], c0), block::<W>(&c[r1 * k..], c0)];
     for &(s, x) in span {
         subtract_scaled_pair::<W, FUSED>(&mut acc, (x[0], x[1]), &d[s * k + c0..s * k + c0 + W]);
     }
-    c[r * k + c0..r * k + c0 + W].copy_from_slice(&acc[0]);
-    c[(r + 1) * k + c0..(r + 1) * k + c0 + W].copy_from_slice(&acc[1]);
-}
-
-/// Columns `c0..c0 + W` of the last row `r` alone of [`combine_compact_rows`].
-#[inline(always)]
-fn combine_one<const W: usize, const FUSED: bool>(
-    c: &mut [f64],
-    r: usize,
-    span: &[Term],
-    d: &[f64],
-    k: usize,
-    c0: usize,
-) {
-    let mut acc = block::<W>(&c[r * k..], c0);
-    for &(s, x) in span {
-        subtract_scaled::<W, FUSED>(&mut acc, x[0], &d[s * k + c0..s * k + c0 + W]);
-    }
-    c[r * k + c0..r * k + c0 + W].copy_from_slice(&acc);
+    c[r1 * k + c0..r1 * k + c0 + W].copy_from_slice(&acc[1]);
+    c[r0 * k + c0..r0 * k + c0 + W].copy_from_slice(&acc[0]);
 }
 
 #[cfg(test)]

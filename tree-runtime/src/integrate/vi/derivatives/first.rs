@@ -98,7 +98,6 @@ impl Linearisation {
         for (c, &xc) in x_columns.iter().enumerate() {
             tangent[(xc, c)] = 1.0;
         }
-        let ks = solved;
         let lu = OrderedFactor::new(shape.nd(), m);
         Linearisation {
             lvq: vec![0.0; n * n],
@@ -121,8 +120,8 @@ impl Linearisation {
             tangent_ready: false,
             column: vec![0.0; rows],
             scratch: vec![0.0; rows],
-            rhs: vec![0.0; rows * ks],
-            dp2: vec![0.0; nd * ks],
+            rhs: vec![0.0; rows * solved],
+            dp2: vec![0.0; nd * solved],
             combination: CompactCombination::default(),
             q1: vec![0.0; n],
             q2: vec![0.0; n],

@@ -19,13 +19,15 @@
 //!   `Σ w ∂²/∂x_i∂x_j = (μᵀ D_j J + w_pᵀ D_j P) Δ_i` with
 //!   `μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p)`: one transposed solve, no tensor.
 //!
-//! The Jacobians are written once, over any [`Scalar`](crate::scalar::Scalar)
-//! ([`jacobians`]): over `f64` at the solution for the first derivatives, over
-//! [`Dual`](crate::dual::Dual) for their derivatives. Forces the caller
+//! The Jacobians are written once, over any [`Scalar`](crate::scalar::Scalar), into a sink
+//! ([`jacobians`]): at the solution, straight into the pieces the first-order solve reads
+//! (`R_z` into its factor's storage, `−R_x` into the right-hand sides); for the second
+//! derivatives, whole, from the derivative parts of the terms evaluated over
+//! [`Dual`](crate::dual::Dual) numbers. Forces the caller
 //! adds (a [`GeneralizedForce`]) are held fixed; the model's own (damping, dampers) and the
 //! inputs are differentiated.
 //!
-//! The pieces: [`jacobians`] (`J`, `P` over any scalar, from the step's terms), [`first`]
+//! The pieces: [`jacobians`] (`J`, `P` from the step's terms, into a sink), [`first`]
 //! (`R_z`'s factor, the tangent, the first-derivative blocks), [`second`] (`D_j J`, `D_j P`
 //! over dual numbers along each direction).
 
