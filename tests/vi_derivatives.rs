@@ -540,3 +540,45 @@ fn derivatives_reuse_the_steps_last_evaluation() {
         }
     }
 }
+
+/// A Newton matrix that is singular names the unknown whose pivot vanished: the string
+/// pendulum's string given twice makes the second string's multiplier dependent (the
+/// elimination order's own mapping is tested beside it, `first.rs`). With the step and time,
+/// on both forcings; the model as it is linearises at the same point.
+#[test]
+fn a_singular_newton_matrix_names_the_unknown_whose_pivot_vanished() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let text = std::fs::read_to_string(format!("{root}/tests/models/string-pendulum.toml"))
+        .expect("the model");
+    let twice = format!(
+        "{text}\n[[constraint]]\nname = \"twin\"\nkind = \"distance\"\nframes = [\"bob\", \"anchor\"]\nlength = 1.5\n"
+    );
+    let cases = [(text, None), (twice, Some("the λ of constraint `twin`"))];
+    for (source, singular) in cases {
+        let model = model::from_toml_str(&source, None).expect("a valid model");
+        let sys = &mut TreeSystem::new(&model).expect("a valid system");
+        for forcing in [Forcing::Split, Forcing::Left] {
+            let (q1, dq1) = sys.initial_state();
+            let mut vi = MidpointVi::new(sys, tight(0.5, forcing));
+            let p1 = vi.initial_momentum(sys, &q1, &dq1);
+            let mut motion = ModelMotions::of(sys);
+            let mut force = NoForce;
+            let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.01);
+            (cx.index, cx.t) = (7, 0.07);
+            let q2 = q1.clone();
+            match (vi.derivatives(&mut cx, &q1, &p1, &q2), singular) {
+                (Ok(d), None) => {
+                    assert!(d.q2_dq1.iter().all(|x| x.is_finite()) && d.q2_dq1.amax() > 0.0);
+                }
+                (Err(e), Some(unknown)) => {
+                    let want = format!(
+                        "step 7 (t = 0.07): variational integrator Newton matrix is singular (at {unknown})"
+                    );
+                    assert_eq!(e.to_string(), want, "{forcing:?}");
+                    assert_eq!(e.when(), Some((7, 0.07)), "{forcing:?}");
+                }
+                (outcome, _) => panic!("{forcing:?}, {singular:?}: {:?}", outcome.map(|_| ())),
+            }
+        }
+    }
+}

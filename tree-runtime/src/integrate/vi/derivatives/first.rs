@@ -523,3 +523,97 @@ impl JacobianSink<f64> for Pieces<'_> {
 fn jacobians_in_pieces(sh: &Shape, st: &StepTerms<f64>, pieces: &mut Pieces) {
     jacobians(sh, st, pieces);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The matrix `R_z` of `rows` unknowns (`nd` dynamic), column-major in `z`'s order.
+    fn matrix(nd: usize, rows: usize) -> Vec<f64> {
+        (0..rows * rows)
+            .map(|at| {
+                let (r, c) = (at % rows, at / rows);
+                let x = ((r * 7 + c * 3) % 11) as f64 * 0.1 - 0.5;
+                // A dynamic block heavy on its diagonal, a zero multipliers' block.
+                match (r < nd, c < nd) {
+                    (true, true) => x + if r == c { 4.0 } else { 0.0 },
+                    (false, false) => 0.0,
+                    _ => x + 0.3,
+                }
+            })
+            .collect()
+    }
+
+    fn factored(a: &[f64], nd: usize, rows: usize) -> (OrderedFactor, Result<(), usize>) {
+        let mut lu = OrderedFactor::new(nd, rows - nd);
+        let (storage, position) = lu.storage();
+        for (e, u) in (0..rows).flat_map(|e| (0..rows).map(move |u| (e, u))) {
+            storage[position[u] * rows + position[e]] = a[u * rows + e];
+        }
+        let done = lu.factor();
+        (lu, done)
+    }
+
+    /// Solves with `R_z` and `R_zᵀ` through the elimination order give `z`'s order back
+    /// (the residual of the matrix as written), the order puts the last dynamic variable first
+    /// and the multipliers last, and a vanished pivot is named in `z`'s order.
+    #[test]
+    fn the_elimination_order_is_undone_in_every_solve_and_error() {
+        let (nd, rows) = (4, 6);
+        let a = matrix(nd, rows);
+        let (lu, done) = factored(&a, nd, rows);
+        assert_eq!(done, Ok(()));
+        assert_eq!(lu.order, [3, 2, 1, 0, 4, 5]);
+        let b: Vec<f64> = (0..rows).map(|i| (i as f64 * 0.9).sin()).collect();
+        let mut scratch = vec![0.0; rows];
+        for transposed in [false, true] {
+            let mut x = b.clone();
+            lu.solve(&mut x, &mut scratch, transposed);
+            for r in 0..rows {
+                let entry = |r: usize, c: usize| {
+                    if transposed {
+                        a[r * rows + c]
+                    } else {
+                        a[c * rows + r]
+                    }
+                };
+                let ax: f64 = (0..rows).map(|c| entry(r, c) * x[c]).sum();
+                assert!(
+                    (ax - b[r]).abs() < 1e-12,
+                    "transposed {transposed}, row {r}"
+                );
+            }
+        }
+        // The rows solve too: b's rows put in the order, the solution's read through it.
+        let k = 3;
+        let mut rows_b = vec![0.0; rows * k];
+        for (i, &o) in lu.order.iter().enumerate() {
+            for c in 0..k {
+                rows_b[i * k + c] = b[o] * (c + 1) as f64;
+            }
+        }
+        lu.solve_rows(&mut rows_b, k);
+        let mut one = b.clone();
+        lu.solve(&mut one, &mut scratch, false);
+        for u in 0..rows {
+            for c in 0..k {
+                let got = rows_b[lu.position[u] * k + c];
+                assert!(
+                    (got - one[u] * (c + 1) as f64).abs() < 1e-12,
+                    "unknown {u}, column {c}"
+                );
+            }
+        }
+        // Unknown 3's column zero (the last dynamic variable: eliminated first), then a
+        // multiplier's dependent on the other's.
+        let mut zero = a.clone();
+        zero[3 * rows..4 * rows].fill(0.0);
+        assert_eq!(factored(&zero, nd, rows).1, Err(3));
+        let mut twin = a.clone();
+        for r in 0..nd {
+            twin[5 * rows + r] = twin[4 * rows + r];
+            twin[r * rows + 5] = twin[r * rows + 4];
+        }
+        assert_eq!(factored(&twin, nd, rows).1, Err(5));
+    }
+}
