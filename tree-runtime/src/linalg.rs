@@ -417,70 +417,6 @@ fn substitute<const W: usize, const FUSED: bool>(
     }
 }
 
-/// `C += A D` for row-major `C` (rows of `k`) and `D` (row `s` at `s·k`), where row `r` of `A`
-/// is row `r` of the row-major `a` (rows of `w`) read at the columns `cols` (column `s` of `A`
-/// is `a`'s column `cols[s]`): two rows of `C` at a time, each block of both summing its
-/// combination of `D`'s rows in registers (one load of `D` for both), zero coefficients
-/// skipped. Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time
-/// (as [`mul_into`]'s kernel).
-#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-pub fn combine_rows(c: &mut [f64], k: usize, a: &[f64], w: usize, cols: &[usize], d: &[f64]) {
-    if multiversion::target::target_cfg_f!(target_feature = "fma") {
-        combine_rows_with::<true>(c, k, a, w, cols, d);
-    } else {
-        combine_rows_with::<false>(c, k, a, w, cols, d);
-    }
-}
-
-/// [`combine_rows`] with fused multiply-adds or without (both tested on any CPU).
-#[inline(always)]
-fn combine_rows_with<const FUSED: bool>(
-    c: &mut [f64],
-    k: usize,
-    a: &[f64],
-    w: usize,
-    cols: &[usize],
-    d: &[f64],
-) {
-    let rows = c.len() / k.max(1);
-    for r in (0..rows).step_by(2) {
-        // A last row alone is paired with itself (its coefficients read twice, stored once).
-        let pair = (r, (r + 1).min(rows - 1));
-        for (c0, width) in blocks(k) {
-            match width {
-                BLOCK => combine_block::<BLOCK, FUSED>(c, pair, a, w, cols, d, k, c0),
-                4 => combine_block::<4, FUSED>(c, pair, a, w, cols, d, k, c0),
-                _ => combine_block::<1, FUSED>(c, pair, a, w, cols, d, k, c0),
-            }
-        }
-    }
-}
-
-/// Columns `c0..c0 + W` of rows `r0`, `r1` of [`combine_rows`].
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn combine_block<const W: usize, const FUSED: bool>(
-    c: &mut [f64],
-    (r0, r1): (usize, usize),
-    a: &[f64],
-    w: usize,
-    cols: &[usize],
-    d: &[f64],
-    k: usize,
-    c0: usize,
-) {
-    let mut acc = [block::<W>(&c[r0 * k..], c0), block::<W>(&c[r1 * k..], c0)];
-    for (s, &col) in cols.iter().enumerate() {
-        let (x0, x1) = (a[r0 * w + col], a[r1 * w + col]);
-        if x0 != 0.0 || x1 != 0.0 {
-            // acc += x · D[s]: subtract its negative.
-            subtract_scaled_pair::<W, FUSED>(&mut acc, (-x0, -x1), &d[s * k + c0..s * k + c0 + W]);
-        }
-    }
-    c[r1 * k + c0..r1 * k + c0 + W].copy_from_slice(&acc[1]);
-    c[r0 * k + c0..r0 * k + c0 + W].copy_from_slice(&acc[0]);
-}
-
 /// `L y = b` (unit lower), then `U x = y`, on column-major factors, two columns a step:
 /// each entry below (above) takes both columns' terms in one pass, in the order of a pass
 /// per column (the same sums), so the loop runs, and the solved entries come back from
@@ -911,32 +847,9 @@ mod tests {
         }
     }
 
-    /// `combine_rows` is `C + A D` with `A` read at chosen columns of a wider row-major matrix;
     /// `largest_magnitude` finds the largest entry wherever it sits (any length, NaN skipped).
     #[test]
-    fn row_combination_and_largest_magnitude() {
-        for k in [5, 21, 37] {
-            let (rows, w) = (3, 6);
-            let mut a: Vec<f64> = (0..rows * w).map(|x| (x as f64 * 0.7).sin()).collect();
-            a[w] = 0.0;
-            let d: Vec<f64> = (0..4 * k).map(|x| (x as f64 * 1.3).cos()).collect();
-            let cols = [4, 0, 5, 2];
-            let mut c: Vec<f64> = (0..rows * k).map(|x| x as f64).collect();
-            let start = c.clone();
-            let mut unfused = c.clone();
-            combine_rows_with::<false>(&mut unfused, k, &a, w, &cols, &d);
-            let mut fused = c.clone();
-            combine_rows_with::<true>(&mut fused, k, &a, w, &cols, &d);
-            combine_rows(&mut c, k, &a, w, &cols, &d);
-            for r in 0..rows {
-                for j in 0..k {
-                    let sum: f64 = (0..4).map(|s| a[r * w + cols[s]] * d[s * k + j]).sum();
-                    for result in [&c, &unfused, &fused] {
-                        assert!((result[r * k + j] - start[r * k + j] - sum).abs() < 1e-13);
-                    }
-                }
-            }
-        }
+    fn largest_magnitude_anywhere() {
         for len in 1..11 {
             for at in 0..len {
                 let mut x: Vec<f64> = (0..len).map(|i| 0.1 * i as f64).collect();

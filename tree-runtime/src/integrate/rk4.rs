@@ -78,8 +78,8 @@ where
     }
 
     /// Stage `s`'s state from the step's start `(q, q̇)` at `t`: `(q, q̇) + C_s Δt k_{s−1}`
-    /// into the stage's buffers ([`Self::stage_parts`]), the kinematic variables prescribed, and its velocity kept as
-    /// the stage's `k_q`. Returns the stage's time `t + C_s Δt`.
+    /// into the stage's buffers ([`Self::stage_parts`]), the kinematic variables prescribed,
+    /// and its velocity kept as the stage's `k_q`. Returns the stage's time `t + C_s Δt`.
     pub(crate) fn stage_state(
         &mut self,
         s: usize,
