@@ -345,7 +345,8 @@ fn generated_equals_interpreted_on_every_model() {
 
 /// The recorded variant of the compiled code and its fused one (AVX2 with fused
 /// multiply-adds, run where the CPU has them: `tree_mech::runtime::cpu`) both equal the
-/// interpreted runtime — every output, whole trajectories, constraints — and, on a CPU that
+/// interpreted runtime — every output, whole trajectories, constraints, their weighted
+/// Hessian — and, on a CPU that
 /// runs the fused variant, differ from each other in the last bits (so both ran). The switch
 /// is process-wide: the other tests here compare to tolerances, whichever variant they get.
 #[test]
@@ -381,6 +382,8 @@ fn both_variants_of_the_compiled_code_equal_the_interpreted() {
         for r in 0..m {
             assert!((&c.d2h[r] - &ct.d2h[r]).amax() <= 1e-12 * scale);
         }
+        // The rows' Hessians weighted as they are formed, in either variant.
+        common::check_weighted_hessian(&mut Elements, 7, 1e-13);
         type HumanoidVector = Vector<nalgebra::Const<{ Humanoid::DOF }>>;
         let t = Humanoid.evaluate(
             &HumanoidVector::from_fn(|i, _| 0.1 * i as f64),

@@ -160,6 +160,43 @@ fn the_marionettes_statement_count_is_pinned() {
     assert_eq!(Marionette::STATEMENTS, 12888);
 }
 
+/// `Σ_r w_r D²h_r` on the dynamic variables' columns (what a step's first derivatives read at
+/// `q₁`), compiled, interpreted and by the trait's default (a wrapper that leaves the method
+/// out): the rows' Hessians weighted and summed.
+#[test]
+fn the_weighted_constraint_hessian_is_the_rows_hessians_summed() {
+    let model = load("marionette.toml");
+    common::check_weighted_hessian(&mut Marionette, 5, 1e-13);
+    common::check_weighted_hessian(&mut interpreted(&model), 5, 1e-13);
+    common::check_weighted_hessian(
+        &mut Summing {
+            inner: interpreted(&model),
+        },
+        5,
+        1e-13,
+    );
+}
+
+/// A system that evaluates as the interpreted one but weighs constraint Hessians by the
+/// trait's default.
+struct Summing {
+    inner: tree_mech::TreeSystem,
+}
+
+impl System for Summing {
+    type N = nalgebra::Dyn;
+    delegate_description!(inner);
+    fn lagrangian(
+        &mut self,
+        q: &Vector<nalgebra::Dyn>,
+        dq: &Vector<nalgebra::Dyn>,
+        order: Order,
+        out: &mut tree_mech::Terms<nalgebra::Dyn>,
+    ) {
+        self.inner.lagrangian(q, dq, order, out)
+    }
+}
+
 /// The constraints alone over dual numbers (what a step's second derivatives differentiate at
 /// `q₁` and `q₂`) are, compiled and interpreted, the whole dual evaluation's constraint
 /// outputs, value and derivative, with the Lagrangian's left zero.

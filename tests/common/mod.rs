@@ -183,3 +183,52 @@ macro_rules! delegate_description {
         }
     };
 }
+
+/// `sys`'s weighted constraint Hessian (`System::weighted_constraint_hessian`) at a random
+/// `q` against the rows' Hessians of its `Order::Full` constraints weighted and summed, on
+/// the dynamic variables' columns (the kinematic ones left zero), to `tol` relative; `h` and
+/// `Dh` as the constraints give them. Garbage left in the dynamic columns by an earlier call
+/// is overwritten, not added to.
+pub fn check_weighted_hessian<S: System>(sys: &mut S, seed: u64, tol: f64)
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (n, m) = (sys.dof(), sys.constraint_count());
+    assert!(m > 0, "a model with constraints");
+    let mut rng = Rng::new(seed);
+    let (mut q, mut dq) = (sys.zero_vector(), sys.zero_vector());
+    for i in 0..n {
+        q[i] = rng.uniform();
+        dq[i] = rng.uniform();
+    }
+    let weights: Vec<f64> = (0..m).map(|_| 3.0 * rng.uniform()).collect();
+    let mut full = tree_mech::ConstraintTerms::zeros(m, n);
+    sys.constraints(&q, &dq, tree_mech::Order::Full, &mut full);
+    let mut weighted = tree_mech::ConstraintTerms::zeros(m, n);
+    // An earlier call's sum, and garbage, in the dynamic columns.
+    sys.weighted_constraint_hessian(&q, &vec![1.0; m], &mut weighted);
+    for j in (0..n).filter(|&j| !sys.is_kinematic(j)) {
+        weighted.weighted_d2h.column_mut(j).fill(1e9);
+    }
+    sys.weighted_constraint_hessian(&q, &weights, &mut weighted);
+    let scale = full.d2h.iter().fold(1.0f64, |s, h| s.max(h.amax())) * 3.0 * m as f64;
+    let mut reached = 0;
+    for j in 0..n {
+        for i in 0..n {
+            let want = if sys.is_kinematic(j) {
+                0.0
+            } else {
+                (0..m).map(|r| weights[r] * full.d2h[r][(i, j)]).sum()
+            };
+            let got = weighted.weighted_d2h[(i, j)];
+            assert!(
+                (got - want).abs() <= tol * scale,
+                "Σ w D²h ({i}, {j}): {got} against {want}"
+            );
+            reached += (want != 0.0) as usize;
+        }
+    }
+    assert!(reached > 0, "some row's Hessian reaches a dynamic column");
+    assert!((&weighted.h - &full.h).amax() <= tol * scale);
+    assert!((&weighted.dh - &full.dh).amax() <= tol * scale);
+}

@@ -121,6 +121,39 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
     Traced { nodes, outputs }
 }
 
+/// Whether each of the model's variables is kinematic.
+fn model_kinematic(model: &tree_model::Model) -> Vec<bool> {
+    model.variables.iter().map(|v| v.is_kinematic()).collect()
+}
+
+/// The constraints' `h`, `Dh` and `Σ_r w_r D²h_r` on the dynamic variables' columns
+/// (`kernel::weighted_constraint_hessian`, the weights `out.weights[r]` an input), every
+/// entry of those columns assigned — zero where no row's Hessian reaches, so nothing needs
+/// clearing. `None` without constraints.
+fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Program> {
+    if plan.rows == 0 {
+        return None;
+    }
+    let n = plan.dof();
+    let columns: Vec<bool> = kinematic.iter().map(|&k| !k).collect();
+    let (nodes, outputs) = trace::record(|| {
+        let (q, _) = state_inputs(n);
+        let weights: Vec<Term> = (0..plan.rows).map(trace::weight).collect();
+        let mut k = Kernel::<Term>::new(plan);
+        let mut out = Recorder::default();
+        kernel::weighted_constraint_hessian(plan, &mut k, &q, &q, &weights, &columns, &mut out);
+        for j in (0..n).filter(|&j| columns[j]) {
+            for i in 0..n {
+                if out.get(Output::WeightedD2h(i, j)).is_none() {
+                    out.add(Output::WeightedD2h(i, j), Term::Const(0.0));
+                }
+            }
+        }
+        out.values
+    });
+    Some(Traced { nodes, outputs }.assigning())
+}
+
 /// The articulated-body step traced as the interpreted system runs it: the elements' forces
 /// (`kernel::elements_at`, its outward sweep included) added to `τ`, then
 /// `articulated::accelerations` — each dynamic variable's `q̈`, pivot and pivot scale into
@@ -532,6 +565,27 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let c_full = c_full
         .assigning()
         .emit("__c_full", &var_names, f64_constraints);
+    let weighted = weighted_program(&plan, &model_kinematic(&model))
+        .map(|p| p.emit("__c_weighted", &var_names, f64_constraints));
+    let weighted_functions = weighted.as_ref().map(|e| e.functions.clone());
+    let weighted_method = weighted.as_ref().map(|e| {
+        let body = &e.body;
+        quote! {
+            fn weighted_constraint_hessian(
+                &mut self,
+                q: &::tree_mech::runtime::Vector<Self::N>,
+                weights: &[f64],
+                out: &mut ::tree_mech::runtime::ConstraintTerms,
+            ) {
+                // Every entry of the dynamic variables' columns is assigned: none is cleared.
+                out.weigh(weights, #n, false);
+                let q: &[f64; #n] = &q.data.0[0];
+                // The traced sweeps read no velocity.
+                let dq = q;
+                #body
+            }
+        }
+    });
     let functions = [
         &first.functions,
         &mass.functions,
@@ -617,7 +671,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     };
     let lagrangian_dual = dual_by_order("clear_lagrangian", d_dynamics_body, d_full_body);
     let constraints_dual = dual_by_order("clear_constraints", dc_dynamics_body, dc_full_body);
-    let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+    let kinematic = model_kinematic(&model);
     let articulated = articulated_program(&plan, &kinematic).map(|program| {
         program.emit(
             "__articulated",
@@ -782,6 +836,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             #(#functions)*
             #articulated_functions
+            #weighted_functions
             #inverse_functions
         }
 
@@ -914,6 +969,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             }
 
             #articulated_method
+            #weighted_method
             #inverse_method
 
             fn poses(

@@ -107,9 +107,12 @@ impl Names {
 
 fn operands(node: &Node) -> Vec<Term> {
     match *node {
-        Node::Q(_) | Node::Dq(_) | Node::Tau(_) | Node::KinematicQdd(_) | Node::Qdd(_) => {
-            vec![]
-        }
+        Node::Q(_)
+        | Node::Dq(_)
+        | Node::Tau(_)
+        | Node::KinematicQdd(_)
+        | Node::Qdd(_)
+        | Node::Weight(_) => vec![],
         Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => vec![a, b],
         Node::Neg(a) | Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Recip(a) => vec![a],
     }
@@ -124,6 +127,7 @@ fn expression(node: &Node, names: &Names, generic: bool) -> TokenStream {
         Node::KinematicQdd(i) => quote!(out.qdd_in[#i]),
         Node::Qdd(i) if generic => quote!(S::constant(out.acceleration(#i))),
         Node::Qdd(i) => quote!(out.acceleration(#i)),
+        Node::Weight(r) => quote!(out.weights[#r]),
         Node::Add(a, b) => {
             let (a, b) = (term(a), term(b));
             quote!(#a + #b)

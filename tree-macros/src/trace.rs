@@ -39,6 +39,8 @@ pub enum Node {
     KinematicQdd(usize),
     /// The acceleration an inverse-dynamics evaluation is asked for (`out.acceleration(i)`).
     Qdd(usize),
+    /// Constraint row r's weight in a weighted Hessian (`out.weights[r]`).
+    Weight(usize),
     Add(Term, Term),
     Sub(Term, Term),
     Mul(Term, Term),
@@ -79,6 +81,7 @@ fn key(node: &Node) -> NodeKey {
         Node::Tau(i) => (10, (false, i as u64), none),
         Node::KinematicQdd(i) => (11, (false, i as u64), none),
         Node::Qdd(i) => (12, (false, i as u64), none),
+        Node::Weight(r) => (13, (false, r as u64), none),
         Node::Add(a, b) => {
             let (x, y) = ordered(a, b);
             (2, x, y)
@@ -140,6 +143,11 @@ pub fn tau(i: usize) -> Term {
 /// The input `q̈[i]` an inverse-dynamics evaluation is asked for.
 pub fn qdd(i: usize) -> Term {
     push(Node::Qdd(i))
+}
+
+/// The input `w[r]`, constraint row r's weight.
+pub fn weight(r: usize) -> Term {
+    push(Node::Weight(r))
 }
 
 /// The input `q̈[i]` of a kinematic variable (its prescription).

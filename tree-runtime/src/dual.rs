@@ -116,7 +116,7 @@ pub struct DualOutputs {
 }
 
 /// Every field, in declaration order (so `field as usize` indexes it).
-const FIELDS: [Field; 15] = [
+const FIELDS: [Field; 16] = [
     Field::L,
     Field::Energy,
     Field::DlDq,
@@ -131,6 +131,7 @@ const FIELDS: [Field; 15] = [
     Field::Dh,
     Field::DhDot,
     Field::D2h,
+    Field::WeightedD2h,
     Field::Tau,
 ];
 
@@ -146,6 +147,7 @@ impl DualOutputs {
             Field::H | Field::DhDot => m,
             Field::Dh => m * n,
             Field::D2h => m * n * n,
+            Field::WeightedD2h => n * n,
         };
         DualOutputs {
             n,

@@ -6,7 +6,7 @@
 use crate::elements::{self, Scratch};
 use crate::newton_euler::{self, NewtonEuler};
 use crate::order::Order;
-use crate::outputs::{Output, Sink};
+use crate::outputs::{Output, Sink, Weighted};
 use crate::plan::TreePlan;
 use crate::scalar::Scalar;
 use crate::sweeps::{self, Workspace};
@@ -125,4 +125,23 @@ pub fn constraints<S: Scalar>(
 ) {
     sweeps::forward(plan, &mut k.tree, q, dq, sweeps::Reach::Attachments);
     elements::constraints(plan, &k.tree, &mut k.elements, q, dq, order, out);
+}
+
+/// `h`, `Dh` and `Σ_r w_r D²h_r` on the `columns` kept at `q`: the constraints at
+/// `Order::Full` through [`Weighted`] (`dq` is read for `q̇ᵀD²h q̇` alone, which is dropped).
+pub fn weighted_constraint_hessian<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    dq: &[S],
+    weights: &[S],
+    columns: &[bool],
+    out: &mut impl Sink<S>,
+) {
+    let inner = &mut Weighted {
+        weights,
+        columns,
+        inner: out,
+    };
+    constraints(plan, k, q, dq, Order::Full, inner);
 }

@@ -2,6 +2,8 @@
 //! one table the runtime's storage and the compiler's emission both read), and where an
 //! evaluation puts it ([`Sink`]).
 
+use crate::scalar::Scalar;
+
 /// One scalar that an evaluation produces. Every evaluation adds its contributions into a
 /// [`Sink`] by these names, so a new term is one more contribution, not a new interface.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -35,6 +37,9 @@ pub enum Output {
     DhDot(usize),
     /// `∂²h_r/∂q_i∂q_j`.
     D2h(usize, usize, usize),
+    /// `Σ_r w_r ∂²h_r/∂q_i∂q_j`: the rows' Hessians weighted (by a step's multipliers), on
+    /// the dynamic variables' columns `j` ([`Weighted`]).
+    WeightedD2h(usize, usize),
     /// The bodies' inverse dynamics `τ_i = [M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q]_i` at given
     /// accelerations (recursive Newton–Euler, [`crate::newton_euler`]; springs and forces not
     /// included).
@@ -93,6 +98,8 @@ pub enum Field {
     DhDot,
     /// `ConstraintTerms::d2h`.
     D2h,
+    /// `ConstraintTerms::weighted_d2h`.
+    WeightedD2h,
     /// The inverse dynamics' `τ` (`JetOutputs::tau`; no f64 storage keeps it).
     Tau,
 }
@@ -115,6 +122,7 @@ impl Field {
             Field::Dh => "dh",
             Field::DhDot => "dh_dot",
             Field::D2h => "d2h",
+            Field::WeightedD2h => "weighted_d2h",
             Field::Tau => "tau",
         }
     }
@@ -153,7 +161,39 @@ impl Output {
             Output::Dh(r, i) => (Field::Dh, Pair(r, i)),
             Output::DhDot(r) => (Field::DhDot, Entry(r)),
             Output::D2h(r, i, j) => (Field::D2h, Stacked(r, i, j)),
+            Output::WeightedD2h(i, j) => (Field::WeightedD2h, Pair(i, j)),
             Output::Tau(i) => (Field::Tau, Entry(i)),
+        }
+    }
+}
+
+/// A sink in front of another that sums the constraint rows' Hessians weighted, `D²h_r`'s
+/// entry `(i, j)` times `weights[r]` into [`Output::WeightedD2h`]`(i, j)` for the columns `j`
+/// that `columns` keeps, and drops `q̇ᵀD²h q̇`; every other output passes on. Run over a
+/// constraint evaluation at `Order::Full`, it gives `h`, `Dh` and `Σ_r w_r D²h_r` without
+/// forming any row's Hessian: what a step's first derivatives read at `q₁`
+/// (`System::weighted_constraint_hessian`, docs/derivations.md §9).
+pub struct Weighted<'a, S, K> {
+    /// One weight per constraint row.
+    pub weights: &'a [S],
+    /// The columns kept, one flag per variable.
+    pub columns: &'a [bool],
+    /// Where everything goes.
+    pub inner: &'a mut K,
+}
+
+impl<S: Scalar, K: Sink<S>> Sink<S> for Weighted<'_, S, K> {
+    #[inline(always)]
+    fn add(&mut self, at: Output, x: S) {
+        match at {
+            Output::D2h(r, i, j) => {
+                if self.columns[j] {
+                    self.inner
+                        .add(Output::WeightedD2h(i, j), self.weights[r] * x);
+                }
+            }
+            Output::DhDot(_) => {}
+            _ => self.inner.add(at, x),
         }
     }
 }

@@ -208,6 +208,13 @@ pub struct ConstraintTerms {
     pub dh_dot: DVector<f64>,
     /// `D²h_r = ∂²h_r/∂q²` for each row (at `Order::Full`).
     pub d2h: Vec<DMatrix<f64>>,
+    /// `Σ_r w_r D²h_r` on the dynamic variables' columns, the other columns zero (n × n,
+    /// from [`System::weighted_constraint_hessian`]; 0 × 0 before its first call).
+    pub weighted_d2h: DMatrix<f64>,
+    /// The weights `w` of [`Self::weighted_d2h`] (an input of the generated code, which reads
+    /// it here).
+    #[doc(hidden)]
+    pub weights: Vec<f64>,
     /// Generated code's storage between its functions (not part of the terms' value).
     #[doc(hidden)]
     pub scratch: Scratch<f64>,
@@ -223,8 +230,25 @@ impl ConstraintTerms {
             dh: DMatrix::zeros(rows, n),
             dh_dot: DVector::zeros(rows),
             d2h: vec![DMatrix::zeros(n, n); rows],
+            weighted_d2h: DMatrix::zeros(0, 0),
+            weights: Vec::new(),
             scratch: Scratch::default(),
             variables: Vec::new(),
+        }
+    }
+
+    /// Ready for a weighted Hessian ([`System::weighted_constraint_hessian`]) over `n`
+    /// variables: `weights` kept as the evaluation's input, `h` and `Dh` zeroed, and
+    /// [`Self::weighted_d2h`] sized (allocated on the first call only) — zeroed too if
+    /// `clear` (for an evaluation that accumulates).
+    pub fn weigh(&mut self, weights: &[f64], n: usize, clear: bool) {
+        self.clear(Order::First);
+        self.weights.clear();
+        self.weights.extend_from_slice(weights);
+        if self.weighted_d2h.shape() != (n, n) {
+            self.weighted_d2h = DMatrix::zeros(n, n);
+        } else if clear {
+            self.weighted_d2h.as_mut_slice().fill(0.0);
         }
     }
 
@@ -291,6 +315,7 @@ impl Sink<f64> for ConstraintTerms {
             (Field::Dh, Index::Pair(r, i)) => &mut self.dh[(r, i)],
             (Field::DhDot, Index::Entry(r)) => &mut self.dh_dot[r],
             (Field::D2h, Index::Stacked(r, i, j)) => &mut self.d2h[r][(i, j)],
+            (Field::WeightedD2h, Index::Pair(i, j)) => &mut self.weighted_d2h[(i, j)],
             _ => return,
         };
         *entry += x;
@@ -432,6 +457,35 @@ where
         order: Order,
         out: &mut ConstraintTerms,
     );
+
+    /// `h(q)`, `Dh(q)` and the constraint rows' Hessians summed with `weights` (one per row),
+    /// `Σ_r w_r D²h_r(q)`, on the dynamic variables' columns, into `out.weighted_d2h` (n × n,
+    /// the kinematic variables' columns zero): the multipliers' term `Σ_s λ_s D²h_s(q₁)` of a
+    /// step's first derivatives (docs/derivations.md §9), without forming each row's
+    /// Hessian. `out.dh_dot` and `out.d2h` are not outputs of it (what they hold after is
+    /// unspecified). The default makes the whole evaluation at `Order::Full` and sums; the
+    /// interpreted and generated systems sum as they go ([`crate::outputs::Weighted`]).
+    fn weighted_constraint_hessian(
+        &mut self,
+        q: &Vector<Self::N>,
+        weights: &[f64],
+        out: &mut ConstraintTerms,
+    ) {
+        let n = q.len();
+        out.weigh(weights, n, true);
+        // `q̇ᵀD²h q̇` is not an output here: any velocity will do (q, with no allocation).
+        self.constraints(q, q, Order::Full, out);
+        let ConstraintTerms {
+            d2h, weighted_d2h, ..
+        } = out;
+        for (&w, h) in weights.iter().zip(d2h.iter()) {
+            for j in (0..n).filter(|&j| !self.is_kinematic(j)) {
+                for i in 0..n {
+                    weighted_d2h[(i, j)] += w * h[(i, j)];
+                }
+            }
+        }
+    }
 
     /// Evaluates the Lagrangian terms up to `order` at `(q, q̇)` into `out`, springs and the
     /// model's forces included.

@@ -35,6 +35,8 @@ pub struct TreeSystem {
     /// The articulated-body algorithm's storage, and its inputs' buffers.
     articulated: Articulated,
     kinematic: Vec<bool>,
+    /// `!kinematic`: the columns a weighted constraint Hessian is formed on.
+    dynamic: Vec<bool>,
     tau: Vec<f64>,
     /// The kernel over jets and the accelerations as jet constants, for
     /// [`System::inverse_dynamics_jet`] (made on first use).
@@ -161,6 +163,7 @@ impl TreeSystem {
             constraint_variables: plan.constraint_variables(),
             articulated: Articulated::new(&plan),
             kinematic: model.variables.iter().map(|v| v.is_kinematic()).collect(),
+            dynamic: model.variables.iter().map(|v| !v.is_kinematic()).collect(),
             tau: vec![0.0; model.variables.len()],
             jet_kernel: None,
             qdd_jet: vec![Jet::default(); model.variables.len()],
@@ -251,6 +254,25 @@ impl System for TreeSystem {
             q.as_slice(),
             dq.as_slice(),
             order,
+            out,
+        );
+    }
+
+    fn weighted_constraint_hessian(
+        &mut self,
+        q: &Vector<Dyn>,
+        weights: &[f64],
+        out: &mut ConstraintTerms,
+    ) {
+        out.weigh(weights, q.len(), true);
+        let q = q.as_slice();
+        kernel::weighted_constraint_hessian(
+            &self.plan,
+            &mut self.kernel,
+            q,
+            q,
+            weights,
+            &self.dynamic,
             out,
         );
     }

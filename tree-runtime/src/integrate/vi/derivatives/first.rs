@@ -32,15 +32,13 @@ pub(crate) struct Linearisation {
     pub(super) forces: Sparsity,
     pub(super) fq: Vec<f64>,
     pub(super) fv: Vec<f64>,
-    /// `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (the dynamic variables' rows), `Dh(q₂)` row-major,
-    /// and λ.
+    /// `Dh(q₁)`, `Dh(q₂)` row-major, and λ.
     pub(super) dh1: Vec<f64>,
-    pub(super) lambda_d2h1: Vec<f64>,
     pub(super) dh2: Vec<f64>,
     pub(super) lambda: Vec<f64>,
-    /// Whether each variable is dynamic (the rows `Σ_s λ_s D²h_s(q₁)` is formed on).
-    pub(super) is_dynamic: Vec<bool>,
-    /// The constraints at `q₁` up to `D²h`.
+    /// The constraints at `q₁`: `Dh` and `Σ_s λ_s D²h_s(q₁)` on the dynamic variables'
+    /// columns (`weighted_d2h`, n × n, zero without constraints; symmetric, so its column i
+    /// is row i).
     pub(super) c1: ConstraintTerms,
     /// `P_z = ∂p₂/∂q₂` on the dynamic variables, row-major n_d × n_d (`J` and `P` are
     /// otherwise formed only where the solve reads them: [`Pieces`]).
@@ -105,11 +103,9 @@ impl Linearisation {
             fq: vec![0.0; n * n],
             fv: vec![0.0; n * n],
             dh1: vec![0.0; m * n],
-            lambda_d2h1: vec![0.0; n * n],
             dh2: vec![0.0; m * n],
             lambda: vec![0.0; m],
-            is_dynamic: (0..n).map(|i| shape.dynamic.contains(&i)).collect(),
-            c1: ConstraintTerms::zeros(m, n),
+            c1: constraints_at_q1(ConstraintTerms::zeros(m, n)),
             pz: vec![0.0; nd * nd],
             rows_scratch: vec![0.0; 3 * n],
             z_columns,
@@ -148,7 +144,7 @@ impl Linearisation {
             fq: &self.fq,
             fv: &self.fv,
             dh1: &self.dh1,
-            lambda_d2h1: &self.lambda_d2h1,
+            lambda_d2h1: self.c1.weighted_d2h.as_slice(),
             dh2: &self.dh2,
         };
         // R_z into the factor's storage, −R_x into the right-hand sides (the equations and
@@ -295,6 +291,14 @@ impl Linearisation {
             }
         }
     }
+}
+
+/// `c`, made to hold the constraints at `q₁` for [`Linearisation`]: its weighted Hessian
+/// sized n × n (zero where nothing writes it: every entry without constraints).
+pub(super) fn constraints_at_q1(mut c: ConstraintTerms) -> ConstraintTerms {
+    let n = c.dh.ncols();
+    c.weighted_d2h = DMatrix::zeros(n, n);
+    c
 }
 
 /// Where a column of `x` is found among the solved ones ([`Linearisation::source`]).

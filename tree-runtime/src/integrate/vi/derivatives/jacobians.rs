@@ -5,7 +5,7 @@
 use super::StepInput;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
 use crate::scalar::Scalar;
-use crate::system::{ConstraintTerms, Sparsity};
+use crate::system::Sparsity;
 
 /// Sizes of one step and where each block sits in `w = (q₁, q₂, p₁, u₁, λ)` and in `x`.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,8 +67,9 @@ impl Shape {
 
 /// What the step's Jacobians are built from, over a scalar: the continuous terms at the
 /// quadrature point (`L_qq`, `L_q̇q` and its transpose, `M`, `F_q`, `F_q̇`, row-major n × n;
-/// `forces`: where `F_q`, `F_q̇` may be non-zero, and are read), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)` (n × n,
-/// [`contract`]) and `Dh(q₂)`.
+/// `forces`: where `F_q`, `F_q̇` may be non-zero, and are read), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)`
+/// (n × n, read on the dynamic variables' rows: [`contract_on_rows`], or the systems' own sum)
+/// and `Dh(q₂)`.
 pub(super) struct StepTerms<'a, T> {
     pub(super) lqq: &'a [T],
     pub(super) lvq: &'a [T],
@@ -235,8 +236,9 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut imp
 /// symmetric, so its row i is its column-major column i): the multipliers' term of
 /// `∂r/∂q₁`. `d2h` holds one n × n block per constraint row, zero outside the row's
 /// variables where `variables(s)` names them; `add(o, λ, x)` is `o += λx`. A multiplier at
-/// zero adds nothing. Over `f64` at the solution ([`contract_hessians`]) and over dual
-/// numbers along each direction of the second derivatives.
+/// zero adds nothing. Over dual numbers along each direction of the second derivatives (at
+/// the solution, over `f64`, the systems sum as they evaluate:
+/// `System::weighted_constraint_hessian`).
 #[inline(always)]
 pub(super) fn contract_on_rows<'a, T: Scalar + PartialEq + 'a>(
     out: &mut [T],
@@ -273,44 +275,6 @@ pub(super) fn contract_on_rows<'a, T: Scalar + PartialEq + 'a>(
     }
 }
 
-/// [`contract_on_rows`] over `f64` on the dynamic rows (`dynamic[i]`), from the constraints'
-/// terms. Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-pub(super) fn contract_hessians(
-    out: &mut [f64],
-    n: usize,
-    dynamic: &[bool],
-    lambda: &[f64],
-    c: &ConstraintTerms,
-) {
-    if multiversion::target::target_cfg_f!(target_feature = "fma") {
-        contract_hessians_with::<true>(out, n, dynamic, lambda, c);
-    } else {
-        contract_hessians_with::<false>(out, n, dynamic, lambda, c);
-    }
-}
-
-/// [`contract_hessians`] with fused multiply-adds or without (both tested on any CPU).
-#[inline(always)]
-fn contract_hessians_with<const FUSED: bool>(
-    out: &mut [f64],
-    n: usize,
-    dynamic: &[bool],
-    lambda: &[f64],
-    c: &ConstraintTerms,
-) {
-    let blocks = c.d2h.iter().map(|h| h.as_slice());
-    contract_on_rows(
-        out,
-        n,
-        dynamic,
-        lambda,
-        blocks,
-        |s| c.variables(s),
-        |o, l, x| *o = if FUSED { l.mul_add(x, *o) } else { *o + l * x },
-    );
-}
-
 /// [`jacobians`] over `f64`, whole, compiled also for AVX and chosen at run time (the same
 /// operations in the same order on every CPU: no fused multiply-adds here).
 #[multiversion::multiversion(targets("x86_64+avx"))]
@@ -345,13 +309,12 @@ mod tests {
     use super::*;
     use crate::dual::Dual;
 
-    /// `Σ_s λ_s D²h_s` on the chosen rows, both roundings and the dispatched kernel, against
-    /// the sum written out, with the rows' variables unknown and known (each block zero
+    /// `Σ_s λ_s D²h_s` on the chosen rows against the sum written out, with the rows' variables unknown and known (each block zero
     /// outside them); rows not chosen are left as they were, a zero multiplier adds nothing.
     #[test]
     fn hessians_contract_on_the_dynamic_rows() {
         let n = 5;
-        let variables = vec![vec![0, 2, 3], vec![1, 2], vec![1, 2, 4]];
+        let variables = [vec![0, 2, 3], vec![1, 2], vec![1, 2, 4]];
         let d2h: Vec<DMatrix<f64>> = (0..3)
             .map(|s| {
                 DMatrix::from_fn(n, n, |i, j| {
@@ -361,21 +324,21 @@ mod tests {
             })
             .map(|h| &h + h.transpose())
             .collect();
-        let mut dense = ConstraintTerms::zeros(3, n);
-        dense.d2h.clone_from(&d2h);
-        let sparse = dense.clone().with_variables(variables.clone());
         let lambda = [0.5, 0.0, -2.0];
         let dynamic = [true, false, true, true, false];
         let expected = |i: usize, j: usize| 0.5 * d2h[0][(i, j)] - 2.0 * d2h[2][(i, j)];
-        type Kernel = fn(&mut [f64], usize, &[bool], &[f64], &ConstraintTerms);
-        let kernels: [Kernel; 3] = [
-            contract_hessians_with::<false>,
-            contract_hessians_with::<true>,
-            contract_hessians,
-        ];
-        for (kernel, c) in kernels.iter().flat_map(|k| [(k, &dense), (k, &sparse)]) {
+        // The rows' variables unknown, then known.
+        for known in [false, true] {
             let mut out = vec![7.0; n * n];
-            kernel(&mut out, n, &dynamic, &lambda, c);
+            contract_on_rows(
+                &mut out,
+                n,
+                &dynamic,
+                &lambda,
+                d2h.iter().map(|h| h.as_slice()),
+                |s| variables.get(s).filter(|_| known).map(Vec::as_slice),
+                |o, l, x| *o += l * x,
+            );
             for i in 0..n {
                 for j in 0..n {
                     let want = if dynamic[i] { expected(i, j) } else { 7.0 };

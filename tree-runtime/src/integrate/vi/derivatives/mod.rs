@@ -38,14 +38,14 @@ use crate::context::StepContext;
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
 use crate::integrate::discrete::DiscreteLagrangian;
-use crate::system::{ConstraintTerms, Order, Sparsity, System, Vector};
+use crate::system::{ConstraintTerms, Sparsity, System, Vector};
 
 mod first;
 mod jacobians;
 mod second;
 
 pub(crate) use first::Linearisation;
-use jacobians::{contract_hessians, gather_rows, Shape};
+use jacobians::{gather_rows, Shape};
 use second::DualJacobians;
 
 /// A block of the step's inputs `x = (q₁, p₁, u₁, k₂)`.
@@ -404,17 +404,17 @@ where
                 plus,
             }));
             // D²h(q₁) cleared on each row's own variables, where the system names them.
-            lin.c1 = ConstraintTerms::of(cx.sys);
+            lin.c1 = first::constraints_at_q1(ConstraintTerms::of(cx.sys));
             lin
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
         let m = lin.shape.m;
         // Terms at the quadrature point, Dh(q₁), Dh(q₂) at the solution (the step's last
-        // evaluation, when it was of second order at this point); D²h(q₁).
+        // evaluation, when it was of second order at this point); Σ_s λ_s D²h_s(q₁).
         let evaluated =
             self.full_known && self.dt == cx.dt && self.full_q1 == *q1 && self.full_q2 == *q2;
         if m > 0 {
-            cx.sys.constraints(q1, &self.zero, Order::Full, &mut lin.c1);
+            (cx.sys).weighted_constraint_hessian(q1, self.lambda.as_slice(), &mut lin.c1);
         }
         if evaluated {
             if m > 0 {
@@ -470,13 +470,6 @@ where
                 lin.dh2[s * n + i] = self.constraint_terms.dh[(s, i)];
             }
         }
-        contract_hessians(
-            &mut lin.lambda_d2h1,
-            n,
-            &lin.is_dynamic,
-            self.lambda.as_slice(),
-            &lin.c1,
-        );
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
         let lin = self.linearisation.insert(lin);
