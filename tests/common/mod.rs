@@ -188,7 +188,8 @@ macro_rules! delegate_description {
 /// `q` against the rows' Hessians of its `Order::Full` constraints weighted and summed, on
 /// the dynamic variables' columns (the kinematic ones left zero), to `tol` relative; `h` and
 /// `Dh` as the constraints give them. Garbage left in the dynamic columns by an earlier call
-/// is overwritten, not added to.
+/// is overwritten, not added to. The same over dual numbers
+/// (`System::weighted_constraint_hessian_dual`), `q` and the weights seeded.
 pub fn check_weighted_hessian<S: System>(sys: &mut S, seed: u64, tol: f64)
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -231,4 +232,34 @@ where
     assert!(reached > 0, "some row's Hessian reaches a dynamic column");
     assert!((&weighted.h - &full.h).amax() <= tol * scale);
     assert!((&weighted.dh - &full.dh).amax() <= tol * scale);
+    // Over dual numbers, q and the weights both moving: the value and the derivative of
+    // Σ_r w_r D²h_r (product rule) against the rows' dual Hessians, and `h`, `Dh` as the
+    // dual constraints give them; an earlier call's sum overwritten.
+    use tree_mech::runtime::dual::{Dual, DualOutputs};
+    use tree_mech::runtime::outputs::{Field, Output};
+    let seeded = |x: f64, rng: &mut Rng| Dual::new(x, rng.uniform());
+    let qd: Vec<Dual> = (0..n).map(|i| seeded(q[i], &mut rng)).collect();
+    let wd: Vec<Dual> = weights.iter().map(|&w| seeded(w, &mut rng)).collect();
+    let mut rows = DualOutputs::new(n, m);
+    sys.constraints_dual(&qd, &qd, tree_mech::Order::Full, &mut rows);
+    let mut sums = DualOutputs::new(n, m);
+    sys.weighted_constraint_hessian_dual(&qd, &vec![Dual::new(1.0, 1.0); m], &mut sums);
+    sys.weighted_constraint_hessian_dual(&qd, &wd, &mut sums);
+    for j in (0..n).filter(|&j| !sys.is_kinematic(j)) {
+        for i in 0..n {
+            let want = (0..m).fold(Dual::default(), |s, r| {
+                s + wd[r] * rows.get(Output::D2h(r, i, j))
+            });
+            let got = sums.get(Output::WeightedD2h(i, j));
+            assert!(
+                (got.v - want.v).abs() <= tol * scale && (got.d - want.d).abs() <= tol * scale,
+                "Σ w D²h over duals ({i}, {j}): {got:?} against {want:?}"
+            );
+        }
+    }
+    for f in [Field::H, Field::Dh] {
+        for (a, b) in sums.field(f).iter().zip(rows.field(f)) {
+            assert!((a.v - b.v).abs() <= tol * scale && (a.d - b.d).abs() <= tol * scale);
+        }
+    }
 }

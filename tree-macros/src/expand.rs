@@ -129,8 +129,10 @@ fn model_kinematic(model: &tree_model::Model) -> Vec<bool> {
 /// The constraints' `h`, `Dh` and `Σ_r w_r D²h_r` on the dynamic variables' columns
 /// (`kernel::weighted_constraint_hessian`, the weights `out.weights[r]` an input), every
 /// entry of those columns assigned — zero where no row's Hessian reaches, so nothing needs
-/// clearing. `None` without constraints.
-fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Program> {
+/// clearing, for [`Flavour::F64`]; and the same evaluation handing its outputs to a sink by
+/// name (accumulated: the sink is cleared first), for [`Flavour::Generic`]. `None` without
+/// constraints.
+fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<(Program, Program)> {
     if plan.rows == 0 {
         return None;
     }
@@ -151,7 +153,17 @@ fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Program> {
         }
         out.values
     });
-    Some(Traced { nodes, outputs }.assigning())
+    let traced = Traced { nodes, outputs };
+    // Handed to a sink that accumulates, a zero adds nothing.
+    let nonzero = (traced.outputs.iter())
+        .filter(|(_, t)| !matches!(t, Term::Const(c) if *c == 0.0))
+        .copied()
+        .collect();
+    let sums = Traced {
+        nodes: traced.nodes.clone(),
+        outputs: nonzero,
+    };
+    Some((traced.assigning(), sums.naming()))
 }
 
 /// The articulated-body step traced as the interpreted system runs it: the elements' forces
@@ -565,9 +577,39 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let c_full = c_full
         .assigning()
         .emit("__c_full", &var_names, f64_constraints);
-    let weighted = weighted_program(&plan, &model_kinematic(&model))
-        .map(|p| p.emit("__c_weighted", &var_names, f64_constraints));
+    let weighted_program = weighted_program(&plan, &model_kinematic(&model));
+    let weighted = (weighted_program.as_ref())
+        .map(|(assigning, _)| assigning.emit("__c_weighted", &var_names, f64_constraints));
+    let weighted_dual = (weighted_program.as_ref())
+        .map(|(_, naming)| naming.emit("__dc_weighted", &var_names, generic));
     let weighted_functions = weighted.as_ref().map(|e| e.functions.clone());
+    let weighted_dual_functions = weighted_dual.as_ref().map(|e| e.functions.clone());
+    let weighted_dual_method = weighted_dual.as_ref().map(|e| {
+        let body = &e.body;
+        let arrays = {
+            let wrong = "weighted_constraint_hessian_dual takes one dual number per variable ({})";
+            quote! {
+                let q: &[::tree_mech::runtime::dual::Dual; #n] = match q.try_into() {
+                    Ok(q) => q,
+                    _ => panic!(#wrong, #n),
+                };
+            }
+        };
+        quote! {
+            fn weighted_constraint_hessian_dual(
+                &mut self,
+                q: &[::tree_mech::runtime::dual::Dual],
+                weights: &[::tree_mech::runtime::dual::Dual],
+                out: &mut ::tree_mech::runtime::dual::DualOutputs,
+            ) {
+                out.weigh(weights);
+                #arrays
+                // The traced sweeps read no velocity.
+                let dq = q;
+                #body
+            }
+        }
+    });
     let weighted_method = weighted.as_ref().map(|e| {
         let body = &e.body;
         quote! {
@@ -837,6 +879,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             #(#functions)*
             #articulated_functions
             #weighted_functions
+            #weighted_dual_functions
             #inverse_functions
         }
 
@@ -970,6 +1013,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
 
             #articulated_method
             #weighted_method
+            #weighted_dual_method
             #inverse_method
 
             fn poses(

@@ -127,6 +127,7 @@ fn expression(node: &Node, names: &Names, generic: bool) -> TokenStream {
         Node::KinematicQdd(i) => quote!(out.qdd_in[#i]),
         Node::Qdd(i) if generic => quote!(S::constant(out.acceleration(#i))),
         Node::Qdd(i) => quote!(out.acceleration(#i)),
+        Node::Weight(r) if generic => quote!(out.weight(#r)),
         Node::Weight(r) => quote!(out.weights[#r]),
         Node::Add(a, b) => {
             let (a, b) = (term(a), term(b));

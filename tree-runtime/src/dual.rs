@@ -110,6 +110,9 @@ pub struct DualOutputs {
     /// Each constraint row's variables, where known
     /// ([`Self::with_constraint_variables`]): its `D²h` block is cleared on them alone.
     variables: Vec<Vec<usize>>,
+    /// The weights of [`Field::WeightedD2h`] (`System::weighted_constraint_hessian_dual`'s
+    /// input, which generated code reads through [`Sink::weight`]).
+    weights: Vec<Dual>,
     /// Generated code's storage between its functions (not part of the outputs).
     #[doc(hidden)]
     pub scratch: Scratch<Dual>,
@@ -156,7 +159,19 @@ impl DualOutputs {
                 .map(|&f| vec![Dual::default(); size(f)])
                 .collect(),
             variables: Vec::new(),
+            weights: Vec::new(),
             scratch: Scratch::default(),
+        }
+    }
+
+    /// Ready for a weighted Hessian over dual numbers
+    /// (`System::weighted_constraint_hessian_dual`): `weights` kept as its input, `h`, `Dh`
+    /// and [`Field::WeightedD2h`] zeroed (the evaluation accumulates into them).
+    pub fn weigh(&mut self, weights: &[Dual]) {
+        self.weights.clear();
+        self.weights.extend_from_slice(weights);
+        for f in [Field::H, Field::Dh, Field::WeightedD2h] {
+            self.fields[f as usize].fill(Dual::default());
         }
     }
 
@@ -256,6 +271,11 @@ impl Sink<Dual> for DualOutputs {
         let (field, index) = at.slot();
         let o = self.offset(field, index);
         self.fields[field as usize][o] += x;
+    }
+
+    #[inline(always)]
+    fn weight(&self, r: usize) -> Dual {
+        self.weights[r]
     }
 }
 

@@ -65,6 +65,16 @@ pub trait Sink<S> {
         let _ = i;
         0.0
     }
+
+    /// Constraint row `r`'s weight in a weighted Hessian ([`Output::WeightedD2h`]), where
+    /// the sink carries it (the generated weighted evaluation's input; default zero).
+    fn weight(&self, r: usize) -> S
+    where
+        S: Scalar,
+    {
+        let _ = r;
+        S::zero()
+    }
 }
 
 /// A field of `Terms` or `ConstraintTerms` that outputs are stored in.

@@ -599,6 +599,33 @@ where
         self.evaluate_dual(q, dq, order, out);
     }
 
+    /// [`Self::weighted_constraint_hessian`] over dual numbers, weights included: `h`, `Dh`
+    /// and `Σ_r w_r D²h_r` on the dynamic variables' columns (`Field::WeightedD2h`, entry
+    /// `(i, j)` at `i n + j`), each with its derivative along the direction seeded in `q` and
+    /// `weights` — what a step's second derivatives differentiate at `q₁` (the multipliers'
+    /// term `Σ_s λ_s D²h_s(q₁)` moves with `q₁` and with λ). Zeroes those outputs first
+    /// (`DualOutputs::weigh`); the others are left as they are. The default evaluates the
+    /// constraints at `Order::Full` ([`Self::constraints_dual`]) and sums.
+    fn weighted_constraint_hessian_dual(
+        &mut self,
+        q: &[Dual],
+        weights: &[Dual],
+        out: &mut DualOutputs,
+    ) {
+        out.weigh(weights);
+        // `q̇ᵀD²h q̇` is not an output here: any velocity will do.
+        self.constraints_dual(q, q, Order::Full, out);
+        let n = q.len();
+        for j in (0..n).filter(|&j| !self.is_kinematic(j)) {
+            for i in 0..n {
+                for (r, &w) in weights.iter().enumerate() {
+                    let x = out.get(Output::D2h(r, i, j));
+                    out.add(Output::WeightedD2h(i, j), w * x);
+                }
+            }
+        }
+    }
+
     /// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable) over
     /// [`Jet`]s ([`crate::kernel::inverse_dynamics`]: the bodies' `τ` by recursive
     /// Newton–Euler, the springs' `∂L/∂q` and `L`, the model's own forces; with constraints

@@ -390,6 +390,18 @@ impl System for TreeSystem {
         kernel::constraints(plan, kernel, q, dq, order, out);
     }
 
+    fn weighted_constraint_hessian_dual(
+        &mut self,
+        q: &[Dual],
+        weights: &[Dual],
+        out: &mut DualOutputs,
+    ) {
+        out.weigh(weights);
+        let plan = &self.plan;
+        let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
+        kernel::weighted_constraint_hessian(plan, kernel, q, q, weights, &self.dynamic, out);
+    }
+
     fn inverse_dynamics_jet(
         &mut self,
         q: &[Jet<LANES>],

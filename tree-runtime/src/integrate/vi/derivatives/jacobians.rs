@@ -1,6 +1,6 @@
 //! The step's Jacobians `J = ∂R/∂w` and `P = ∂p₂/∂w` from its terms, written once over any
 //! [`Scalar`] (docs/derivations.md §9): over `f64` at the solution for the first derivatives,
-//! over dual numbers for their derivatives; and the multipliers' term `Σ_s λ_s D²h_s(q₁)`.
+//! over dual numbers for their derivatives.
 
 use super::StepInput;
 use crate::integrate::discrete::{DiscreteLagrangian, Slots};
@@ -68,8 +68,8 @@ impl Shape {
 /// What the step's Jacobians are built from, over a scalar: the continuous terms at the
 /// quadrature point (`L_qq`, `L_q̇q` and its transpose, `M`, `F_q`, `F_q̇`, row-major n × n;
 /// `forces`: where `F_q`, `F_q̇` may be non-zero, and are read), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)`
-/// (n × n, read on the dynamic variables' rows: [`contract_on_rows`], or the systems' own sum)
-/// and `Dh(q₂)`.
+/// (n × n, read on the dynamic variables' rows: `System::weighted_constraint_hessian` and its
+/// dual form) and `Dh(q₂)`.
 pub(super) struct StepTerms<'a, T> {
     pub(super) lqq: &'a [T],
     pub(super) lvq: &'a [T],
@@ -232,49 +232,6 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut imp
     }
 }
 
-/// `Σ_s λ_s D²h_s` into `out`'s rows chosen by `rows[i]` (row-major, rows of `n`; D²h_s is
-/// symmetric, so its row i is its column-major column i): the multipliers' term of
-/// `∂r/∂q₁`. `d2h` holds one n × n block per constraint row, zero outside the row's
-/// variables where `variables(s)` names them; `add(o, λ, x)` is `o += λx`. A multiplier at
-/// zero adds nothing. Over dual numbers along each direction of the second derivatives (at
-/// the solution, over `f64`, the systems sum as they evaluate:
-/// `System::weighted_constraint_hessian`).
-#[inline(always)]
-pub(super) fn contract_on_rows<'a, T: Scalar + PartialEq + 'a>(
-    out: &mut [T],
-    n: usize,
-    rows: &[bool],
-    lambda: &[T],
-    d2h: impl Iterator<Item = &'a [T]>,
-    variables: impl Fn(usize) -> Option<&'a [usize]>,
-    add: impl Fn(&mut T, T, T),
-) {
-    for i in (0..n).filter(|&i| rows[i]) {
-        out[i * n..(i + 1) * n].fill(T::zero());
-    }
-    for (s, (&l, h)) in lambda.iter().zip(d2h).enumerate() {
-        if l == T::zero() {
-            continue;
-        }
-        match variables(s) {
-            // Only the rows and columns of the row's own variables.
-            Some(vars) => {
-                for &i in vars.iter().filter(|&&i| rows[i]) {
-                    for &j in vars {
-                        add(&mut out[i * n + j], l, h[i * n + j]);
-                    }
-                }
-            }
-            None => {
-                for i in (0..n).filter(|&i| rows[i]) {
-                    let (row, column) = (&mut out[i * n..(i + 1) * n], &h[i * n..(i + 1) * n]);
-                    row.iter_mut().zip(column).for_each(|(o, &x)| add(o, l, x));
-                }
-            }
-        }
-    }
-}
-
 /// [`jacobians`] over `f64`, whole, compiled also for AVX and chosen at run time (the same
 /// operations in the same order on every CPU: no fused multiply-adds here).
 #[multiversion::multiversion(targets("x86_64+avx"))]
@@ -300,78 +257,4 @@ pub(super) fn gather_rows<T: Copy>(
 /// `out` = the n × n matrix stored column-major in `a`, stored row-major (its transpose).
 pub(super) fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
     gather_rows(a, n, 0..n, out);
-}
-
-#[cfg(test)]
-mod tests {
-    use nalgebra::DMatrix;
-
-    use super::*;
-    use crate::dual::Dual;
-
-    /// `Σ_s λ_s D²h_s` on the chosen rows against the sum written out, with the rows' variables unknown and known (each block zero
-    /// outside them); rows not chosen are left as they were, a zero multiplier adds nothing.
-    #[test]
-    fn hessians_contract_on_the_dynamic_rows() {
-        let n = 5;
-        let variables = [vec![0, 2, 3], vec![1, 2], vec![1, 2, 4]];
-        let d2h: Vec<DMatrix<f64>> = (0..3)
-            .map(|s| {
-                DMatrix::from_fn(n, n, |i, j| {
-                    let inside = variables[s].contains(&i) && variables[s].contains(&j);
-                    inside as u8 as f64 * ((i + j + 3 * s) as f64 * 0.7).sin()
-                })
-            })
-            .map(|h| &h + h.transpose())
-            .collect();
-        let lambda = [0.5, 0.0, -2.0];
-        let dynamic = [true, false, true, true, false];
-        let expected = |i: usize, j: usize| 0.5 * d2h[0][(i, j)] - 2.0 * d2h[2][(i, j)];
-        // The rows' variables unknown, then known.
-        for known in [false, true] {
-            let mut out = vec![7.0; n * n];
-            contract_on_rows(
-                &mut out,
-                n,
-                &dynamic,
-                &lambda,
-                d2h.iter().map(|h| h.as_slice()),
-                |s| variables.get(s).filter(|_| known).map(Vec::as_slice),
-                |o, l, x| *o += l * x,
-            );
-            for i in 0..n {
-                for j in 0..n {
-                    let want = if dynamic[i] { expected(i, j) } else { 7.0 };
-                    assert!((out[i * n + j] - want).abs() < 1e-14, "({i}, {j})");
-                }
-            }
-        }
-        // Over dual numbers on every row (the second derivatives' form): the value part is
-        // the same sum, the derivative part the multipliers' derivatives' sum.
-        let blocks: Vec<Vec<Dual>> = (d2h.iter())
-            .map(|h| h.iter().map(|&x| Dual::new(x, 0.0)).collect())
-            .collect();
-        let lambda_d = [
-            Dual::new(0.5, 1.0),
-            Dual::new(0.0, 0.0),
-            Dual::new(-2.0, 3.0),
-        ];
-        let mut out = vec![Dual::new(7.0, 7.0); n * n];
-        contract_on_rows(
-            &mut out,
-            n,
-            &[true; 5],
-            &lambda_d,
-            blocks.iter().map(Vec::as_slice),
-            |s| variables.get(s).map(Vec::as_slice),
-            |o, l, x| *o += l * x,
-        );
-        for i in 0..n {
-            for j in 0..n {
-                let d = d2h[0][(i, j)] + 3.0 * d2h[2][(i, j)];
-                let got = out[i * n + j];
-                assert!((got.v - expected(i, j)).abs() < 1e-14 && (got.d - d).abs() < 1e-14);
-            }
-        }
-    }
 }

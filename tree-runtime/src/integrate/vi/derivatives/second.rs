@@ -6,7 +6,7 @@
 use nalgebra::{allocator::Allocator, DVectorView, DefaultAllocator};
 
 use super::first::Linearisation;
-use super::jacobians::{contract_on_rows, jacobians_f64, row_major_into, Shape, StepTerms};
+use super::jacobians::{jacobians_f64, row_major_into, Shape, StepTerms};
 use crate::dual::{Dual, DualOutputs};
 use crate::linalg::dot;
 use crate::outputs::Field;
@@ -15,7 +15,7 @@ use crate::system::{row_variables, Order, Sparsity, System};
 /// Scratch for the Jacobians over dual numbers along one tangent direction.
 #[derive(Clone, Debug)]
 pub(super) struct DualJacobians {
-    /// At the quadrature point (Full), at `q₁` (constraints alone, Full), at `q₂`
+    /// At the quadrature point (Full), at `q₁` (`Dh` and `Σ_s λ_s D²h_s` alone), at `q₂`
     /// (constraints alone).
     at_alpha: DualOutputs,
     at_q1: DualOutputs,
@@ -27,8 +27,6 @@ pub(super) struct DualJacobians {
     pub(super) q2: Vec<Dual>,
     pub(super) rest: Vec<Dual>,
     pub(super) lambda: Vec<Dual>,
-    /// `Σ_s λ_s D²h_s(q₁)` over duals.
-    pub(super) lambda_d2h1: Vec<Dual>,
     /// The derivative parts of the step's terms along the direction, in the order of
     /// [`StepTerms`]: `L_qq`, `L_q̇q`, its transpose, `M`, `F_q`, `F_q̇`, `Dh(q₁)`,
     /// `Σ λ_s D²h_s(q₁)`, `Dh(q₂)`.
@@ -40,10 +38,6 @@ pub(super) struct DualJacobians {
     pub(super) pjac: Vec<f64>,
     /// `c_j = μᵀ D_jJ + w_pᵀ D_jP` (length w).
     pub(super) adjoint: Vec<f64>,
-    /// Each constraint row's variables, where the system names them (empty: unknown).
-    pub(super) variables: Vec<Vec<usize>>,
-    /// Every variable (`Σ_s λ_s D²h_s` over duals is formed on every row).
-    every_row: Vec<bool>,
 }
 
 impl DualJacobians {
@@ -53,7 +47,8 @@ impl DualJacobians {
     {
         let (n, m) = (sys.dof(), sys.constraint_count());
         let zeros = |k| vec![Dual::default(); k];
-        // D²h cleared on each row's own variables, where the system names them.
+        // D²h (which the default weighted evaluation forms) cleared on each row's own
+        // variables, where the system names them.
         let variables = row_variables(sys);
         let outputs = || DualOutputs::new(n, m).with_constraint_variables(variables.clone());
         DualJacobians {
@@ -66,7 +61,6 @@ impl DualJacobians {
             q2: zeros(n),
             rest: zeros(n),
             lambda: zeros(m),
-            lambda_d2h1: zeros(n * n),
             along_terms: [
                 n * n,
                 n * n,
@@ -82,8 +76,6 @@ impl DualJacobians {
             jac: vec![0.0; sh.rows() * sh.w()],
             pjac: vec![0.0; sh.nd() * sh.w()],
             adjoint: vec![0.0; sh.w()],
-            variables,
-            every_row: vec![true; n],
         }
     }
 
@@ -106,23 +98,14 @@ impl DualJacobians {
             self.q2[i] = Dual::new(x2, d2);
         }
         sys.evaluate_dual(&self.q_alpha, &self.v, Order::Full, &mut self.at_alpha);
-        if m > 0 {
-            sys.constraints_dual(&self.q1, &self.rest, Order::Full, &mut self.at_q1);
-            sys.constraints_dual(&self.q2, &self.rest, Order::First, &mut self.at_q2);
-        }
         for s in 0..m {
             self.lambda[s] = Dual::new(lin.lambda[s], dir[sh.w_lambda() + s]);
         }
-        let variables = &self.variables;
-        contract_on_rows(
-            &mut self.lambda_d2h1,
-            n,
-            &self.every_row,
-            &self.lambda,
-            self.at_q1.field(Field::D2h).chunks_exact(n * n),
-            |s| variables.get(s).map(Vec::as_slice),
-            |o, l, x| *o += l * x,
-        );
+        if m > 0 {
+            // Dh(q₁) and Σ_s λ_s D²h_s(q₁), both moving along the direction; Dh(q₂).
+            sys.weighted_constraint_hessian_dual(&self.q1, &self.lambda, &mut self.at_q1);
+            sys.constraints_dual(&self.q2, &self.rest, Order::First, &mut self.at_q2);
+        }
         let (t, c1, c2) = (&self.at_alpha, &self.at_q1, &self.at_q2);
         let sources = [
             t.field(Field::D2lDqDq),
@@ -132,7 +115,8 @@ impl DualJacobians {
             t.field(Field::DforceDq),
             t.field(Field::DforceDdq),
             c1.field(Field::Dh),
-            &self.lambda_d2h1,
+            // Read below: formed on the dynamic columns, wanted on the dynamic rows.
+            &[],
             c2.field(Field::Dh),
         ];
         for (to, from) in self.along_terms.iter_mut().zip(sources) {
@@ -142,6 +126,13 @@ impl DualJacobians {
         }
         let [lqq, lvq, lvq_t, mass, fq, fv, dh1, lambda_d2h1, dh2] = &mut self.along_terms;
         row_major_into(lvq, n, lvq_t);
+        // Σ_s λ_s D²h_s is symmetric: its dynamic rows are its dynamic columns, transposed.
+        let weighted = c1.field(Field::WeightedD2h);
+        for (i, row) in lambda_d2h1.chunks_exact_mut(n).enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = weighted[j * n + i].d;
+            }
+        }
         let terms = StepTerms {
             lqq,
             lvq,
