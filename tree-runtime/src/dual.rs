@@ -166,8 +166,11 @@ impl DualOutputs {
 
     /// Ready for a weighted Hessian over dual numbers
     /// (`System::weighted_constraint_hessian_dual`): `weights` kept as its input, `h`, `Dh`
-    /// and [`Field::WeightedD2h`] zeroed (the evaluation accumulates into them).
+    /// and [`Field::WeightedD2h`] zeroed (the evaluation accumulates into them). Panics
+    /// unless there is one weight per constraint row (a caller's error, not input's).
     pub fn weigh(&mut self, weights: &[Dual]) {
+        let rows = self.fields[Field::H as usize].len();
+        assert_eq!(weights.len(), rows, "one weight per constraint row");
         self.weights.clear();
         self.weights.extend_from_slice(weights);
         for f in [Field::H, Field::Dh, Field::WeightedD2h] {

@@ -240,8 +240,10 @@ impl ConstraintTerms {
     /// Ready for a weighted Hessian ([`System::weighted_constraint_hessian`]) over `n`
     /// variables: `weights` kept as the evaluation's input, `h` and `Dh` zeroed, and
     /// [`Self::weighted_d2h`] sized (allocated on the first call only) — zeroed too if
-    /// `clear` (for an evaluation that accumulates).
+    /// `clear` (for an evaluation that accumulates). Panics unless there is one weight per
+    /// constraint row (a caller's error, not input's).
     pub fn weigh(&mut self, weights: &[f64], n: usize, clear: bool) {
+        assert_eq!(weights.len(), self.rows(), "one weight per constraint row");
         self.clear(Order::First);
         self.weights.clear();
         self.weights.extend_from_slice(weights);
