@@ -208,8 +208,9 @@ pub struct ConstraintTerms {
     pub dh_dot: DVector<f64>,
     /// `D²h_r = ∂²h_r/∂q²` for each row (at `Order::Full`).
     pub d2h: Vec<DMatrix<f64>>,
-    /// `Σ_r w_r D²h_r` on the dynamic variables' columns, the other columns zero (n × n,
-    /// from [`System::weighted_constraint_hessian`]; 0 × 0 before its first call).
+    /// `Σ_r w_r D²h_r` on the dynamic variables' columns (n × n, from
+    /// [`System::weighted_constraint_hessian`]; 0 × 0 before its first call). The other
+    /// columns are not written: zero as the matrix is made.
     pub weighted_d2h: DMatrix<f64>,
     /// The weights `w` of [`Self::weighted_d2h`] (an input of the generated code, which reads
     /// it here).
@@ -461,8 +462,8 @@ where
     );
 
     /// `h(q)`, `Dh(q)` and the constraint rows' Hessians summed with `weights` (one per row),
-    /// `Σ_r w_r D²h_r(q)`, on the dynamic variables' columns, into `out.weighted_d2h` (n × n,
-    /// the kinematic variables' columns zero): the multipliers' term `Σ_s λ_s D²h_s(q₁)` of a
+    /// `Σ_r w_r D²h_r(q)`, on the dynamic variables' columns, into `out.weighted_d2h` (n × n;
+    /// the kinematic variables' columns are not part of it): the multipliers' term `Σ_s λ_s D²h_s(q₁)` of a
     /// step's first derivatives (docs/derivations.md §9), without forming each row's
     /// Hessian. `out.dh_dot` and `out.d2h` are not outputs of it (what they hold after is
     /// unspecified). The default makes the whole evaluation at `Order::Full` and sums; the
