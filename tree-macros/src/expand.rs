@@ -121,11 +121,6 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
     Traced { nodes, outputs }
 }
 
-/// Whether each of the model's variables is kinematic.
-fn model_kinematic(model: &tree_model::Model) -> Vec<bool> {
-    model.variables.iter().map(|v| v.is_kinematic()).collect()
-}
-
 /// The constraints' `h`, `Dh` and `Σ_r w_r D²h_r` on the dynamic variables' columns
 /// (`kernel::weighted_constraint_hessian`, the weights `out.weights[r]` an input), every
 /// entry of those columns assigned — zero where no row's Hessian reaches, so nothing needs
@@ -577,7 +572,8 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let c_full = c_full
         .assigning()
         .emit("__c_full", &var_names, f64_constraints);
-    let weighted_program = weighted_program(&plan, &model_kinematic(&model));
+    let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+    let weighted_program = weighted_program(&plan, &kinematic);
     let weighted = (weighted_program.as_ref())
         .map(|(assigning, _)| assigning.emit("__c_weighted", &var_names, f64_constraints));
     let weighted_dual = (weighted_program.as_ref())
@@ -620,7 +616,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 out: &mut ::tree_mech::runtime::ConstraintTerms,
             ) {
                 // Every entry of the dynamic variables' columns is assigned: none is cleared.
-                out.weigh(weights, #n, false);
+                out.weigh(weights, false);
                 let q: &[f64; #n] = &q.data.0[0];
                 // The traced sweeps read no velocity.
                 let dq = q;
@@ -713,7 +709,6 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
     };
     let lagrangian_dual = dual_by_order("clear_lagrangian", d_dynamics_body, d_full_body);
     let constraints_dual = dual_by_order("clear_constraints", dc_dynamics_body, dc_full_body);
-    let kinematic = model_kinematic(&model);
     let articulated = articulated_program(&plan, &kinematic).map(|program| {
         program.emit(
             "__articulated",

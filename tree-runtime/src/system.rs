@@ -238,13 +238,14 @@ impl ConstraintTerms {
         }
     }
 
-    /// Ready for a weighted Hessian ([`System::weighted_constraint_hessian`]) over `n`
-    /// variables: `weights` kept as the evaluation's input, `h` and `Dh` zeroed, and
-    /// [`Self::weighted_d2h`] sized (allocated on the first call only) — zeroed too if
-    /// `clear` (for an evaluation that accumulates). Panics unless there is one weight per
-    /// constraint row (a caller's error, not input's).
-    pub fn weigh(&mut self, weights: &[f64], n: usize, clear: bool) {
+    /// Ready for a weighted Hessian ([`System::weighted_constraint_hessian`]): `weights` kept
+    /// as the evaluation's input, `h` and `Dh` zeroed, and [`Self::weighted_d2h`] sized n × n
+    /// (allocated on the first call only) — zeroed too if `clear` (for an evaluation that
+    /// accumulates). Panics unless there is one weight per constraint row (a caller's error,
+    /// not input's).
+    pub fn weigh(&mut self, weights: &[f64], clear: bool) {
         assert_eq!(weights.len(), self.rows(), "one weight per constraint row");
+        let n = self.dh.ncols();
         self.clear(Order::First);
         self.weights.clear();
         self.weights.extend_from_slice(weights);
@@ -475,7 +476,7 @@ where
         out: &mut ConstraintTerms,
     ) {
         let n = q.len();
-        out.weigh(weights, n, true);
+        out.weigh(weights, true);
         // `q̇ᵀD²h q̇` is not an output here: any velocity will do (q, with no allocation).
         self.constraints(q, q, Order::Full, out);
         let ConstraintTerms {

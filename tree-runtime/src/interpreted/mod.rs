@@ -264,7 +264,7 @@ impl System for TreeSystem {
         weights: &[f64],
         out: &mut ConstraintTerms,
     ) {
-        out.weigh(weights, q.len(), true);
+        out.weigh(weights, true);
         let q = q.as_slice();
         kernel::weighted_constraint_hessian(
             &self.plan,

@@ -76,8 +76,13 @@ pub(crate) struct Linearisation {
 }
 
 impl Linearisation {
-    pub(super) fn new(shape: Shape) -> Self {
+    /// Buffers for `shape`'s step; `c1` holds the constraints at `q₁` (`ConstraintTerms::of`
+    /// the system, so that `D²h` is cleared on each row's own variables where the default
+    /// weighted evaluation forms it), its weighted Hessian sized here: zero where nothing
+    /// writes it (every entry without constraints).
+    pub(super) fn new(shape: Shape, mut c1: ConstraintTerms) -> Self {
         let (n, m, nd) = (shape.n, shape.m, shape.nd());
+        c1.weighted_d2h = DMatrix::zeros(n, n);
         let (rows, w, x) = (shape.rows(), shape.w(), shape.x());
         let z_columns: Vec<usize> = (shape.dynamic.iter().map(|&i| shape.w_q2() + i))
             .chain((0..m).map(|s| shape.w_lambda() + s))
@@ -105,7 +110,7 @@ impl Linearisation {
             dh1: vec![0.0; m * n],
             dh2: vec![0.0; m * n],
             lambda: vec![0.0; m],
-            c1: constraints_at_q1(ConstraintTerms::zeros(m, n)),
+            c1,
             pz: vec![0.0; nd * nd],
             rows_scratch: vec![0.0; 3 * n],
             z_columns,
@@ -291,14 +296,6 @@ impl Linearisation {
             }
         }
     }
-}
-
-/// `c`, made to hold the constraints at `q₁` for [`Linearisation`]: its weighted Hessian
-/// sized n × n (zero where nothing writes it: every entry without constraints).
-pub(super) fn constraints_at_q1(mut c: ConstraintTerms) -> ConstraintTerms {
-    let n = c.dh.ncols();
-    c.weighted_d2h = DMatrix::zeros(n, n);
-    c
 }
 
 /// Where a column of `x` is found among the solved ones ([`Linearisation::source`]).

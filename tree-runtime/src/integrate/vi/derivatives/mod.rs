@@ -391,7 +391,7 @@ where
         let (left, plus) = (left * dt, plus * dt);
         let ld = DiscreteLagrangian { alpha: a, dt };
         let mut lin = self.linearisation.take().unwrap_or_else(|| {
-            let mut lin = Box::new(Linearisation::new(Shape {
+            let shape = Shape {
                 n,
                 dynamic: self.split.dynamic.clone(),
                 kinematic: self.split.kinematic.clone(),
@@ -402,10 +402,8 @@ where
                 ld,
                 left,
                 plus,
-            }));
-            // D²h(q₁) cleared on each row's own variables, where the system names them.
-            lin.c1 = first::constraints_at_q1(ConstraintTerms::of(cx.sys));
-            lin
+            };
+            Box::new(Linearisation::new(shape, ConstraintTerms::of(cx.sys)))
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
         let m = lin.shape.m;
