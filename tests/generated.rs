@@ -481,3 +481,75 @@ fn the_statement_counts_of_the_shipped_models_are_pinned() {
         [12, 85, 6309, 7518, 274, 971]
     );
 }
+
+/// Terms kept for a compiled evaluation (an integrator's own, `Terms::keep_zeros`) skip
+/// clearing `M`, `∂²L/∂q̇∂q` and `∂²L/∂q²` only when the model's own evaluation at the same
+/// order wrote them last: every entry it writes is then as fresh terms have it, and an entry
+/// it never writes keeps what another writer left there — which an evaluation at another
+/// order or `Terms::clear` clears first. Terms not kept are cleared on every evaluation.
+#[test]
+fn kept_terms_skip_clearing_only_after_their_own_evaluation() {
+    let mut sys = Humanoid;
+    let mut rng = Rng::new(7);
+    let mut state = || {
+        let (mut q, mut dq) = (sys.zero_vector(), sys.zero_vector());
+        for i in 0..q.len() {
+            (q[i], dq[i]) = (2.0 * rng.uniform(), 3.0 * rng.uniform());
+        }
+        (q, dq)
+    };
+    let (a, b, c) = (state(), state(), state());
+    let at_b = sys.evaluate(&b.0, &b.1, Order::Full);
+    let mut kept = tree_mech::Terms::zeros(sys.dim());
+    kept.keep_zeros();
+    let mut plain = tree_mech::Terms::zeros(sys.dim());
+    sys.lagrangian(&a.0, &a.1, Order::Full, &mut kept);
+    sys.lagrangian(&a.0, &a.1, Order::Full, &mut plain);
+    assert!(
+        kept == sys.evaluate(&a.0, &a.1, Order::Full),
+        "a first evaluation"
+    );
+    // Garbage on the zeros of M: where the model's next evaluation writes, overwritten; where
+    // it does not (its limbs do not couple), kept — a first-order evaluation between leaves
+    // the matrices alone. Terms not kept are cleared.
+    let n = sys.dof();
+    let zeros: Vec<(usize, usize)> = (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .filter(|&e| kept.mass[e] == 0.0)
+        .collect();
+    for &e in &zeros {
+        kept.mass[e] = 7.0;
+        plain.mass[e] = 7.0;
+    }
+    sys.lagrangian(&c.0, &c.1, Order::First, &mut kept);
+    sys.lagrangian(&b.0, &b.1, Order::Full, &mut kept);
+    sys.lagrangian(&b.0, &b.1, Order::Full, &mut plain);
+    assert!(plain == at_b, "terms not kept are cleared");
+    let unwritten: Vec<(usize, usize)> = (zeros.iter().copied())
+        .filter(|&e| kept.mass[e] == 7.0)
+        .collect();
+    assert!(!unwritten.is_empty(), "the clearing was skipped");
+    for &e in &unwritten {
+        kept.mass[e] = 0.0;
+    }
+    assert!(kept == at_b, "every written entry as fresh terms have it");
+    // Another order's evaluation between, or a clear of the matrices (then a writer that
+    // accumulates, as the interpreted system does), and the next clears all; clearing the
+    // first order's outputs alone leaves the matrices and the mark.
+    let e = unwritten[0];
+    for between in [Some(Order::Dynamics), Some(Order::First), None] {
+        match between {
+            Some(Order::First) => kept.clear(Order::First),
+            Some(order) => sys.lagrangian(&c.0, &c.1, order, &mut kept),
+            None => kept.clear(Order::Full),
+        }
+        kept.mass[e] = 7.0;
+        kept.d2l_dq_dq[e] = 7.0;
+        sys.lagrangian(&b.0, &b.1, Order::Full, &mut kept);
+        if between == Some(Order::First) {
+            assert_eq!((kept.mass[e], kept.d2l_dq_dq[e]), (7.0, 7.0));
+        } else {
+            assert!(kept == at_b, "after {between:?}");
+        }
+    }
+}

@@ -971,7 +971,12 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 order: ::tree_mech::runtime::Order,
                 out: &mut ::tree_mech::runtime::Terms<Self::N>,
             ) {
-                out.clear(order);
+                // Each order's program assigns the same entries on every call: terms kept
+                // for it clear only what it does not (`Terms::begin_assigned`). A static's
+                // address is this model's own.
+                static MODEL: u8 = 0;
+                let key = ::core::ptr::addr_of!(MODEL) as usize;
+                out.begin_assigned(key, order);
                 let q: &[f64; #n] = &q.data.0[0];
                 let dq: &[f64; #n] = &dq.data.0[0];
                 match order {
@@ -979,6 +984,7 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                     ::tree_mech::runtime::Order::Dynamics => { #dynamics_body }
                     ::tree_mech::runtime::Order::Full => { #full_body #mark_force_derivatives }
                 }
+                out.end_assigned(key, order);
             }
 
             fn mass_matrix(

@@ -177,7 +177,9 @@ where
 {
     /// The settings in force.
     pub settings: ViSettings,
-    /// The Lagrangian terms at the last quadrature point.
+    /// The Lagrangian terms at the last quadrature point. Read them, do not write them: a
+    /// compiled model's evaluations into them clear only the vectors when the last was its
+    /// own at the same order (its structural zeros kept, `Terms::begin_assigned`).
     pub terms: Terms<N>,
     /// Constraints at the current guess `q₂` (and, after `velocity_and_energy`, at its `q`).
     pub constraint_terms: ConstraintTerms,
@@ -260,7 +262,11 @@ where
         let (nd, m) = (split.dynamic.len(), split.rows);
         MidpointVi {
             settings,
-            terms: Terms::zeros(n),
+            terms: {
+                let mut terms = Terms::zeros(n);
+                terms.keep_zeros();
+                terms
+            },
             constraint_terms: ConstraintTerms::zeros(m, n.value()),
             constraints_at: z(),
             constraints_known: false,

@@ -8,7 +8,7 @@
 //! whose outcome the branch predictor learns badly when half the factor is zero.
 //! [`CompactFactor`] makes those lists once per factorisation; [`lu_solve_compact_rows`]
 //! then takes the same terms in the same order (so the same bits) with no test at all.
-//! [`CompactCombination`] and [`combine_compact_rows`] do the same for a product `C += A D`
+//! [`CompactCombination`] and [`combine_compact_rows`] do the same for a product `C −= A D`
 //! (the step derivatives' `P_z·dz/dx`).
 
 use super::{block, blocks, interchange_rows, substitute, subtract_scaled_pair, RowTerms, BLOCK};
@@ -187,16 +187,16 @@ impl CompactCombination {
         self.rows = rows;
         let pairs = &mut self.pairs;
         pairs.clear(rows.div_ceil(2) * cols.len());
-        // Kept negated: the kernel subtracts. A last row alone is paired with itself.
+        // A last row alone is paired with itself.
         for r in (0..rows).step_by(2) {
             let row = &a[r * w..(r + 1) * w];
             let next = &a[(r + 1).min(rows - 1) * w..][..w];
-            pairs.pair(0..cols.len(), |s| [-row[cols[s]], -next[cols[s]]]);
+            pairs.pair(0..cols.len(), |s| [row[cols[s]], next[cols[s]]]);
         }
     }
 }
 
-/// `C += A D` for row-major `C` (rows of `k`) and `D` (row `s` at `s·k`) with `A`'s
+/// `C −= A D` for row-major `C` (rows of `k`) and `D` (row `s` at `s·k`) with `A`'s
 /// non-zeros gathered in `compact`: two rows of `C` at a time, each block of both summing its
 /// combination of `D`'s rows in registers (one load of `D` for both), `D`'s rows in order.
 /// Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time.
@@ -328,11 +328,11 @@ mod tests {
         assert!(wrong.is_err());
     }
 
-    /// The compact combination is `C + A D` (both roundings and the dispatched kernel), an
+    /// The compact combination is `C − A D` (both roundings and the dispatched kernel), an
     /// odd last row and zero coefficients (left out) included; the two roundings differ only
     /// in the last bits.
     #[test]
-    fn the_compact_combination_adds_the_product() {
+    fn the_compact_combination_subtracts_the_product() {
         for rows in 1..6 {
             for k in [1, 5, 21, 37] {
                 let w = 7;
@@ -360,7 +360,7 @@ mod tests {
                     for j in 0..k {
                         let sum: f64 = (0..4).map(|s| a[r * w + cols[s]] * d[s * k + j]).sum();
                         for c in [&unfused, &fused] {
-                            let got = c[r * k + j] - start[r * k + j];
+                            let got = start[r * k + j] - c[r * k + j];
                             assert!((got - sum).abs() < 1e-13, "rows {rows}, k {k}, ({r}, {j})");
                         }
                     }

@@ -11,7 +11,7 @@
 
 use nalgebra::DMatrix;
 
-use super::jacobians::{jacobians, JacobianSink, Shape, StepTerms};
+use super::jacobians::{jacobians, JacobianSink, RowWriter, Segment, Shape, StepTerms};
 use super::second::DualJacobians;
 use super::{StepDerivatives, StepInput};
 use crate::linalg::{
@@ -43,7 +43,7 @@ pub(crate) struct Linearisation {
     /// `P_z = ∂p₂/∂q₂` on the dynamic variables, row-major n_d × n_d (`J` and `P` are
     /// otherwise formed only where the solve reads them: [`Pieces`]).
     pub(super) pz: Vec<f64>,
-    /// Rows of `∂r/∂q₁`, `∂r/∂q₂`, `∂p₂/∂q₂` (n each) as [`jacobians`] writes them.
+    /// `∂r/∂q₂` of a row on the dynamic variables, as [`jacobians`] writes it.
     rows_scratch: Vec<f64>,
     /// The columns of `w` that are the unknowns `z`, and the number of columns of `x` the
     /// solve works for: `q₁`, `p₁`, `k₂` (an input's column is `left` times its variable's
@@ -61,8 +61,8 @@ pub(crate) struct Linearisation {
     pub(super) column: Vec<f64>,
     /// Scratch of one vector's solve in the elimination order.
     pub(super) scratch: Vec<f64>,
-    /// `−R_x`, then `dz/dx`, over the solved columns: row-major `rows × solved` (all
-    /// right-hand sides of one solve), its rows in the elimination order.
+    /// `R_x`, then `R_z⁻¹ R_x = −dz/dx`, over the solved columns: row-major `rows × solved`
+    /// (all right-hand sides of one solve), its rows in the elimination order.
     rhs: Vec<f64>,
     /// `dp₂/dx = P Δ` over the solved columns, row-major `n_d × solved`.
     dp2: Vec<f64>,
@@ -112,7 +112,7 @@ impl Linearisation {
             lambda: vec![0.0; m],
             c1,
             pz: vec![0.0; nd * nd],
-            rows_scratch: vec![0.0; 3 * n],
+            rows_scratch: vec![0.0; nd],
             z_columns,
             solved,
             input_rows,
@@ -152,14 +152,14 @@ impl Linearisation {
             lambda_d2h1: self.c1.weighted_d2h.as_slice(),
             dh2: &self.dh2,
         };
-        // R_z into the factor's storage, −R_x into the right-hand sides (the equations and
+        // R_z into the factor's storage, R_x into the right-hand sides (the equations and
         // unknowns in the elimination order), P_x into dp₂/dx, P_z: then R_z factored.
         let (factor, position) = self.lu.storage();
         let mut pieces = Pieces {
             n: sh.n,
             nd,
             k,
-            dynamic: &sh.dynamic,
+            segments: &sh.segments,
             kinematic: &sh.kinematic,
             position,
             factor,
@@ -171,10 +171,11 @@ impl Linearisation {
         jacobians_in_pieces(sh, &terms, &mut pieces);
         self.lu.factor()?;
         self.tangent_ready = false;
-        // dz/dx = −R_z⁻¹ R_x on the solved columns, all in one solve.
+        // R_z⁻¹ R_x = −dz/dx on the solved columns, all in one solve.
         self.lu.solve_rows(&mut self.rhs, k);
-        // dp₂/dx = P Δ = P_x + P_z dz/dx (P is zero on the p₁ and λ columns; only q₂_d of z),
-        // dz/dx's rows in the elimination order (the dynamic ones first).
+        // dp₂/dx = P Δ = P_x + P_z dz/dx = P_x − P_z R_z⁻¹ R_x (P is zero on the p₁ and λ
+        // columns; only q₂_d of z), the solution's rows in the elimination order (the dynamic
+        // ones first).
         (self.combination).gather(nd, &self.pz, nd, &self.lu.order[..nd]);
         combine_compact_rows(&mut self.dp2[..nd * k], k, &self.combination, &self.rhs);
         Ok(())
@@ -200,8 +201,8 @@ impl Linearisation {
     fn dz(&self, r: usize, c: usize) -> f64 {
         let (k, r) = (self.solved, self.lu.position[r]);
         match self.source(c) {
-            Some(Source::Solved(s)) => self.rhs[r * k + s],
-            Some(Source::Input(s, _)) => self.shape.left * self.rhs[r * k + s],
+            Some(Source::Solved(s)) => -self.rhs[r * k + s],
+            Some(Source::Input(s, _)) => self.shape.left * -self.rhs[r * k + s],
             None => 0.0,
         }
     }
@@ -256,13 +257,13 @@ impl Linearisation {
             fit(q2, nd, wc);
             fit(p2, nd, wc);
             fit(lambda, m, wc);
-            // Solved columns c0.. (after the inputs: less nu) as they are, transposed.
+            // Solved columns c0.. (after the inputs: less nu), transposed (dz/dx negated).
             let s0 = if b == K2 { c0 - sh.nu() } else { c0 };
             let solved = |r| self.lu.position[r];
-            transpose_into(&self.rhs, k, s0, q2.as_mut_slice(), nd, solved);
-            transpose_into(&self.dp2, k, s0, p2.as_mut_slice(), nd, |r| r);
+            transpose_into::<true>(&self.rhs, k, s0, q2.as_mut_slice(), nd, solved);
+            transpose_into::<false>(&self.dp2, k, s0, p2.as_mut_slice(), nd, |r| r);
             let multiplier = |s| self.lu.position[nd + s];
-            transpose_into(&self.rhs, k, s0, lambda.as_mut_slice(), m, multiplier);
+            transpose_into::<true>(&self.rhs, k, s0, lambda.as_mut_slice(), m, multiplier);
         }
         // Column c of the input block: `left` times its variable's p₁ column (plus `plus` on
         // p₂'s own row), zero for an input on no dynamic variable — read from the p₁ blocks
@@ -309,8 +310,9 @@ enum Source {
 }
 
 /// `to` (column-major, `rows` rows) = the `rows × (to.len()/rows)` block of the row-major
-/// `from` (row stride `k`) starting at column `s0`, row `r` of `to` from row `row_of(r)`.
-fn transpose_into(
+/// `from` (row stride `k`) starting at column `s0`, row `r` of `to` from row `row_of(r)`;
+/// negated if `NEGATE`.
+fn transpose_into<const NEGATE: bool>(
     from: &[f64],
     k: usize,
     s0: usize,
@@ -323,6 +325,7 @@ fn transpose_into(
     }
     let cols = to.len() / rows;
     let row = |r: usize| &from[row_of(r) * k + s0..row_of(r) * k + s0 + cols];
+    let sign = |x: f64| if NEGATE { -x } else { x };
     // Four rows at a time, each read in order, each column's four entries stored together
     // (a column at a time, the reads strided by a whole row, cost twice as much).
     let mut r = 0;
@@ -330,13 +333,13 @@ fn transpose_into(
         let (a, b, c, d) = (row(r), row(r + 1), row(r + 2), row(r + 3));
         for ((((column, &a), &b), &c), &d) in to.chunks_exact_mut(rows).zip(a).zip(b).zip(c).zip(d)
         {
-            column[r..r + 4].copy_from_slice(&[a, b, c, d]);
+            column[r..r + 4].copy_from_slice(&[sign(a), sign(b), sign(c), sign(d)]);
         }
         r += 4;
     }
     for r in r..rows {
         for (column, &x) in to.chunks_exact_mut(rows).zip(row(r)) {
-            column[r] = x;
+            column[r] = sign(x);
         }
     }
 }
@@ -422,23 +425,25 @@ impl OrderedFactor {
 }
 
 /// The first derivatives' [`JacobianSink`]: `R_z` straight into the factor's storage and
-/// `−R_x` on the solved columns (`q₁`, `p₁`, `k₂`) into the right-hand sides' rows, both in
-/// the elimination order; `P_x` into `dp₂/dx`'s rows, `P_z` into `pz`. Every entry the solve
-/// reads is written on every call, zeros included (as `−0.0` where `−R_x` negates one), and
-/// nothing else of `J` and `P` is formed.
+/// `R_x` on the solved columns (`q₁`, `p₁`, `k₂`) into the right-hand sides' rows, both in
+/// the elimination order; `P_x` into `dp₂/dx`'s rows, `P_z` into `pz`. Each run of dynamic
+/// or kinematic variables ([`Segment`]) of a row is written where it goes, but `R_z`'s
+/// (kept in `scratch` until the row ends: the factor is stored by columns). Every entry the
+/// solve reads is written on every call, zeros included, and nothing else of `J` and `P` is
+/// formed.
 struct Pieces<'a> {
     n: usize,
     nd: usize,
     /// Solved columns.
     k: usize,
-    dynamic: &'a [usize],
+    segments: &'a [Segment],
     kinematic: &'a [usize],
     position: &'a [usize],
     factor: &'a mut [f64],
     rhs: &'a mut [f64],
     dp2: &'a mut [f64],
     pz: &'a mut [f64],
-    /// `∂r/∂q₁`, `∂r/∂q₂`, `∂p₂/∂q₂` of the row being written.
+    /// `∂r/∂q₂` of the row being written, on its dynamic variables.
     scratch: &'a mut [f64],
 }
 
@@ -452,39 +457,41 @@ impl Pieces<'_> {
 
 impl JacobianSink<f64> for Pieces<'_> {
     #[inline(always)]
-    fn rows(&mut self, r: usize) -> [&mut [f64]; 4] {
-        let (n, k) = (self.n, self.k);
-        let (by_q1, rest) = self.scratch.split_at_mut(n);
-        let (by_q2, p_by_q2) = rest.split_at_mut(n);
-        // ∂p₂/∂q₁ is P_x's q₁ block, the first solved columns of dp₂/dx's row.
-        [by_q1, by_q2, &mut self.dp2[r * k..r * k + n], p_by_q2]
+    fn row(&mut self, r: usize, writer: &RowWriter<f64>) {
+        let (n, nd, k) = (self.n, self.nd, self.k);
+        // The right-hand side's row: R_x's q₁, p₁, k₂ columns; dp₂/dx's: P_x's.
+        let rhs = &mut self.rhs[self.position[r] * k..(self.position[r] + 1) * k];
+        let (r_q1, rest) = rhs.split_at_mut(n);
+        let r_k2 = &mut rest[nd..];
+        let (p_q1, rest) = self.dp2[r * k..(r + 1) * k].split_at_mut(n);
+        let p_k2 = &mut rest[nd..];
+        let pz = &mut self.pz[r * nd..(r + 1) * nd];
+        for s in self.segments {
+            let (columns, at, len) = (s.columns.clone(), s.place, s.columns.len());
+            let (r_q2, p_q2) = if s.dynamic {
+                (&mut self.scratch[at..at + len], &mut pz[at..at + len])
+            } else {
+                (&mut r_k2[at..at + len], &mut p_k2[at..at + len])
+            };
+            writer.write(
+                columns.clone(),
+                [&mut r_q1[columns.clone()], r_q2, &mut p_q1[columns], p_q2],
+            );
+        }
     }
 
     #[inline(always)]
     fn end_row(&mut self, r: usize) {
         let (n, nd, k) = (self.n, self.nd, self.k);
-        let (by_q1, rest) = self.scratch.split_at(n);
-        let (by_q2, p_by_q2) = rest.split_at(n);
-        for (c, &d) in self.dynamic.iter().enumerate() {
-            let at = self.at(r, c);
-            self.factor[at] = by_q2[d];
-            self.pz[r * nd + c] = p_by_q2[d];
+        let (rows, equation) = (self.position.len(), self.position[r]);
+        for (c, &x) in self.scratch[..nd].iter().enumerate() {
+            self.factor[self.position[c] * rows + equation] = x;
         }
-        let out = &mut self.rhs[self.position[r] * k..(self.position[r] + 1) * k];
-        let (q1, rest) = out.split_at_mut(n);
-        let (p1, k2) = rest.split_at_mut(nd);
-        q1.iter_mut().zip(by_q1).for_each(|(o, &x)| *o = -x);
-        p1.fill(-0.0);
-        p1[r] = -1.0;
-        k2.iter_mut()
-            .zip(self.kinematic)
-            .for_each(|(o, &v)| *o = -by_q2[v]);
-        let (_, rest) = self.dp2[r * k..(r + 1) * k].split_at_mut(n);
-        let (p1, k2) = rest.split_at_mut(nd);
+        // ∂r_r/∂p₁ = e_r; P is zero on p₁.
+        let p1 = &mut self.rhs[equation * k + n..equation * k + n + nd];
         p1.fill(0.0);
-        k2.iter_mut()
-            .zip(self.kinematic)
-            .for_each(|(o, &v)| *o = p_by_q2[v]);
+        p1[r] = 1.0;
+        self.dp2[r * k + n..r * k + n + nd].fill(0.0);
     }
 
     /// An input's columns are not solved for (its `p₁` column's, scaled).
@@ -499,9 +506,11 @@ impl JacobianSink<f64> for Pieces<'_> {
     fn constraint(&mut self, s: usize, dh2: &[f64]) {
         let (n, nd, k) = (self.n, self.nd, self.k);
         let equation = nd + s;
-        for (c, &d) in self.dynamic.iter().enumerate() {
-            let at = self.at(equation, c);
-            self.factor[at] = dh2[d];
+        for segment in self.segments.iter().filter(|s| s.dynamic) {
+            for (o, &x) in dh2[segment.columns.clone()].iter().enumerate() {
+                let at = self.at(equation, segment.place + o);
+                self.factor[at] = x;
+            }
         }
         // h does not depend on the multipliers.
         for unknown in nd..self.position.len() {
@@ -510,10 +519,10 @@ impl JacobianSink<f64> for Pieces<'_> {
         }
         let out = &mut self.rhs[self.position[equation] * k..(self.position[equation] + 1) * k];
         let (q1_p1, k2) = out.split_at_mut(n + nd);
-        q1_p1.fill(-0.0);
+        q1_p1.fill(0.0);
         k2.iter_mut()
             .zip(self.kinematic)
-            .for_each(|(o, &v)| *o = -dh2[v]);
+            .for_each(|(o, &v)| *o = dh2[v]);
     }
 }
 

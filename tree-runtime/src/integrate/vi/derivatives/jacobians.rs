@@ -3,7 +3,7 @@
 //! over dual numbers for their derivatives.
 
 use super::StepInput;
-use crate::integrate::discrete::{DiscreteLagrangian, Slots};
+use crate::integrate::discrete::{DiscreteLagrangian, SecondSlot, Slots};
 use crate::scalar::Scalar;
 use crate::system::Sparsity;
 
@@ -13,6 +13,10 @@ pub(super) struct Shape {
     pub(super) n: usize,
     pub(super) dynamic: Vec<usize>,
     pub(super) kinematic: Vec<usize>,
+    /// The variables in runs of consecutive dynamic or kinematic ones (one of each where the
+    /// kinematic variables come last, as in most models): where a row of the Jacobians is
+    /// written to, a run at a time.
+    pub(super) segments: Vec<Segment>,
     /// Constraint equations.
     pub(super) m: usize,
     /// The variable each input pushes on.
@@ -24,6 +28,46 @@ pub(super) struct Shape {
 }
 
 impl Shape {
+    /// The shape of a step over `n` variables split into `dynamic` and `kinematic`, with `m`
+    /// constraint equations and inputs on `inputs`' variables, `f⁻ = left·F`, `f⁺ = plus·F`.
+    pub(super) fn new(
+        n: usize,
+        (dynamic, kinematic): (Vec<usize>, Vec<usize>),
+        m: usize,
+        inputs: Vec<usize>,
+        ld: DiscreteLagrangian,
+        (left, plus): (f64, f64),
+    ) -> Self {
+        let mut segments: Vec<Segment> = Vec::new();
+        for j in 0..n {
+            let (is_dynamic, place) = match dynamic.iter().position(|&d| d == j) {
+                Some(c) => (true, c),
+                None => (false, kinematic.iter().position(|&v| v == j).unwrap_or(0)),
+            };
+            match segments.last_mut() {
+                Some(last) if last.dynamic == is_dynamic && last.columns.end == j => {
+                    last.columns.end += 1
+                }
+                _ => segments.push(Segment {
+                    columns: j..j + 1,
+                    dynamic: is_dynamic,
+                    place,
+                }),
+            }
+        }
+        Shape {
+            n,
+            dynamic,
+            kinematic,
+            segments,
+            m,
+            inputs,
+            ld,
+            left,
+            plus,
+        }
+    }
+
     pub(super) fn nd(&self) -> usize {
         self.dynamic.len()
     }
@@ -65,6 +109,15 @@ impl Shape {
     }
 }
 
+/// A run of consecutive variables, all dynamic or all kinematic, and the place of its first
+/// in its list ([`Shape::dynamic`] or [`Shape::kinematic`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Segment {
+    pub(super) columns: std::ops::Range<usize>,
+    pub(super) dynamic: bool,
+    pub(super) place: usize,
+}
+
 /// What the step's Jacobians are built from, over a scalar: the continuous terms at the
 /// quadrature point (`L_qq`, `L_q̇q` and its transpose, `M`, `F_q`, `F_q̇`, row-major n × n;
 /// `forces`: where `F_q`, `F_q̇` may be non-zero, and are read), `Dh(q₁)`, `Σ_s λ_s D²h_s(q₁)`
@@ -89,8 +142,9 @@ pub(super) struct StepTerms<'a, T> {
 /// variables — `∂r_r/∂q₁`, `∂r_r/∂q₂`, `∂p₂,r/∂q₁`, `∂p₂,r/∂q₂` — then [`Self::end_row`];
 /// the constant and sparse entries are given one by one.
 pub(super) trait JacobianSink<T> {
-    /// Row `r`'s four rows, each to be written whole.
-    fn rows(&mut self, r: usize) -> [&mut [T]; 4];
+    /// Row `r`'s four rows, by runs of variables where the sink keeps them apart: the
+    /// sink calls [`RowWriter::write`] with each run and the four rows' slices over it.
+    fn row(&mut self, r: usize, writer: &RowWriter<T>);
     /// Row `r` written (its `∂r_r/∂p₁ = e_r` is the sink's to place).
     fn end_row(&mut self, r: usize);
     /// `∂r_r/∂u_k = left`, `∂p₂,r/∂u_k = plus` (input `k` pushes on row `r`'s variable).
@@ -134,11 +188,11 @@ impl<'a, T> Whole<'a, T> {
 
 impl<T: Scalar> JacobianSink<T> for Whole<'_, T> {
     #[inline(always)]
-    fn rows(&mut self, r: usize) -> [&mut [T]; 4] {
+    fn row(&mut self, r: usize, writer: &RowWriter<T>) {
         let (w, n) = (self.w, self.n);
         let (by_q1, rest) = self.jac[r * w..(r + 1) * w].split_at_mut(n);
         let (p_by_q1, p_rest) = self.pjac[r * w..(r + 1) * w].split_at_mut(n);
-        [by_q1, &mut rest[..n], p_by_q1, &mut p_rest[..n]]
+        writer.write(0..n, [by_q1, &mut rest[..n], p_by_q1, &mut p_rest[..n]]);
     }
     #[inline(always)]
     fn end_row(&mut self, r: usize) {
@@ -155,6 +209,54 @@ impl<T: Scalar> JacobianSink<T> for Whole<'_, T> {
     fn constraint(&mut self, s: usize, dh2: &[T]) {
         let row = &mut self.jac[(self.nd + s) * self.w..(self.nd + s + 1) * self.w];
         row[self.n..2 * self.n].copy_from_slice(dh2);
+    }
+}
+
+/// One dynamic row `i` of `J` and `P` on `q₁` and `q₂` from the terms' rows `i`, written
+/// into a sink's slices a run of variables at a time ([`JacobianSink::row`]).
+pub(super) struct RowWriter<'a, T> {
+    /// Rows `i` of `L_qq`, `L_q̇q`, its transpose, `M`, `Σ_s λ_s D²h_s(q₁)`.
+    terms: [&'a [T]; 5],
+    /// Rows `i` of `F_q`, `F_q̇`, read on the variables `forced`.
+    forces: (&'a [T], &'a [T]),
+    forced: std::ops::Range<usize>,
+    /// `D₁D₁L_d`, `D₂D₁L_d`, `D₂D₂L_d`.
+    slots: [SecondSlot<T>; 3],
+    /// `Δt`, `left`, `plus`, `1 − α`, `1/Δt`, `α`.
+    constants: [T; 6],
+}
+
+impl<T: Scalar> RowWriter<'_, T> {
+    /// The row on the variables `columns` into `[∂r_i/∂q₁, ∂r_i/∂q₂, ∂p₂,i/∂q₁, ∂p₂,i/∂q₂]`
+    /// (each as long as `columns`).
+    #[inline(always)]
+    pub(super) fn write(&self, columns: std::ops::Range<usize>, outs: [&mut [T]; 4]) {
+        let [d1d1, d2d1, d2d2] = self.slots;
+        let [cdt, left, plus, q1_q, v1, q2_q] = self.constants;
+        let (j0, width) = (columns.start, columns.len());
+        let [lqq, lvq, lvq_t, mass, l_d2h] = self.terms.map(|t| &t[columns.clone()]);
+        let [by_q1, by_q2, p_by_q1, p_by_q2] = outs;
+        let (by_q1, by_q2) = (&mut by_q1[..width], &mut by_q2[..width]);
+        let (p_by_q1, p_by_q2) = (&mut p_by_q1[..width], &mut p_by_q2[..width]);
+        for o in 0..width {
+            let (qq, vq, vq_t, mm) = (lqq[o], lvq[o], lvq_t[o], mass[o]);
+            by_q1[o] = d1d1.at(qq, vq, vq_t, mm) + cdt * l_d2h[o];
+            by_q2[o] = d2d1.at(qq, vq, vq_t, mm);
+            // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁ (L_qq and M symmetric).
+            p_by_q1[o] = d2d1.at(qq, vq_t, vq, mm);
+            p_by_q2[o] = d2d2.at(qq, vq, vq_t, mm);
+        }
+        // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt.
+        let (fq, fv) = self.forces;
+        for j in self.forced.start.max(j0)..self.forced.end.min(columns.end) {
+            let f1 = q1_q * fq[j] - v1 * fv[j];
+            let f2 = q2_q * fq[j] + v1 * fv[j];
+            let o = j - j0;
+            by_q1[o] += left * f1;
+            by_q2[o] += left * f2;
+            p_by_q1[o] += plus * f1;
+            p_by_q2[o] += plus * f2;
+        }
     }
 }
 
@@ -179,44 +281,28 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut imp
     pub(super) fn row<T>(x: &[T], i: usize, n: usize) -> &[T] {
         &x[i * n..(i + 1) * n]
     }
+    let (q1_q, v1, q2_q) = (c(1.0 - a), c(1.0 / dt), c(a));
     for (r, &i) in sh.dynamic.iter().enumerate() {
         let at = |x| row(x, i, n);
-        let (lqq, lvq, lvq_t, mass, l_d2h) = (
-            at(st.lqq),
-            at(st.lvq),
-            at(st.lvq_t),
-            at(st.mass),
-            at(st.lambda_d2h1),
-        );
-        let [by_q1, by_q2, p_by_q1, p_by_q2] = sink.rows(r);
-        let (by_q1, by_q2) = (&mut by_q1[..n], &mut by_q2[..n]);
-        let (p_by_q1, p_by_q2) = (&mut p_by_q1[..n], &mut p_by_q2[..n]);
-        for j in 0..n {
-            let (qq, vq, vq_t, mm) = (lqq[j], lvq[j], lvq_t[j], mass[j]);
-            by_q1[j] = d1d1.at(qq, vq, vq_t, mm) + cdt * l_d2h[j];
-            by_q2[j] = d2d1.at(qq, vq, vq_t, mm);
-            // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁ (L_qq and M symmetric).
-            p_by_q1[j] = d2d1.at(qq, vq_t, vq, mm);
-            p_by_q2[j] = d2d2.at(qq, vq, vq_t, mm);
-        }
-        if st.forces != Sparsity::Zero {
-            // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt; on the diagonal alone
-            // for per-variable damping.
-            let (fq, fv) = (at(st.fq), at(st.fv));
-            let (q1_q, v1, q2_q) = (c(1.0 - a), c(1.0 / dt), c(a));
-            let columns = match st.forces {
+        let writer = RowWriter {
+            terms: [
+                at(st.lqq),
+                at(st.lvq),
+                at(st.lvq_t),
+                at(st.mass),
+                at(st.lambda_d2h1),
+            ],
+            forces: (at(st.fq), at(st.fv)),
+            // On the diagonal alone for per-variable damping.
+            forced: match st.forces {
+                Sparsity::Zero => 0..0,
                 Sparsity::Diagonal => i..i + 1,
-                _ => 0..n,
-            };
-            for j in columns {
-                let f1 = q1_q * fq[j] - v1 * fv[j];
-                let f2 = q2_q * fq[j] + v1 * fv[j];
-                by_q1[j] += left * f1;
-                by_q2[j] += left * f2;
-                p_by_q1[j] += plus * f1;
-                p_by_q2[j] += plus * f2;
-            }
-        }
+                Sparsity::Dense => 0..n,
+            },
+            slots: [d1d1, d2d1, d2d2],
+            constants: [cdt, left, plus, q1_q, v1, q2_q],
+        };
+        sink.row(r, &writer);
         sink.end_row(r);
         for (k, &v) in sh.inputs.iter().enumerate() {
             if v == i {

@@ -391,18 +391,16 @@ where
         let (left, plus) = (left * dt, plus * dt);
         let ld = DiscreteLagrangian { alpha: a, dt };
         let mut lin = self.linearisation.take().unwrap_or_else(|| {
-            let shape = Shape {
+            let shape = Shape::new(
                 n,
-                dynamic: self.split.dynamic.clone(),
-                kinematic: self.split.kinematic.clone(),
-                m: self.split.rows,
-                inputs: (0..cx.sys.input_count())
+                (self.split.dynamic.clone(), self.split.kinematic.clone()),
+                self.split.rows,
+                (0..cx.sys.input_count())
                     .map(|k| cx.sys.input_variable(k))
                     .collect(),
                 ld,
-                left,
-                plus,
-            };
+                (left, plus),
+            );
             Box::new(Linearisation::new(shape, ConstraintTerms::of(cx.sys)))
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
@@ -461,11 +459,14 @@ where
                 );
             }
         }
-        for s in 0..m {
-            lin.lambda[s] = self.lambda[s];
-            for i in 0..n {
-                lin.dh1[s * n + i] = self.dh1[(s, i)];
-                lin.dh2[s * n + i] = self.constraint_terms.dh[(s, i)];
+        lin.lambda.copy_from_slice(self.lambda.as_slice());
+        // Dh (m × n, column-major) into row-major rows.
+        let dh = [self.dh1.as_slice(), self.constraint_terms.dh.as_slice()];
+        for (from, to) in dh.into_iter().zip([&mut lin.dh1, &mut lin.dh2]) {
+            for (i, column) in from.chunks_exact(m.max(1)).enumerate() {
+                for (s, &x) in column.iter().enumerate() {
+                    to[s * n + i] = x;
+                }
             }
         }
         lin.q1.copy_from_slice(q1.as_slice());
