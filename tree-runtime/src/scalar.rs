@@ -34,6 +34,14 @@ pub trait Scalar:
     fn zero() -> Self {
         Self::constant(0.0)
     }
+
+    /// `self·a + b`; with `FUSED`, rounded once where the number type can (`f64`: a fused
+    /// multiply-add, for code compiled for a CPU that has one — elsewhere it is a library
+    /// call).
+    #[inline(always)]
+    fn multiply_add<const FUSED: bool>(self, a: Self, b: Self) -> Self {
+        self * a + b
+    }
 }
 
 impl Scalar for f64 {
@@ -55,5 +63,14 @@ impl Scalar for f64 {
     #[inline(always)]
     fn recip(self) -> Self {
         1.0 / self
+    }
+
+    #[inline(always)]
+    fn multiply_add<const FUSED: bool>(self, a: Self, b: Self) -> Self {
+        if FUSED {
+            f64::mul_add(self, a, b)
+        } else {
+            self * a + b
+        }
     }
 }

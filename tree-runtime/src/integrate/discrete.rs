@@ -39,8 +39,17 @@ impl<T: Scalar> SecondSlot<T> {
     /// Entry `(i, j)` from `L_qq[i][j]`, `L_q̇q[i][j]`, `L_q̇q[j][i]`, `M[i][j]`.
     #[inline(always)]
     pub fn at(&self, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
+        self.at_fused::<false>(lqq_ij, lvq_ij, lvq_ji, m_ij)
+    }
+
+    /// [`Self::at`], each product after the first added by a multiply-add (fused where
+    /// `FUSED`: [`Scalar::multiply_add`]; unfused, the same sum in the same order).
+    #[inline(always)]
+    pub fn at_fused<const FUSED: bool>(&self, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
         let [k_qq, k_t, k_vq, k_m] = self.0;
-        k_qq * lqq_ij + k_t * lvq_ji + k_vq * lvq_ij + k_m * m_ij
+        let sum = k_t.multiply_add::<FUSED>(lvq_ji, k_qq * lqq_ij);
+        let sum = k_vq.multiply_add::<FUSED>(lvq_ij, sum);
+        k_m.multiply_add::<FUSED>(m_ij, sum)
     }
 }
 

@@ -457,7 +457,7 @@ impl Pieces<'_> {
 
 impl JacobianSink<f64> for Pieces<'_> {
     #[inline(always)]
-    fn row(&mut self, r: usize, writer: &RowWriter<f64>) {
+    fn row<const FUSED: bool>(&mut self, r: usize, writer: &RowWriter<f64, FUSED>) {
         let (n, nd, k) = (self.n, self.nd, self.k);
         // The right-hand side's row: R_x's q₁, p₁, k₂ columns; dp₂/dx's: P_x's.
         let rhs = &mut self.rhs[self.position[r] * k..(self.position[r] + 1) * k];
@@ -526,12 +526,15 @@ impl JacobianSink<f64> for Pieces<'_> {
     }
 }
 
-/// [`jacobians`] into [`Pieces`], compiled also for AVX and chosen at run time (no fused
-/// multiply-adds: the same operations as [`jacobians_f64`](super::jacobians::jacobians_f64)
-/// on every CPU).
-#[multiversion::multiversion(targets("x86_64+avx"))]
+/// [`jacobians`] into [`Pieces`], compiled also for AVX2 with fused multiply-adds and for
+/// AVX, chosen at run time (as [`jacobians_f64`](super::jacobians::jacobians_f64)).
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 fn jacobians_in_pieces(sh: &Shape, st: &StepTerms<f64>, pieces: &mut Pieces) {
-    jacobians(sh, st, pieces);
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        jacobians::<f64, true>(sh, st, pieces);
+    } else {
+        jacobians::<f64, false>(sh, st, pieces);
+    }
 }
 
 #[cfg(test)]

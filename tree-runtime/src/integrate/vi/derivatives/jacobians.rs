@@ -144,7 +144,7 @@ pub(super) struct StepTerms<'a, T> {
 pub(super) trait JacobianSink<T> {
     /// Row `r`'s four rows, by runs of variables where the sink keeps them apart: the
     /// sink calls [`RowWriter::write`] with each run and the four rows' slices over it.
-    fn row(&mut self, r: usize, writer: &RowWriter<T>);
+    fn row<const FUSED: bool>(&mut self, r: usize, writer: &RowWriter<T, FUSED>);
     /// Row `r` written (its `∂r_r/∂p₁ = e_r` is the sink's to place).
     fn end_row(&mut self, r: usize);
     /// `∂r_r/∂u_k = left`, `∂p₂,r/∂u_k = plus` (input `k` pushes on row `r`'s variable).
@@ -188,7 +188,7 @@ impl<'a, T> Whole<'a, T> {
 
 impl<T: Scalar> JacobianSink<T> for Whole<'_, T> {
     #[inline(always)]
-    fn row(&mut self, r: usize, writer: &RowWriter<T>) {
+    fn row<const FUSED: bool>(&mut self, r: usize, writer: &RowWriter<T, FUSED>) {
         let (w, n) = (self.w, self.n);
         let (by_q1, rest) = self.jac[r * w..(r + 1) * w].split_at_mut(n);
         let (p_by_q1, p_rest) = self.pjac[r * w..(r + 1) * w].split_at_mut(n);
@@ -214,7 +214,7 @@ impl<T: Scalar> JacobianSink<T> for Whole<'_, T> {
 
 /// One dynamic row `i` of `J` and `P` on `q₁` and `q₂` from the terms' rows `i`, written
 /// into a sink's slices a run of variables at a time ([`JacobianSink::row`]).
-pub(super) struct RowWriter<'a, T> {
+pub(super) struct RowWriter<'a, T, const FUSED: bool> {
     /// Rows `i` of `L_qq`, `L_q̇q`, its transpose, `M`, `Σ_s λ_s D²h_s(q₁)`.
     terms: [&'a [T]; 5],
     /// Rows `i` of `F_q`, `F_q̇`, read on the variables `forced`.
@@ -226,7 +226,7 @@ pub(super) struct RowWriter<'a, T> {
     constants: [T; 6],
 }
 
-impl<T: Scalar> RowWriter<'_, T> {
+impl<T: Scalar, const FUSED: bool> RowWriter<'_, T, FUSED> {
     /// The row on the variables `columns` into `[∂r_i/∂q₁, ∂r_i/∂q₂, ∂p₂,i/∂q₁, ∂p₂,i/∂q₂]`
     /// (each as long as `columns`).
     #[inline(always)]
@@ -240,11 +240,12 @@ impl<T: Scalar> RowWriter<'_, T> {
         let (p_by_q1, p_by_q2) = (&mut p_by_q1[..width], &mut p_by_q2[..width]);
         for o in 0..width {
             let (qq, vq, vq_t, mm) = (lqq[o], lvq[o], lvq_t[o], mass[o]);
-            by_q1[o] = d1d1.at(qq, vq, vq_t, mm) + cdt * l_d2h[o];
-            by_q2[o] = d2d1.at(qq, vq, vq_t, mm);
+            let d1d1 = d1d1.at_fused::<FUSED>(qq, vq, vq_t, mm);
+            by_q1[o] = cdt.multiply_add::<FUSED>(l_d2h[o], d1d1);
+            by_q2[o] = d2d1.at_fused::<FUSED>(qq, vq, vq_t, mm);
             // D₁D₂L_d = (D₂D₁L_d)ᵀ: entry (j, i) of D₂D₁ (L_qq and M symmetric).
-            p_by_q1[o] = d2d1.at(qq, vq_t, vq, mm);
-            p_by_q2[o] = d2d2.at(qq, vq, vq_t, mm);
+            p_by_q1[o] = d2d1.at_fused::<FUSED>(qq, vq_t, vq, mm);
+            p_by_q2[o] = d2d2.at_fused::<FUSED>(qq, vq, vq_t, mm);
         }
         // ∂F/∂q₁ = (1−α)F_q − F_q̇/Δt, ∂F/∂q₂ = αF_q + F_q̇/Δt.
         let (fq, fv) = self.forces;
@@ -270,7 +271,11 @@ impl<T: Scalar> RowWriter<'_, T> {
 ///
 /// with `∂F/∂q₁ = (1−α)F_q − F_q̇/Δt`, `∂F/∂q₂ = αF_q + F_q̇/Δt` (F at `(q_α, v)`).
 #[inline(always)]
-pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut impl JacobianSink<T>) {
+pub(super) fn jacobians<T: Scalar, const FUSED: bool>(
+    sh: &Shape,
+    st: &StepTerms<T>,
+    sink: &mut impl JacobianSink<T>,
+) {
     let (n, m) = (sh.n, sh.m);
     let (a, dt) = (sh.ld.alpha, sh.ld.dt);
     let c = T::constant;
@@ -284,7 +289,7 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut imp
     let (q1_q, v1, q2_q) = (c(1.0 - a), c(1.0 / dt), c(a));
     for (r, &i) in sh.dynamic.iter().enumerate() {
         let at = |x| row(x, i, n);
-        let writer = RowWriter {
+        let writer = RowWriter::<T, FUSED> {
             terms: [
                 at(st.lqq),
                 at(st.lvq),
@@ -318,11 +323,16 @@ pub(super) fn jacobians<T: Scalar>(sh: &Shape, st: &StepTerms<T>, sink: &mut imp
     }
 }
 
-/// [`jacobians`] over `f64`, whole, compiled also for AVX and chosen at run time (the same
-/// operations in the same order on every CPU: no fused multiply-adds here).
-#[multiversion::multiversion(targets("x86_64+avx"))]
+/// [`jacobians`] over `f64`, whole, compiled also for AVX2 with fused multiply-adds and for
+/// AVX, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub(super) fn jacobians_f64(sh: &Shape, st: &StepTerms<f64>, jac: &mut [f64], pjac: &mut [f64]) {
-    jacobians(sh, st, &mut Whole::new(sh, jac, pjac));
+    let whole = &mut Whole::new(sh, jac, pjac);
+    if multiversion::target::target_cfg_f!(target_feature = "fma") {
+        jacobians::<f64, true>(sh, st, whole);
+    } else {
+        jacobians::<f64, false>(sh, st, whole);
+    }
 }
 
 /// Rows `rows` of the n × n matrix stored column-major in `a`, into the same rows of the
