@@ -177,6 +177,66 @@ fn the_weighted_constraint_hessian_is_the_rows_hessians_summed() {
     );
 }
 
+/// Constraint terms kept for the compiled weighted sum (a linearisation's own,
+/// `ConstraintTerms::keep_zeros`) skip clearing it only when the model's own sum wrote it
+/// last: every entry the constraints reach is then as fresh terms have it, and an entry they
+/// never reach keeps what another writer left; after `weigh` (what the interpreted and the
+/// default evaluations begin with) the next sum clears all. Terms not kept are cleared on
+/// every sum.
+#[test]
+fn kept_weighted_sums_skip_clearing_only_after_their_own_evaluation() {
+    let mut sys = Marionette;
+    let mut rng = Rng::new(11);
+    let m = sys.constraint_count();
+    let mut point = || {
+        let q = Vector::<Const<N>>::from_fn(|_, _| rng.uniform() - 0.5);
+        let w: Vec<f64> = (0..m).map(|_| rng.uniform() - 0.5).collect();
+        (q, w)
+    };
+    let (a, b) = (point(), point());
+    let sum =
+        |sys: &mut Marionette, (q, w): &(Vector<Const<N>>, Vec<f64>), out: &mut ConstraintTerms| {
+            sys.weighted_constraint_hessian(q, w, out);
+        };
+    let mut at_b = ConstraintTerms::of(&sys);
+    sum(&mut sys, &b, &mut at_b);
+    let mut kept = ConstraintTerms::of(&sys);
+    kept.keep_zeros();
+    let mut plain = ConstraintTerms::of(&sys);
+    sum(&mut sys, &a, &mut kept);
+    sum(&mut sys, &a, &mut plain);
+    let zeros: Vec<(usize, usize)> = (0..N)
+        .flat_map(|i| (0..N).map(move |j| (i, j)))
+        .filter(|&e| kept.weighted_d2h[e] == 0.0)
+        .collect();
+    for &e in &zeros {
+        kept.weighted_d2h[e] = 7.0;
+        plain.weighted_d2h[e] = 7.0;
+    }
+    sum(&mut sys, &b, &mut kept);
+    sum(&mut sys, &b, &mut plain);
+    assert!(
+        plain.weighted_d2h == at_b.weighted_d2h,
+        "terms not kept are cleared"
+    );
+    let unreached: Vec<(usize, usize)> = (zeros.iter().copied())
+        .filter(|&e| kept.weighted_d2h[e] == 7.0)
+        .collect();
+    assert!(!unreached.is_empty(), "the clearing was skipped");
+    for &e in &unreached {
+        kept.weighted_d2h[e] = 0.0;
+    }
+    assert!(
+        kept.weighted_d2h == at_b.weighted_d2h,
+        "every reached entry as fresh terms have it"
+    );
+    let e = unreached[0];
+    kept.weigh(&b.1, true);
+    kept.weighted_d2h[e] = 7.0;
+    sum(&mut sys, &b, &mut kept);
+    assert!(kept.weighted_d2h == at_b.weighted_d2h, "after weigh");
+}
+
 /// A system that evaluates as the interpreted one but weighs constraint Hessians by the
 /// trait's default.
 struct Summing {

@@ -55,6 +55,7 @@ fn state_inputs(n: usize) -> (Vec<Term>, Vec<Term>) {
 }
 
 /// A traced evaluation: the tape and the value that lands in each output.
+#[derive(Clone)]
 struct Traced {
     nodes: Vec<trace::Node>,
     outputs: Vec<(Output, Term)>,
@@ -122,10 +123,11 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
 }
 
 /// The constraints' `h`, `Dh` and `Σ_r w_r D²h_r` on the dynamic variables' columns
-/// (`kernel::weighted_constraint_hessian`, the weights `out.weights[r]` an input), every
-/// entry of those columns assigned — zero where no row's Hessian reaches, so nothing needs
-/// clearing, for [`Flavour::F64`]; and the same evaluation handing its outputs to a sink by
-/// name (accumulated: the sink is cleared first), for [`Flavour::Generic`]. `None` without
+/// (`kernel::weighted_constraint_hessian`, the weights `out.weights[r]` an input), the
+/// entries some row's Hessian reaches assigned — the others cleared first unless the terms
+/// are kept from this model's last evaluation (`ConstraintTerms::weigh_assigned`) — for
+/// [`Flavour::F64`]; and the same evaluation handing its outputs to a sink by name
+/// (accumulated: the sink is cleared first), for [`Flavour::Generic`]. `None` without
 /// constraints.
 fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<(Program, Program)> {
     if plan.rows == 0 {
@@ -139,26 +141,17 @@ fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<(Program, Pro
         let mut k = Kernel::<Term>::new(plan);
         let mut out = Recorder::default();
         kernel::weighted_constraint_hessian(plan, &mut k, &q, &q, &weights, &columns, &mut out);
-        for j in (0..n).filter(|&j| columns[j]) {
-            for i in 0..n {
-                if out.get(Output::WeightedD2h(i, j)).is_none() {
-                    out.add(Output::WeightedD2h(i, j), Term::Const(0.0));
-                }
-            }
-        }
         out.values
     });
-    let traced = Traced { nodes, outputs };
-    // Handed to a sink that accumulates, a zero adds nothing.
-    let nonzero = (traced.outputs.iter())
+    // Assigned or handed to a sink that accumulates, a zero is the cleared entry's own.
+    let nonzero = (outputs.into_iter())
         .filter(|(_, t)| !matches!(t, Term::Const(c) if *c == 0.0))
-        .copied()
         .collect();
-    let sums = Traced {
-        nodes: traced.nodes.clone(),
+    let traced = Traced {
+        nodes,
         outputs: nonzero,
     };
-    Some((traced.assigning(), sums.naming()))
+    Some((traced.clone().assigning(), traced.naming()))
 }
 
 /// The articulated-body step traced as the interpreted system runs it: the elements' forces
@@ -615,8 +608,11 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
                 weights: &[f64],
                 out: &mut ::tree_mech::runtime::ConstraintTerms,
             ) {
-                // Every entry of the dynamic variables' columns is assigned: none is cleared.
-                out.weigh(weights, false);
+                // The entries the constraints reach are assigned, the rest cleared unless
+                // kept from this model's last evaluation (`weigh_assigned`). A static's
+                // address is this model's own.
+                static MODEL: u8 = 0;
+                out.weigh_assigned(weights, ::core::ptr::addr_of!(MODEL) as usize);
                 let q: &[f64; #n] = &q.data.0[0];
                 // The traced sweeps read no velocity.
                 let dq = q;

@@ -279,7 +279,7 @@ pub struct ConstraintTerms {
     pub d2h: Vec<DMatrix<f64>>,
     /// `Σ_r w_r D²h_r` on the dynamic variables' columns (n × n, from
     /// [`System::weighted_constraint_hessian`]; 0 × 0 before its first call). The other
-    /// columns are not written: zero as the matrix is made.
+    /// columns are not written: zero as the matrix is made, unless written by the caller.
     pub weighted_d2h: DMatrix<f64>,
     /// The weights `w` of [`Self::weighted_d2h`] (an input of the generated code, which reads
     /// it here).
@@ -290,6 +290,9 @@ pub struct ConstraintTerms {
     pub scratch: Scratch<f64>,
     /// Per row, the variables its `D²h` block can be non-zero on (empty: any).
     variables: Vec<Vec<usize>>,
+    /// Which compiled weighted evaluation last assigned [`Self::weighted_d2h`], when these
+    /// terms keep its zeros ([`ConstraintTerms::keep_zeros`]; not part of their value).
+    assigned: Assigned,
 }
 
 impl ConstraintTerms {
@@ -304,7 +307,26 @@ impl ConstraintTerms {
             weights: Vec::new(),
             scratch: Scratch::default(),
             variables: Vec::new(),
+            assigned: Assigned::default(),
         }
+    }
+
+    /// Lets a compiled weighted evaluation into these terms skip clearing
+    /// [`Self::weighted_d2h`] when its own evaluation wrote it last ([`Assigned`]). For terms
+    /// no one else writes to (a linearisation's own).
+    #[doc(hidden)]
+    pub fn keep_zeros(&mut self) {
+        self.assigned.keeps = true;
+    }
+
+    /// [`Self::weigh`] before a compiled weighted evaluation of the model `key`, which
+    /// assigns the entries the constraints reach and nothing else: `weighted_d2h` cleared
+    /// unless these terms are kept and that evaluation wrote it last.
+    #[doc(hidden)]
+    pub fn weigh_assigned(&mut self, weights: &[f64], key: usize) {
+        let own = self.assigned.keeps && self.assigned.by == Some((key, Order::Full));
+        self.weigh(weights, !own);
+        self.assigned.by = Some((key, Order::Full));
     }
 
     /// Ready for a weighted Hessian ([`System::weighted_constraint_hessian`]): `weights` kept
@@ -316,6 +338,7 @@ impl ConstraintTerms {
         assert_eq!(weights.len(), self.rows(), "one weight per constraint row");
         let n = self.dh.ncols();
         self.clear(Order::First);
+        self.assigned.by = None;
         self.weights.clear();
         self.weights.extend_from_slice(weights);
         if self.weighted_d2h.shape() != (n, n) {

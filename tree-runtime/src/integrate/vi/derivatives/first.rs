@@ -83,6 +83,7 @@ impl Linearisation {
     pub(super) fn new(shape: Shape, mut c1: ConstraintTerms) -> Self {
         let (n, m, nd) = (shape.n, shape.m, shape.nd());
         c1.weighted_d2h = DMatrix::zeros(n, n);
+        c1.keep_zeros();
         let (rows, w, x) = (shape.rows(), shape.w(), shape.x());
         let z_columns: Vec<usize> = (shape.dynamic.iter().map(|&i| shape.w_q2() + i))
             .chain((0..m).map(|s| shape.w_lambda() + s))
