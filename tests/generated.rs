@@ -512,31 +512,18 @@ fn kept_terms_skip_clearing_only_after_their_own_evaluation() {
     // Garbage on the zeros of M: where the model's next evaluation writes, overwritten; where
     // it does not (its limbs do not couple), kept — a first-order evaluation between leaves
     // the matrices alone. Terms not kept are cleared.
-    let n = sys.dof();
-    let zeros: Vec<(usize, usize)> = (0..n)
-        .flat_map(|i| (0..n).map(move |j| (i, j)))
-        .filter(|&e| kept.mass[e] == 0.0)
-        .collect();
-    for &e in &zeros {
-        kept.mass[e] = 7.0;
-        plain.mass[e] = 7.0;
-    }
+    let zeros = common::mark_zeros(kept.mass.as_mut_slice(), plain.mass.as_mut_slice(), 7.0);
     sys.lagrangian(&c.0, &c.1, Order::First, &mut kept);
     sys.lagrangian(&b.0, &b.1, Order::Full, &mut kept);
     sys.lagrangian(&b.0, &b.1, Order::Full, &mut plain);
     assert!(plain == at_b, "terms not kept are cleared");
-    let unwritten: Vec<(usize, usize)> = (zeros.iter().copied())
-        .filter(|&e| kept.mass[e] == 7.0)
-        .collect();
+    let unwritten = common::unwritten(kept.mass.as_mut_slice(), &zeros, 7.0);
     assert!(!unwritten.is_empty(), "the clearing was skipped");
-    for &e in &unwritten {
-        kept.mass[e] = 0.0;
-    }
     assert!(kept == at_b, "every written entry as fresh terms have it");
     // Another order's evaluation between, or a clear of the matrices (then a writer that
     // accumulates, as the interpreted system does), and the next clears all; clearing the
     // first order's outputs alone leaves the matrices and the mark.
-    let e = unwritten[0];
+    let e = (unwritten[0] % sys.dof(), unwritten[0] / sys.dof());
     for between in [Some(Order::Dynamics), Some(Order::First), None] {
         match between {
             Some(Order::First) => kept.clear(Order::First),

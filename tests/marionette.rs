@@ -205,34 +205,22 @@ fn kept_weighted_sums_skip_clearing_only_after_their_own_evaluation() {
     let mut plain = ConstraintTerms::of(&sys);
     sum(&mut sys, &a, &mut kept);
     sum(&mut sys, &a, &mut plain);
-    let zeros: Vec<(usize, usize)> = (0..N)
-        .flat_map(|i| (0..N).map(move |j| (i, j)))
-        .filter(|&e| kept.weighted_d2h[e] == 0.0)
-        .collect();
-    for &e in &zeros {
-        kept.weighted_d2h[e] = 7.0;
-        plain.weighted_d2h[e] = 7.0;
-    }
+    let (kept_sum, plain_sum) = (&mut kept.weighted_d2h, &mut plain.weighted_d2h);
+    let zeros = common::mark_zeros(kept_sum.as_mut_slice(), plain_sum.as_mut_slice(), 7.0);
     sum(&mut sys, &b, &mut kept);
     sum(&mut sys, &b, &mut plain);
     assert!(
         plain.weighted_d2h == at_b.weighted_d2h,
         "terms not kept are cleared"
     );
-    let unreached: Vec<(usize, usize)> = (zeros.iter().copied())
-        .filter(|&e| kept.weighted_d2h[e] == 7.0)
-        .collect();
+    let unreached = common::unwritten(kept.weighted_d2h.as_mut_slice(), &zeros, 7.0);
     assert!(!unreached.is_empty(), "the clearing was skipped");
-    for &e in &unreached {
-        kept.weighted_d2h[e] = 0.0;
-    }
     assert!(
         kept.weighted_d2h == at_b.weighted_d2h,
         "every reached entry as fresh terms have it"
     );
-    let e = unreached[0];
     kept.weigh(&b.1, true);
-    kept.weighted_d2h[e] = 7.0;
+    kept.weighted_d2h.as_mut_slice()[unreached[0]] = 7.0;
     sum(&mut sys, &b, &mut kept);
     assert!(kept.weighted_d2h == at_b.weighted_d2h, "after weigh");
 }

@@ -189,6 +189,31 @@ macro_rules! delegate_description {
 /// the dynamic variables' columns (the kinematic ones left zero), to `tol` relative; `h` and
 /// `Dh` as the constraints give them. Garbage left in the dynamic columns by an earlier call
 /// is overwritten, not added to. The same over dual numbers
+/// For outputs kept between a compiled model's evaluations (`keep_zeros`): the zero entries
+/// of `kept` (column-major storage), each set to `mark` there and in `plain` (the same
+/// output, not kept) — garbage where an evaluation does not write, to see whether the next
+/// one clears it.
+pub fn mark_zeros(kept: &mut [f64], plain: &mut [f64], mark: f64) -> Vec<usize> {
+    let zeros: Vec<usize> = (0..kept.len()).filter(|&e| kept[e] == 0.0).collect();
+    for &e in &zeros {
+        kept[e] = mark;
+        plain[e] = mark;
+    }
+    zeros
+}
+
+/// Of the entries `mark_zeros` marked, those an evaluation since left as marked (it does not
+/// write them), each set back to zero.
+pub fn unwritten(kept: &mut [f64], marked: &[usize], mark: f64) -> Vec<usize> {
+    let left: Vec<usize> = (marked.iter().copied())
+        .filter(|&e| kept[e] == mark)
+        .collect();
+    for &e in &left {
+        kept[e] = 0.0;
+    }
+    left
+}
+
 /// (`System::weighted_constraint_hessian_dual`), `q` and the weights seeded.
 pub fn check_weighted_hessian<S: System>(sys: &mut S, seed: u64, tol: f64)
 where
