@@ -21,7 +21,8 @@
 //!
 //! The Jacobians are written once, over any [`Scalar`](crate::scalar::Scalar), into a sink
 //! ([`jacobians`]): at the solution, straight into the pieces the first-order solve reads
-//! (`R_z` into its factor's storage, `−R_x` into the right-hand sides); for the second
+//! (`R_z` into its factor's storage, `R_x` into the right-hand sides, which the solve turns
+//! into `−dz/dx`); for the second
 //! derivatives, whole, from the derivative parts of the terms evaluated over
 //! [`Dual`](crate::dual::Dual) numbers. Forces the caller
 //! adds (a [`GeneralizedForce`]) are held fixed; the model's own (damping, dampers) and the
