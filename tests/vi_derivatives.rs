@@ -200,6 +200,10 @@ fn cases() -> Vec<(Model, ViSettings, String)> {
     damped.variables[0].damping = 0.4;
     let models = [
         (file("elements.toml"), "elements"),
+        (
+            interleaved(),
+            "elements, kinematic variables between dynamic ones",
+        ),
         (file("cart.toml"), "cart"),
         (file("string-pendulum.toml"), "string pendulum"),
         (damped, "damped double pendulum"),
@@ -226,6 +230,34 @@ fn cases() -> Vec<(Model, ViSettings, String)> {
         ));
     }
     out
+}
+
+/// elements.toml with the hand's frames declared before the elbow, so that its kinematic
+/// variables fall between dynamic ones (yaw, pitch, hand_x, hand_z, bend, slide, len): the
+/// step's Jacobians are written a run of dynamic or kinematic variables at a time, and every
+/// other model here has its kinematic variables last.
+fn interleaved() -> Model {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let text = std::fs::read_to_string(format!("{root}/tests/models/elements.toml")).unwrap();
+    let hand = "[[frame]]\nname = \"hand\"\ntx = \"hand_x\"\n\n\
+                [[frame]]\nname = \"hand_z\"\nparent = \"hand\"\ntz = \"hand_z\"\n\n";
+    let elbow = "[[frame]]\nname = \"elbow\"";
+    assert!(
+        text.contains(hand) && text.contains(elbow),
+        "elements.toml as this test knows it"
+    );
+    let moved = text
+        .replace(hand, "")
+        .replace(elbow, &format!("{hand}{elbow}"));
+    let model = model::from_toml_str(&moved, None).expect("a valid model");
+    let kinds: String = (model.variables.iter())
+        .map(|v| if v.is_kinematic() { 'k' } else { 'd' })
+        .collect();
+    assert_eq!(
+        kinds, "ddkkddk",
+        "the kinematic variables between dynamic ones"
+    );
+    model
 }
 
 #[test]

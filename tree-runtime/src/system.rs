@@ -68,6 +68,13 @@ struct Assigned {
     by: Option<(usize, Order)>,
 }
 
+impl Assigned {
+    /// Whether these outputs are kept and model `key`'s evaluation at `order` wrote them last.
+    fn holds(&self, key: usize, order: Order) -> bool {
+        self.keeps && self.by == Some((key, order))
+    }
+}
+
 impl Clone for Assigned {
     fn clone(&self) -> Self {
         Assigned::default()
@@ -128,8 +135,7 @@ where
     /// evaluation's last (kept terms only).
     #[doc(hidden)]
     pub fn begin_assigned(&mut self, key: usize, order: Order) {
-        let own = self.assigned.keeps && self.assigned.by == Some((key, order));
-        if order >= Order::Dynamics && own {
+        if order >= Order::Dynamics && self.assigned.holds(key, order) {
             self.clear_parts(order, false);
         } else {
             self.clear(order);
@@ -324,7 +330,7 @@ impl ConstraintTerms {
     /// unless these terms are kept and that evaluation wrote it last.
     #[doc(hidden)]
     pub fn weigh_assigned(&mut self, weights: &[f64], key: usize) {
-        let own = self.assigned.keeps && self.assigned.by == Some((key, Order::Full));
+        let own = self.assigned.holds(key, Order::Full);
         self.weigh(weights, !own);
         self.assigned.by = Some((key, Order::Full));
     }

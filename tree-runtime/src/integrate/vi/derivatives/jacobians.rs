@@ -335,22 +335,24 @@ pub(super) fn jacobians_f64(sh: &Shape, st: &StepTerms<f64>, jac: &mut [f64], pj
     }
 }
 
-/// Rows `rows` of the n × n matrix stored column-major in `a`, into the same rows of the
-/// row-major `out` (other rows untouched).
+/// Rows `rows` of the matrix of `height` rows stored column-major in `a`, into the same rows
+/// of the row-major `out` (rows as long as `a` has columns; other rows untouched).
 pub(super) fn gather_rows<T: Copy>(
     a: &[T],
-    n: usize,
+    height: usize,
     rows: impl IntoIterator<Item = usize>,
     out: &mut [T],
 ) {
+    let width = a.len().checked_div(height).unwrap_or(0);
     for i in rows {
-        for (j, o) in out[i * n..(i + 1) * n].iter_mut().enumerate() {
-            *o = a[j * n + i];
+        for (j, o) in out[i * width..(i + 1) * width].iter_mut().enumerate() {
+            *o = a[j * height + i];
         }
     }
 }
 
-/// `out` = the n × n matrix stored column-major in `a`, stored row-major (its transpose).
-pub(super) fn row_major_into<T: Copy>(a: &[T], n: usize, out: &mut [T]) {
-    gather_rows(a, n, 0..n, out);
+/// `out` = the matrix of `height` rows stored column-major in `a`, stored row-major (its
+/// transpose's storage).
+pub(super) fn row_major_into<T: Copy>(a: &[T], height: usize, out: &mut [T]) {
+    gather_rows(a, height, 0..height, out);
 }

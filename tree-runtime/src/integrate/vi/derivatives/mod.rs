@@ -46,7 +46,7 @@ mod jacobians;
 mod second;
 
 pub(crate) use first::Linearisation;
-use jacobians::{gather_rows, Shape};
+use jacobians::{gather_rows, row_major_into, Shape};
 use second::DualJacobians;
 
 /// A block of the step's inputs `x = (q₁, p₁, u₁, k₂)`.
@@ -461,15 +461,9 @@ where
             }
         }
         lin.lambda.copy_from_slice(self.lambda.as_slice());
-        // Dh (m × n, column-major) into row-major rows.
-        let dh = [self.dh1.as_slice(), self.constraint_terms.dh.as_slice()];
-        for (from, to) in dh.into_iter().zip([&mut lin.dh1, &mut lin.dh2]) {
-            for (i, column) in from.chunks_exact(m.max(1)).enumerate() {
-                for (s, &x) in column.iter().enumerate() {
-                    to[s * n + i] = x;
-                }
-            }
-        }
+        // Dh (m × n) row-major.
+        row_major_into(self.dh1.as_slice(), m, &mut lin.dh1);
+        row_major_into(self.constraint_terms.dh.as_slice(), m, &mut lin.dh2);
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
         let lin = self.linearisation.insert(lin);
