@@ -5,12 +5,12 @@ mod common;
 
 use common::{interpreted, load, simulate_from_start, Rng};
 use nalgebra::Const;
-use tree_mech::integrate::{Method, SimOptions, ViSettings};
+use tree_mech::integrate::{Method, SimOptions, StepContext, ViSettings};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::runtime::dual::{Dual, DualOutputs};
 use tree_mech::runtime::outputs::Field;
-use tree_mech::runtime::Vector;
-use tree_mech::{tree_model, ConstraintTerms, Order, System, Trajectory};
+use tree_mech::runtime::{Dynamics, ModelMotions, Vector};
+use tree_mech::{tree_model, ConstraintTerms, NoForce, Order, System, Trajectory};
 
 tree_model!(struct Marionette from "models/marionette.toml");
 
@@ -175,6 +175,47 @@ fn the_weighted_constraint_hessian_is_the_rows_hessians_summed() {
         5,
         1e-13,
     );
+}
+
+/// The continuous dynamics' own terms (RK4's stages, the continuous linearisation) are kept
+/// for the compiled evaluation: after its first acceleration the next skips clearing `M` — a
+/// mark put on `M`'s zeros (small: `M` stays positive definite) survives it — while every
+/// entry it writes is as a fresh workspace's, and with the zeros back `q̈` is a fresh
+/// workspace's to the bit.
+#[test]
+fn the_continuous_dynamics_keep_their_terms_zeros() {
+    let mut sys = Marionette;
+    let mut rng = Rng::new(13);
+    let mut motion = ModelMotions::of(&sys);
+    let (q0, dq0) = sys.initial_state();
+    let mut state = || {
+        let (mut q, mut dq) = (q0.clone(), dq0.clone());
+        for i in (0..N).filter(|&i| !Marionette::KINEMATIC[i]) {
+            q[i] += 0.2 * (rng.uniform() - 0.5);
+            dq[i] += rng.uniform() - 0.5;
+        }
+        (q, dq)
+    };
+    let (a, b) = (state(), state());
+    let (mut kept, mut fresh) = (Dynamics::new(&sys), Dynamics::new(&sys));
+    let (mut qdd, mut expected) = (Vector::<Const<N>>::zeros(), Vector::<Const<N>>::zeros());
+    let mut no_force = NoForce;
+    let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.01);
+    kept.acceleration(&mut cx, &a.0, &a.1, &mut qdd).unwrap();
+    let (mut scratch, mark) = (kept.terms.mass.clone(), 1e-12);
+    let zeros = common::mark_zeros(kept.terms.mass.as_mut_slice(), scratch.as_mut_slice(), mark);
+    kept.acceleration(&mut cx, &b.0, &b.1, &mut qdd).unwrap();
+    fresh
+        .acceleration(&mut cx, &b.0, &b.1, &mut expected)
+        .unwrap();
+    let unwritten = common::unwritten(kept.terms.mass.as_mut_slice(), &zeros, mark);
+    assert!(!unwritten.is_empty(), "the clearing was skipped");
+    assert!(
+        kept.terms == fresh.terms,
+        "every written entry as fresh terms have it"
+    );
+    kept.acceleration(&mut cx, &b.0, &b.1, &mut qdd).unwrap();
+    assert_eq!(qdd, expected);
 }
 
 /// Constraint terms kept for the compiled weighted sum (a linearisation's own,

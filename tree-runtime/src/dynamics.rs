@@ -145,7 +145,9 @@ where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
     /// The Lagrangian terms of the last evaluation (after an articulated-body solve, only
-    /// the model's own forces: `force` and the springs' `dl_dq`).
+    /// the model's own forces: `force` and the springs' `dl_dq`). Read them, do not write
+    /// them: a compiled model's evaluations into them clear only the vectors when the last
+    /// was its own at the same order (its structural zeros kept, `Terms::begin_assigned`).
     pub terms: Terms<N>,
     /// The constraint terms of the last evaluation.
     pub constraint_terms: ConstraintTerms,
@@ -293,7 +295,11 @@ where
         let split = Split::of(sys);
         let (nd, m) = (split.dynamic.len(), split.rows);
         Dynamics {
-            terms: Terms::zeros(n),
+            terms: {
+                let mut terms = Terms::zeros(n);
+                terms.keep_zeros();
+                terms
+            },
             constraint_terms: ConstraintTerms::zeros(m, n.value()),
             lambda: DVector::zeros(m),
             baumgarte: Baumgarte::default(),
