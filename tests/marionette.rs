@@ -189,7 +189,7 @@ fn the_continuous_dynamics_keep_their_terms_zeros() {
     let mut motion = ModelMotions::of(&sys);
     let (q0, dq0) = sys.initial_state();
     let mut state = || {
-        let (mut q, mut dq) = (q0.clone(), dq0.clone());
+        let (mut q, mut dq) = (q0, dq0);
         for i in (0..N).filter(|&i| !Marionette::KINEMATIC[i]) {
             q[i] += 0.2 * (rng.uniform() - 0.5);
             dq[i] += rng.uniform() - 0.5;
@@ -202,7 +202,7 @@ fn the_continuous_dynamics_keep_their_terms_zeros() {
     let mut no_force = NoForce;
     let mut cx = StepContext::new(&mut sys, &mut no_force, &mut motion, 0.01);
     kept.acceleration(&mut cx, &a.0, &a.1, &mut qdd).unwrap();
-    let (mut scratch, mark) = (kept.terms.mass.clone(), 1e-12);
+    let (mut scratch, mark) = (kept.terms.mass, 1e-12);
     let zeros = common::mark_zeros(kept.terms.mass.as_mut_slice(), scratch.as_mut_slice(), mark);
     kept.acceleration(&mut cx, &b.0, &b.1, &mut qdd).unwrap();
     fresh
