@@ -266,6 +266,8 @@ fn entries<T: Scalar, const FUSED: bool>(
     p_by_q1: &mut [T],
     p_by_q2: &mut [T],
 ) {
+    // One length for every output (the caller's slices already are): the bounds are then
+    // checked once, before the loop.
     let width = by_q1.len();
     let (by_q2, p_by_q1, p_by_q2) = (
         &mut by_q2[..width],
