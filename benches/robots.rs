@@ -9,7 +9,7 @@
 //! mean per call.
 //! Run: `cargo bench --bench robots`. `cargo bench --bench robots -- variants` times the
 //! compiled robots with the generated code's recorded variant and its AVX2-and-FMA one
-//! (`tree_mech::runtime::cpu`), alternated, side by side.
+//! (`tree_mech::kernel::cpu`), alternated, side by side.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -169,7 +169,7 @@ fn pinocchio(label: &str) -> Option<[f64; 4]> {
 /// The compiled robots with the recorded variant of the generated code and with the fused
 /// one, alternated three times (best of each): every figure of [`measure`], and the ratio.
 fn variants() {
-    use tree_mech::runtime::cpu;
+    use tree_mech::kernel::cpu;
     if !cpu::fused() || cpu::FUSED_ONLY {
         println!("one variant runs here (fused: {})", cpu::fused());
         return;

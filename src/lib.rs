@@ -34,14 +34,43 @@ extern crate self as tree_mech;
 /// The model crate: model types, the TOML and URDF readers, the builder, validation.
 /// (`::tree_model`: the crate alone, not also the macro of the same name.)
 pub use ::tree_model as model;
+/// Optimal control: costs, LQR, iLQR/DDP with box limits, task files (`tree-control`).
+pub use tree_control as control;
+/// The recursions over any scalar that both the interpreted and the compiled systems run
+/// (`tree-kernel`): poses, twists, the tree's plan, dual numbers and SIMD lanes.
+pub use tree_kernel as kernel;
 /// Compiles a model into a type implementing [`System`]: the whole syntax is on the macro.
 pub use tree_macros::tree_model;
+/// The runtime (`tree-runtime`): the [`System`] trait, the interpreted system, dynamics,
+/// integrators and their derivatives, batches.
 pub use tree_runtime as runtime;
 pub use tree_runtime::nalgebra;
 pub use tree_runtime::{
-    control, integrate, ConstraintTerms, GeneralizedForce, NoForce, Order, PaperEvaluation,
-    PaperSystem, SimError, System, Terms, Trajectory, TreeSystem,
+    integrate, ConstraintTerms, GeneralizedForce, NoForce, Order, PaperEvaluation, PaperSystem,
+    SimError, System, Terms, Trajectory, TreeSystem,
 };
+
+/// README.md's Rust examples, run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeExamples;
+
+/// What the code `tree_model!` generates names, and nothing else: its one door into the
+/// crates beneath (as thiserror's `__private`). Not a public interface; it changes with the
+/// macro.
+#[doc(hidden)]
+pub mod __private {
+    pub use tree_kernel::articulated::{pivots_hold, ArticulatedIo};
+    pub use tree_kernel::cpu::fused;
+    pub use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+    pub use tree_kernel::outputs::{Output, Sink};
+    pub use tree_kernel::scalar::Scalar;
+    pub use tree_kernel::{__unless_fused_only, Order, Pose};
+    pub use tree_model as model;
+    pub use tree_runtime::nalgebra::Const;
+    pub use tree_runtime::system::Sparsity;
+    pub use tree_runtime::{ConstraintTerms, System, Terms, Vector};
+}
 
 /// Runs a program's `main` the way a command-line tool should end: an error is printed to
 /// stderr as its sentence (`error: …`, not its `Debug` form) with a failing exit code, and a

@@ -153,7 +153,7 @@ fn ilqr_solves_a_linear_quadratic_problem_in_one_iteration_as_the_riccati_recurs
 }
 
 /// The cart pushed to x = 0.5, pendulum down, within [−2, 2] N.
-fn cart_problem<S: System>(sys: S, solver: Solver) -> tree_mech::runtime::control::Solution
+fn cart_problem<S: System>(sys: S, solver: Solver) -> tree_mech::control::Solution
 where
     tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
@@ -549,7 +549,7 @@ fn unlimited<S: System>(
     mut cost: QuadraticCost,
     x0: &DVector<f64>,
     knots: usize,
-) -> tree_mech::runtime::control::Solution
+) -> tree_mech::control::Solution
 where
     tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
@@ -563,7 +563,7 @@ where
 }
 
 /// The cart problem with every weight scaled by `scale`, unlimited, iLQR.
-fn scaled_cart(scale: f64) -> tree_mech::runtime::control::Solution {
+fn scaled_cart(scale: f64) -> tree_mech::control::Solution {
     let (dt, knots) = (0.02, 60);
     let (dynamics, x0) = at_start(Cart, ViSettings::default(), dt);
     let mut cost = common::cart_to_half_metre(dt);
@@ -603,7 +603,7 @@ fn a_task_in_other_units_takes_the_same_steps() {
 /// The cart problem with the model written in units of `length` metres (`x`, the bob's
 /// offset and gravity divided by it; forces and momenta with it) and every weight converted,
 /// so the cost is the same function of the same motion: unlimited, iLQR.
-fn cart_in_units(length: f64) -> tree_mech::runtime::control::Solution {
+fn cart_in_units(length: f64) -> tree_mech::control::Solution {
     let l = length;
     let text = format!(
         "name = \"cart\"\ngravity = [0.0, 0.0, {g:e}]\n\

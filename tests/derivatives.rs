@@ -5,8 +5,8 @@ mod common;
 
 use common::{assert_close, model_files, Rng};
 use nalgebra::Dyn;
+use tree_mech::kernel::se3::{LocalTransform, Pose};
 use tree_mech::model::{self, Joint, Model};
-use tree_mech::runtime::se3::{LocalTransform, Pose};
 use tree_mech::runtime::{Order, PaperEvaluation, PaperSystem, System, Terms, TreeSystem, Vector};
 
 const H: f64 = 1e-6;

@@ -222,7 +222,7 @@ where
         // The inverse dynamics and the constraints over jets (the continuous linearisation's
         // sweep): values and derivatives along random directions alike.
         {
-            use tree_mech::runtime::dual::{Jet, JetOutputs, LANES};
+            use tree_mech::kernel::dual::{Jet, JetOutputs, LANES};
             let mut seed = |x: &[f64]| -> Vec<Jet<LANES>> {
                 x.iter()
                     .map(|&v| Jet {
@@ -344,14 +344,14 @@ fn generated_equals_interpreted_on_every_model() {
 }
 
 /// The recorded variant of the compiled code and its fused one (AVX2 with fused
-/// multiply-adds, run where the CPU has them: `tree_mech::runtime::cpu`) both equal the
+/// multiply-adds, run where the CPU has them: `tree_mech::kernel::cpu`) both equal the
 /// interpreted runtime — every output, whole trajectories, constraints, their weighted
 /// Hessian — and, on a CPU that
 /// runs the fused variant, differ from each other in the last bits (so both ran). The switch
 /// is process-wide: the other tests here compare to tolerances, whichever variant they get.
 #[test]
 fn both_variants_of_the_compiled_code_equal_the_interpreted() {
-    use tree_mech::runtime::cpu;
+    use tree_mech::kernel::cpu;
     use tree_mech::ConstraintTerms;
     let fused_here = cpu::fused();
     #[cfg(target_arch = "x86_64")]

@@ -6,9 +6,9 @@ mod common;
 use common::{interpreted, load, simulate_from_start, Rng};
 use nalgebra::Const;
 use tree_mech::integrate::{Method, SimOptions, StepContext, ViSettings};
+use tree_mech::kernel::dual::{Dual, DualOutputs};
+use tree_mech::kernel::outputs::Field;
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
-use tree_mech::runtime::dual::{Dual, DualOutputs};
-use tree_mech::runtime::outputs::Field;
 use tree_mech::runtime::{Dynamics, ModelMotions, Vector};
 use tree_mech::{tree_model, ConstraintTerms, NoForce, Order, System, Trajectory};
 

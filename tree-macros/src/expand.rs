@@ -5,18 +5,19 @@ use std::collections::HashMap;
 
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote};
-use tree_model::{ModelSpec, ParameterSpec, Value};
-use tree_runtime::articulated::{self, Articulated};
-use tree_runtime::kernel::{self, Kernel};
-use tree_runtime::outputs::{Index, Output, Sink};
-use tree_runtime::plan::TreePlan;
-use tree_runtime::se3::Pose;
-use tree_runtime::sweeps;
-use tree_runtime::Order;
+use tree_kernel::articulated::{self, Articulated};
+use tree_kernel::kernel::{self, Kernel};
+use tree_kernel::outputs::{Index, Output, Sink};
+use tree_kernel::plan::TreePlan;
+use tree_kernel::se3::Pose;
+use tree_kernel::sweeps;
+use tree_kernel::Order;
+use tree_model::{Model, ModelSpec, ParameterSpec, Value};
 
 use crate::ast::{Input, Source};
 use crate::lower;
-use crate::program::{constant, identifier_part, Flavour, Program};
+use crate::program::{constant, identifier_part, Emitted, Flavour, Program};
+use crate::system_impl;
 use crate::trace::{self, Term};
 
 /// Collects what the recursions hand out, summing the contributions to each output, in the
@@ -94,7 +95,7 @@ impl Traced {
             .iter()
             .map(|&(at, x)| {
                 // An output's derived `Debug` is its constructor expression.
-                let path = format!("::tree_mech::runtime::outputs::Output::{at:?}");
+                let path = format!("::tree_mech::__private::Output::{at:?}");
                 let target: TokenStream = path.parse().expect("an output names a constructor");
                 (target, x)
             })
@@ -293,22 +294,22 @@ fn model_constructor(
     if let Some((path, shown)) = file {
         if lower::is_urdf(shown) {
             return quote! {
-                ::tree_mech::model::from_urdf_str(
+                ::tree_mech::__private::model::from_urdf_str(
                     include_str!(#path),
                     Some(#shown),
-                    ::tree_mech::model::UrdfOptions { floating_base: #floating_base },
+                    ::tree_mech::__private::model::UrdfOptions { floating_base: #floating_base },
                 )
                 .expect("the model was validated when it was compiled")
             };
         }
         return quote! {
-            ::tree_mech::model::from_toml_str(include_str!(#path), Some(#shown))
+            ::tree_mech::__private::model::from_toml_str(include_str!(#path), Some(#shown))
                 .expect("the model was validated when it was compiled")
         };
     }
     let spec = spec_tokens(spec.expect("an inline model has its spec"));
     quote! {
-        ::tree_mech::model::validate(&#spec)
+        ::tree_mech::__private::model::validate(&#spec)
             .ok()
             .expect("the model was validated when it was compiled")
     }
@@ -316,7 +317,7 @@ fn model_constructor(
 
 /// Rust tokens that build `spec` (a `ModelSpec` literal).
 fn spec_tokens(spec: &ModelSpec) -> TokenStream {
-    let m = quote!(::tree_mech::model);
+    let m = quote!(::tree_mech::__private::model);
     let opt = |x: Option<f64>| match x {
         Some(x) => {
             let x = constant(x);
@@ -476,354 +477,258 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
     })
 }
 
+/// The expansion of one `tree_model!`, as named stages: read the model, trace and emit its
+/// programs, then declare the type, its constants and the `System` impl around them.
 pub fn expand(input: Input) -> syn::Result<TokenStream> {
-    let (model, spec, file) = match &input.source {
+    let loaded = load(&input)?;
+    let plan = TreePlan::folded(&loaded.model);
+    let programs = Programs::emit(&plan, &loaded.model);
+    let declaration = declaration(&input, &loaded, programs.full.statements);
+    let inherent = inherent_impl(&input.name, &loaded, &programs)?;
+    let system = system_impl::system_impl(&input.name, &loaded.model, &plan, &programs);
+    Ok(quote! {
+        #declaration
+        #inherent
+        #system
+    })
+}
+
+/// The model a `tree_model!` names, with where it came from.
+pub(crate) struct Loaded {
+    pub(crate) model: Model,
+    /// An inline model's spec (rebuilt at run time by `Name::model()`).
+    spec: Option<ModelSpec>,
+    /// A file model's full path and the path as written.
+    file: Option<(String, String)>,
+    floating_base: bool,
+}
+
+/// Reads the model from its file or lowers the inline syntax (a compile error at the token
+/// at fault otherwise).
+fn load(input: &Input) -> syn::Result<Loaded> {
+    Ok(match &input.source {
         Source::File(path, floating_base) => {
             let (model, full) = lower::from_file(path, *floating_base)?;
-            (model, None, Some((full, path.value())))
+            Loaded {
+                model,
+                spec: None,
+                file: Some((full.to_string_lossy().into_owned(), path.value())),
+                floating_base: *floating_base,
+            }
         }
         Source::Inline(inline) => {
             let (model, spec) = lower::from_inline(&input.name, inline)?;
-            (model, Some(spec), None)
+            Loaded {
+                model,
+                spec: Some(spec),
+                file: None,
+                floating_base: false,
+            }
         }
-    };
-    let (attrs, vis, name) = (&input.attrs, &input.vis, &input.name);
-    let plan = TreePlan::folded(&model);
-    let n = model.dof();
-    let nf = model.frames.len();
+    })
+}
 
-    let var_names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
-    let frame_names: Vec<&str> = model.frames.iter().map(|f| f.name.as_str()).collect();
-    let var_consts = index_constants("", &var_names, "variable", name.span())?;
-    let frame_consts = index_constants("FRAME_", &frame_names, "frame", name.span())?;
-    let q0: Vec<TokenStream> = model.variables.iter().map(|v| constant(v.q0)).collect();
-    let dq0: Vec<TokenStream> = model.variables.iter().map(|v| constant(v.dq0)).collect();
-    let damping: Vec<TokenStream> = model
-        .variables
-        .iter()
-        .map(|v| constant(v.damping))
-        .collect();
+/// Every program of the expansion, traced from the kernel and emitted: over `f64` into the
+/// runtime's terms (`first` … `c_full`), generic for dual numbers (`d_*`, `dc_*`), and the
+/// optional ones a model may not have.
+pub(crate) struct Programs {
+    pub(crate) first: Emitted,
+    pub(crate) mass: Emitted,
+    pub(crate) energy: Emitted,
+    pub(crate) dynamics: Emitted,
+    pub(crate) full: Emitted,
+    pub(crate) poses: Emitted,
+    pub(crate) c_first: Emitted,
+    pub(crate) c_dynamics: Emitted,
+    pub(crate) c_full: Emitted,
+    pub(crate) d_dynamics: Emitted,
+    pub(crate) d_full: Emitted,
+    pub(crate) dc_dynamics: Emitted,
+    pub(crate) dc_full: Emitted,
+    /// `Σ_r w_r D²h_r` over `f64` and over dual numbers (constrained models only).
+    pub(crate) weighted: Option<(Emitted, Emitted)>,
+    /// The articulated-body algorithm (models it resolves, without constraints).
+    pub(crate) articulated: Option<Emitted>,
+    /// The inverse dynamics and the constraints over jets.
+    pub(crate) inverse: Emitted,
+}
 
-    let terms_ty = quote!(::tree_mech::runtime::Terms<::tree_mech::runtime::nalgebra::Const<#n>>);
-    let constraint_ty = quote!(::tree_mech::runtime::ConstraintTerms);
-    let (f64_terms, f64_constraints, generic) = (
-        Flavour::F64 {
-            out_ty: &terms_ty,
-            scratch: true,
-        },
-        Flavour::F64 {
-            out_ty: &constraint_ty,
-            scratch: true,
-        },
-        Flavour::Generic,
-    );
-    let lagrangian: Evaluation = kernel::evaluate;
-    let constraints: Evaluation = kernel::constraints;
-    // `M(q)` and `L(q, 0)` alone (`System::mass_matrix`): the sweeps at rest, no velocity.
-    let mass: Evaluation = |plan, k, q, _, _, out| kernel::mass(plan, k, q, out);
-    // `E = T + V` alone (`System::energy`): velocities and first moments, no columns.
-    let energy: Evaluation = |plan, k, q, dq, _, out| kernel::energy(plan, k, q, dq, out);
-    // Every evaluation over f64; those the linearisations differentiate also generic (only
-    // instantiated, over dual numbers, where a program differentiates this model).
-    let [l_first, l_dynamics, l_full] =
-        [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, lagrangian));
-    let [c_first, c_dynamics, c_full] =
-        [Order::First, Order::Dynamics, Order::Full].map(|o| traced(&plan, o, constraints));
-    let first = l_first.assigning().emit("__first", &var_names, f64_terms);
-    let mass = traced(&plan, Order::Dynamics, mass)
-        .assigning()
-        .emit("__mass", &var_names, f64_terms);
-    let energy = traced(&plan, Order::First, energy)
-        .assigning()
-        .emit("__energy", &var_names, f64_terms);
-    let dynamics = l_dynamics
-        .assigning()
-        .emit("__dynamics", &var_names, f64_terms);
-    let full = l_full.assigning().emit("__full", &var_names, f64_terms);
-    let d_dynamics = l_dynamics
-        .naming()
-        .emit("__d_dynamics", &var_names, generic);
-    let d_full = l_full.naming().emit("__d_full", &var_names, generic);
-    let poses = poses_program(&plan).emit(
-        "__poses",
-        &var_names,
-        Flavour::F64 {
-            out_ty: &quote!([::tree_mech::runtime::Pose]),
-            scratch: false,
-        },
-    );
-    let dc_dynamics = c_dynamics
-        .naming()
-        .emit("__dc_dynamics", &var_names, generic);
-    let dc_full = c_full.naming().emit("__dc_full", &var_names, generic);
-    let c_first = c_first
-        .assigning()
-        .emit("__c_first", &var_names, f64_constraints);
-    let c_dynamics = c_dynamics
-        .assigning()
-        .emit("__c_dynamics", &var_names, f64_constraints);
-    let c_full = c_full
-        .assigning()
-        .emit("__c_full", &var_names, f64_constraints);
-    let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
-    let weighted_program = weighted_program(&plan, &kinematic);
-    let weighted = (weighted_program.as_ref())
-        .map(|(assigning, _)| assigning.emit("__c_weighted", &var_names, f64_constraints));
-    let weighted_dual = (weighted_program.as_ref())
-        .map(|(_, naming)| naming.emit("__dc_weighted", &var_names, generic));
-    let weighted_functions = weighted.as_ref().map(|e| e.functions.clone());
-    let weighted_dual_functions = weighted_dual.as_ref().map(|e| e.functions.clone());
-    let weighted_dual_method = weighted_dual.as_ref().map(|e| {
-        let body = &e.body;
-        let arrays = {
-            let wrong = "weighted_constraint_hessian_dual takes one dual number per variable ({})";
-            quote! {
-                let q: &[::tree_mech::runtime::dual::Dual; #n] = match q.try_into() {
-                    Ok(q) => q,
-                    _ => panic!(#wrong, #n),
-                };
-            }
-        };
-        quote! {
-            fn weighted_constraint_hessian_dual(
-                &mut self,
-                q: &[::tree_mech::runtime::dual::Dual],
-                weights: &[::tree_mech::runtime::dual::Dual],
-                out: &mut ::tree_mech::runtime::dual::DualOutputs,
-            ) {
-                out.weigh(weights);
-                #arrays
-                // The traced sweeps read no velocity.
-                let dq = q;
-                #body
-            }
-        }
-    });
-    let weighted_method = weighted.as_ref().map(|e| {
-        let body = &e.body;
-        quote! {
-            fn weighted_constraint_hessian(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                weights: &[f64],
-                out: &mut ::tree_mech::runtime::ConstraintTerms,
-            ) {
-                // The entries the constraints reach are assigned, the rest cleared unless
-                // kept from this model's last evaluation (`weigh_assigned`). A static's
-                // address is this model's own.
-                static MODEL: u8 = 0;
-                out.weigh_assigned(weights, ::core::ptr::addr_of!(MODEL) as usize);
-                let q: &[f64; #n] = &q.data.0[0];
-                // The traced sweeps read no velocity.
-                let dq = q;
-                #body
-            }
-        }
-    });
-    let functions = [
-        &first.functions,
-        &mass.functions,
-        &energy.functions,
-        &dynamics.functions,
-        &full.functions,
-        &poses.functions,
-        &c_first.functions,
-        &c_dynamics.functions,
-        &c_full.functions,
-        &d_dynamics.functions,
-        &d_full.functions,
-        &dc_dynamics.functions,
-        &dc_full.functions,
-    ];
-    let (d_dynamics_body, d_full_body, dc_dynamics_body, dc_full_body) = (
-        &d_dynamics.body,
-        &d_full.body,
-        &dc_dynamics.body,
-        &dc_full.body,
-    );
-    let (c_first_body, c_dynamics_body, c_full_body) =
-        (&c_first.body, &c_dynamics.body, &c_full.body);
-    let rows = plan.rows;
-    let constraint_names = model.constraint_row_names();
-    let constraint_variables = plan.constraint_variables();
-    let inputs = model.inputs.len();
-    let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
-    let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
-    let (first_body, dynamics_body, full_body, poses_body, mass_body, energy_body) = (
-        &first.body,
-        &dynamics.body,
-        &full.body,
-        &poses.body,
-        &mass.body,
-        &energy.body,
-    );
-    let statements = full.statements;
-    // Where the Full evaluation writes force derivatives (elements::forces): dampers fill
-    // both matrices, per-variable damping only ∂F/∂q̇'s diagonal.
-    let sparsity = if !plan.dampers.is_empty() {
-        Some(quote!(Dense))
-    } else if plan.damping.iter().any(|&c| c != 0.0) {
-        Some(quote!(Diagonal))
-    } else {
-        None
-    };
-    let mark_force_derivatives = sparsity
-        .map(|s| quote!(out.force_derivatives = ::tree_mech::runtime::system::Sparsity::#s;));
-    // A dual evaluation's slices as arrays of the model's size (a panic naming the method
-    // otherwise).
-    let dual_arrays = |method: &str| {
-        let wrong = format!("{method} takes one dual number per variable ({{}})");
-        quote! {
-            let (q, dq): (&[::tree_mech::runtime::dual::Dual; #n], &[::tree_mech::runtime::dual::Dual; #n]) =
-                match (q.try_into(), dq.try_into()) {
-                    (Ok(q), Ok(dq)) => (q, dq),
-                    _ => panic!(#wrong, #n),
-                };
-        }
-    };
-    let (evaluate_arrays, constraints_arrays) = (
-        dual_arrays("evaluate_dual"),
-        dual_arrays("constraints_dual"),
-    );
-    // A dual evaluation by its order: `clear` (a `DualOutputs` method) zeroes what that
-    // order accumulates, then the body runs (first-order outputs are among the Dynamics
-    // evaluation's).
-    let dual_by_order = |clear: &str, dynamics: &TokenStream, full: &TokenStream| {
-        let clear = format_ident!("{clear}");
-        quote! {
-            match order {
-                ::tree_mech::runtime::Order::First | ::tree_mech::runtime::Order::Dynamics => {
-                    out.#clear(::tree_mech::runtime::Order::Dynamics);
-                    #dynamics
-                }
-                ::tree_mech::runtime::Order::Full => {
-                    out.#clear(::tree_mech::runtime::Order::Full);
-                    #full
-                }
-            }
-        }
-    };
-    let lagrangian_dual = dual_by_order("clear_lagrangian", d_dynamics_body, d_full_body);
-    let constraints_dual = dual_by_order("clear_constraints", dc_dynamics_body, dc_full_body);
-    let articulated = articulated_program(&plan, &kinematic).map(|program| {
-        program.emit(
-            "__articulated",
-            &var_names,
+impl Programs {
+    /// Traces and emits every program of `model`'s plan.
+    fn emit(plan: &TreePlan, model: &Model) -> Self {
+        let n = model.dof();
+        let var_names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
+        let vars = &var_names[..];
+        let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+        let terms_ty = quote!(::tree_mech::__private::Terms<::tree_mech::__private::Const<#n>>);
+        let constraint_ty = quote!(::tree_mech::__private::ConstraintTerms);
+        let (f64_terms, f64_constraints, generic) = (
             Flavour::F64 {
-                out_ty: &quote!(::tree_mech::runtime::articulated::ArticulatedIo<#n>),
-                scratch: false,
+                out_ty: &terms_ty,
+                scratch: true,
             },
-        )
-    });
-    let articulated_functions = articulated.as_ref().map(|e| e.functions.clone());
-    // The inverse dynamics over a generic scalar with the accelerations as inputs, and the
-    // constraints' `Dh` and `q̇ᵀD²h q̇`, for the continuous linearisation's sweeps over jets
-    // (`System::inverse_dynamics_jet`).
-    let inverse = {
-        let evaluation: Evaluation = |plan, k, q, dq, _, out| {
-            let qdd: Vec<Term> = (0..plan.dof()).map(trace::qdd).collect();
-            kernel::inverse_dynamics(plan, k, q, dq, &qdd, out);
-            if plan.rows > 0 {
-                kernel::constraints(plan, k, q, dq, Order::Dynamics, out);
-            }
+            Flavour::F64 {
+                out_ty: &constraint_ty,
+                scratch: true,
+            },
+            Flavour::Generic,
+        );
+        let lagrangian: Evaluation = kernel::evaluate;
+        let constraints: Evaluation = kernel::constraints;
+        // `M(q)` and `L(q, 0)` alone (`System::mass_matrix`): the sweeps at rest, no velocity.
+        let mass: Evaluation = |plan, k, q, _, _, out| kernel::mass(plan, k, q, out);
+        // `E = T + V` alone (`System::energy`): velocities and first moments, no columns.
+        let energy: Evaluation = |plan, k, q, dq, _, out| kernel::energy(plan, k, q, dq, out);
+        // Every evaluation over f64; those the linearisations differentiate also generic (only
+        // instantiated, over dual numbers, where a program differentiates this model).
+        let [l_first, l_dynamics, l_full] =
+            [Order::First, Order::Dynamics, Order::Full].map(|o| traced(plan, o, lagrangian));
+        let [c_first, c_dynamics, c_full] =
+            [Order::First, Order::Dynamics, Order::Full].map(|o| traced(plan, o, constraints));
+        let poses = Flavour::F64 {
+            out_ty: &quote!([::tree_mech::__private::Pose]),
+            scratch: false,
         };
-        traced(&plan, Order::First, evaluation)
-            .naming()
-            .emit("__d_inverse", &var_names, generic)
-    };
-    let inverse_functions = &inverse.functions;
-    let inverse_method = {
-        let body = &inverse.body;
-        quote! {
-            #[inline]
-            fn inverse_dynamics_jet(
-                &mut self,
-                q: &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>],
-                dq: &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>],
-                qdd: &[f64],
-                out: &mut ::tree_mech::runtime::dual::JetOutputs<{ ::tree_mech::runtime::dual::LANES }>,
-            ) -> bool {
-                out.clear();
-                out.accelerations.copy_from_slice(qdd);
-                let (q, dq): (
-                    &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>; #n],
-                    &[::tree_mech::runtime::dual::Jet<{ ::tree_mech::runtime::dual::LANES }>; #n],
-                ) = match (q.try_into(), dq.try_into()) {
-                    (Ok(q), Ok(dq)) => (q, dq),
-                    _ => panic!("inverse_dynamics_jet takes one jet per variable ({})", #n),
-                };
-                #body
-                true
-            }
+        let articulated = Flavour::F64 {
+            out_ty: &quote!(::tree_mech::__private::ArticulatedIo<#n>),
+            scratch: false,
+        };
+        Programs {
+            first: l_first.assigning().emit("__first", vars, f64_terms),
+            mass: (traced(plan, Order::Dynamics, mass).assigning()).emit("__mass", vars, f64_terms),
+            energy: (traced(plan, Order::First, energy).assigning())
+                .emit("__energy", vars, f64_terms),
+            dynamics: l_dynamics.assigning().emit("__dynamics", vars, f64_terms),
+            full: l_full.assigning().emit("__full", vars, f64_terms),
+            poses: poses_program(plan).emit("__poses", vars, poses),
+            c_first: c_first.assigning().emit("__c_first", vars, f64_constraints),
+            c_dynamics: c_dynamics
+                .assigning()
+                .emit("__c_dynamics", vars, f64_constraints),
+            c_full: c_full.assigning().emit("__c_full", vars, f64_constraints),
+            d_dynamics: l_dynamics.naming().emit("__d_dynamics", vars, generic),
+            d_full: l_full.naming().emit("__d_full", vars, generic),
+            dc_dynamics: c_dynamics.naming().emit("__dc_dynamics", vars, generic),
+            dc_full: c_full.naming().emit("__dc_full", vars, generic),
+            weighted: weighted_program(plan, &kinematic).map(|(assigning, naming)| {
+                (
+                    assigning.emit("__c_weighted", vars, f64_constraints),
+                    naming.emit("__dc_weighted", vars, generic),
+                )
+            }),
+            articulated: articulated_program(plan, &kinematic)
+                .map(|program| program.emit("__articulated", vars, articulated)),
+            inverse: inverse_program(plan).emit("__d_inverse", vars, generic),
+        }
+    }
+
+    /// Every program's helper functions (associated functions of the generated type).
+    fn functions(&self) -> impl Iterator<Item = &TokenStream> {
+        let always = [
+            &self.first,
+            &self.mass,
+            &self.energy,
+            &self.dynamics,
+            &self.full,
+            &self.poses,
+            &self.c_first,
+            &self.c_dynamics,
+            &self.c_full,
+            &self.d_dynamics,
+            &self.d_full,
+            &self.dc_dynamics,
+            &self.dc_full,
+        ];
+        let weighted = self.weighted.iter().flat_map(|(a, b)| [a, b]);
+        (always.into_iter().chain(self.articulated.iter()))
+            .chain(weighted)
+            .chain([&self.inverse])
+            .map(|e| &e.functions)
+    }
+}
+
+/// The inverse dynamics over a generic scalar with the accelerations as inputs, and the
+/// constraints' `Dh` and `q̇ᵀD²h q̇`, for the continuous linearisation's sweeps over jets
+/// (`System::inverse_dynamics_jet`).
+fn inverse_program(plan: &TreePlan) -> Program {
+    let evaluation: Evaluation = |plan, k, q, dq, _, out| {
+        let qdd: Vec<Term> = (0..plan.dof()).map(trace::qdd).collect();
+        kernel::inverse_dynamics(plan, k, q, dq, &qdd, out);
+        if plan.rows > 0 {
+            kernel::constraints(plan, k, q, dq, Order::Dynamics, out);
         }
     };
-    let articulated_method = articulated.as_ref().map(|e| {
-        let body = &e.body;
-        quote! {
-            fn articulated_acceleration(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                dq: &::tree_mech::runtime::Vector<Self::N>,
-                tau: &::tree_mech::runtime::Vector<Self::N>,
-                qdd: &mut ::tree_mech::runtime::Vector<Self::N>,
-                own: &mut ::tree_mech::runtime::Terms<Self::N>,
-            ) -> bool {
-                let mut io = ::tree_mech::runtime::articulated::ArticulatedIo::<#n>::default();
-                io.tau.copy_from_slice(tau.as_slice());
-                io.qdd_in.copy_from_slice(qdd.as_slice());
-                {
-                    let out = &mut io;
-                    let q: &[f64; #n] = &q.data.0[0];
-                    let dq: &[f64; #n] = &dq.data.0[0];
-                    #body
-                }
-                // The model's own forces, as the interpreted system leaves them.
-                own.force.as_mut_slice().copy_from_slice(&io.force);
-                own.dl_dq.as_mut_slice().copy_from_slice(&io.dl_dq);
-                let held = ::tree_mech::runtime::articulated::pivots_hold(&Self::KINEMATIC, |i| {
-                    (io.pivot[i], io.pivot_scale[i])
-                });
-                if held {
-                    for i in (0..#n).filter(|&i| !Self::KINEMATIC[i]) {
-                        qdd[i] = io.qdd[i];
-                    }
-                }
-                held
-            }
-        }
-    });
-    let full_path = file
-        .as_ref()
-        .map(|(full, shown)| (full.to_string_lossy().into_owned(), shown.clone()));
-    let floating_base = matches!(input.source, Source::File(_, true));
-    let constructor = model_constructor(
-        spec.as_ref(),
-        full_path.as_ref().map(|(p, s)| (p.as_str(), s.as_str())),
-        floating_base,
-    );
-    let rebuild = full_path.as_ref().map(|(path, _)| {
-        quote!(
-            const _: &[u8] = include_bytes!(#path);
-        )
-    });
+    traced(plan, Order::First, evaluation).naming()
+}
+
+/// The unit struct with its documentation, and (for a file model) the file compiled in, so
+/// that editing it rebuilds the crate.
+fn declaration(input: &Input, loaded: &Loaded, statements: usize) -> TokenStream {
+    let (attrs, vis, name) = (&input.attrs, &input.vis, &input.name);
+    let model = &loaded.model;
+    let var_names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
     let doc = format!(
         "The `{}` model compiled by `tree_model!`: {} variables ({}), {} frames. Its full \
          evaluation is {} straight-line statements.",
         model.name,
-        n,
+        model.dof(),
         var_names.join(", "),
-        nf,
+        model.frames.len(),
         statements
     );
-
-    Ok(quote! {
+    let rebuild = loaded.file.as_ref().map(|(path, _)| {
+        quote!(
+            const _: &[u8] = include_bytes!(#path);
+        )
+    });
+    quote! {
         #(#attrs)*
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
         #vis struct #name;
 
         #rebuild
+    }
+}
 
+/// The type's own items: its constants (sizes, names, the model's initial values, an index
+/// per variable and frame), `new`, `model()` and every program's functions.
+fn inherent_impl(
+    name: &syn::Ident,
+    loaded: &Loaded,
+    programs: &Programs,
+) -> syn::Result<TokenStream> {
+    let model = &loaded.model;
+    let (n, nf, rows, inputs) = (
+        model.dof(),
+        model.frames.len(),
+        model.constraint_row_names().len(),
+        model.inputs.len(),
+    );
+    let var_names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
+    let frame_names: Vec<&str> = model.frames.iter().map(|f| f.name.as_str()).collect();
+    let var_consts = index_constants("", &var_names, "variable", name.span())?;
+    let frame_consts = index_constants("FRAME_", &frame_names, "frame", name.span())?;
+    let per_variable = |f: fn(&tree_model::Variable) -> f64| -> Vec<TokenStream> {
+        model.variables.iter().map(|v| constant(f(v))).collect()
+    };
+    let (q0, dq0, damping) = (
+        per_variable(|v| v.q0),
+        per_variable(|v| v.dq0),
+        per_variable(|v| v.damping),
+    );
+    let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
+    let constraint_names = model.constraint_row_names();
+    let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
+    let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
+    let statements = programs.full.statements;
+    let constructor = model_constructor(
+        loaded.spec.as_ref(),
+        (loaded.file.as_ref()).map(|(p, s)| (p.as_str(), s.as_str())),
+        loaded.floating_base,
+    );
+    let functions = programs.functions();
+    Ok(quote! {
         impl #name {
             /// Number of configuration variables.
             pub const DOF: usize = #n;
@@ -856,198 +761,18 @@ pub fn expand(input: Input) -> syn::Result<TokenStream> {
             }
 
             /// The same model for the interpreted runtime (`TreeSystem::new(&Self::model(), …)`).
-            pub fn model() -> ::tree_mech::model::Model {
+            pub fn model() -> ::tree_mech::__private::model::Model {
                 Self::model_ref().clone()
             }
 
             /// The model, built once (a file model is parsed on first use only).
-            fn model_ref() -> &'static ::tree_mech::model::Model {
-                static MODEL: ::std::sync::OnceLock<::tree_mech::model::Model> =
+            fn model_ref() -> &'static ::tree_mech::__private::model::Model {
+                static MODEL: ::std::sync::OnceLock<::tree_mech::__private::model::Model> =
                     ::std::sync::OnceLock::new();
                 MODEL.get_or_init(|| #constructor)
             }
 
             #(#functions)*
-            #articulated_functions
-            #weighted_functions
-            #weighted_dual_functions
-            #inverse_functions
-        }
-
-        impl ::tree_mech::runtime::System for #name {
-            type N = ::tree_mech::runtime::nalgebra::Const<#n>;
-
-            fn dim(&self) -> Self::N {
-                ::tree_mech::runtime::nalgebra::Const::<#n>
-            }
-
-            fn variable_name(&self, i: usize) -> &str {
-                Self::VARIABLES[i]
-            }
-
-            fn frame_count(&self) -> usize {
-                #nf
-            }
-
-            fn frame_name(&self, k: usize) -> &str {
-                Self::FRAMES[k]
-            }
-
-            fn initial(&self, i: usize) -> (f64, f64) {
-                (Self::Q0[i], Self::DQ0[i])
-            }
-
-            fn damping(&self, i: usize) -> f64 {
-                Self::DAMPING[i]
-            }
-
-            fn is_angle(&self, i: usize) -> bool {
-                Self::model_ref().is_angle(i)
-            }
-
-            fn input_count(&self) -> usize {
-                Self::INPUTS.len()
-            }
-
-            fn input_name(&self, k: usize) -> &str {
-                Self::INPUTS[k]
-            }
-
-            fn input_variable(&self, k: usize) -> usize {
-                Self::INPUT_VARIABLES[k]
-            }
-
-            /// Read from the model (allocates): call it when setting up, not per step.
-            fn motion(&self, i: usize) -> Option<::tree_mech::model::Motion> {
-                if Self::KINEMATIC[i] {
-                    Self::model_ref().variables[i].motion.clone()
-                } else {
-                    None
-                }
-            }
-
-            fn is_kinematic(&self, i: usize) -> bool {
-                Self::KINEMATIC[i]
-            }
-
-            fn constraint_count(&self) -> usize {
-                #rows
-            }
-
-            fn constraint_name(&self, r: usize) -> &str {
-                Self::CONSTRAINTS[r]
-            }
-
-            fn constraint_variables(&self, r: usize) -> Option<&[usize]> {
-                const VARIABLES: [&[usize]; #rows] = [#(&[#(#constraint_variables),*]),*];
-                VARIABLES.get(r).copied()
-            }
-
-            fn constraints(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                dq: &::tree_mech::runtime::Vector<Self::N>,
-                order: ::tree_mech::runtime::Order,
-                out: &mut ::tree_mech::runtime::ConstraintTerms,
-            ) {
-                out.clear(order);
-                let q: &[f64; #n] = &q.data.0[0];
-                let dq: &[f64; #n] = &dq.data.0[0];
-                match order {
-                    ::tree_mech::runtime::Order::First => { #c_first_body }
-                    ::tree_mech::runtime::Order::Dynamics => { #c_dynamics_body }
-                    ::tree_mech::runtime::Order::Full => { #c_full_body }
-                }
-            }
-
-            fn lagrangian(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                dq: &::tree_mech::runtime::Vector<Self::N>,
-                order: ::tree_mech::runtime::Order,
-                out: &mut ::tree_mech::runtime::Terms<Self::N>,
-            ) {
-                // Each order's program assigns the same entries on every call: terms kept
-                // for it clear only what it does not (`Terms::begin_assigned`). A static's
-                // address is this model's own.
-                static MODEL: u8 = 0;
-                let key = ::core::ptr::addr_of!(MODEL) as usize;
-                out.begin_assigned(key, order);
-                let q: &[f64; #n] = &q.data.0[0];
-                let dq: &[f64; #n] = &dq.data.0[0];
-                match order {
-                    ::tree_mech::runtime::Order::First => { #first_body }
-                    ::tree_mech::runtime::Order::Dynamics => { #dynamics_body }
-                    ::tree_mech::runtime::Order::Full => { #full_body #mark_force_derivatives }
-                }
-                out.end_assigned(key, order);
-            }
-
-            fn mass_matrix(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                out: &mut ::tree_mech::runtime::Terms<Self::N>,
-            ) {
-                out.clear(::tree_mech::runtime::Order::Dynamics);
-                let q: &[f64; #n] = &q.data.0[0];
-                // The traced sweeps read no velocity.
-                let dq = q;
-                #mass_body
-            }
-
-            fn energy(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                dq: &::tree_mech::runtime::Vector<Self::N>,
-                out: &mut ::tree_mech::runtime::Terms<Self::N>,
-            ) -> f64 {
-                let q: &[f64; #n] = &q.data.0[0];
-                let dq: &[f64; #n] = &dq.data.0[0];
-                out.total_energy = 0.0;
-                #energy_body
-                out.total_energy
-            }
-
-            #articulated_method
-            #weighted_method
-            #weighted_dual_method
-            #inverse_method
-
-            fn poses(
-                &mut self,
-                q: &::tree_mech::runtime::Vector<Self::N>,
-                out: &mut [::tree_mech::runtime::Pose],
-            ) {
-                assert_eq!(out.len(), #nf, "poses() needs one slot per frame");
-                let q: &[f64; #n] = &q.data.0[0];
-                let dq = q;
-                #poses_body
-            }
-
-            #[inline]
-            fn evaluate_dual(
-                &mut self,
-                q: &[::tree_mech::runtime::dual::Dual],
-                dq: &[::tree_mech::runtime::dual::Dual],
-                order: ::tree_mech::runtime::Order,
-                out: &mut ::tree_mech::runtime::dual::DualOutputs,
-            ) {
-                // The constraints first (that call zeroes their outputs), then the Lagrangian.
-                <Self as ::tree_mech::runtime::System>::constraints_dual(self, q, dq, order, out);
-                #evaluate_arrays
-                #lagrangian_dual
-            }
-
-            fn constraints_dual(
-                &mut self,
-                q: &[::tree_mech::runtime::dual::Dual],
-                dq: &[::tree_mech::runtime::dual::Dual],
-                order: ::tree_mech::runtime::Order,
-                out: &mut ::tree_mech::runtime::dual::DualOutputs,
-            ) {
-                #constraints_arrays
-                #constraints_dual
-            }
         }
     })
 }

@@ -29,6 +29,7 @@ mod ast;
 mod expand;
 mod lower;
 mod program;
+mod system_impl;
 mod trace;
 
 use proc_macro::TokenStream;

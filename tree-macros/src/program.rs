@@ -3,7 +3,7 @@
 //! function boundary passed through one scratch array. Each program is emitted twice: as
 //! recorded, and compiled on x86-64 for AVX2 and FMA — over `f64` with a product read by one
 //! sum fused into it ([`fusions`]) — the second called where the CPU has them
-//! (`tree_runtime::cpu::fused`).
+//! (`tree_kernel::cpu::fused`).
 
 use proc_macro2::{Ident, TokenStream};
 use quote::{format_ident, quote};
@@ -24,14 +24,14 @@ pub struct Program {
 pub enum Flavour<'a> {
     /// `f64` throughout; outputs assigned to their targets (`out.mass[(0, 1)] = …`) in a
     /// storage of type `out_ty`, which keeps the scratch (`out.scratch`, a
-    /// `tree_runtime::outputs::Scratch`) if `scratch`, else the scratch is a local array.
+    /// `tree_kernel::outputs::Scratch`) if `scratch`, else the scratch is a local array.
     F64 {
         out_ty: &'a TokenStream,
         scratch: bool,
     },
     /// Helpers generic over `S: Scalar`, outputs handed to a `Sink<S>`
     /// (`out.add(Output::Mass(0, 1), …)`; the targets are `Output` expressions), called
-    /// from a body whose outputs (`tree_runtime::dual::DualOutputs`) instantiate `S` and keep
+    /// from a body whose outputs (`tree_kernel::dual::DualOutputs`) instantiate `S` and keep
     /// the scratch.
     Generic,
 }
@@ -335,11 +335,11 @@ impl Program {
             Flavour::Generic => (
                 quote!(S),
                 Box::new(move |name: &Ident| {
-                    quote!(fn #name<S: ::tree_mech::runtime::scalar::Scalar>(
+                    quote!(fn #name<S: ::tree_mech::__private::Scalar>(
                         q: &[S; #dof],
                         dq: &[S; #dof],
                         s: &mut [S; #slots],
-                        out: &mut impl ::tree_mech::runtime::outputs::Sink<S>,
+                        out: &mut impl ::tree_mech::__private::Sink<S>,
                     ))
                 }) as Box<dyn Fn(&Ident) -> TokenStream>,
             ),
@@ -415,7 +415,7 @@ impl Program {
                 functions.extend(if fused_variant {
                     function
                 } else {
-                    quote!(::tree_mech::runtime::__unless_fused_only! { #function })
+                    quote!(::tree_mech::__private::__unless_fused_only! { #function })
                 });
                 let calls = if fused_variant {
                     &mut fused_calls
@@ -428,13 +428,13 @@ impl Program {
         // Where every CPU the build targets runs the fused variant, the recorded one is not
         // compiled (`__unless_fused_only`; `cpu::fused` is then `true`).
         let body = quote! {
-            if ::tree_mech::runtime::cpu::fused() {
+            if ::tree_mech::__private::fused() {
                 // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
                 // the functions have no target features and the block is plain.
                 #[allow(unused_unsafe)]
                 let () = unsafe { #fused_calls };
             } else {
-                ::tree_mech::runtime::__unless_fused_only! { let () = { #plain_calls }; }
+                ::tree_mech::__private::__unless_fused_only! { let () = { #plain_calls }; }
             }
         };
         // The values passed between functions: the outputs' scratch (allocated once, never

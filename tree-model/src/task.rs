@@ -1,7 +1,7 @@
 //! Optimal-control task files (README, "Optimal control"): what to optimise on which model —
 //! horizon, integrator, controls, start, running and terminal cost terms, limits — read from
 //! TOML with source spans and resolved against the model, so every problem names its line.
-//! The numbers are the runtime's business (`tree_runtime::control`); this module only says
+//! The numbers are the runtime's business (`tree_control`); this module only says
 //! what was asked, with names turned into indices.
 
 use std::collections::BTreeMap;

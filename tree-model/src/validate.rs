@@ -38,13 +38,66 @@ impl Problems {
 /// Validates a model specification. On failure, every problem found is returned.
 pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     let mut errs = Problems(Vec::new());
-
     let gravity = spec.gravity.unwrap_or(DEFAULT_GRAVITY);
     if gravity.iter().any(|g| !g.is_finite()) {
         errs.push(Site::Model, "gravity must be three finite numbers".into());
     }
+    let index_of = frame_names(spec, &mut errs);
+    let mut vars = Variables::default();
+    let frames = (0..spec.frames.len())
+        .map(|k| {
+            let f = &spec.frames[k];
+            let parent = parent_of(k, f, &index_of, &mut errs);
+            let (primitive, joint) = joint_of(k, spec, &mut vars, &mut errs);
+            let mass = mass_of(k, f, &mut errs);
+            Frame {
+                name: f.name.clone(),
+                parent,
+                primitive,
+                joint,
+                mass,
+            }
+        })
+        .collect();
+    constraint_length_variables(spec, &mut vars, &mut errs);
+    for v in &spec.variables {
+        apply_settings(v, &mut vars, &mut errs);
+    }
+    check_variables(spec, &vars.list, &mut errs);
+    let (constraints, springs, dampers) =
+        crate::elements::validate_elements(spec, &index_of, &vars.index, &vars.list, &mut errs.0);
+    let inputs = validate_inputs(spec, &vars.index, &vars.list, &mut errs);
+    if !errs.0.is_empty() {
+        return Err(errs.0);
+    }
+    let model = Model {
+        name: spec.name.clone(),
+        gravity,
+        frames,
+        variables: vars.list,
+        constraints,
+        springs,
+        dampers,
+        inputs,
+    };
+    check_directions(&model, &mut errs);
+    check_moves_mass(&model, &mut errs);
+    check_totals(&model, &mut errs);
+    match errs.0.is_empty() {
+        true => Ok(model),
+        false => Err(errs.0),
+    }
+}
 
-    // Frame names: unique, not "world".
+/// The variables found so far, in order, and their indices by name.
+#[derive(Default)]
+struct Variables<'a> {
+    list: Vec<Variable>,
+    index: HashMap<&'a str, usize>,
+}
+
+/// Frame names: unique, not "world"; each name's index.
+fn frame_names<'a>(spec: &'a ModelSpec, errs: &mut Problems) -> HashMap<&'a str, usize> {
     let mut index_of: HashMap<&str, usize> = HashMap::new();
     for (k, f) in spec.frames.iter().enumerate() {
         if !name_ok(&f.name) || f.name == "world" {
@@ -72,137 +125,150 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         }
     }
 
-    let mut frames = Vec::with_capacity(spec.frames.len());
-    let mut variables: Vec<Variable> = Vec::new();
-    let mut var_index: HashMap<&str, usize> = HashMap::new();
-    for (k, f) in spec.frames.iter().enumerate() {
-        let parent = match f.parent.as_deref() {
-            None | Some("world") => None,
-            Some(p) => match index_of.get(p) {
-                Some(&pi) if pi < k => Some(pi),
-                Some(&pi) if pi == k => {
-                    errs.frame(
-                        k,
-                        FrameField::Parent,
-                        format!("frame `{}` is its own parent", f.name),
-                    );
-                    None
-                }
-                Some(_) => {
-                    errs.frame(
-                        k,
-                        FrameField::Parent,
-                        format!(
-                            "frame `{}`: parent `{p}` is listed after its child; list every parent before its children",
-                            f.name
-                        ),
-                    );
-                    None
-                }
-                None => {
-                    errs.frame(
-                        k,
-                        FrameField::Parent,
-                        format!("frame `{}` has unknown parent `{p}`", f.name),
-                    );
-                    None
-                }
-            },
-        };
+    index_of
+}
 
-        let (primitive, joint) = match f.primitives.as_slice() {
-            [] => {
+/// Frame `k`'s parent: the world, or a frame listed before it.
+fn parent_of(
+    k: usize,
+    f: &FrameSpec,
+    index_of: &HashMap<&str, usize>,
+    errs: &mut Problems,
+) -> Option<usize> {
+    match f.parent.as_deref() {
+        None | Some("world") => None,
+        Some(p) => match index_of.get(p) {
+            Some(&pi) if pi < k => Some(pi),
+            Some(&pi) if pi == k => {
                 errs.frame(
                     k,
-                    FrameField::Whole,
+                    FrameField::Parent,
+                    format!("frame `{}` is its own parent", f.name),
+                );
+                None
+            }
+            Some(_) => {
+                errs.frame(
+                    k,
+                    FrameField::Parent,
                     format!(
-                        "frame `{}` has no transform: give exactly one of tx ty tz rx ry rz",
+                        "frame `{}`: parent `{p}` is listed after its child; list every parent before its children",
                         f.name
                     ),
                 );
-                (PrimitiveKind::Tx, Joint::Constant(0.0))
+                None
             }
-            [p] => {
-                let joint = match &p.value {
-                    Value::Constant(x) => {
-                        if !x.is_finite() {
-                            errs.frame(
-                                k,
-                                FrameField::Primitive,
-                                format!("frame `{}`: {} value {x} is not finite", f.name, p.kind),
-                            );
-                        }
-                        Joint::Constant(*x)
+            None => {
+                errs.frame(
+                    k,
+                    FrameField::Parent,
+                    format!("frame `{}` has unknown parent `{p}`", f.name),
+                );
+                None
+            }
+        },
+    }
+}
+
+/// Frame `k`'s one primitive and what drives it: a constant, or a variable (created by the
+/// first frame it drives).
+fn joint_of<'a>(
+    k: usize,
+    spec: &'a ModelSpec,
+    vars: &mut Variables<'a>,
+    errs: &mut Problems,
+) -> (PrimitiveKind, Joint) {
+    let f = &spec.frames[k];
+    match f.primitives.as_slice() {
+        [] => {
+            errs.frame(
+                k,
+                FrameField::Whole,
+                format!(
+                    "frame `{}` has no transform: give exactly one of tx ty tz rx ry rz",
+                    f.name
+                ),
+            );
+            (PrimitiveKind::Tx, Joint::Constant(0.0))
+        }
+        [p] => {
+            let joint = match &p.value {
+                Value::Constant(x) => {
+                    if !x.is_finite() {
+                        errs.frame(
+                            k,
+                            FrameField::Primitive,
+                            format!("frame `{}`: {} value {x} is not finite", f.name, p.kind),
+                        );
                     }
-                    Value::Variable(name) if !name_ok(name) => {
+                    Joint::Constant(*x)
+                }
+                Value::Variable(name) if !name_ok(name) => {
+                    errs.frame(
+                        k,
+                        FrameField::Primitive,
+                        format!(
+                            "frame `{}`: variable name `{}` is empty or holds a control character",
+                            f.name,
+                            name.escape_debug()
+                        ),
+                    );
+                    Joint::Constant(0.0)
+                }
+                Value::Variable(name) => match vars.index.get(name.as_str()) {
+                    Some(&i) => {
                         errs.frame(
                             k,
                             FrameField::Primitive,
                             format!(
-                                "frame `{}`: variable name `{}` is empty or holds a control character",
-                                f.name,
-                                name.escape_debug()
+                                "variable `{name}` drives frames `{}` and `{}`: a variable drives exactly one transform",
+                                vars.list[i].frame.map_or("?", |k| spec.frames[k].name.as_str()),
+                                f.name
                             ),
                         );
-                        Joint::Constant(0.0)
+                        Joint::Variable(i)
                     }
-                    Value::Variable(name) => match var_index.get(name.as_str()) {
-                        Some(&i) => {
-                            errs.frame(
-                                k,
-                                FrameField::Primitive,
-                                format!(
-                                    "variable `{name}` drives frames `{}` and `{}`: a variable drives exactly one transform",
-                                    variables[i].frame.map_or("?", |k| spec.frames[k].name.as_str()),
-                                    f.name
-                                ),
-                            );
-                            Joint::Variable(i)
-                        }
-                        None => {
-                            let i = variables.len();
-                            var_index.insert(name, i);
-                            variables.push(Variable {
-                                name: name.clone(),
-                                frame: Some(k),
-                                q0: 0.0,
-                                dq0: 0.0,
-                                damping: 0.0,
-                                motion: None,
-                                limits: None,
-                            });
-                            Joint::Variable(i)
-                        }
-                    },
-                };
-                (p.kind, joint)
-            }
-            several => {
-                let kinds: Vec<&str> = several.iter().map(|p| p.kind.keyword()).collect();
-                errs.frame(
-                    k,
-                    FrameField::Primitive,
-                    format!(
-                        "frame `{}` has several transforms ({}): give exactly one; chain frames for more",
-                        f.name,
-                        kinds.join(", ")
-                    ),
-                );
-                (several[0].kind, Joint::Constant(0.0))
-            }
-        };
-
-        let mass = mass_of(k, f, &mut errs);
-        frames.push(Frame {
-            name: f.name.clone(),
-            parent,
-            primitive,
-            joint,
-            mass,
-        });
+                    None => {
+                        let i = vars.list.len();
+                        vars.index.insert(name, i);
+                        vars.list.push(Variable {
+                            name: name.clone(),
+                            frame: Some(k),
+                            q0: 0.0,
+                            dq0: 0.0,
+                            damping: 0.0,
+                            motion: None,
+                            limits: None,
+                        });
+                        Joint::Variable(i)
+                    }
+                },
+            };
+            (p.kind, joint)
+        }
+        several => {
+            let kinds: Vec<&str> = several.iter().map(|p| p.kind.keyword()).collect();
+            errs.frame(
+                k,
+                FrameField::Primitive,
+                format!(
+                    "frame `{}` has several transforms ({}): give exactly one; chain frames for more",
+                    f.name,
+                    kinds.join(", ")
+                ),
+            );
+            (several[0].kind, Joint::Constant(0.0))
+        }
     }
+}
 
-    // Variables that only set a constraint's length come next, in constraint order.
+/// Variables that only set a constraint's length come after the frames' own, in
+/// constraint order.
+fn constraint_length_variables<'a>(
+    spec: &'a ModelSpec,
+    vars: &mut Variables<'a>,
+    errs: &mut Problems,
+) {
     let settings: HashMap<&str, &VariableSpec> = spec
         .variables
         .iter()
@@ -210,12 +276,12 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         .collect();
     for (c, con) in spec.constraints.iter().enumerate() {
         if let Some(ParameterSpec::Variable(name)) = &con.length {
-            if var_index.contains_key(name.as_str()) {
+            if vars.index.contains_key(name.as_str()) {
                 continue;
             }
             if settings.contains_key(name.as_str()) {
-                var_index.insert(name, variables.len());
-                variables.push(Variable {
+                vars.index.insert(name, vars.list.len());
+                vars.list.push(Variable {
                     name: name.clone(),
                     frame: None,
                     q0: 0.0,
@@ -233,146 +299,159 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             }
         }
     }
+}
 
-    // Per-variable settings.
-    for v in &spec.variables {
-        let site = || Site::VariableSettings {
-            name: v.name.clone(),
-        };
-        let Some(&i) = var_index.get(v.name.as_str()) else {
+/// One variable's settings, checked and applied: start, damping, limits, and for a
+/// kinematic variable its prescribed motion (where it then starts).
+fn apply_settings(v: &VariableSpec, vars: &mut Variables, errs: &mut Problems) {
+    let site = || Site::VariableSettings {
+        name: v.name.clone(),
+    };
+    let Some(&i) = vars.index.get(v.name.as_str()) else {
+        errs.push(
+            site(),
+            format!(
+                "settings for variable `{}`, which drives no transform and sets no constraint length",
+                v.name
+            ),
+        );
+        return;
+    };
+    for (what, value) in [("q0", v.q0), ("dq0", v.dq0), ("damping", v.damping)] {
+        if value.is_some_and(|x| !x.is_finite()) {
+            errs.push(
+                site(),
+                format!("variable `{}`: {what} is not finite", v.name),
+            );
+        }
+    }
+    if v.damping.is_some_and(|c| c < 0.0) {
+        errs.push(
+            site(),
+            format!("variable `{}`: damping must not be negative", v.name),
+        );
+    }
+    if let Some([lo, hi]) = v.limits {
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
             errs.push(
                 site(),
                 format!(
-                    "settings for variable `{}`, which drives no transform and sets no constraint length",
-                    v.name
-                ),
-            );
-            continue;
-        };
-        for (what, value) in [("q0", v.q0), ("dq0", v.dq0), ("damping", v.damping)] {
-            if value.is_some_and(|x| !x.is_finite()) {
-                errs.push(
-                    site(),
-                    format!("variable `{}`: {what} is not finite", v.name),
-                );
-            }
-        }
-        if v.damping.is_some_and(|c| c < 0.0) {
-            errs.push(
-                site(),
-                format!("variable `{}`: damping must not be negative", v.name),
-            );
-        }
-        if let Some([lo, hi]) = v.limits {
-            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                errs.push(
-                    site(),
-                    format!(
-                        "variable `{}`: limits [{lo}, {hi}] must be finite with lower ≤ upper",
-                        v.name
-                    ),
-                );
-            }
-        }
-        let kinematic = v.kinematic.unwrap_or(false);
-        let var = &mut variables[i];
-        var.limits = v.limits;
-        var.q0 = v.q0.unwrap_or(0.0);
-        var.dq0 = v.dq0.unwrap_or(0.0);
-        var.damping = v.damping.unwrap_or(0.0);
-        if !kinematic {
-            if v.motion.is_some() || v.samples.is_some() {
-                errs.push(
-                    site(),
-                    format!(
-                        "variable `{}` has a prescribed motion but is dynamic: add `kinematic = true`, or remove the motion",
-                        v.name
-                    ),
-                );
-            }
-            continue;
-        }
-        if v.damping.is_some_and(|c| c != 0.0) {
-            errs.push(
-                site(),
-                format!(
-                    "variable `{}` is kinematic: damping has no effect on a prescribed variable",
+                    "variable `{}`: limits [{lo}, {hi}] must be finite with lower ≤ upper",
                     v.name
                 ),
             );
         }
-        var.motion = match (&v.motion, &v.samples) {
-            (Some(_), Some(_)) => {
+    }
+    let kinematic = v.kinematic.unwrap_or(false);
+    let var = &mut vars.list[i];
+    var.limits = v.limits;
+    var.q0 = v.q0.unwrap_or(0.0);
+    var.dq0 = v.dq0.unwrap_or(0.0);
+    var.damping = v.damping.unwrap_or(0.0);
+    if !kinematic {
+        if v.motion.is_some() || v.samples.is_some() {
+            errs.push(
+                site(),
+                format!(
+                    "variable `{}` has a prescribed motion but is dynamic: add `kinematic = true`, or remove the motion",
+                    v.name
+                ),
+            );
+        }
+        return;
+    }
+    if v.damping.is_some_and(|c| c != 0.0) {
+        errs.push(
+            site(),
+            format!(
+                "variable `{}` is kinematic: damping has no effect on a prescribed variable",
+                v.name
+            ),
+        );
+    }
+    var.motion = prescribed_motion(v, var, errs);
+    if let Some(m) = &var.motion {
+        // A prescribed variable starts where its motion does.
+        [var.q0, var.dq0, _] = m.at(0.0);
+    }
+}
+
+/// A kinematic variable's motion: a sine, a spline through samples, or (neither given)
+/// `q0 + dq0·t`.
+fn prescribed_motion(v: &VariableSpec, var: &Variable, errs: &mut Problems) -> Option<Motion> {
+    let site = || Site::VariableSettings {
+        name: v.name.clone(),
+    };
+    match (&v.motion, &v.samples) {
+        (Some(_), Some(_)) => {
+            errs.push(
+                site(),
+                format!(
+                    "variable `{}`: give `motion` or `samples`, not both",
+                    v.name
+                ),
+            );
+            None
+        }
+        (Some(m), None) => {
+            let sine = [m.offset, m.amplitude, m.frequency, m.phase].map(|x| x.unwrap_or(0.0));
+            if sine.iter().any(|x| !x.is_finite()) {
+                errs.push(
+                    site(),
+                    format!("variable `{}`: motion has a non-finite number", v.name),
+                );
+            } else if sine[2] < 0.0 {
                 errs.push(
                     site(),
                     format!(
-                        "variable `{}`: give `motion` or `samples`, not both",
+                        "variable `{}`: motion frequency must not be negative",
+                        v.name
+                    ),
+                );
+            } else {
+                // q̈ peaks at a·(2πf)²: it must be a number, or every step overflows.
+                let w = 2.0 * std::f64::consts::PI * sine[2];
+                if !(sine[1] * w * w).is_finite() || !(sine[0].abs() + sine[1].abs()).is_finite() {
+                    errs.push(
+                        site(),
+                        format!(
+                            "variable `{}`: motion with amplitude {} and frequency {} has an acceleration a·(2πf)² that overflows",
+                            v.name, short(sine[1]), short(sine[2])
+                        ),
+                    );
+                }
+            }
+            Some(Motion::Sine {
+                offset: sine[0],
+                amplitude: sine[1],
+                frequency: sine[2],
+                phase: sine[3],
+            })
+        }
+        (None, Some(samples)) => match CubicSpline::new(samples) {
+            Some(spline) => Some(Motion::Spline(spline)),
+            None => {
+                errs.push(
+                    site(),
+                    format!(
+                        "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing (and slopes that do not overflow)",
                         v.name
                     ),
                 );
                 None
             }
-            (Some(m), None) => {
-                let sine = [m.offset, m.amplitude, m.frequency, m.phase].map(|x| x.unwrap_or(0.0));
-                if sine.iter().any(|x| !x.is_finite()) {
-                    errs.push(
-                        site(),
-                        format!("variable `{}`: motion has a non-finite number", v.name),
-                    );
-                } else if sine[2] < 0.0 {
-                    errs.push(
-                        site(),
-                        format!(
-                            "variable `{}`: motion frequency must not be negative",
-                            v.name
-                        ),
-                    );
-                } else {
-                    // q̈ peaks at a·(2πf)²: it must be a number, or every step overflows.
-                    let w = 2.0 * std::f64::consts::PI * sine[2];
-                    if !(sine[1] * w * w).is_finite()
-                        || !(sine[0].abs() + sine[1].abs()).is_finite()
-                    {
-                        errs.push(
-                            site(),
-                            format!(
-                                "variable `{}`: motion with amplitude {} and frequency {} has an acceleration a·(2πf)² that overflows",
-                                v.name, short(sine[1]), short(sine[2])
-                            ),
-                        );
-                    }
-                }
-                Some(Motion::Sine {
-                    offset: sine[0],
-                    amplitude: sine[1],
-                    frequency: sine[2],
-                    phase: sine[3],
-                })
-            }
-            (None, Some(samples)) => match CubicSpline::new(samples) {
-                Some(spline) => Some(Motion::Spline(spline)),
-                None => {
-                    errs.push(
-                        site(),
-                        format!(
-                            "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing (and slopes that do not overflow)",
-                            v.name
-                        ),
-                    );
-                    None
-                }
-            },
-            (None, None) => Some(Motion::Steady {
-                q0: var.q0,
-                dq0: var.dq0,
-            }),
-        };
-        if let Some(m) = &var.motion {
-            // A prescribed variable starts where its motion does.
-            [var.q0, var.dq0, _] = m.at(0.0);
-        }
+        },
+        (None, None) => Some(Motion::Steady {
+            q0: var.q0,
+            dq0: var.dq0,
+        }),
     }
-    for v in &variables {
+}
+
+/// A variable that sets a constraint length and drives no frame must be prescribed; a
+/// model needs frames and a variable.
+fn check_variables(spec: &ModelSpec, variables: &[Variable], errs: &mut Problems) {
+    for v in variables {
         if v.frame.is_none() && !v.is_kinematic() {
             errs.push(
                 Site::VariableSettings {
@@ -394,95 +473,84 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     } else if spec.frames.is_empty() {
         errs.push(Site::Model, "model has no frames".into());
     }
+}
 
-    let elements =
-        crate::elements::validate_elements(spec, &index_of, &var_index, &variables, &mut errs.0);
-
-    let inputs = validate_inputs(spec, &var_index, &variables, &mut errs);
-
-    if errs.0.is_empty() {
-        let (constraints, springs, dampers) = elements;
-        // A spring with a rest length, or a damper, between frames that coincide at the
-        // start has no direction: its force is 0/0 at the first step.
-        let q0: Vec<f64> = variables.iter().map(|v| v.q0).collect();
-        let model = Model {
-            name: spec.name.clone(),
-            gravity,
-            frames,
-            variables,
-            constraints,
-            springs,
-            dampers,
-            inputs,
-        };
-        let origins = model.origins(&q0);
-        let apart = |[a, b]: [usize; 2]| {
-            let (pa, pb) = (origins[a], origins[b]);
-            let d = [0, 1, 2].map(|k| pa[k] - pb[k]);
-            let scale = pa.iter().chain(&pb).fold(0.0f64, |m, x| m.max(x.abs()));
-            d.iter()
-                .any(|x| x.abs() > 1e-12 * scale.max(f64::MIN_POSITIVE))
-        };
-        let name = |k: usize| model.frames[k].name.as_str();
-        for (index, s) in model.springs.iter().enumerate() {
-            if let SpringKind::Frames(fr) = s.kind {
-                if s.rest != 0.0 && !apart(fr) {
-                    errs.push(
-                        Site::Element { section: Section::Spring, index, field: Some("frames") },
-                        format!(
-                            "spring {}: frames `{}` and `{}` coincide at the initial configuration, where a spring of rest length {} has no direction; start them apart (or use rest = 0)",
-                            index + 1, name(fr[0]), name(fr[1]), s.rest
-                        ),
-                    );
-                }
-            }
-        }
-        for (index, d) in model.dampers.iter().enumerate() {
-            if !apart(d.frames) {
+/// A spring with a rest length, or a damper, between frames that coincide at the start has
+/// no direction: its force is 0/0 at the first step.
+fn check_directions(model: &Model, errs: &mut Problems) {
+    let q0: Vec<f64> = model.variables.iter().map(|v| v.q0).collect();
+    let origins = model.origins(&q0);
+    let apart = |[a, b]: [usize; 2]| {
+        let (pa, pb) = (origins[a], origins[b]);
+        let d = [0, 1, 2].map(|k| pa[k] - pb[k]);
+        let scale = pa.iter().chain(&pb).fold(0.0f64, |m, x| m.max(x.abs()));
+        d.iter()
+            .any(|x| x.abs() > 1e-12 * scale.max(f64::MIN_POSITIVE))
+    };
+    let name = |k: usize| model.frames[k].name.as_str();
+    for (index, s) in model.springs.iter().enumerate() {
+        if let SpringKind::Frames(fr) = s.kind {
+            if s.rest != 0.0 && !apart(fr) {
                 errs.push(
-                    Site::Element { section: Section::Damper, index, field: Some("frames") },
+                    Site::Element { section: Section::Spring, index, field: Some("frames") },
                     format!(
-                        "damper {}: frames `{}` and `{}` coincide at the initial configuration, where a damper has no direction; start them apart",
-                        index + 1, name(d.frames[0]), name(d.frames[1])
+                        "spring {}: frames `{}` and `{}` coincide at the initial configuration, where a spring of rest length {} has no direction; start them apart (or use rest = 0)",
+                        index + 1, name(fr[0]), name(fr[1]), s.rest
                     ),
                 );
             }
-        }
-        for (i, v) in model.variables.iter().enumerate() {
-            if v.is_kinematic() {
-                continue;
-            }
-            let Some(frame) = v.frame else { continue };
-            if !variable_moves_mass(&model, i) {
-                errs.frame(
-                    frame,
-                    FrameField::Primitive,
-                    format!(
-                        "variable `{}` moves no mass: nothing at or below frame `{}` has mass or inertia that it moves (its mass-matrix column would be zero)",
-                        v.name, model.frames[frame].name
-                    ),
-                );
-            }
-        }
-        if !model.total_mass().is_finite() {
-            errs.push(
-                Site::Model,
-                "the masses add up to more than a floating-point number holds (the total mass overflows)".into(),
-            );
-        }
-        let dynamic = model.dynamic().len();
-        let rows = model.constraint_rows();
-        if rows > dynamic {
-            errs.push(
-                Site::Model,
-                format!("the model has {rows} constraint equations but only {dynamic} dynamic variables: at most one equation per dynamic variable"),
-            );
-        }
-        if errs.0.is_empty() {
-            return Ok(model);
         }
     }
-    Err(errs.0)
+    for (index, d) in model.dampers.iter().enumerate() {
+        if !apart(d.frames) {
+            errs.push(
+                Site::Element { section: Section::Damper, index, field: Some("frames") },
+                format!(
+                    "damper {}: frames `{}` and `{}` coincide at the initial configuration, where a damper has no direction; start them apart",
+                    index + 1, name(d.frames[0]), name(d.frames[1])
+                ),
+            );
+        }
+    }
+}
+
+/// Every dynamic variable moves some mass (else its mass-matrix column is zero).
+fn check_moves_mass(model: &Model, errs: &mut Problems) {
+    for (i, v) in model.variables.iter().enumerate() {
+        if v.is_kinematic() {
+            continue;
+        }
+        let Some(frame) = v.frame else { continue };
+        if !variable_moves_mass(model, i) {
+            errs.frame(
+                frame,
+                FrameField::Primitive,
+                format!(
+                    "variable `{}` moves no mass: nothing at or below frame `{}` has mass or inertia that it moves (its mass-matrix column would be zero)",
+                    v.name, model.frames[frame].name
+                ),
+            );
+        }
+    }
+}
+
+/// The total mass is a number, and there are no more constraint equations than dynamic
+/// variables.
+fn check_totals(model: &Model, errs: &mut Problems) {
+    if !model.total_mass().is_finite() {
+        errs.push(
+            Site::Model,
+            "the masses add up to more than a floating-point number holds (the total mass overflows)".into(),
+        );
+    }
+    let dynamic = model.dynamic().len();
+    let rows = model.constraint_rows();
+    if rows > dynamic {
+        errs.push(
+            Site::Model,
+            format!("the model has {rows} constraint equations but only {dynamic} dynamic variables: at most one equation per dynamic variable"),
+        );
+    }
 }
 
 /// The frame's body, checked: mass finite and not negative, centre of mass finite, inertia

@@ -8,8 +8,8 @@ use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 use crate::context::StepContext;
 use crate::dynamics::{Dynamics, ModelMotions, NoForce, Prescription};
 use crate::error::SimError;
-use crate::se3::Pose;
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
+use tree_kernel::se3::Pose;
 
 /// One state's evaluation.
 #[derive(Clone, Debug)]

@@ -4,7 +4,7 @@
 //! `centerOfMass` and `jacobianCenterOfMass` give, for any model (its compiled system too:
 //! this reads the model, not the system).
 //!
-//! One outward sweep ([`crate::sweeps::forward`] over every model frame) gives each frame's
+//! One outward sweep ([`tree_kernel::sweeps::forward`] over every model frame) gives each frame's
 //! pose `g_k`, body twist `v_k` (eq. (6)) and body Jacobian columns `∂v_k/∂q̇_a` (eq. (7));
 //! the body acceleration follows outward as in the articulated-body algorithm,
 //! `a_k = Ad_{g_k⁻¹} a_par + (∂v_k/∂q_k) q̇_k + ξ_k q̈_k` from a base at rest
@@ -46,11 +46,11 @@
 use nalgebra::DMatrix;
 use tree_model::Model;
 
-use crate::articulated::outward_acceleration;
 use crate::error::SimError;
-use crate::plan::{Body, TreePlan};
-use crate::se3::{cross, zero6, Pose, Twist};
-use crate::sweeps::{forward, Reach, Workspace};
+use tree_kernel::articulated::outward_acceleration;
+use tree_kernel::plan::{Body, TreePlan};
+use tree_kernel::se3::{cross, zero6, Pose, Twist};
+use tree_kernel::sweeps::{forward, Reach, Workspace};
 
 /// The axes and the point a frame's twist, Jacobian or acceleration is reported in (as
 /// Pinocchio's `ReferenceFrame`; see the module documentation).
@@ -194,8 +194,10 @@ impl Kinematics {
         Ok(())
     }
 
-    /// [`Self::update`] for a state known to fit (the right lengths, finite).
-    pub(crate) fn set(&mut self, q: &[f64], dq: Option<&[f64]>, ddq: Option<&[f64]>) {
+    /// [`Self::update`] for a state known to fit (the right lengths, finite): the task costs'
+    /// per-knot call, whose states the solver made. Panics on a wrong length.
+    #[doc(hidden)]
+    pub fn set(&mut self, q: &[f64], dq: Option<&[f64]>, ddq: Option<&[f64]>) {
         match dq {
             Some(x) => self.dq.copy_from_slice(x),
             None => self.dq.as_mut_slice().fill(0.0),

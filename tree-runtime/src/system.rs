@@ -6,11 +6,11 @@ use nalgebra::{
 };
 use tree_model::Motion;
 
-use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
-use crate::lanes::{ElementForces, Lanes, WIDTH};
-pub use crate::order::Order;
-use crate::outputs::{clear_among, Field, Index, Output, Scratch, Sink};
-use crate::se3::Pose;
+use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+use tree_kernel::lanes::{ElementForces, Lanes, WIDTH};
+pub use tree_kernel::order::Order;
+use tree_kernel::outputs::{clear_among, Field, Index, Output, Scratch, Sink};
+use tree_kernel::se3::Pose;
 
 /// A vector over the system's configuration variables.
 pub type Vector<N> = OVector<f64, N>;
@@ -566,7 +566,7 @@ where
     /// step's first derivatives (docs/derivations.md §9), without forming each row's
     /// Hessian. `out.dh_dot` and `out.d2h` are not outputs of it (what they hold after is
     /// unspecified). The default makes the whole evaluation at `Order::Full` and sums; the
-    /// interpreted and generated systems sum as they go ([`crate::outputs::Weighted`]).
+    /// interpreted and generated systems sum as they go ([`tree_kernel::outputs::Weighted`]).
     fn weighted_constraint_hessian(
         &mut self,
         q: &Vector<Self::N>,
@@ -614,7 +614,7 @@ where
     /// reports. The default is [`Self::lagrangian`] at [`Order::First`] and its Legendre
     /// transform `q̇·∂L/∂q̇ − L`; the interpreted and compiled systems take the body
     /// velocities of the outward sweep and the first mass moments carried inward
-    /// ([`crate::kernel::energy`]; no columns).
+    /// ([`tree_kernel::kernel::energy`]; no columns).
     fn energy(
         &mut self,
         q: &Vector<Self::N>,
@@ -633,7 +633,7 @@ where
     /// left in `own.force` and `own.dl_dq` (the rest of `own` unspecified). Returns `false`
     /// when the system has no such algorithm, the model has constraints, or a pivot
     /// vanishes; the caller then solves `M q̈ = …` (which names a singular variable). The
-    /// default returns `false`; the interpreted system runs [`crate::articulated`], and
+    /// default returns `false`; the interpreted system runs [`tree_kernel::articulated`], and
     /// `tree_model!` unrolls the same code for a model without constraints.
     fn articulated_acceleration(
         &mut self,
@@ -658,7 +658,7 @@ where
     /// model's own forces left in `own`): each lane's `q̈` has the bits the one-state call
     /// gives, and each lane says whether its pivots held. `None` when the system has no laned
     /// evaluation (the default) or the model has constraints; the interpreted system runs
-    /// [`crate::articulated`] over [`Lanes`].
+    /// [`tree_kernel::articulated`] over [`Lanes`].
     fn articulated_acceleration_lanes(
         &mut self,
         q: &[Lanes],
@@ -729,9 +729,9 @@ where
     }
 
     /// The inverse dynamics' terms at `(q, q̇)` and accelerations `qdd` (every variable) over
-    /// [`Jet`]s ([`crate::kernel::inverse_dynamics`]: the bodies' `τ` by recursive
+    /// [`Jet`]s ([`tree_kernel::kernel::inverse_dynamics`]: the bodies' `τ` by recursive
     /// Newton–Euler, the springs' `∂L/∂q` and `L`, the model's own forces; with constraints
-    /// also their `Dh` and `q̇ᵀD²h q̇`, [`crate::kernel::constraints`]) into `out` (cleared
+    /// also their `Dh` and `q̇ᵀD²h q̇`, [`tree_kernel::kernel::constraints`]) into `out` (cleared
     /// first; `JetOutputs::new(dof, constraint_count)`): one O(frames) sweep for [`LANES`]
     /// directions, what the continuous linearisation differentiates. `false` when this system has no such evaluation (the
     /// caller differentiates [`Self::evaluate_dual`] instead).

@@ -32,9 +32,9 @@ use crate::dynamics::{ModelMotions, NoForce};
 use crate::error::SimError;
 use crate::integrate::laned::{rk4_lanes, LaneStart, Observer};
 use crate::integrate::{finish, recording, run_with_inputs, InputSchedule, Method, SimOptions};
-use crate::lanes::WIDTH;
 use crate::system::System;
 use crate::trajectory::{Sample, Trajectory};
+use tree_kernel::lanes::WIDTH;
 
 mod steps;
 

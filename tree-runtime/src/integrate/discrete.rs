@@ -16,8 +16,8 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
-use crate::scalar::Scalar;
 use crate::system::{Terms, Vector};
+use tree_kernel::scalar::Scalar;
 
 /// Which second slot derivative of `L_d`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

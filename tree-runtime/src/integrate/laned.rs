@@ -15,8 +15,8 @@ use super::{Rk4, SimOptions};
 use crate::context::StepContext;
 use crate::dynamics::{prescribe, Dynamics, ModelMotions, NoForce};
 use crate::error::SimError;
-use crate::lanes::{ElementForces, Lanes, WIDTH};
 use crate::system::{System, Terms, Vector};
+use tree_kernel::lanes::{ElementForces, Lanes, WIDTH};
 
 /// One lane's start.
 #[derive(Clone, Copy, Debug)]

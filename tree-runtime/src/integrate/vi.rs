@@ -244,6 +244,8 @@ where
     pub subdivisions: usize,
     /// The derivatives' workspace, made on their first call.
     linearisation: Option<Box<derivatives::Linearisation>>,
+    /// The second derivatives' scratch over dual numbers, made on their first use.
+    dual_jacobians: Option<Box<derivatives::DualJacobians>>,
     /// The energy the model's own forces (damping, dampers) took out over the last step:
     /// the discrete work `−F(q_α, v)·(q₂ − q₁)` of the force the step applied, summed over
     /// its sub-steps.
@@ -304,6 +306,7 @@ where
             subdivisions: 0,
             dissipated: 0.0,
             linearisation: None,
+            dual_jacobians: None,
             angles: split
                 .dynamic
                 .iter()

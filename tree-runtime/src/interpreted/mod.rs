@@ -1,19 +1,19 @@
 //! The interpreted tree system: walks the validated model at run time with the composite
-//! sweeps of [`crate::sweeps`] and the elements of [`crate::elements`] — the same code
+//! sweeps of [`tree_kernel::sweeps`] and the elements of [`tree_kernel::elements`] — the same code
 //! `tree_model!` compiles.
 
 use nalgebra::Dyn;
 use tree_model::{Model, Motion};
 
-use crate::articulated::{self, Articulated};
-use crate::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 use crate::error::SimError;
-use crate::kernel::{self, Kernel};
-use crate::lanes::{ElementForces, EnergySink, Lanes, WIDTH};
-use crate::plan::TreePlan;
-use crate::se3::{Pose, Twist};
-use crate::sweeps::{self, Reach, Workspace};
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
+use tree_kernel::articulated::{self, Articulated};
+use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+use tree_kernel::kernel::{self, Kernel};
+use tree_kernel::lanes::{ElementForces, EnergySink, Lanes, WIDTH};
+use tree_kernel::plan::TreePlan;
+use tree_kernel::se3::{Pose, Twist};
+use tree_kernel::sweeps::{self, Reach, Workspace};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
 pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
@@ -58,13 +58,13 @@ struct Laned {
 /// An error when `model` would need more Jacobian columns than the runtime allocates (each
 /// frame keeps one for every variable at or above it).
 pub(crate) fn columns_fit(model: &Model) -> Result<(), SimError> {
-    let (columns, deepest) = crate::plan::column_count(model);
-    if columns > crate::plan::MAX_COLUMNS {
+    let (columns, deepest) = tree_kernel::plan::column_count(model);
+    if columns > tree_kernel::plan::MAX_COLUMNS {
         return Err(SimError::InvalidInput(format!(
             "model `{}` would need {columns} Jacobian columns (each of its {} frames keeps one for every variable at or above it; its deepest frame has {deepest} variables above it); the interpreted system allocates at most {}",
             model.name,
             model.frames.len(),
-            crate::plan::MAX_COLUMNS
+            tree_kernel::plan::MAX_COLUMNS
         )));
     }
     Ok(())

@@ -4,8 +4,8 @@
 
 use nalgebra::Dyn;
 
-use crate::se3::{dot, inertia_times, Pose, Twist};
 use crate::system::{Order, Terms};
+use tree_kernel::se3::{dot, inertia_times, Pose, Twist};
 
 /// The per-frame quantities of one massive frame k; positions `a, b` index its ancestor
 /// variables (root first).

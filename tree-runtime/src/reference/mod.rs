@@ -13,14 +13,14 @@ mod uncached;
 use nalgebra::{DVector, Dyn};
 use tree_model::{Model, Motion};
 
-use crate::dual::{Dual, DualOutputs};
 use crate::error::SimError;
-use crate::kernel::{self, Kernel};
-use crate::outputs::{Output, Sink};
-use crate::plan::TreePlan;
-use crate::se3::{Pose, Twist};
-use crate::sweeps::{self, Workspace};
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
+use tree_kernel::dual::{Dual, DualOutputs};
+use tree_kernel::kernel::{self, Kernel};
+use tree_kernel::outputs::{Output, Sink};
+use tree_kernel::plan::TreePlan;
+use tree_kernel::se3::{Pose, Twist};
+use tree_kernel::sweeps::{self, Workspace};
 
 /// How the reference system evaluates the paper's sums.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -6,9 +6,9 @@ use tree_model::Joint;
 
 use super::accumulate::{add_mass_terms, FrameQuantities};
 use super::PaperSystem;
-use crate::plan::{Body, FramePlan};
-use crate::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
 use crate::system::{Order, Terms};
+use tree_kernel::plan::{Body, FramePlan};
+use tree_kernel::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
 
 impl PaperSystem {
     pub(crate) fn accumulate_uncached(

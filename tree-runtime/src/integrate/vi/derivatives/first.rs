@@ -12,7 +12,6 @@
 use nalgebra::DMatrix;
 
 use super::jacobians::{jacobians, JacobianSink, RowWriter, Segment, Shape, StepTerms};
-use super::second::DualJacobians;
 use super::{StepDerivatives, StepInput};
 use crate::linalg::{
     combine_compact_rows, lu_factor_packed_threshold, lu_solve_compact_rows, lu_solve_packed,
@@ -71,8 +70,6 @@ pub(crate) struct Linearisation {
     /// The point: `q₁`, `q₂` (all variables).
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
-    /// For the second derivatives, made on their first use.
-    pub(super) duals: Option<DualJacobians>,
 }
 
 impl Linearisation {
@@ -127,7 +124,6 @@ impl Linearisation {
             combination: CompactCombination::default(),
             q1: vec![0.0; n],
             q2: vec![0.0; n],
-            duals: None,
             shape,
         }
     }

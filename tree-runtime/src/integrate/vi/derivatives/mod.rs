@@ -19,12 +19,12 @@
 //!   `Σ w ∂²/∂x_i∂x_j = (μᵀ D_j J + w_pᵀ D_j P) Δ_i` with
 //!   `μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p)`: one transposed solve, no tensor.
 //!
-//! The Jacobians are written once, over any [`Scalar`](crate::scalar::Scalar), into a sink
+//! The Jacobians are written once, over any [`Scalar`](tree_kernel::scalar::Scalar), into a sink
 //! ([`jacobians`]): at the solution, straight into the pieces the first-order solve reads
 //! (`R_z` into its factor's storage, `R_x` into the right-hand sides, which the solve turns
 //! into `−dz/dx`); for the second
 //! derivatives, whole, from the derivative parts of the terms evaluated over
-//! [`Dual`](crate::dual::Dual) numbers. Forces the caller
+//! [`Dual`](tree_kernel::dual::Dual) numbers. Forces the caller
 //! adds (a [`GeneralizedForce`]) are held fixed; the model's own (damping, dampers) and the
 //! inputs are differentiated.
 //!
@@ -47,7 +47,7 @@ mod second;
 
 pub(crate) use first::Linearisation;
 use jacobians::{gather_rows, row_major_into, Shape};
-use second::DualJacobians;
+pub(crate) use second::DualJacobians;
 
 /// A block of the step's inputs `x = (q₁, p₁, u₁, k₂)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -254,6 +254,7 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
+        let cached = self.dual_jacobians.take();
         let lin = self.linearise(cx, q1, p1, q2)?;
         lin.fill_tangent();
         let mut first = StepDerivatives::empty();
@@ -266,10 +267,7 @@ where
             p2: vec![DMatrix::zeros(x, x); nd],
             lambda: vec![DMatrix::zeros(x, x); m],
         };
-        let mut duals = lin
-            .duals
-            .take()
-            .unwrap_or_else(|| DualJacobians::new(&sh, cx.sys));
+        let mut duals = cached.unwrap_or_else(|| Box::new(DualJacobians::new(&sh, cx.sys)));
         let (mut g, mut scratch) = (vec![0.0; rows], vec![0.0; rows]);
         for j in 0..x {
             if let Some(from) = lin.input_direction(j) {
@@ -307,7 +305,7 @@ where
                 }
             }
         }
-        lin.duals = Some(duals);
+        self.dual_jacobians = Some(duals);
         Ok((first, second))
     }
 
@@ -329,6 +327,7 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
+        let cached = self.dual_jacobians.take();
         let lin = self.linearise(cx, q1, p1, q2)?;
         lin.fill_tangent();
         let sh = &lin.shape;
@@ -349,10 +348,7 @@ where
         if out.shape() != (x, x) {
             *out = DMatrix::zeros(x, x);
         }
-        let mut duals = lin
-            .duals
-            .take()
-            .unwrap_or_else(|| DualJacobians::new(&lin.shape, cx.sys));
+        let mut duals = cached.unwrap_or_else(|| Box::new(DualJacobians::new(&lin.shape, cx.sys)));
         for j in 0..x {
             if let Some(from) = lin.input_direction(j) {
                 // As in `second_derivatives`: an input's column is its variable's p₁ one,
@@ -369,7 +365,7 @@ where
                 out[(i, j)] = duals.dot_adjoint(lin.tangent.column(i));
             }
         }
-        lin.duals = Some(duals);
+        self.dual_jacobians = Some(duals);
         Ok(())
     }
 

@@ -7,14 +7,14 @@ use nalgebra::{allocator::Allocator, DVectorView, DefaultAllocator};
 
 use super::first::Linearisation;
 use super::jacobians::{jacobians_f64, row_major_into, Shape, StepTerms};
-use crate::dual::{Dual, DualOutputs};
 use crate::linalg::dot;
-use crate::outputs::Field;
 use crate::system::{row_variables, Order, Sparsity, System};
+use tree_kernel::dual::{Dual, DualOutputs};
+use tree_kernel::outputs::Field;
 
 /// Scratch for the Jacobians over dual numbers along one tangent direction.
 #[derive(Clone, Debug)]
-pub(super) struct DualJacobians {
+pub(crate) struct DualJacobians {
     /// At the quadrature point (Full), at `q₁` (`Dh` and `Σ_s λ_s D²h_s` alone), at `q₂`
     /// (constraints alone).
     at_alpha: DualOutputs,

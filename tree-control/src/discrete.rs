@@ -12,19 +12,19 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
-use super::cost::Needs;
-use crate::context::StepContext;
-use crate::dynamics::{ModelMotions, NoForce, Prescription};
-use crate::error::SimError;
-use crate::integrate::{
+use crate::knot::{Knot, Needs};
+use tree_model::Control;
+use tree_runtime::context::StepContext;
+use tree_runtime::dynamics::{ModelMotions, NoForce, Prescription};
+use tree_runtime::error::SimError;
+use tree_runtime::integrate::{
     MidpointVi, Rk4, StepCovector, StepDerivatives, StepInput, StepOutput, ViSettings,
 };
-use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
-use crate::linearize::{
+use tree_runtime::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows};
+use tree_runtime::linearize::{
     explicit_step_derivatives_into, ExplicitStepDerivatives, ExplicitStepWorkspace, RK4,
 };
-use crate::system::{Order, System, Terms, Vector};
-use tree_model::Control;
+use tree_runtime::system::{Order, System, Terms, Vector};
 
 /// The discretisation.
 enum Method<N: nalgebra::Dim>
@@ -170,49 +170,6 @@ impl Layout {
             if let (Control::Kinematic(i), Some(at)) = (*control, self.memory[c]) {
                 (q[i], dq[i]) = (x[at], x[at + 1]);
             }
-        }
-    }
-}
-
-/// The configuration, velocity and their derivatives by the state at a knot: what costs
-/// are written on.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Knot {
-    /// The state.
-    pub x: DVector<f64>,
-    /// Every variable's value.
-    pub q: DVector<f64>,
-    /// Every variable's velocity (for the VI, the one consistent with the momentum).
-    pub dq: DVector<f64>,
-    /// `∂q/∂x` (n × states).
-    pub q_x: DMatrix<f64>,
-    /// `∂q̇/∂x` (n × states).
-    pub dq_x: DMatrix<f64>,
-    /// Per control: the input that holds `q` at rest, `g(q) = −∂L/∂q` at `q̇ = 0` on its
-    /// variable (zero for kinematic controls).
-    pub gravity: DVector<f64>,
-    /// `∂g/∂x` (controls × states).
-    pub gravity_x: DMatrix<f64>,
-    /// Per control: its previous value (the memory part of `x`; 0 for an input the state
-    /// does not remember).
-    pub previous: DVector<f64>,
-    /// Where each control's previous value sits in `x` (None: an input not remembered).
-    pub previous_at: Vec<Option<usize>>,
-}
-
-impl Knot {
-    /// An empty knot, sized by [`DiscreteSystem::knot`] on first use.
-    pub fn empty() -> Self {
-        Knot {
-            x: DVector::zeros(0),
-            q: DVector::zeros(0),
-            dq: DVector::zeros(0),
-            q_x: DMatrix::zeros(0, 0),
-            dq_x: DMatrix::zeros(0, 0),
-            gravity: DVector::zeros(0),
-            gravity_x: DMatrix::zeros(0, 0),
-            previous: DVector::zeros(0),
-            previous_at: Vec::new(),
         }
     }
 }

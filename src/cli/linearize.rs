@@ -1,7 +1,9 @@
 //! `tree-mech linearize`: the exact linearisation of the dynamics at a state, and of one
 //! step as a map, as JSON (the numbers from `runtime::report`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
 
 use serde_json::{json, Value};
 use tree_mech::integrate::{project_initial_state, Forcing};
@@ -11,7 +13,7 @@ use tree_mech::runtime::report::{self, Entry, Explicit};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::System;
 
-use crate::{parse_list, parse_vector, Source};
+use super::{parse_list, parse_vector, ForcingArg, Source};
 
 /// What to linearise, as the options gave it.
 pub struct Request<'a> {
@@ -27,6 +29,94 @@ pub struct Request<'a> {
     pub explicit: Option<Explicit>,
     /// Add the VI step's second derivatives.
     pub second_order: bool,
+}
+
+/// What `linearize` was asked for: its command-line arguments.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Model file (TOML, or URDF by its .urdf extension).
+    model: PathBuf,
+    /// Configuration, comma-separated, in variable order (default: the model's q0; with
+    /// neither --q nor --dq, the start projected onto the constraints as simulate takes
+    /// it).
+    #[arg(long, allow_hyphen_values = true)]
+    q: Option<String>,
+    /// Velocity, comma-separated (default: the model's dq0, projected with q0).
+    #[arg(long, allow_hyphen_values = true)]
+    dq: Option<String>,
+    /// Inputs, comma-separated in input order (default: zero).
+    #[arg(long, allow_hyphen_values = true)]
+    u: Option<String>,
+    /// Time (the kinematic variables' prescription is taken at it).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    t: f64,
+    /// Also one VI step of this length from (t, q, p), and its derivatives.
+    #[arg(long)]
+    dt: Option<f64>,
+    /// The VI step's starting momenta of the dynamic variables (default ∂L/∂q̇ at q, q̇).
+    #[arg(long, allow_hyphen_values = true)]
+    p: Option<String>,
+    /// VI forcing: split (second order) or left (trep's).
+    #[arg(long, value_enum, default_value = "split")]
+    forcing: ForcingArg,
+    /// VI quadrature point α.
+    #[arg(long, default_value_t = 0.5)]
+    alpha: f64,
+    /// The step to linearise with --dt: the VI (state (q, p)), or RK4 or rk45's
+    /// Dormand–Prince step (state (q, q̇)).
+    #[arg(long, value_enum, default_value = "vi")]
+    integrator: StepArg,
+    /// With --dt (VI): also the step's 30 second derivatives, `q2_dq1dp1` … as
+    /// [output][input1][input2].
+    #[arg(long)]
+    second_order: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum StepArg {
+    /// The midpoint variational integrator.
+    Vi,
+    /// Classical RK4.
+    Rk4,
+    /// One Dormand–Prince 5(4) step (rk45's) of length --dt.
+    Rk45,
+}
+
+/// Runs `linearize` with the model read as `source` says.
+pub fn run(args: Args, source: &Source) -> Result<(), String> {
+    let Args {
+        model,
+        q,
+        dq,
+        u,
+        t,
+        dt,
+        p,
+        forcing,
+        alpha,
+        integrator,
+        second_order,
+    } = args;
+    linearize(
+        &model,
+        source,
+        Request {
+            q: q.as_deref(),
+            dq: dq.as_deref(),
+            u: u.as_deref(),
+            p: p.as_deref(),
+            t,
+            dt,
+            forcing: forcing.into(),
+            alpha,
+            explicit: match integrator {
+                StepArg::Vi => None,
+                StepArg::Rk4 => Some(tree_mech::runtime::report::Explicit::Rk4),
+                StepArg::Rk45 => Some(tree_mech::runtime::report::Explicit::Rk45),
+            },
+            second_order,
+        },
+    )
 }
 
 fn matrix(m: &DMatrix<f64>) -> Value {
@@ -45,7 +135,7 @@ fn value(e: &Entry) -> Value {
     }
 }
 
-pub fn run(path: &Path, source: &Source, request: Request) -> Result<(), String> {
+fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), String> {
     if request.second_order && (request.explicit.is_some() || request.dt.is_none()) {
         return Err(
             "--second-order is for the VI step: give --dt (and not --integrator rk4 or rk45)"

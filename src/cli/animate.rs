@@ -6,12 +6,12 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::output::{drawing_error, OutputFile, Sentence};
+use super::output::{drawing_error, OutputFile, Sentence};
 use plotters::style::{register_font, FontStyle};
 use tree_mech::model::{ConstraintKind, Joint, Model, SpringKind};
 use tree_mech::runtime::{Pose, Seconds};
 
-use crate::plot::FONT;
+use super::plot::FONT;
 
 /// Picture size in pixels.
 const SIZE: (u32, u32) = (640, 480);

@@ -12,13 +12,14 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use tree_model::{About, Control, CostTerm, Model, Target, Task};
 
-use super::cost::{Cost, Derivatives, Needs};
-use super::discrete::Knot;
-use super::frames::{log_so3, right_jacobian_inverse};
-use crate::error::SimError;
-use crate::kinematics::{Kinematics, Reference};
-use crate::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
-use crate::se3::Pose;
+use crate::cost::{Cost, Derivatives};
+use crate::frames::{log_so3, right_jacobian_inverse};
+use crate::knot::Knot;
+use crate::knot::Needs;
+use tree_kernel::se3::Pose;
+use tree_runtime::error::SimError;
+use tree_runtime::kinematics::{Kinematics, Reference};
+use tree_runtime::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
 
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]

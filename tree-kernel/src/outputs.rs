@@ -244,7 +244,7 @@ impl<T> std::fmt::Debug for Scratch<T> {
 
 /// Zeroes the entries `(i, j)`, `i` and `j` both among `vars`, of the `n × n` column-major
 /// `block`: a constraint row's `D²h`, which an evaluation writes there alone.
-pub(crate) fn clear_among<T: Copy>(block: &mut [T], n: usize, vars: &[usize], zero: T) {
+pub fn clear_among<T: Copy>(block: &mut [T], n: usize, vars: &[usize], zero: T) {
     for &j in vars {
         let column = &mut block[j * n..(j + 1) * n];
         for &i in vars {

@@ -5,7 +5,7 @@
 
 use nalgebra::DMatrix;
 
-use crate::error::SimError;
+use tree_runtime::error::SimError;
 
 /// A feedback `u = −K x` and the cost-to-go `½ xᵀ P x`.
 #[derive(Clone, Debug, PartialEq)]

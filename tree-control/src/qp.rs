@@ -4,7 +4,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::linalg::{
+use tree_runtime::linalg::{
     cholesky_backward, cholesky_factor_packed, cholesky_forward, cholesky_solve_rows,
 };
 

@@ -1,6 +1,6 @@
 //! The rotation algebra the `orientation` cost term is written in: `log` on SO(3) and the
 //! inverse of its right Jacobian (the frames' poses and Jacobians themselves come from
-//! [`crate::kinematics`]).
+//! [`tree_runtime::kinematics`]).
 
 use nalgebra::{Matrix3, Vector3};
 

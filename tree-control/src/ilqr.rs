@@ -13,14 +13,16 @@ use std::ops::ControlFlow;
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
-use super::cost::{Cost, Derivatives, Needs};
-use super::discrete::{DiscreteSystem, Knot};
-use super::qp::{ControlQp, Limits};
-use crate::error::SimError;
-use crate::linalg::{
+use crate::cost::{Cost, Derivatives};
+use crate::discrete::DiscreteSystem;
+use crate::knot::Knot;
+use crate::knot::Needs;
+use crate::qp::{ControlQp, Limits};
+use tree_runtime::error::SimError;
+use tree_runtime::linalg::{
     mul_into, mul_into_pair, tr_mul_into, tr_mul_into_pair, tr_mul_into_symmetric, Packing,
 };
-use crate::system::System;
+use tree_runtime::system::System;
 
 /// Which second-order model of the dynamics the backward pass uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

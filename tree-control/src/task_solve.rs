@@ -9,14 +9,15 @@ use std::time::Instant;
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
 
-use super::cost::Needs;
-use super::discrete::{DiscreteSystem, Knot};
-use super::ilqr::{solve_until, IlqrSettings, Iteration, Solution, Solver};
-use super::task_cost::TaskCost;
-use crate::dynamics::{ModelMotions, Prescription};
-use crate::error::SimError;
-use crate::integrate::ViSettings;
-use crate::system::{ConstraintTerms, Order, System};
+use crate::discrete::DiscreteSystem;
+use crate::ilqr::{solve_until, IlqrSettings, Iteration, Solution, Solver};
+use crate::knot::Knot;
+use crate::knot::Needs;
+use crate::task_cost::TaskCost;
+use tree_runtime::dynamics::{ModelMotions, Prescription};
+use tree_runtime::error::SimError;
+use tree_runtime::integrate::ViSettings;
+use tree_runtime::system::{ConstraintTerms, Order, System};
 
 /// A solved task: the solver's result and the trajectory at every knot.
 #[derive(Clone, Debug, PartialEq)]

@@ -6,7 +6,7 @@
 //! damping and dampers are the caller's), in O(frames) where forming `M` is O(frames · depth).
 //! Written over any [`Scalar`]: over jets (a value with derivatives along several directions,
 //! [`crate::dual::Jet`]) it gives the directional derivatives of `τ` the continuous
-//! linearisation needs ([`crate::linearize`]), one sweep for eight directions.
+//! linearisation needs (`tree_runtime::linearize`), one sweep for eight directions.
 //!
 //! After the outward sweep ([`crate::sweeps::forward`] at
 //! [`Reach::Motion`](crate::sweeps::Reach::Motion): body velocities `v_k` and each frame's own

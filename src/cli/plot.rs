@@ -8,10 +8,10 @@ use plotters::style::{register_font, FontStyle};
 use tree_mech::model::Model;
 use tree_mech::Trajectory;
 
-use crate::output::{drawing_error, OutputFile, Sentence};
+use super::output::{drawing_error, OutputFile, Sentence};
 
 /// DejaVu Sans, bundled so plots need no system fonts (licence in `assets/`).
-pub static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+pub static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Drawing scale: pictures are drawn this many times larger, then averaged down.
 const SCALE: u32 = 2;

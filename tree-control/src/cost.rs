@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::discrete::Knot;
+use crate::knot::{Knot, Needs};
 
 /// `ℓ_x`, `ℓ_u`, `ℓ_xx`, `ℓ_uu`, `ℓ_ux` of one term.
 #[derive(Clone, Debug, PartialEq)]
@@ -31,21 +31,6 @@ impl Derivatives {
             lux: DMatrix::zeros(nu, nx),
         }
     }
-}
-
-/// What a cost reads at a knot beyond the state: the knot's velocity (for the VI, from the
-/// momentum), the gravity compensation.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Needs {
-    /// [`Knot::dq`] and [`Knot::dq_x`] beyond the state itself (always filled; this asks
-    /// that they be exact, which the VI pays a solve for).
-    pub velocity: bool,
-    /// [`Knot::gravity`] and [`Knot::gravity_x`].
-    pub gravity: bool,
-    /// [`Knot::previous`] of inputs: the state must remember them
-    /// ([`DiscreteSystem::with_input_memory`](super::DiscreteSystem::with_input_memory)); the
-    /// optimiser refuses a system that does not.
-    pub input_memory: bool,
 }
 
 /// A cost over a horizon: user costs implement this with their derivatives. Each term is

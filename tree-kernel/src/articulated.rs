@@ -121,7 +121,7 @@ pub(crate) fn velocity_product<S: Scalar>(f: &FramePlan, ws: &Workspace<S>, dq: 
 /// Frame `k`'s acceleration at known joint accelerations, outward from `base`:
 /// `a_k = Ad_{g_k⁻¹} a_par + c_k + ξ_k q̈_k` (the recursive Newton–Euler algorithm's outward
 /// pass; the frame kinematics' from a base at rest).
-pub(crate) fn outward_acceleration<S: Scalar>(
+pub fn outward_acceleration<S: Scalar>(
     plan: &TreePlan,
     ws: &Workspace<S>,
     k: usize,
@@ -294,10 +294,7 @@ pub fn accelerations<S: Scalar>(
 /// lost, the cases the caller solves with `M` instead. Compiled also for AVX2 and chosen at
 /// run time (wider registers and three-operand instructions; no fused multiply-adds, so the
 /// generic body's bits).
-#[cfg_attr(
-    feature = "simulate",
-    multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))
-)]
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
 pub fn accelerations_checked(
     plan: &TreePlan,
     ws: &Workspace<f64>,

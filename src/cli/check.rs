@@ -1,0 +1,189 @@
+//! `tree-mech check`: a model validated and summarised, its tree drawn as text.
+
+use std::path::{Path, PathBuf};
+
+use tree_mech::model::{self, Given, Rounded};
+use tree_mech::{System, TreeSystem};
+
+use super::{counted, Source};
+
+/// What `check` was asked for: its command-line arguments.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Model file (TOML, or URDF by its .urdf extension).
+    model: PathBuf,
+}
+
+/// Runs `check` with the model read as `source` says.
+pub fn run(args: Args, source: &Source) -> Result<(), String> {
+    run_check(&args.model, source)
+}
+
+fn run_check(path: &Path, source: &Source) -> Result<(), String> {
+    let model = source.model(path)?;
+    let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
+    println!("model `{}`: valid", model.name);
+    if !source.locks.is_empty() {
+        println!("locked (held as constants): {}", source.locks.join(", "));
+    }
+    println!(
+        "gravity: [{}, {}, {}]",
+        Given(model.gravity[0]),
+        Given(model.gravity[1]),
+        Given(model.gravity[2])
+    );
+    println!(
+        "{}, {}:",
+        counted(model.frames.len(), "frame"),
+        counted(sys.dof(), "variable")
+    );
+    print_variables(&model);
+    print_constraints(&model);
+    print_inputs(&model);
+    print_elements(&model);
+    print_masses(&model);
+    println!("tree:\n{}", model.tree_text().trim_end());
+    Ok(())
+}
+
+/// Each variable: what it drives, its start, dynamic or how it is prescribed, its limits.
+fn print_variables(model: &model::Model) {
+    for v in &model.variables {
+        let drives = match v.frame {
+            Some(f) => format!(
+                "drives `{}` by {}",
+                model.frames[f].name, model.frames[f].primitive
+            ),
+            None => "sets a constraint length".to_string(),
+        };
+        let how = match &v.motion {
+            None => format!("dynamic, damping = {}", Given(v.damping)),
+            Some(model::Motion::Steady { q0, dq0 }) => {
+                format!(
+                    "kinematic, held at q0 = {} moving at {}",
+                    Given(*q0),
+                    Given(*dq0)
+                )
+            }
+            Some(model::Motion::Sine {
+                offset,
+                amplitude,
+                frequency,
+                phase,
+            }) => format!(
+                "kinematic, {} + {}·sin(2π·{}·t + {})",
+                Given(*offset),
+                Given(*amplitude),
+                Given(*frequency),
+                Given(*phase)
+            ),
+            Some(model::Motion::Spline(s)) => {
+                let (a, b) = s.span();
+                format!(
+                    "kinematic, spline through samples on [{}, {}] s",
+                    Given(a),
+                    Given(b)
+                )
+            }
+        };
+        let limits = v
+            .limits
+            .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
+            .unwrap_or_default();
+        println!(
+            "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}{limits}",
+            v.name,
+            Given(v.q0),
+            Given(v.dq0)
+        );
+    }
+}
+
+/// Each constraint: its kind and its frames.
+fn print_constraints(model: &model::Model) {
+    if !model.constraints.is_empty() {
+        println!("{}:", counted(model.constraints.len(), "constraint"));
+        for c in &model.constraints {
+            let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
+            let what = match &c.kind {
+                model::ConstraintKind::Distance { length } => match length {
+                    model::Parameter::Constant(l) => format!("distance {}", Given(*l)),
+                    model::Parameter::Variable(i) => {
+                        format!("distance `{}`", model.variables[*i].name)
+                    }
+                },
+                model::ConstraintKind::Plane { normal } => {
+                    format!("plane, normal {normal:?} in `{a}`")
+                }
+                model::ConstraintKind::Point { axes } => format!(
+                    "point, axes {}",
+                    axes.iter().map(|&k| ["x", "y", "z"][k]).collect::<String>()
+                ),
+            };
+            println!("  {:<20} {what} between `{a}` and `{b}`", c.name);
+        }
+    }
+}
+
+/// Each input: the variable it pushes on and its limits.
+fn print_inputs(model: &model::Model) {
+    if !model.inputs.is_empty() {
+        println!(
+            "{} (generalized forces u):",
+            counted(model.inputs.len(), "input")
+        );
+        for u in &model.inputs {
+            let limits = u
+                .limits
+                .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
+                .unwrap_or_default();
+            println!(
+                "  {:<20} on `{}`{limits}",
+                u.name, model.variables[u.variable].name
+            );
+        }
+    }
+}
+
+/// Springs and dampers.
+fn print_elements(model: &model::Model) {
+    for s in &model.springs {
+        match s.kind {
+            model::SpringKind::Frames([a, b]) => println!(
+                "spring between `{}` and `{}`: k = {}, rest = {}",
+                model.frames[a].name,
+                model.frames[b].name,
+                Given(s.stiffness),
+                Given(s.rest)
+            ),
+            model::SpringKind::Variable(i) => println!(
+                "spring on `{}`: k = {}, rest = {}",
+                model.variables[i].name,
+                Given(s.stiffness),
+                Given(s.rest)
+            ),
+        }
+    }
+    for d in &model.dampers {
+        println!(
+            "damper between `{}` and `{}`: c = {}",
+            model.frames[d.frames[0]].name,
+            model.frames[d.frames[1]].name,
+            Given(d.damping)
+        );
+    }
+}
+
+/// The masses and their total.
+fn print_masses(model: &model::Model) {
+    let masses: Vec<_> = model.frames.iter().filter(|f| f.mass.is_some()).collect();
+    println!(
+        "{}, total mass {} kg:",
+        counted(masses.len(), "mass"),
+        Rounded(model.total_mass(), 12)
+    );
+    for f in masses {
+        let m = f.mass.unwrap();
+        println!("  {:<20} {}", f.name, m.describe());
+    }
+}

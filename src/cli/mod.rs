@@ -1,0 +1,172 @@
+//! The command line, a module a command: each reads its own arguments (a `clap::Args`
+//! struct) and the model as [`Source`] says, and returns an error as a sentence.
+
+mod animate;
+mod check;
+mod eval;
+mod linearize;
+mod optimize;
+mod output;
+mod plot;
+mod simulate;
+
+use std::path::Path;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use tree_mech::integrate::Forcing;
+use tree_mech::model;
+use tree_mech::nalgebra::Dyn;
+use tree_mech::runtime::Vector;
+use tree_mech::TreeSystem;
+
+#[derive(Parser)]
+#[command(
+    name = "tree-mech",
+    version,
+    about = "Simulate mechanical systems described as trees of frames"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+    /// URDF models: add a floating base (root_x root_y root_z root_yaw root_pitch root_roll:
+    /// tx ty tz rz ry rx) between the world and the root link.
+    #[arg(long, global = true)]
+    floating_base: bool,
+    /// Hold a variable still as a constant, at its q0 or at VALUE: `--lock NAME[=VALUE]`,
+    /// repeated or comma-separated (as Pinocchio's reduced model locks joints).
+    #[arg(
+        long,
+        global = true,
+        value_name = "NAME[=VALUE]",
+        value_delimiter = ','
+    )]
+    lock: Vec<String>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a model and write its trajectory (CSV) and a picture (PNG).
+    #[command(allow_negative_numbers = true)]
+    Simulate(simulate::Args),
+    /// Evaluate L, its derivatives, q̈ and every pose at a state; prints JSON.
+    Eval(eval::Args),
+    /// Linearise the dynamics at a state (exact derivatives of q̈ and λ), and with --dt one
+    /// midpoint-VI step as a map; prints JSON.
+    #[command(allow_negative_numbers = true)]
+    Linearize(linearize::Args),
+    /// Solve an optimal-control task file (iLQR or DDP) and write the optimal trajectory.
+    Optimize(optimize::Request),
+    /// Validate a model and print a summary with the tree drawn as text.
+    Check(check::Args),
+}
+
+impl Cli {
+    /// Runs the command it names.
+    pub fn run(self) -> Result<(), String> {
+        let source = Source {
+            urdf: model::UrdfOptions {
+                floating_base: self.floating_base,
+            },
+            locks: self.lock,
+        };
+        match self.command {
+            Command::Simulate(args) => simulate::run(args, &source),
+            Command::Eval(args) => eval::run(args, &source),
+            Command::Linearize(args) => linearize::run(args, &source),
+            Command::Check(args) => check::run(args, &source),
+            Command::Optimize(request) => {
+                if source.urdf.floating_base || !source.locks.is_empty() {
+                    Err("--floating-base and --lock do not apply to optimize: say `floating_base = true` in the task file, and lock joints in the model".into())
+                } else {
+                    optimize::run(request)
+                }
+            }
+        }
+    }
+}
+
+/// How every command reads its model: the URDF options and the variables to lock.
+pub struct Source {
+    urdf: model::UrdfOptions,
+    locks: Vec<String>,
+}
+
+impl Source {
+    /// The model at `path`, with the locked variables held.
+    pub fn model(&self, path: &Path) -> Result<model::Model, String> {
+        let model = model::from_file(path, self.urdf).map_err(|e| e.to_string())?;
+        if self.locks.is_empty() {
+            return Ok(model);
+        }
+        let locks = self
+            .locks
+            .iter()
+            .map(|l| model::Lock::parse(l))
+            .collect::<Result<Vec<_>, _>>()?;
+        model.locked(&locks).map_err(|e| e.to_string())
+    }
+
+    pub fn system(&self, path: &Path) -> Result<TreeSystem, String> {
+        TreeSystem::new(&self.model(path)?).map_err(|e| e.to_string())
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum ForcingArg {
+    /// f⁻ = f⁺ = ½Δt F at the midpoint (second order).
+    Split,
+    /// f⁻ = Δt F, f⁺ = 0 (trep's; first order in the force).
+    Left,
+}
+
+impl From<ForcingArg> for Forcing {
+    fn from(forcing: ForcingArg) -> Self {
+        match forcing {
+            ForcingArg::Split => Forcing::Split,
+            ForcingArg::Left => Forcing::Left,
+        }
+    }
+}
+
+/// `1 frame`, `2 frames`, `1 mass`, `3 masses`.
+fn counted(n: usize, noun: &str) -> String {
+    match (n, noun.ends_with('s')) {
+        (1, _) => format!("1 {noun}"),
+        (_, true) => format!("{n} {noun}es"),
+        (_, false) => format!("{n} {noun}s"),
+    }
+}
+
+/// Parses a comma-separated vector of exactly `n` numbers.
+fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Vector<Dyn>, String> {
+    parse_list(text, n, what, names, "variables").map(Vector::<Dyn>::from_vec)
+}
+
+/// Parses a comma-separated list of exactly `n` finite numbers for option `--{what}`, one per
+/// entry of `names` (the model's `kind`).
+fn parse_list(
+    text: &str,
+    n: usize,
+    what: &str,
+    names: &[String],
+    kind: &str,
+) -> Result<Vec<f64>, String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|s| {
+            let s = s.trim();
+            s.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("--{what}: `{s}` is not a finite number"))
+        })
+        .collect::<Result<_, _>>()?;
+    if values.len() != n {
+        return Err(format!(
+            "--{what} has {} values; the model has {n} {kind} ({})",
+            values.len(),
+            names.join(", ")
+        ));
+    }
+    Ok(values)
+}
