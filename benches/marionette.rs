@@ -62,26 +62,26 @@ fn main() {
         println!("interpreted_ms {i:.1}");
         return;
     }
-    // `cargo bench --bench marionette -- linearise`: trep's Puppet's trajectory linearised
+    // `cargo bench --bench marionette -- linearize`: trep's Puppet's trajectory linearised
     // step by step, compiled and interpreted (what tools/reference/trep_linearize_bench.sh
     // puts beside trep's `DSystem.linearize_trajectory`).
-    if std::env::args().any(|a| a == "linearise") {
+    if std::env::args().any(|a| a == "linearize") {
         let mut interpreted = TreeSystem::new(&TrepPuppet::model()).expect("valid model");
-        println!("compiled_us {:.2}", linearise_trajectory(&mut TrepPuppet));
+        println!("compiled_us {:.2}", linearize_trajectory(&mut TrepPuppet));
         println!(
             "interpreted_us {:.2}",
-            linearise_trajectory(&mut interpreted)
+            linearize_trajectory(&mut interpreted)
         );
         // The same through `batch::linearize_trajectory` (a recorded run, its steps checked,
         // the thread pool made per call): on one thread and on two.
         for threads in [1, 2] {
             println!(
                 "compiled_batch_{threads}_us {:.2}",
-                batch_linearise(&TrepPuppet, threads)
+                batch_linearize(&TrepPuppet, threads)
             );
             println!(
                 "interpreted_batch_{threads}_us {:.2}",
-                batch_linearise(&interpreted, threads)
+                batch_linearize(&interpreted, threads)
             );
         }
         return;
@@ -121,13 +121,13 @@ fn main() {
     for (name, c, i) in [
         (
             "marionette",
-            linearise_trajectory(&mut Marionette),
-            linearise_trajectory(&mut TreeSystem::new(&Marionette::model()).unwrap()),
+            linearize_trajectory(&mut Marionette),
+            linearize_trajectory(&mut TreeSystem::new(&Marionette::model()).unwrap()),
         ),
         (
             "trep's Puppet",
-            linearise_trajectory(&mut TrepPuppet),
-            linearise_trajectory(&mut TreeSystem::new(&TrepPuppet::model()).unwrap()),
+            linearize_trajectory(&mut TrepPuppet),
+            linearize_trajectory(&mut TreeSystem::new(&TrepPuppet::model()).unwrap()),
         ),
     ] {
         println!("| {name} | {c:.1} | {i:.1} |");
@@ -159,7 +159,7 @@ fn best_of(batches: usize, calls: usize, mut f: impl FnMut()) -> f64 {
 /// the Newton matrix factored and solved for every input direction, as iLQR's backward pass
 /// does (`DiscreteSystem::jacobians`). trep, whose state has no λ, takes each step again from
 /// its recorded end as a hint.
-fn linearise_trajectory<S: System>(sys: &mut S) -> f64
+fn linearize_trajectory<S: System>(sys: &mut S) -> f64
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -203,7 +203,7 @@ where
 
 /// Mean µs per step (best of 30 calls) of a `batch::StepLinearizer` on `threads` threads
 /// over a 1 s VI run of the model from its start at Δt = 0.01 (made once, as iLQR would).
-fn batch_linearise<S>(sys: &S, threads: usize) -> f64
+fn batch_linearize<S>(sys: &S, threads: usize) -> f64
 where
     S: System + Clone + Send + Sync,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -273,13 +273,13 @@ where
     let with_second = time_us(20, || go(sys, 2));
     let mut workspace = ContinuousWorkspace::new(sys);
     let mut continuous = ContinuousDerivatives::empty();
-    let linearise = time_us(20, || {
+    let linearize = time_us(20, || {
         let mut force = NoForce;
         let mut cx = StepContext::new(sys, &mut force, &mut motion, 0.0);
         continuous_derivatives_into(&mut cx, &q, &dq, &mut workspace, &mut continuous)
             .expect("the linearisation");
     });
-    [step, with_first, with_second - with_first, linearise]
+    [step, with_first, with_second - with_first, linearize]
 }
 
 /// The VI and RK4 rows for one model, compiled (`sys`) and interpreted (from `model`).

@@ -23,7 +23,7 @@ use tree_mech::integrate::{
     Forcing, InputSchedule, Method, MidpointVi, SimOptions, StepContext, StepInput, StepOutput,
     Tolerance, ViSettings,
 };
-use tree_mech::model::{self, ModelError as CoreModelError};
+use tree_mech::model::{self, Integrator, ModelError as CoreModelError};
 use tree_mech::nalgebra::{DMatrix, DVector, Dyn};
 use tree_mech::runtime::batch::{
     rollouts_of_watched, rollouts_watched, trajectory, Rollout, StepLinearizer, Watch,
@@ -477,8 +477,8 @@ fn method(
     rtol: f64,
     atol: f64,
 ) -> PyResult<Method> {
-    Ok(match integrator {
-        "vi" => Method::Vi(ViSettings {
+    Ok(match integrator.parse().map_err(bad)? {
+        Integrator::Vi => Method::Vi(ViSettings {
             alpha,
             forcing: match forcing {
                 "split" => Forcing::Split,
@@ -488,13 +488,8 @@ fn method(
             tolerance: newton_tol.unwrap_or(ViSettings::default().tolerance),
             ..ViSettings::default()
         }),
-        "rk4" => Method::Rk4,
-        "rk45" => Method::Rk45(Tolerance { rtol, atol }),
-        other => {
-            return Err(bad(format!(
-                "integrator `{other}`: use `vi`, `rk4` or `rk45`"
-            )))
-        }
+        Integrator::Rk4 => Method::Rk4,
+        Integrator::Rk45 => Method::Rk45(Tolerance { rtol, atol }),
     })
 }
 
@@ -1060,16 +1055,7 @@ impl Model {
                 other => return Err(bad(format!("forcing `{other}`: use `split` or `left`"))),
             },
             alpha,
-            explicit: match integrator {
-                "vi" => None,
-                "rk4" => Some(Explicit::Rk4),
-                "rk45" => Some(Explicit::Rk45),
-                other => {
-                    return Err(bad(format!(
-                        "integrator `{other}`: use `vi`, `rk4` or `rk45`"
-                    )))
-                }
-            },
+            explicit: Explicit::of(integrator.parse().map_err(bad)?),
             second_order,
         };
         // The model's own system, whose workspaces (the jets' kernel among them) stay warm
@@ -1125,14 +1111,14 @@ impl Model {
         let run = self.core_trajectory(py, &trajectory)?;
         let sys = self.system();
         let watch = Watch::default();
-        let linearise = || {
+        let linearize = || {
             let mut steps = Vec::new();
             StepLinearizer::new(&sys, &settings, threads.unwrap_or(0))?
                 .linearize_into_watched(&run, &mut steps, &watch)
                 .map(|()| steps)
         };
         let count = run.len().saturating_sub(1);
-        let steps = watched(py, linearise, &watch, count, progress.as_ref())?
+        let steps = watched(py, linearize, &watch, count, progress.as_ref())?
             .map_err(|e| sim_error(py, &e))?;
         let out = self.named_parts(py)?;
         for of in StepOutput::ALL {

@@ -3,17 +3,16 @@
 
 use std::path::{Path, PathBuf};
 
-use clap::ValueEnum;
-
 use serde_json::{json, Value};
 use tree_mech::integrate::{project_initial_state, Forcing};
+use tree_mech::model::Integrator;
 use tree_mech::nalgebra::DMatrix;
 use tree_mech::runtime::dynamics::{prescribe, Split};
 use tree_mech::runtime::report::{self, Entry, Explicit};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::System;
 
-use super::{parse_list, parse_vector, ForcingArg, Source};
+use super::{integrator_arg, parse_list, parse_vector, ForcingArg, Source};
 
 /// What to linearise, as the options gave it.
 pub struct Request<'a> {
@@ -64,22 +63,12 @@ pub struct Args {
     alpha: f64,
     /// The step to linearise with --dt: the VI (state (q, p)), or RK4 or rk45's
     /// Dormand–Prince step (state (q, q̇)).
-    #[arg(long, value_enum, default_value = "vi")]
-    integrator: StepArg,
+    #[arg(long, default_value = "vi", value_parser = integrator_arg())]
+    integrator: Integrator,
     /// With --dt (VI): also the step's 30 second derivatives, `q2_dq1dp1` … as
     /// [output][input1][input2].
     #[arg(long)]
     second_order: bool,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum StepArg {
-    /// The midpoint variational integrator.
-    Vi,
-    /// Classical RK4.
-    Rk4,
-    /// One Dormand–Prince 5(4) step (rk45's) of length --dt.
-    Rk45,
 }
 
 /// Runs `linearize` with the model read as `source` says.
@@ -109,11 +98,7 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
             dt,
             forcing: forcing.into(),
             alpha,
-            explicit: match integrator {
-                StepArg::Vi => None,
-                StepArg::Rk4 => Some(tree_mech::runtime::report::Explicit::Rk4),
-                StepArg::Rk45 => Some(tree_mech::runtime::report::Explicit::Rk45),
-            },
+            explicit: Explicit::of(integrator),
             second_order,
         },
     )

@@ -119,6 +119,15 @@ enum ForcingArg {
     Left,
 }
 
+/// `--integrator`'s parser: the names of [`model::Integrator`], each with its summary in
+/// `--help`; clap refuses any other with the list.
+fn integrator_arg() -> impl clap::builder::TypedValueParser<Value = model::Integrator> {
+    use clap::builder::TypedValueParser;
+    let names = model::Integrator::ALL
+        .map(|i| clap::builder::PossibleValue::new(i.name()).help(i.summary()));
+    clap::builder::PossibleValuesParser::new(names).map(|name| name.parse().unwrap_or_default())
+}
+
 impl From<ForcingArg> for Forcing {
     fn from(forcing: ForcingArg) -> Self {
         match forcing {

@@ -389,10 +389,7 @@ fn print_summary(path: &Path, plan: &Knots, frames: &serde_json::Map<String, ser
         path.display(),
         task.knots,
         Seconds(task.dt),
-        match task.integrator {
-            model::TaskIntegrator::Vi => "VI",
-            model::TaskIntegrator::Rk4 => "RK4",
-        },
+        task.integrator.name().to_uppercase(),
         sol.history.len(),
         res.solve_seconds,
         sol.cost,

@@ -10,20 +10,21 @@ use tree_mech::integrate::{
     run_with_inputs, InputSchedule, JacobianUpdate, Method, RunSummary, SimOptions, Tolerance,
     ViSettings,
 };
-use tree_mech::model;
+use tree_mech::model::{self, Integrator};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Sample, Seconds, Vector};
 use tree_mech::{NoForce, PaperEvaluation, PaperSystem, SimError, System, Trajectory, TreeSystem};
 
 use super::output::OutputFile;
-use super::{animate, parse_list, parse_vector, plot, ForcingArg, Source};
+use super::{animate, integrator_arg, parse_list, parse_vector, plot, ForcingArg, Source};
 
 /// What `simulate` was asked for: its command-line arguments.
 #[derive(clap::Args)]
 pub struct Args {
     /// Model file (TOML, or URDF by its .urdf extension).
     model: PathBuf,
-    #[arg(long, value_enum, default_value = "vi")]
+    /// The integrator.
+    #[arg(long, default_value = "vi", value_parser = integrator_arg())]
     integrator: Integrator,
     /// Time step (the first step tried, for rk45).
     #[arg(long, default_value_t = 0.01)]
@@ -99,16 +100,6 @@ pub struct Args {
     /// per-mass sums with caching, or without caching (the paper's Fig. 3 comparison).
     #[arg(long, value_enum, default_value = "sweeps")]
     evaluation: EvaluationArg,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum Integrator {
-    /// Midpoint variational integrator (energy-stable, momentum-conserving).
-    Vi,
-    /// Fixed-step fourth-order Runge–Kutta.
-    Rk4,
-    /// Adaptive Dormand–Prince 5(4).
-    Rk45,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

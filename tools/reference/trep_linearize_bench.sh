@@ -12,7 +12,7 @@ cargo bench --bench marionette --no-run -q 2>/dev/null
 times=$("$py" tools/reference/trep_linearize.py)
 echo "$times"
 trep=$(echo "$times" | awk '/trep_linearize_ms_per_step/ {print $2}')
-bench=$(cargo bench -q --bench marionette -- linearise)
+bench=$(cargo bench -q --bench marionette -- linearize)
 field() { echo "$bench" | awk -v k="$1" '$1 == k {print $2}'; }
 python3 -c "
 t = $trep * 1e3

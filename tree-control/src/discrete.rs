@@ -27,7 +27,7 @@ use tree_runtime::linearize::{
 use tree_runtime::system::{Order, System, Terms, Vector};
 
 /// The discretisation.
-enum Method<N: nalgebra::Dim>
+enum Stepper<N: nalgebra::Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
@@ -208,7 +208,7 @@ where
 {
     /// The system.
     pub sys: S,
-    method: Method<S::N>,
+    method: Stepper<S::N>,
     motion: ModelMotions,
     /// The step length.
     pub dt: f64,
@@ -265,7 +265,7 @@ where
             ..settings
         };
         let vi = MidpointVi::new(&sys, settings);
-        Self::build(sys, Method::Vi(Box::new(vi)), dt, t0, controls)
+        Self::build(sys, Stepper::Vi(Box::new(vi)), dt, t0, controls)
     }
 
     /// RK4 on `(q_d, q̇_d)` with the given controls (inputs only: a kinematic variable would
@@ -284,12 +284,12 @@ where
             workspace: ExplicitStepWorkspace::new(&sys),
             derivatives: ExplicitStepDerivatives::empty(),
         });
-        Self::build(sys, Method::Rk4(rk4), dt, t0, controls)
+        Self::build(sys, Stepper::Rk4(rk4), dt, t0, controls)
     }
 
     fn build(
         sys: S,
-        method: Method<S::N>,
+        method: Stepper<S::N>,
         dt: f64,
         t0: f64,
         controls: Vec<Control>,
@@ -375,14 +375,14 @@ where
 
     /// Whether this is the VI (otherwise RK4).
     pub fn is_vi(&self) -> bool {
-        matches!(self.method, Method::Vi(_))
+        matches!(self.method, Stepper::Vi(_))
     }
 
     /// The constraint multipliers of the last step (VI: `λ` of the step; RK4: none).
     pub fn multipliers(&self) -> &[f64] {
         match &self.method {
-            Method::Vi(vi) => vi.lambda.as_slice(),
-            Method::Rk4(_) => &[],
+            Stepper::Vi(vi) => vi.lambda.as_slice(),
+            Stepper::Rk4(_) => &[],
         }
     }
 
@@ -399,8 +399,8 @@ where
         let nd = l.dynamic.len();
         let mut x = DVector::zeros(l.states);
         let v = match &mut self.method {
-            Method::Vi(vi) => vi.initial_momentum(&mut self.sys, q, dq),
-            Method::Rk4(_) => dq.clone(),
+            Stepper::Vi(vi) => vi.initial_momentum(&mut self.sys, q, dq),
+            Stepper::Rk4(_) => dq.clone(),
         };
         for (r, &i) in l.dynamic.iter().enumerate() {
             x[r] = q[i];
@@ -484,7 +484,7 @@ where
             &mut self.buf.velocity_rhs,
         );
         match self.method {
-            Method::Rk4(_) => {
+            Stepper::Rk4(_) => {
                 for (r, &i) in l.dynamic.iter().enumerate() {
                     dq[i] = x[nd + r];
                     if derivatives {
@@ -492,8 +492,8 @@ where
                     }
                 }
             }
-            Method::Vi(_) if !needs.velocity => {}
-            Method::Vi(_) => {
+            Stepper::Vi(_) if !needs.velocity => {}
+            Stepper::Vi(_) => {
                 // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇ (M does
                 // not depend on q̇, so q̇_d = 0 here is as good as any).
                 self.sys.mass_matrix(q, terms);
@@ -604,7 +604,7 @@ where
         x: &[f64],
         u: &[f64],
         f: impl FnOnce(
-            &mut Method<S::N>,
+            &mut Stepper<S::N>,
             &mut StepContext<S, NoForce, Decided>,
             &Layout,
             &mut Buffers<S::N>,
@@ -618,7 +618,7 @@ where
         for (r, &i) in l.dynamic.iter().enumerate() {
             b.p1[i] = x[nd + r];
         }
-        if matches!(self.method, Method::Vi(_)) {
+        if matches!(self.method, Stepper::Vi(_)) {
             // The VI's p₁ has dynamic entries only.
             for &i in &l.kinematic {
                 b.p1[i] = 0.0;
@@ -671,7 +671,7 @@ where
         self.with_step(k, x, u, |method, cx, l, b| {
             let nd = l.dynamic.len();
             match method {
-                Method::Vi(vi) => {
+                Stepper::Vi(vi) => {
                     b.q2.copy_from(&b.q1);
                     b.p2.copy_from(&b.p1);
                     vi.predict_from_rest();
@@ -686,7 +686,7 @@ where
                         read_jacobians(l, &b.first, a, bm);
                     }
                 }
-                Method::Rk4(explicit) => {
+                Stepper::Rk4(explicit) => {
                     if let Some((a, bm)) = jacobians.as_mut() {
                         let (ws, d) = (&mut explicit.workspace, &mut explicit.derivatives);
                         explicit_step_derivatives_into(cx, &b.q1, &b.p1, &RK4, ws, d)?;
@@ -751,7 +751,7 @@ where
         let dt = self.dt;
         let t2 = self.t0 + (k + 1) as f64 * dt;
         self.with_step(k, x, u, |method, cx, l, b| {
-            let Method::Vi(vi) = method else {
+            let Stepper::Vi(vi) = method else {
                 unreachable!("checked above")
             };
             // q₂: its dynamic part from x₂, its kinematic part where the step puts it.
@@ -794,7 +794,7 @@ where
         self.step(k, x, u, x2, None)?;
         let (n, inputs) = (self.sys.dof(), self.sys.input_count());
         self.with_step(k, x, u, |method, cx, l, b| {
-            let Method::Vi(vi) = method else {
+            let Stepper::Vi(vi) = method else {
                 unreachable!("checked above")
             };
             let nd = l.dynamic.len();

@@ -210,59 +210,22 @@ pub fn solve_until<S: System>(
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
     check(dynamics, cost, x0, &u)?;
-    let settled = |x: f64| x.is_finite() && x >= 0.0;
-    if !(settled(settings.cost_tolerance)
-        && settled(settings.decrease_tolerance)
-        && settled(settings.mu))
-    {
-        return Err(SimError::InvalidInput(format!(
-            "the optimiser's cost tolerance ({}), decrease tolerance ({}) and regularisation ({}) must be finite and non-negative",
-            settings.cost_tolerance, settings.decrease_tolerance, settings.mu
-        )));
+    check_settings(dynamics, settings)?;
+    if let Some(limits) = &settings.limits {
+        clamp_into(limits, &mut u);
     }
-    if settings.solver == Solver::Ddp && !dynamics.is_vi() {
-        return Err(SimError::InvalidInput(
-            "DDP needs the VI's second derivatives: use iLQR with RK4".into(),
-        ));
-    }
-    if let Some((lo, hi)) = &settings.limits {
-        if lo.len() != nu || hi.len() != nu {
-            return Err(SimError::InvalidInput(format!(
-                "the limits have {} lower and {} upper bounds; the problem has {nu} controls",
-                lo.len(),
-                hi.len()
-            )));
-        }
-        for c in 0..nu {
-            if lo[c].is_nan() || hi[c].is_nan() || lo[c] > hi[c] {
-                return Err(SimError::InvalidInput(format!(
-                    "the limits of control {c} are [{}, {}]: the lower must not exceed the upper",
-                    lo[c], hi[c]
-                )));
-            }
-        }
-        for uk in u.iter_mut() {
-            for c in 0..nu {
-                uk[c] = uk[c].clamp(lo[c], hi[c]);
-            }
-        }
-    }
-    let mut work = Work {
-        a: vec![DMatrix::zeros(nx, nx); n],
-        b: vec![DMatrix::zeros(nx, nu); n],
-        k: vec![DVector::zeros(nu); n],
-        gain: vec![DMatrix::zeros(nu, nx); n],
-        knot: Knot::empty(),
-        needs: cost.needs(),
-        dx: DVector::zeros(nx),
-        lambda: vec![Vec::new(); n],
-        backward: Backward::new(nx, nu),
-    };
+    let (nx, nu, n) = (dynamics.states(), dynamics.controls(), u.len());
+    let mut work = Work::new(nx, nu, n, cost.needs());
     let mut x = vec![x0.clone(); n + 1];
-    let mut total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
-    let (mut x_new, mut u_new) = (x.clone(), u.clone());
+    let total = rollout(dynamics, cost, &mut x, &mut u, &mut work, true, None)?;
+    let mut it = Iterate {
+        x_new: x.clone(),
+        u_new: u.clone(),
+        x,
+        u,
+        total,
+    };
     let mut mu = settings.mu;
     let mut history = Vec::with_capacity(settings.max_iterations);
     let has_limits = settings.limits.is_some();
@@ -281,29 +244,9 @@ where
     let mut stop = Stop::IterationLimit;
     let mut phase = BoxPhase::Clamped;
     for _ in 0..settings.max_iterations {
-        let pass = Pass {
-            solver: settings.solver,
-            mu,
-            limits: match phase {
-                BoxPhase::Clamped => None,
-                BoxPhase::Boxed => settings.limits.as_ref(),
-            },
-        };
-        let mut gradient = backward(dynamics, cost, &x, &u, &mut work, &pass)?;
-        let mut model = pass.solver;
-        if gradient.is_none() && pass.solver == Solver::Ddp {
-            // DDP's model is indefinite here (the step's curvature contracted with V_x, far
-            // from the optimum): this pass takes the Gauss–Newton model at the same μ rather
-            // than a μ large enough to hide it, which would turn the steps into a crawl.
-            let gauss_newton = Pass {
-                solver: Solver::Ilqr,
-                ..pass
-            };
-            gradient = backward(dynamics, cost, &x, &u, &mut work, &gauss_newton)?;
-            model = Solver::Ilqr;
-        }
-        let used = (model, phase);
-        let Some(Outcome { gradient, decrease }) = gradient else {
+        let Some(direction) =
+            compute_direction(dynamics, cost, &it, &mut work, settings, mu, phase)?
+        else {
             // Some Q_uu + μ s I is not positive definite: regularise more.
             mu = raised(mu);
             if mu > MAX_MU {
@@ -312,42 +255,23 @@ where
             }
             continue;
         };
+        let (gradient, used) = (direction.outcome.gradient, (direction.model, phase));
         // A small predicted decrease is convergence only while the regularisation is small
         // too: a large μ shrinks the step whatever the gradient (a model that keeps failing
         // its line search), and that ends on the regularisation's ceiling instead.
-        if decrease <= settings.decrease_tolerance * total.abs() && mu <= settings.mu.max(1e-6) {
+        let decrease = direction.outcome.decrease;
+        if decrease <= settings.decrease_tolerance * it.total.abs() && mu <= settings.mu.max(1e-6) {
             stop = Stop::Converged;
-            let _ = record(total, 0.0, mu, gradient, used);
+            let _ = record(it.total, 0.0, mu, gradient, used);
             break;
         }
-        // Forward pass: the first step length that lowers the true cost.
-        let mut accepted = 0.0;
-        let mut alpha = 1.0;
-        let mut trial_total = total;
-        while alpha > 1e-4 {
-            for k in 0..n {
-                u_new[k].copy_from(&u[k]);
-                u_new[k].axpy(alpha, &work.k[k], 1.0);
-            }
-            x_new[0].copy_from(x0);
-            let policy = Some((x.as_slice(), settings.limits.as_ref()));
-            if let Ok(trial) = rollout(
-                dynamics, cost, &mut x_new, &mut u_new, &mut work, false, policy,
-            ) {
-                if trial.is_finite() && trial < total {
-                    accepted = alpha;
-                    trial_total = trial;
-                    break;
-                }
-            }
-            alpha *= 0.5;
-        }
+        let (accepted, trial_total) = try_step(dynamics, cost, x0, &mut it, &mut work, settings);
         if accepted < 0.5 {
             phase = BoxPhase::Boxed;
         }
         if accepted == 0.0 {
             mu = raised(mu);
-            let flow = record(total, 0.0, mu, gradient, used);
+            let flow = record(it.total, 0.0, mu, gradient, used);
             if mu > MAX_MU {
                 stop = Stop::Regularisation;
                 break;
@@ -358,31 +282,17 @@ where
             }
             continue;
         }
-        std::mem::swap(&mut x, &mut x_new);
-        std::mem::swap(&mut u, &mut u_new);
-        let previous = total;
-        total = trial_total;
-        // The accepted rollout's Jacobians, at its converged steps.
-        for k in 0..n {
-            let (head, tail) = x.split_at_mut(k + 1);
-            dynamics.jacobians(
-                k,
-                head[k].as_slice(),
-                u[k].as_slice(),
-                tail[0].as_mut_slice(),
-                &work.lambda[k],
-                &mut work.a[k],
-                &mut work.b[k],
-            )?;
-        }
+        let previous = it.total;
+        accept_step(dynamics, &mut it, trial_total, &mut work)?;
         // A short step means the model was trusted too far: regularise more next time.
         mu = if accepted < 0.25 {
             raised(mu)
         } else {
             (mu * 0.1).max(1e-12)
         };
-        let flow = record(total, accepted, mu, gradient, used);
-        if previous - total < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
+        let flow = record(it.total, accepted, mu, gradient, used);
+        let change = previous - it.total;
+        if change < settings.cost_tolerance * previous.abs().max(f64::MIN_POSITIVE) {
             stop = Stop::Converged;
             break;
         }
@@ -394,13 +304,195 @@ where
     Ok(Solution {
         gains: work.gain,
         feedforward: work.k,
-        x,
-        u,
-        cost: total,
+        x: it.x,
+        u: it.u,
+        cost: it.total,
         converged: stop == Stop::Converged,
         stop,
         history,
     })
+}
+
+/// The solve's own settings: tolerances and regularisation finite and non-negative, DDP
+/// only on the VI, limits of the right size with lower ≤ upper.
+fn check_settings<S: System>(
+    dynamics: &DiscreteSystem<S>,
+    settings: &IlqrSettings,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let nu = dynamics.controls();
+    let settled = |x: f64| x.is_finite() && x >= 0.0;
+    if !(settled(settings.cost_tolerance)
+        && settled(settings.decrease_tolerance)
+        && settled(settings.mu))
+    {
+        return Err(SimError::InvalidInput(format!(
+            "the optimiser's cost tolerance ({}), decrease tolerance ({}) and regularisation ({}) must be finite and non-negative",
+            settings.cost_tolerance, settings.decrease_tolerance, settings.mu
+        )));
+    }
+    if settings.solver == Solver::Ddp && !dynamics.is_vi() {
+        return Err(SimError::InvalidInput(
+            "DDP needs the VI's second derivatives: use iLQR with RK4".into(),
+        ));
+    }
+    let Some((lo, hi)) = &settings.limits else {
+        return Ok(());
+    };
+    if lo.len() != nu || hi.len() != nu {
+        return Err(SimError::InvalidInput(format!(
+            "the limits have {} lower and {} upper bounds; the problem has {nu} controls",
+            lo.len(),
+            hi.len()
+        )));
+    }
+    for c in 0..nu {
+        if lo[c].is_nan() || hi[c].is_nan() || lo[c] > hi[c] {
+            return Err(SimError::InvalidInput(format!(
+                "the limits of control {c} are [{}, {}]: the lower must not exceed the upper",
+                lo[c], hi[c]
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The initial guess clamped into the limits.
+fn clamp_into((lo, hi): &Limits, u: &mut [DVector<f64>]) {
+    for uk in u.iter_mut() {
+        for c in 0..uk.len() {
+            uk[c] = uk[c].clamp(lo[c], hi[c]);
+        }
+    }
+}
+
+/// The current iterate (states, controls, total cost) and the trial one the line search
+/// fills.
+struct Iterate {
+    x: Vec<DVector<f64>>,
+    u: Vec<DVector<f64>>,
+    x_new: Vec<DVector<f64>>,
+    u_new: Vec<DVector<f64>>,
+    total: f64,
+}
+
+/// A backward pass's result and the model it used.
+struct Direction {
+    outcome: Outcome,
+    model: Solver,
+}
+
+/// The backward pass at `mu` (the box QP once the phase is boxed): the feedback gains and
+/// feed-forward in `work`. Where DDP's model is indefinite (the step's curvature contracted
+/// with V_x, far from the optimum) this pass takes the Gauss–Newton model at the same μ
+/// rather than a μ large enough to hide it, which would turn the steps into a crawl. `None`:
+/// some `Q_uu + μ s I` is not positive definite.
+fn compute_direction<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
+    it: &Iterate,
+    work: &mut Work,
+    settings: &IlqrSettings,
+    mu: f64,
+    phase: BoxPhase,
+) -> Result<Option<Direction>, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let pass = Pass {
+        solver: settings.solver,
+        mu,
+        limits: match phase {
+            BoxPhase::Clamped => None,
+            BoxPhase::Boxed => settings.limits.as_ref(),
+        },
+    };
+    let outcome = backward(dynamics, cost, &it.x, &it.u, work, &pass)?;
+    if outcome.is_some() || pass.solver != Solver::Ddp {
+        return Ok(outcome.map(|outcome| Direction {
+            outcome,
+            model: pass.solver,
+        }));
+    }
+    let gauss_newton = Pass {
+        solver: Solver::Ilqr,
+        ..pass
+    };
+    let outcome = backward(dynamics, cost, &it.x, &it.u, work, &gauss_newton)?;
+    Ok(outcome.map(|outcome| Direction {
+        outcome,
+        model: Solver::Ilqr,
+    }))
+}
+
+/// The forward pass: the first step length (1, ½, ¼, … above 10⁻⁴) whose rollout lowers the
+/// true cost, into the trial iterate; `(0, total)` when none does.
+fn try_step<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut dyn Cost,
+    x0: &DVector<f64>,
+    it: &mut Iterate,
+    work: &mut Work,
+    settings: &IlqrSettings,
+) -> (f64, f64)
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let mut alpha = 1.0;
+    while alpha > 1e-4 {
+        for k in 0..it.u.len() {
+            it.u_new[k].copy_from(&it.u[k]);
+            it.u_new[k].axpy(alpha, &work.k[k], 1.0);
+        }
+        it.x_new[0].copy_from(x0);
+        let policy = Some((it.x.as_slice(), settings.limits.as_ref()));
+        if let Ok(trial) = rollout(
+            dynamics,
+            cost,
+            &mut it.x_new,
+            &mut it.u_new,
+            work,
+            false,
+            policy,
+        ) {
+            if trial.is_finite() && trial < it.total {
+                return (alpha, trial);
+            }
+        }
+        alpha *= 0.5;
+    }
+    (0.0, it.total)
+}
+
+/// The trial iterate becomes the current one, with its step Jacobians at its converged
+/// steps.
+fn accept_step<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    it: &mut Iterate,
+    total: f64,
+    work: &mut Work,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    std::mem::swap(&mut it.x, &mut it.x_new);
+    std::mem::swap(&mut it.u, &mut it.u_new);
+    it.total = total;
+    for k in 0..it.u.len() {
+        let (head, tail) = it.x.split_at_mut(k + 1);
+        dynamics.jacobians(
+            k,
+            head[k].as_slice(),
+            it.u[k].as_slice(),
+            tail[0].as_mut_slice(),
+            &work.lambda[k],
+            &mut work.a[k],
+            &mut work.b[k],
+        )?;
+    }
+    Ok(())
 }
 
 /// Per-knot buffers and the knot workspace, allocated once per solve.
@@ -416,6 +508,23 @@ struct Work {
     /// Each step's multipliers in the last rollout (for its Jacobians without re-stepping).
     lambda: Vec<Vec<f64>>,
     backward: Backward,
+}
+
+impl Work {
+    /// Buffers for `n` knots of `nx` states and `nu` controls.
+    fn new(nx: usize, nu: usize, n: usize, needs: Needs) -> Self {
+        Work {
+            a: vec![DMatrix::zeros(nx, nx); n],
+            b: vec![DMatrix::zeros(nx, nu); n],
+            k: vec![DVector::zeros(nu); n],
+            gain: vec![DMatrix::zeros(nu, nx); n],
+            knot: Knot::empty(),
+            needs,
+            dx: DVector::zeros(nx),
+            lambda: vec![Vec::new(); n],
+            backward: Backward::new(nx, nu),
+        }
+    }
 }
 
 /// Refuses a problem that does not fit the dynamics: `x0` of `nx` entries, at least one

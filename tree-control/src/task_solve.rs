@@ -63,6 +63,10 @@ where
             task.controls.clone(),
         ),
         TaskIntegrator::Rk4 => DiscreteSystem::rk4(sys, task.dt, 0.0, task.controls.clone()),
+        TaskIntegrator::Rk45 => Err(SimError::InvalidInput(
+            "a task steps with `vi` or `rk4`: an adaptive step (`rk45`) is no discrete system"
+                .into(),
+        )),
     }?;
     Ok(dynamics.with_input_memory(task.reads_previous_inputs()))
 }

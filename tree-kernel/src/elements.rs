@@ -261,141 +261,190 @@ pub fn constraints<S: Scalar>(
     out: &mut impl Sink<S>,
 ) {
     let ws = &mut At { tree, scratch };
-    // `q̇ᵀD²h q̇` from `Order::Dynamics` on (by the frames' curvatures, O(depth)); the whole
-    // Hessian `D²h` only at `Order::Full`.
-    let second = order >= Order::Dynamics;
-    let full = order >= Order::Full;
-    let two = S::constant(2.0);
     let mut r = 0;
     for con in &plan.constraints {
-        let [a, b] = con.frames;
-        match &con.kind {
-            ConstraintKind::Distance { length } => {
-                // q̇ᵀD²h q̇ = 2ḋ·ḋ + 2d·(κ_a − κ_b) − 2q̇_ℓ² (κ: the points' curvatures).
-                let d = pair(plan, ws, a, b);
-                let mut curvature = S::zero();
-                if second {
-                    let rate = pair_rate(ws, dq);
-                    let (ka, kb) = (
-                        point_curvature(plan, ws, a, dq),
-                        point_curvature(plan, ws, b, dq),
-                    );
-                    curvature = two * (dot3(&rate, &rate) + dot3(&d, &sub3(&ka, &kb)));
-                }
-                let sc = &mut ws.scratch;
-                for x in 0..sc.vars.len() {
-                    let i = sc.vars[x];
-                    sc.grad[i] = two * dot3(&d, &sc.dd[i]);
-                }
-                let l = match *length {
-                    Parameter::Constant(l) => S::constant(l),
-                    Parameter::Variable(i) => {
-                        sc.involve(i);
-                        sc.grad[i] -= two * q[i];
-                        if full {
-                            sc.add_hess(i, i, -two);
-                        }
-                        curvature -= two * dq[i] * dq[i];
-                        q[i]
-                    }
-                };
-                if full {
-                    squared_distance_hessian(plan, ws, a, b, &d);
-                }
-                emit_row(ws, r, dot3(&d, &d) - l * l, curvature, order, out);
-                r += 1;
+        let row = Row {
+            frames: con.frames,
+            first: r,
+            order,
+        };
+        r += match &con.kind {
+            ConstraintKind::Distance { length } => distance_row(plan, ws, &row, length, q, dq, out),
+            ConstraintKind::Plane { normal } => plane_row(plan, ws, &row, normal, dq, out),
+            ConstraintKind::Point { axes } => point_rows(plan, ws, &row, axes, dq, out),
+        };
+    }
+}
+
+/// Where a constraint's rows go: its two frames, its first row, and the evaluation's order
+/// (`q̇ᵀD²h q̇` from `Order::Dynamics` on, by the frames' curvatures, O(depth); the whole
+/// Hessian `D²h` only at `Order::Full`).
+struct Row {
+    frames: [usize; 2],
+    first: usize,
+    order: Order,
+}
+
+/// A distance constraint's row `h = ‖p_a − p_b‖² − ℓ²` (eq. in docs/derivations.md §5);
+/// the rows written (one).
+fn distance_row<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut At<'_, S>,
+    row: &Row,
+    length: &Parameter,
+    q: &[S],
+    dq: &[S],
+    out: &mut impl Sink<S>,
+) -> usize {
+    let ([a, b], r, order) = (row.frames, row.first, row.order);
+    let (second, full) = (order >= Order::Dynamics, order >= Order::Full);
+    let two = S::constant(2.0);
+    // q̇ᵀD²h q̇ = 2ḋ·ḋ + 2d·(κ_a − κ_b) − 2q̇_ℓ² (κ: the points' curvatures).
+    let d = pair(plan, ws, a, b);
+    let mut curvature = S::zero();
+    if second {
+        let rate = pair_rate(ws, dq);
+        let (ka, kb) = (
+            point_curvature(plan, ws, a, dq),
+            point_curvature(plan, ws, b, dq),
+        );
+        curvature = two * (dot3(&rate, &rate) + dot3(&d, &sub3(&ka, &kb)));
+    }
+    let sc = &mut ws.scratch;
+    for x in 0..sc.vars.len() {
+        let i = sc.vars[x];
+        sc.grad[i] = two * dot3(&d, &sc.dd[i]);
+    }
+    let l = match *length {
+        Parameter::Constant(l) => S::constant(l),
+        Parameter::Variable(i) => {
+            sc.involve(i);
+            sc.grad[i] -= two * q[i];
+            if full {
+                sc.add_hess(i, i, -two);
             }
-            ConstraintKind::Plane { normal } => {
-                let d = pair(plan, ws, a, b);
-                let e = [-d[0], -d[1], -d[2]];
-                let n = ws.tree.pose[a].rotate(&normal.map(S::constant));
-                let n_cross_e = cross(&n, &e);
-                let (col, anc) = columns(plan, a);
-                // q̇ᵀD²h q̇ = n·(κ_b − κ_a) + 2ṅ·ė + (q̇ᵀ∂²n q̇)·e, ṅ = ω_a × n, ė = −ḋ.
-                let mut curvature = S::zero();
-                if second {
-                    let rate = pair_rate(ws, dq);
-                    let mut omega = [S::zero(); 3];
-                    for (ia, &i) in anc.iter().enumerate() {
-                        let w = ws.tree.axis[col + ia];
-                        for c in 0..3 {
-                            omega[c] += dq[i] * w[c];
-                        }
-                    }
-                    let n_rate = cross(&omega, &n);
-                    let n_curvature =
-                        curvature_along(plan, ws, a, dq, |ib| cross(&ws.tree.axis[col + ib], &n));
-                    let (ka, kb) = (
-                        point_curvature(plan, ws, a, dq),
-                        point_curvature(plan, ws, b, dq),
-                    );
-                    curvature = dot3(&n, &sub3(&kb, &ka)) - two * dot3(&n_rate, &rate)
-                        + dot3(&n_curvature, &e);
-                }
-                let sc = &mut ws.scratch;
-                for x in 0..sc.vars.len() {
-                    let i = sc.vars[x];
-                    sc.grad[i] = -dot3(&n, &sc.dd[i]);
-                }
-                // ∂n/∂q_i · e = (w_i × n)·e = w_i·(n × e).
-                for (ia, &i) in anc.iter().enumerate() {
-                    sc.grad[i] += dot3(&ws.tree.axis[col + ia], &n_cross_e);
-                }
-                if full {
-                    // n·∂²e = n·(∂²p_b − ∂²p_a).
-                    add_point_hessian(plan, ws, b, &n, S::constant(1.0));
-                    add_point_hessian(plan, ws, a, &n, S::constant(-1.0));
-                    let (col, anc) = columns(plan, a);
-                    for ia in 0..anc.len() {
-                        let w_a = ws.tree.axis[col + ia];
-                        let dn = cross(&w_a, &n);
-                        // ∂²n·e over pairs of frame a's variables.
-                        for ib in ia..anc.len() {
-                            let x = dot3(&cross(&w_a, &cross(&ws.tree.axis[col + ib], &n)), &e);
-                            ws.scratch.add_hess_sym(anc[ia], anc[ib], x);
-                        }
-                        // ∂n_i·∂e_j + ∂n_j·∂e_i, with ∂e = −Dd.
-                        let sc = &mut ws.scratch;
-                        for y in 0..sc.vars.len() {
-                            let j = sc.vars[y];
-                            let x = -dot3(&dn, &sc.dd[j]);
-                            sc.add_hess(anc[ia], j, x);
-                            sc.add_hess(j, anc[ia], x);
-                        }
-                    }
-                }
-                emit_row(ws, r, dot3(&n, &e), curvature, order, out);
-                r += 1;
+            curvature -= two * dq[i] * dq[i];
+            q[i]
+        }
+    };
+    if full {
+        squared_distance_hessian(plan, ws, a, b, &d);
+    }
+    emit_row(ws, r, dot3(&d, &d) - l * l, curvature, order, out);
+    1
+}
+
+/// A plane constraint's row `h = n·(p_b − p_a)`, `n` fixed in frame a's axes; the rows
+/// written (one).
+fn plane_row<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut At<'_, S>,
+    row: &Row,
+    normal: &[f64; 3],
+    dq: &[S],
+    out: &mut impl Sink<S>,
+) -> usize {
+    let ([a, b], r, order) = (row.frames, row.first, row.order);
+    let (second, full) = (order >= Order::Dynamics, order >= Order::Full);
+    let two = S::constant(2.0);
+    let d = pair(plan, ws, a, b);
+    let e = [-d[0], -d[1], -d[2]];
+    let n = ws.tree.pose[a].rotate(&normal.map(S::constant));
+    let n_cross_e = cross(&n, &e);
+    let (col, anc) = columns(plan, a);
+    // q̇ᵀD²h q̇ = n·(κ_b − κ_a) + 2ṅ·ė + (q̇ᵀ∂²n q̇)·e, ṅ = ω_a × n, ė = −ḋ.
+    let mut curvature = S::zero();
+    if second {
+        let rate = pair_rate(ws, dq);
+        let mut omega = [S::zero(); 3];
+        for (ia, &i) in anc.iter().enumerate() {
+            let w = ws.tree.axis[col + ia];
+            for c in 0..3 {
+                omega[c] += dq[i] * w[c];
             }
-            ConstraintKind::Point { axes } => {
-                // q̇ᵀD²h q̇ = e_k·(κ_a − κ_b).
-                let relative = if second {
-                    sub3(
-                        &point_curvature(plan, ws, a, dq),
-                        &point_curvature(plan, ws, b, dq),
-                    )
-                } else {
-                    [S::zero(); 3]
-                };
-                for &k in axes {
-                    let d = pair(plan, ws, a, b);
-                    let sc = &mut ws.scratch;
-                    for x in 0..sc.vars.len() {
-                        let i = sc.vars[x];
-                        sc.grad[i] = sc.dd[i][k];
-                    }
-                    if full {
-                        let mut e = [S::zero(); 3];
-                        e[k] = S::constant(1.0);
-                        add_point_hessian(plan, ws, a, &e, S::constant(1.0));
-                        add_point_hessian(plan, ws, b, &e, S::constant(-1.0));
-                    }
-                    emit_row(ws, r, d[k], relative[k], order, out);
-                    r += 1;
-                }
+        }
+        let n_rate = cross(&omega, &n);
+        let n_curvature = curvature_along(plan, ws, a, dq, |ib| cross(&ws.tree.axis[col + ib], &n));
+        let (ka, kb) = (
+            point_curvature(plan, ws, a, dq),
+            point_curvature(plan, ws, b, dq),
+        );
+        curvature = dot3(&n, &sub3(&kb, &ka)) - two * dot3(&n_rate, &rate) + dot3(&n_curvature, &e);
+    }
+    let sc = &mut ws.scratch;
+    for x in 0..sc.vars.len() {
+        let i = sc.vars[x];
+        sc.grad[i] = -dot3(&n, &sc.dd[i]);
+    }
+    // ∂n/∂q_i · e = (w_i × n)·e = w_i·(n × e).
+    for (ia, &i) in anc.iter().enumerate() {
+        sc.grad[i] += dot3(&ws.tree.axis[col + ia], &n_cross_e);
+    }
+    if full {
+        // n·∂²e = n·(∂²p_b − ∂²p_a).
+        add_point_hessian(plan, ws, b, &n, S::constant(1.0));
+        add_point_hessian(plan, ws, a, &n, S::constant(-1.0));
+        let (col, anc) = columns(plan, a);
+        for ia in 0..anc.len() {
+            let w_a = ws.tree.axis[col + ia];
+            let dn = cross(&w_a, &n);
+            // ∂²n·e over pairs of frame a's variables.
+            for ib in ia..anc.len() {
+                let x = dot3(&cross(&w_a, &cross(&ws.tree.axis[col + ib], &n)), &e);
+                ws.scratch.add_hess_sym(anc[ia], anc[ib], x);
+            }
+            // ∂n_i·∂e_j + ∂n_j·∂e_i, with ∂e = −Dd.
+            let sc = &mut ws.scratch;
+            for y in 0..sc.vars.len() {
+                let j = sc.vars[y];
+                let x = -dot3(&dn, &sc.dd[j]);
+                sc.add_hess(anc[ia], j, x);
+                sc.add_hess(j, anc[ia], x);
             }
         }
     }
+    emit_row(ws, r, dot3(&n, &e), curvature, order, out);
+    1
+}
+
+/// A point constraint's rows `h_k = e_k·(p_a − p_b)`, one per listed world axis; the rows
+/// written.
+fn point_rows<S: Scalar>(
+    plan: &TreePlan,
+    ws: &mut At<'_, S>,
+    row: &Row,
+    axes: &[usize],
+    dq: &[S],
+    out: &mut impl Sink<S>,
+) -> usize {
+    let ([a, b], mut r, order) = (row.frames, row.first, row.order);
+    let (second, full) = (order >= Order::Dynamics, order >= Order::Full);
+    // q̇ᵀD²h q̇ = e_k·(κ_a − κ_b).
+    let relative = if second {
+        sub3(
+            &point_curvature(plan, ws, a, dq),
+            &point_curvature(plan, ws, b, dq),
+        )
+    } else {
+        [S::zero(); 3]
+    };
+    for &k in axes {
+        let d = pair(plan, ws, a, b);
+        let sc = &mut ws.scratch;
+        for x in 0..sc.vars.len() {
+            let i = sc.vars[x];
+            sc.grad[i] = sc.dd[i][k];
+        }
+        if full {
+            let mut e = [S::zero(); 3];
+            e[k] = S::constant(1.0);
+            add_point_hessian(plan, ws, a, &e, S::constant(1.0));
+            add_point_hessian(plan, ws, b, &e, S::constant(-1.0));
+        }
+        emit_row(ws, r, d[k], relative[k], order, out);
+        r += 1;
+    }
+    axes.len()
 }
 
 /// Springs' potentials `V` subtracted from `L`, `∂L/∂q` and (at `Order::Full`) `∂²L/∂q²`.

@@ -318,153 +318,23 @@ fn model_constructor(
 /// Rust tokens that build `spec` (a `ModelSpec` literal).
 fn spec_tokens(spec: &ModelSpec) -> TokenStream {
     let m = quote!(::tree_mech::__private::model);
-    let opt = |x: Option<f64>| match x {
-        Some(x) => {
-            let x = constant(x);
-            quote!(Some(#x))
-        }
-        None => quote!(None),
-    };
-    let opt3 = |x: Option<[f64; 3]>| match x {
-        Some(v) => {
-            let v = v.map(constant);
-            quote!(Some([#(#v),*]))
-        }
-        None => quote!(None),
-    };
-    let string = |x: &str| quote!(::std::string::String::from(#x));
-    let opt_string = |x: Option<&str>| match x {
-        Some(x) => {
-            let x = string(x);
-            quote!(Some(#x))
-        }
-        None => quote!(None),
-    };
-    let strings = |xs: &[String]| {
-        let xs = xs.iter().map(|x| string(x));
-        quote!(::std::vec![#(#xs),*])
-    };
-    let frames = spec.frames.iter().map(|f| {
-        let primitives = f.primitives.iter().map(|p| {
-            let kind = format_ident!("{}", format!("{:?}", p.kind));
-            let value = match &p.value {
-                Value::Constant(x) => {
-                    let x = constant(*x);
-                    quote!(#m::Value::Constant(#x))
-                }
-                Value::Variable(v) => {
-                    let v = string(v);
-                    quote!(#m::Value::Variable(#v))
-                }
-            };
-            quote!(#m::Primitive { kind: #m::PrimitiveKind::#kind, value: #value })
-        });
-        let (name, parent) = (string(&f.name), opt_string(f.parent.as_deref()));
-        let (mass, com) = (opt(f.mass), opt3(f.com));
-        let inertia = match &f.inertia {
-            Some(v) => {
-                let v = v.iter().map(|x| constant(*x));
-                quote!(Some(::std::vec![#(#v),*]))
-            }
-            None => quote!(None),
-        };
-        quote!(#m::FrameSpec {
-            name: #name,
-            parent: #parent,
-            primitives: ::std::vec![#(#primitives),*],
-            mass: #mass,
-            com: #com,
-            inertia: #inertia,
-        })
-    });
-    let variables = spec.variables.iter().map(|v| {
-        let name = string(&v.name);
-        let (q0, dq0, damping) = (opt(v.q0), opt(v.dq0), opt(v.damping));
-        let kinematic = match v.kinematic {
-            Some(b) => quote!(Some(#b)),
-            None => quote!(None),
-        };
-        let motion = match &v.motion {
-            Some(s) => {
-                let (o, a, f, p) = (
-                    opt(s.offset),
-                    opt(s.amplitude),
-                    opt(s.frequency),
-                    opt(s.phase),
-                );
-                quote!(Some(#m::SineSpec { offset: #o, amplitude: #a, frequency: #f, phase: #p }))
-            }
-            None => quote!(None),
-        };
-        let samples = match &v.samples {
-            Some(pairs) => {
-                let pairs = pairs.iter().map(|[t, q]| {
-                    let (t, q) = (constant(*t), constant(*q));
-                    quote!([#t, #q])
-                });
-                quote!(Some(::std::vec![#(#pairs),*]))
-            }
-            None => quote!(None),
-        };
-        let limits = match v.limits {
-            Some([lo, hi]) => {
-                let (lo, hi) = (constant(lo), constant(hi));
-                quote!(Some([#lo, #hi]))
-            }
-            None => quote!(None),
-        };
-        quote!(#m::VariableSpec {
-            name: #name, q0: #q0, dq0: #dq0, damping: #damping, kinematic: #kinematic,
-            motion: #motion, samples: #samples, limits: #limits,
-        })
-    });
-    let constraints = spec.constraints.iter().map(|c| {
-        let (name, kind, frames) = (opt_string(c.name.as_deref()), string(&c.kind), strings(&c.frames));
-        let length = match &c.length {
-            Some(ParameterSpec::Constant(x)) => {
-                let x = constant(*x);
-                quote!(Some(#m::ParameterSpec::Constant(#x)))
-            }
-            Some(ParameterSpec::Variable(v)) => {
-                let v = string(v);
-                quote!(Some(#m::ParameterSpec::Variable(#v)))
-            }
-            None => quote!(None),
-        };
-        let (normal, axes) = (opt3(c.normal), opt_string(c.axes.as_deref()));
-        quote!(#m::ConstraintSpec {
-            name: #name, kind: #kind, frames: #frames, length: #length, normal: #normal, axes: #axes,
-        })
-    });
+    let frames = spec.frames.iter().map(|f| frame_spec(&m, f));
+    let variables = spec.variables.iter().map(|v| variable_spec(&m, v));
+    let constraints = spec.constraints.iter().map(|c| constraint_spec(&m, c));
     let springs = spec.springs.iter().map(|s| {
-        let frames = match &s.frames {
-            Some(f) => {
-                let f = strings(f);
-                quote!(Some(#f))
-            }
-            None => quote!(None),
-        };
-        let variable = opt_string(s.variable.as_deref());
-        let (stiffness, rest) = (opt(s.stiffness), opt(s.rest));
+        let (frames, variable) = (s.frames.literal(), s.variable.literal());
+        let (stiffness, rest) = (s.stiffness.literal(), s.rest.literal());
         quote!(#m::SpringSpec { frames: #frames, variable: #variable, stiffness: #stiffness, rest: #rest })
     });
     let dampers = spec.dampers.iter().map(|d| {
-        let (frames, damping) = (strings(&d.frames), opt(d.damping));
+        let (frames, damping) = (d.frames.literal(), d.damping.literal());
         quote!(#m::DamperSpec { frames: #frames, damping: #damping })
     });
     let inputs = spec.inputs.iter().map(|u| {
-        let (name, variable) = (string(&u.name), opt_string(u.variable.as_deref()));
-        let limits = match u.limits {
-            Some(l) => {
-                let [lo, hi] = l.map(constant);
-                quote!(Some([#lo, #hi]))
-            }
-            None => quote!(None),
-        };
+        let (name, variable, limits) = (u.name.literal(), u.variable.literal(), u.limits.literal());
         quote!(#m::InputSpec { name: #name, variable: #variable, limits: #limits })
     });
-    let name = string(&spec.name);
-    let gravity = opt3(spec.gravity);
+    let (name, gravity) = (spec.name.literal(), spec.gravity.literal());
     quote!(#m::ModelSpec {
         name: #name,
         gravity: #gravity,
@@ -475,6 +345,123 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
         dampers: ::std::vec![#(#dampers),*],
         inputs: ::std::vec![#(#inputs),*],
     })
+}
+
+/// A frame's spec as a literal.
+fn frame_spec(m: &TokenStream, f: &tree_model::FrameSpec) -> TokenStream {
+    let primitives = f.primitives.iter().map(|p| {
+        let kind = format_ident!("{}", format!("{:?}", p.kind));
+        let value = match &p.value {
+            Value::Constant(x) => {
+                let x = x.literal();
+                quote!(#m::Value::Constant(#x))
+            }
+            Value::Variable(v) => {
+                let v = v.literal();
+                quote!(#m::Value::Variable(#v))
+            }
+        };
+        quote!(#m::Primitive { kind: #m::PrimitiveKind::#kind, value: #value })
+    });
+    let (name, parent) = (f.name.literal(), f.parent.literal());
+    let (mass, com, inertia) = (f.mass.literal(), f.com.literal(), f.inertia.literal());
+    quote!(#m::FrameSpec {
+        name: #name,
+        parent: #parent,
+        primitives: ::std::vec![#(#primitives),*],
+        mass: #mass,
+        com: #com,
+        inertia: #inertia,
+    })
+}
+
+/// A variable's settings as a literal.
+fn variable_spec(m: &TokenStream, v: &tree_model::VariableSpec) -> TokenStream {
+    let name = v.name.literal();
+    let (q0, dq0, damping) = (v.q0.literal(), v.dq0.literal(), v.damping.literal());
+    let kinematic = v.kinematic.literal();
+    let motion = match &v.motion {
+        Some(s) => {
+            let (o, a) = (s.offset.literal(), s.amplitude.literal());
+            let (f, p) = (s.frequency.literal(), s.phase.literal());
+            quote!(Some(#m::SineSpec { offset: #o, amplitude: #a, frequency: #f, phase: #p }))
+        }
+        None => quote!(None),
+    };
+    let (samples, limits) = (v.samples.literal(), v.limits.literal());
+    quote!(#m::VariableSpec {
+        name: #name, q0: #q0, dq0: #dq0, damping: #damping, kinematic: #kinematic,
+        motion: #motion, samples: #samples, limits: #limits,
+    })
+}
+
+/// A constraint's spec as a literal.
+fn constraint_spec(m: &TokenStream, c: &tree_model::ConstraintSpec) -> TokenStream {
+    let (name, kind, frames) = (c.name.literal(), c.kind.literal(), c.frames.literal());
+    let length = match &c.length {
+        Some(ParameterSpec::Constant(x)) => {
+            let x = x.literal();
+            quote!(Some(#m::ParameterSpec::Constant(#x)))
+        }
+        Some(ParameterSpec::Variable(v)) => {
+            let v = v.literal();
+            quote!(Some(#m::ParameterSpec::Variable(#v)))
+        }
+        None => quote!(None),
+    };
+    let (normal, axes) = (c.normal.literal(), c.axes.literal());
+    quote!(#m::ConstraintSpec {
+        name: #name, kind: #kind, frames: #frames, length: #length, normal: #normal, axes: #axes,
+    })
+}
+
+/// A value written back as the Rust expression that builds it.
+trait Literal {
+    fn literal(&self) -> TokenStream;
+}
+
+impl Literal for f64 {
+    fn literal(&self) -> TokenStream {
+        constant(*self)
+    }
+}
+
+impl Literal for bool {
+    fn literal(&self) -> TokenStream {
+        quote!(#self)
+    }
+}
+
+impl Literal for String {
+    fn literal(&self) -> TokenStream {
+        quote!(::std::string::String::from(#self))
+    }
+}
+
+impl<T: Literal> Literal for Option<T> {
+    fn literal(&self) -> TokenStream {
+        match self {
+            Some(x) => {
+                let x = x.literal();
+                quote!(Some(#x))
+            }
+            None => quote!(None),
+        }
+    }
+}
+
+impl<T: Literal, const N: usize> Literal for [T; N] {
+    fn literal(&self) -> TokenStream {
+        let items = self.iter().map(Literal::literal);
+        quote!([#(#items),*])
+    }
+}
+
+impl<T: Literal> Literal for Vec<T> {
+    fn literal(&self) -> TokenStream {
+        let items = self.iter().map(Literal::literal);
+        quote!(::std::vec![#(#items),*])
+    }
 }
 
 /// The expansion of one `tree_model!`, as named stages: read the model, trace and emit its

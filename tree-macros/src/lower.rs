@@ -238,49 +238,9 @@ fn element_spec(
             None
         }
     };
-    let unknown = |key: &syn::Ident, what: &str, expected: &str, errors: &mut Errors| {
-        errors.push(
-            key.span(),
-            format!("unknown {what} setting `{key}`: expected {expected}"),
-        );
-    };
     match e.element {
         ElementKind::Constraint => {
-            let mut c = ConstraintSpec {
-                name: e.name.as_ref().map(|n| n.to_string()),
-                kind: e.kind.as_ref().map(|k| k.to_string()).unwrap_or_default(),
-                frames: names,
-                ..ConstraintSpec::default()
-            };
-            for (key, value) in &e.settings {
-                match (key.to_string().as_str(), value) {
-                    ("length", Setting::Number(n)) => {
-                        c.length = Some(ParameterSpec::Constant(n.value))
-                    }
-                    ("length", Setting::Name(v)) => {
-                        c.length = Some(ParameterSpec::Variable(v.to_string()))
-                    }
-                    ("length", v) => {
-                        errors.push(v.span(), "`length` takes a number or a variable name")
-                    }
-                    ("normal", Setting::Vector(n, span)) => {
-                        if n.len() == 3 {
-                            c.normal = Some([n[0].value, n[1].value, n[2].value]);
-                        } else {
-                            errors
-                                .push(*span, format!("expected three numbers, found {}", n.len()));
-                        }
-                    }
-                    ("normal", v) => {
-                        errors.push(v.span(), "`normal` takes three numbers [x, y, z]")
-                    }
-                    ("axes", Setting::Text(t)) => c.axes = Some(t.value()),
-                    ("axes", Setting::Name(t)) => c.axes = Some(t.to_string()),
-                    ("axes", v) => errors.push(v.span(), "`axes` takes some of x, y, z (e.g. xz)"),
-                    _ => unknown(key, "constraint", "length, normal or axes", errors),
-                }
-            }
-            spec.constraints.push(c);
+            spec.constraints.push(constraint_spec(e, names, errors));
             (Section::Constraint, spans)
         }
         ElementKind::Spring => {
@@ -314,31 +274,74 @@ fn element_spec(
             (Section::Damper, spans)
         }
         ElementKind::Input => {
-            let mut u = InputSpec {
-                name: e.name.as_ref().map(|n| n.to_string()).unwrap_or_default(),
-                variable: names.first().cloned(),
-                limits: None,
-            };
-            for (key, value) in &e.settings {
-                match (key.to_string().as_str(), value) {
-                    ("limits", Setting::Vector(v, span)) => {
-                        if v.len() == 2 {
-                            u.limits = Some([v[0].value, v[1].value]);
-                        } else {
-                            errors.push(
-                                *span,
-                                format!("expected two numbers [lo, hi], found {}", v.len()),
-                            );
-                        }
-                    }
-                    ("limits", v) => errors.push(v.span(), "`limits` takes two numbers [lo, hi]"),
-                    _ => unknown(key, "input", "limits", errors),
-                }
-            }
-            spec.inputs.push(u);
+            spec.inputs.push(input_spec(e, names, errors));
             (Section::Input, spans)
         }
     }
+}
+
+/// An unknown setting of an element, named with the ones it takes.
+fn unknown(key: &syn::Ident, what: &str, expected: &str, errors: &mut Errors) {
+    errors.push(
+        key.span(),
+        format!("unknown {what} setting `{key}`: expected {expected}"),
+    );
+}
+
+/// `constraint(a, b) { length = …; normal = […]; axes = …; }` as a spec.
+fn constraint_spec(e: &InlineElement, names: Vec<String>, errors: &mut Errors) -> ConstraintSpec {
+    let mut c = ConstraintSpec {
+        name: e.name.as_ref().map(|n| n.to_string()),
+        kind: e.kind.as_ref().map(|k| k.to_string()).unwrap_or_default(),
+        frames: names,
+        ..ConstraintSpec::default()
+    };
+    for (key, value) in &e.settings {
+        match (key.to_string().as_str(), value) {
+            ("length", Setting::Number(n)) => c.length = Some(ParameterSpec::Constant(n.value)),
+            ("length", Setting::Name(v)) => c.length = Some(ParameterSpec::Variable(v.to_string())),
+            ("length", v) => errors.push(v.span(), "`length` takes a number or a variable name"),
+            ("normal", Setting::Vector(n, span)) => {
+                if n.len() == 3 {
+                    c.normal = Some([n[0].value, n[1].value, n[2].value]);
+                } else {
+                    errors.push(*span, format!("expected three numbers, found {}", n.len()));
+                }
+            }
+            ("normal", v) => errors.push(v.span(), "`normal` takes three numbers [x, y, z]"),
+            ("axes", Setting::Text(t)) => c.axes = Some(t.value()),
+            ("axes", Setting::Name(t)) => c.axes = Some(t.to_string()),
+            ("axes", v) => errors.push(v.span(), "`axes` takes some of x, y, z (e.g. xz)"),
+            _ => unknown(key, "constraint", "length, normal or axes", errors),
+        }
+    }
+    c
+}
+
+/// `input name(variable) { limits = [lo, hi]; }` as a spec.
+fn input_spec(e: &InlineElement, names: Vec<String>, errors: &mut Errors) -> InputSpec {
+    let mut u = InputSpec {
+        name: e.name.as_ref().map(|n| n.to_string()).unwrap_or_default(),
+        variable: names.first().cloned(),
+        limits: None,
+    };
+    for (key, value) in &e.settings {
+        match (key.to_string().as_str(), value) {
+            ("limits", Setting::Vector(v, span)) => {
+                if v.len() == 2 {
+                    u.limits = Some([v[0].value, v[1].value]);
+                } else {
+                    errors.push(
+                        *span,
+                        format!("expected two numbers [lo, hi], found {}", v.len()),
+                    );
+                }
+            }
+            ("limits", v) => errors.push(v.span(), "`limits` takes two numbers [lo, hi]"),
+            _ => unknown(key, "input", "limits", errors),
+        }
+    }
+    u
 }
 
 /// Builds and validates the inline model named `name`; returns the spec too, from which the

@@ -260,10 +260,58 @@ impl Program {
     /// statements reading them are named after them).
     pub fn emit(&self, prefix: &str, variables: &[&str], flavour: Flavour) -> Emitted {
         let generic = matches!(flavour, Flavour::Generic);
-        let dof = variables.len();
         let names = Names::of(&self.nodes, variables);
+        let layout = Layout::of(&self.nodes, self.live_statements());
+        let outputs = self.outputs_by_chunk(&layout, &names, generic);
+        let signature = Signature::new(&flavour, variables.len(), layout.slots);
+        let uses = self.uses(&layout.kept);
+        let mut functions = TokenStream::new();
+        let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
+        // The recorded program, then its variant for AVX2 and FMA (over f64 with the fusions;
+        // over a generic scalar as recorded, the dual numbers' lanes then vectorised).
+        for fused_variant in [false, true] {
+            let n = self.nodes.len();
+            let (fused, absorbed) = if fused_variant && !generic {
+                let at = (&uses[..], &layout.chunk_of[..], &layout.slot[..]);
+                fusions(&self.nodes, &layout.kept, at, &names)
+            } else {
+                (vec![None; n], vec![false; n])
+            };
+            let variant = Variant {
+                generic,
+                fused_variant,
+                fused: &fused,
+                absorbed: &absorbed,
+            };
+            for c in 0..layout.chunks {
+                let name = if fused_variant {
+                    format_ident!("{}_fma_{}", prefix, c)
+                } else {
+                    format_ident!("{}_{}", prefix, c)
+                };
+                let stmts = self.chunk_statements(c, &layout, &variant, &names, &signature.ty);
+                let chunk_outputs = &outputs[c];
+                let stmts = quote!(#stmts #(#chunk_outputs)*);
+                functions.extend(chunk_function(&name, &layout, &variant, &signature, stmts));
+                let calls = if fused_variant {
+                    &mut fused_calls
+                } else {
+                    &mut plain_calls
+                };
+                calls.extend(quote!(Self::#name(q, dq, s, out);));
+            }
+        }
+        Emitted {
+            functions,
+            body: dispatch(&flavour, layout.slots, plain_calls, fused_calls),
+            statements: layout.kept.len(),
+        }
+    }
+
+    /// The statements the outputs read, directly or through others (liveness, backwards
+    /// from the outputs), in order.
+    fn live_statements(&self) -> Vec<usize> {
         let n = self.nodes.len();
-        // Liveness, backwards from the outputs.
         let mut live = vec![false; n];
         for (_, t) in &self.outputs {
             if let Term::Var(v) = t {
@@ -279,21 +327,103 @@ impl Program {
                 }
             }
         }
-        let kept: Vec<usize> = (0..n).filter(|&i| live[i]).collect();
-        let chunk_of = {
-            let mut c = vec![usize::MAX; n];
-            for (pos, &i) in kept.iter().enumerate() {
-                c[i] = pos / CHUNK;
+        (0..n).filter(|&i| live[i]).collect()
+    }
+
+    /// Each chunk's output statements: assignments over f64, `out.add` over a generic scalar.
+    fn outputs_by_chunk(
+        &self,
+        layout: &Layout,
+        names: &Names,
+        generic: bool,
+    ) -> Vec<Vec<TokenStream>> {
+        let mut outputs_by_chunk: Vec<Vec<TokenStream>> = vec![Vec::new(); layout.chunks];
+        for (target, t) in &self.outputs {
+            let (c, value) = match t {
+                Term::Var(v) => (layout.chunk_of[*v as usize], names.term(*t, generic)),
+                Term::Const(_) => (0, names.term(*t, generic)),
+            };
+            outputs_by_chunk[c].push(if generic {
+                quote!(out.add(#target, #value);)
+            } else {
+                quote!(#target = #value;)
+            });
+        }
+        outputs_by_chunk
+    }
+
+    /// Each statement's readers among the kept statements and the outputs (for the fusions).
+    fn uses(&self, kept: &[usize]) -> Vec<usize> {
+        let mut uses = vec![0usize; self.nodes.len()];
+        let read = (kept.iter().flat_map(|&i| operands(&self.nodes[i])))
+            .chain(self.outputs.iter().map(|(_, t)| *t));
+        for t in read {
+            if let Term::Var(v) = t {
+                uses[v as usize] += 1;
             }
-            c
-        };
+        }
+        uses
+    }
+
+    /// Chunk `c`'s statements: its imports from the scratch, then its own (fused where the
+    /// variant fuses them), each stored to the scratch where a later chunk reads it.
+    fn chunk_statements(
+        &self,
+        c: usize,
+        layout: &Layout,
+        variant: &Variant,
+        names: &Names,
+        ty: &TokenStream,
+    ) -> TokenStream {
+        let mut stmts = TokenStream::new();
+        for &v in &layout.imports[c] {
+            let (id, s) = (names.var(v), layout.slot[v as usize]);
+            stmts.extend(quote!(let #id: #ty = s[#s];));
+        }
+        let own =
+            (layout.kept.iter()).filter(|&&i| layout.chunk_of[i] == c && !variant.absorbed[i]);
+        for &i in own {
+            let id = names.var(i as u32);
+            let e = match &variant.fused[i] {
+                Some(e) => e.clone(),
+                None => expression(&self.nodes[i], names, variant.generic),
+            };
+            stmts.extend(quote!(let #id: #ty = #e;));
+            if layout.slot[i] != usize::MAX {
+                let s = layout.slot[i];
+                stmts.extend(quote!(s[#s] = #id;));
+            }
+        }
+        stmts
+    }
+}
+
+/// Where a program's kept statements go: chunks of [`CHUNK`] statements (one function
+/// each), and a scratch slot for every value a later chunk reads.
+struct Layout {
+    kept: Vec<usize>,
+    chunk_of: Vec<usize>,
+    chunks: usize,
+    slot: Vec<usize>,
+    slots: usize,
+    /// Each chunk's values from earlier chunks.
+    imports: Vec<Vec<u32>>,
+}
+
+impl Layout {
+    fn of(nodes: &[Node], kept: Vec<usize>) -> Self {
+        let n = nodes.len();
+        let mut chunk_of = vec![usize::MAX; n];
+        for (pos, &i) in kept.iter().enumerate() {
+            chunk_of[i] = pos / CHUNK;
+        }
         let chunks = kept.len().div_ceil(CHUNK).max(1);
         // Values used in a later chunk than their own get a scratch slot.
         let mut slot = vec![usize::MAX; n];
         let mut slots = 0;
         let mut imports: Vec<Vec<u32>> = vec![Vec::new(); chunks];
         for &i in &kept {
-            for t in operands(&self.nodes[i]) {
+            for t in operands(&nodes[i]) {
                 if let Term::Var(v) = t {
                     let (from, to) = (chunk_of[v as usize], chunk_of[i]);
                     if from != to {
@@ -308,158 +438,139 @@ impl Program {
                 }
             }
         }
-        let mut outputs_by_chunk: Vec<Vec<TokenStream>> = vec![Vec::new(); chunks];
-        for (target, t) in &self.outputs {
-            let (c, value) = match t {
-                Term::Var(v) => (chunk_of[*v as usize], names.term(*t, generic)),
-                Term::Const(_) => (0, names.term(*t, generic)),
-            };
-            outputs_by_chunk[c].push(if generic {
-                quote!(out.add(#target, #value);)
-            } else {
-                quote!(#target = #value;)
-            });
+        Layout {
+            kept,
+            chunk_of,
+            chunks,
+            slot,
+            slots,
+            imports,
         }
-        let inline = if chunks == 1 {
-            quote!(#[inline(always)])
-        } else {
-            quote!(#[inline(never)])
-        };
-        let (ty, signature_of) = match flavour {
-            Flavour::F64 { out_ty, .. } => (
-                quote!(f64),
-                Box::new(
-                    move |name: &Ident| quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty)),
-                ) as Box<dyn Fn(&Ident) -> TokenStream>,
-            ),
-            Flavour::Generic => (
-                quote!(S),
-                Box::new(move |name: &Ident| {
+    }
+}
+
+/// One of the two variants a program is emitted in: as recorded, or fused for AVX2 and FMA
+/// (`fused[i]`: statement i's fused expression; `absorbed[i]`: folded into another).
+struct Variant<'a> {
+    /// Over a generic scalar (else `f64`).
+    generic: bool,
+    fused_variant: bool,
+    fused: &'a [Option<TokenStream>],
+    absorbed: &'a [bool],
+}
+
+/// The number type and the signature of a program's functions.
+struct Signature {
+    ty: TokenStream,
+    of: Box<dyn Fn(&Ident) -> TokenStream>,
+}
+
+impl Signature {
+    fn new(flavour: &Flavour, dof: usize, slots: usize) -> Self {
+        match flavour {
+            Flavour::F64 { out_ty, .. } => {
+                let out_ty = (*out_ty).clone();
+                Signature {
+                    ty: quote!(f64),
+                    of: Box::new(
+                        move |name: &Ident| quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty)),
+                    ),
+                }
+            }
+            Flavour::Generic => Signature {
+                ty: quote!(S),
+                of: Box::new(move |name: &Ident| {
                     quote!(fn #name<S: ::tree_mech::__private::Scalar>(
                         q: &[S; #dof],
                         dq: &[S; #dof],
                         s: &mut [S; #slots],
                         out: &mut impl ::tree_mech::__private::Sink<S>,
                     ))
-                }) as Box<dyn Fn(&Ident) -> TokenStream>,
-            ),
-        };
-        // Each statement's readers among the kept statements and the outputs (for the fusions).
-        let mut uses = vec![0usize; n];
-        let read = (kept.iter().flat_map(|&i| operands(&self.nodes[i])))
-            .chain(self.outputs.iter().map(|(_, t)| *t));
-        for t in read {
-            if let Term::Var(v) = t {
-                uses[v as usize] += 1;
-            }
-        }
-        let mut functions = TokenStream::new();
-        let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
-        // The recorded program, then its variant for AVX2 and FMA (over f64 with the fusions;
-        // over a generic scalar as recorded, the dual numbers' lanes then vectorised).
-        for fused_variant in [false, true] {
-            let (fused, absorbed) = if fused_variant && !generic {
-                fusions(&self.nodes, &kept, (&uses, &chunk_of, &slot), &names)
-            } else {
-                (vec![None; n], vec![false; n])
-            };
-            for c in 0..chunks {
-                let name = if fused_variant {
-                    format_ident!("{}_fma_{}", prefix, c)
-                } else {
-                    format_ident!("{}_{}", prefix, c)
-                };
-                let mut stmts = TokenStream::new();
-                for &v in &imports[c] {
-                    let (id, s) = (names.var(v), slot[v as usize]);
-                    stmts.extend(quote!(let #id: #ty = s[#s];));
-                }
-                for &i in kept.iter().filter(|&&i| chunk_of[i] == c && !absorbed[i]) {
-                    let id = names.var(i as u32);
-                    let e = match &fused[i] {
-                        Some(e) => e.clone(),
-                        None => expression(&self.nodes[i], &names, generic),
-                    };
-                    stmts.extend(quote!(let #id: #ty = #e;));
-                    if slot[i] != usize::MAX {
-                        let s = slot[i];
-                        stmts.extend(quote!(s[#s] = #id;));
-                    }
-                }
-                for o in &outputs_by_chunk[c] {
-                    stmts.extend(o.clone());
-                }
-                let signature = signature_of(&name);
-                // (A function with target features may be inlined, not always.)
-                let attributes = match (fused_variant, chunks) {
-                    (false, _) => quote!(#inline),
-                    (true, 1) => quote! {
-                        #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
-                        #[inline]
-                    },
-                    (true, _) => quote! {
-                        #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
-                        #[inline(never)]
-                    },
-                };
-                let function = quote! {
-                    #[doc(hidden)]
-                    #attributes
-                    #[allow(unused_variables, clippy::all)]
-                    #signature {
-                        #stmts
-                    }
-                };
-                // The recorded variant only where some CPU the build targets needs it
-                // (not on aarch64, nor on x86-64 built for AVX2 and FMA).
-                functions.extend(if fused_variant {
-                    function
-                } else {
-                    quote!(::tree_mech::__private::__unless_fused_only! { #function })
-                });
-                let calls = if fused_variant {
-                    &mut fused_calls
-                } else {
-                    &mut plain_calls
-                };
-                calls.extend(quote!(Self::#name(q, dq, s, out);));
-            }
-        }
-        // Where every CPU the build targets runs the fused variant, the recorded one is not
-        // compiled (`__unless_fused_only`; `cpu::fused` is then `true`).
-        let body = quote! {
-            if ::tree_mech::__private::fused() {
-                // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
-                // the functions have no target features and the block is plain.
-                #[allow(unused_unsafe)]
-                let () = unsafe { #fused_calls };
-            } else {
-                ::tree_mech::__private::__unless_fused_only! { let () = { #plain_calls }; }
-            }
-        };
-        // The values passed between functions: the outputs' scratch (allocated once, never
-        // cleared: each slot is written before it is read), or a local array.
-        let body = match flavour {
-            Flavour::F64 { scratch: false, .. } => quote! {
-                let s = &mut [0.0f64; #slots];
-                #body
+                }),
             },
-            _ if slots == 0 => quote! {
-                let s = &mut [];
-                #body
-            },
-            _ => quote! {
-                let mut scratch = ::core::mem::take(&mut out.scratch);
-                let s = scratch.array::<#slots>();
-                #body
-                out.scratch = scratch;
-            },
-        };
-        Emitted {
-            functions,
-            body,
-            statements: kept.len(),
         }
+    }
+}
+
+/// One chunk's function: inlined when the program is one chunk; the fused variant compiled
+/// for AVX2 and FMA, the recorded one only where some CPU the build targets needs it (not on
+/// aarch64, nor on x86-64 built for AVX2 and FMA).
+fn chunk_function(
+    name: &Ident,
+    layout: &Layout,
+    variant: &Variant,
+    signature: &Signature,
+    stmts: TokenStream,
+) -> TokenStream {
+    let inline = if layout.chunks == 1 {
+        quote!(#[inline(always)])
+    } else {
+        quote!(#[inline(never)])
+    };
+    // (A function with target features may be inlined, not always.)
+    let attributes = match (variant.fused_variant, layout.chunks) {
+        (false, _) => quote!(#inline),
+        (true, 1) => quote! {
+            #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
+            #[inline]
+        },
+        (true, _) => quote! {
+            #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
+            #[inline(never)]
+        },
+    };
+    let signature = (signature.of)(name);
+    let function = quote! {
+        #[doc(hidden)]
+        #attributes
+        #[allow(unused_variables, clippy::all)]
+        #signature {
+            #stmts
+        }
+    };
+    if variant.fused_variant {
+        function
+    } else {
+        quote!(::tree_mech::__private::__unless_fused_only! { #function })
+    }
+}
+
+/// The body that calls one variant's functions by the CPU (where every CPU the build
+/// targets runs the fused variant, the recorded one is not compiled: `__unless_fused_only`;
+/// `cpu::fused` is then `true`), with the values passed between functions: the outputs'
+/// scratch (allocated once, never cleared: each slot is written before it is read), or a
+/// local array.
+fn dispatch(
+    flavour: &Flavour,
+    slots: usize,
+    plain_calls: TokenStream,
+    fused_calls: TokenStream,
+) -> TokenStream {
+    let body = quote! {
+        if ::tree_mech::__private::fused() {
+            // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
+            // the functions have no target features and the block is plain.
+            #[allow(unused_unsafe)]
+            let () = unsafe { #fused_calls };
+        } else {
+            ::tree_mech::__private::__unless_fused_only! { let () = { #plain_calls }; }
+        }
+    };
+    match flavour {
+        Flavour::F64 { scratch: false, .. } => quote! {
+            let s = &mut [0.0f64; #slots];
+            #body
+        },
+        _ if slots == 0 => quote! {
+            let s = &mut [];
+            #body
+        },
+        _ => quote! {
+            let mut scratch = ::core::mem::take(&mut out.scratch);
+            let s = scratch.array::<#slots>();
+            #body
+            out.scratch = scratch;
+        },
     }
 }
 

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use crate::error::{Problem, Section, Site};
 use crate::model::{Constraint, ConstraintKind, Damper, Parameter, Spring, SpringKind, Variable};
-use crate::spec::{ModelSpec, ParameterSpec};
+use crate::spec::{ConstraintSpec, ModelSpec, ParameterSpec};
 
 /// Collects element problems into the validator's list.
 struct Report<'a> {
@@ -84,6 +84,19 @@ pub(crate) fn validate_elements(
     variables: &[Variable],
     problems: &mut Vec<Problem>,
 ) -> (Vec<Constraint>, Vec<Spring>, Vec<Damper>) {
+    let constraints = constraints_of(spec, index_of, var_index, problems);
+    let springs = springs_of(spec, index_of, var_index, variables, problems);
+    let dampers = dampers_of(spec, index_of, problems);
+    (constraints, springs, dampers)
+}
+
+/// The constraints: unique names, two frames each, and the fields of their kind only.
+fn constraints_of(
+    spec: &ModelSpec,
+    index_of: &HashMap<&str, usize>,
+    var_index: &HashMap<&str, usize>,
+    problems: &mut Vec<Problem>,
+) -> Vec<Constraint> {
     let mut constraints = Vec::new();
     let mut names: HashMap<String, usize> = HashMap::new();
     for (index, c) in spec.constraints.iter().enumerate() {
@@ -108,105 +121,130 @@ pub(crate) fn validate_elements(
             );
         }
         let frames = two_frames(&c.frames, &what, index_of, report);
-        let foreign = |field: &'static str, given: bool, report: &mut Report| {
-            if given {
-                report.at(
-                    Some(field),
-                    format!(
-                        "{what}: `{field}` does not belong to a {} constraint",
-                        c.kind
-                    ),
-                );
-            }
-        };
-        let kind = match c.kind.as_str() {
-            "distance" => {
-                foreign("normal", c.normal.is_some(), report);
-                foreign("axes", c.axes.is_some(), report);
-                let length = match &c.length {
-                    None => {
-                        report.at(
-                            None,
-                            format!("{what}: a distance constraint needs `length` (a number or a variable)"),
-                        );
-                        Parameter::Constant(0.0)
-                    }
-                    Some(ParameterSpec::Constant(x)) => {
-                        non_negative(*x, &what, "length", report);
-                        Parameter::Constant(*x)
-                    }
-                    Some(ParameterSpec::Variable(v)) => match var_index.get(v.as_str()) {
-                        Some(&i) => Parameter::Variable(i),
-                        // Reported where frame-less variables are created.
-                        None => Parameter::Constant(0.0),
-                    },
-                };
-                ConstraintKind::Distance { length }
-            }
-            "plane" => {
-                foreign("length", c.length.is_some(), report);
-                foreign("axes", c.axes.is_some(), report);
-                let normal = match c.normal {
-                    None => {
-                        report.at(
-                            None,
-                            format!("{what}: a plane constraint needs `normal` (three numbers in frame a's axes)"),
-                        );
-                        [0.0, 0.0, 1.0]
-                    }
-                    Some(n) => {
-                        let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-                        if !(norm.is_finite() && norm > 0.0) {
-                            report.at(
-                                Some("normal"),
-                                format!(
-                                    "{what}: normal [{}, {}, {}] must be finite and not zero",
-                                    n[0], n[1], n[2]
-                                ),
-                            );
-                            [0.0, 0.0, 1.0]
-                        } else {
-                            n.map(|x| x / norm)
-                        }
-                    }
-                };
-                ConstraintKind::Plane { normal }
-            }
-            "point" => {
-                foreign("length", c.length.is_some(), report);
-                foreign("normal", c.normal.is_some(), report);
-                let text = c.axes.as_deref().unwrap_or("xyz");
-                let mut axes = Vec::new();
-                for ch in text.chars() {
-                    match "xyz".find(ch) {
-                        Some(a) if !axes.contains(&a) => axes.push(a),
-                        _ => {
-                            axes.clear();
-                            break;
-                        }
-                    }
-                }
-                if axes.is_empty() {
-                    report.at(
-                        Some("axes"),
-                        format!("{what}: axes `{text}` must list some of x, y, z, each once"),
-                    );
-                }
-                ConstraintKind::Point { axes }
-            }
-            other => {
-                report.at(
-                    Some("kind"),
-                    format!("{what}: unknown kind `{other}`: expected distance, plane or point"),
-                );
-                continue;
-            }
+        let Some(kind) = constraint_kind(c, &what, var_index, report) else {
+            continue;
         };
         if let Some(frames) = frames {
             constraints.push(Constraint { name, kind, frames });
         }
     }
+    constraints
+}
 
+/// A constraint's kind with its own fields checked (a field of another kind is refused);
+/// `None` for an unknown kind.
+fn constraint_kind(
+    c: &ConstraintSpec,
+    what: &str,
+    var_index: &HashMap<&str, usize>,
+    report: &mut Report,
+) -> Option<ConstraintKind> {
+    let foreign = |field: &'static str, given: bool, report: &mut Report| {
+        if given {
+            report.at(
+                Some(field),
+                format!(
+                    "{what}: `{field}` does not belong to a {} constraint",
+                    c.kind
+                ),
+            );
+        }
+    };
+    Some(match c.kind.as_str() {
+        "distance" => {
+            foreign("normal", c.normal.is_some(), report);
+            foreign("axes", c.axes.is_some(), report);
+            let length = match &c.length {
+                None => {
+                    report.at(
+                        None,
+                        format!(
+                            "{what}: a distance constraint needs `length` (a number or a variable)"
+                        ),
+                    );
+                    Parameter::Constant(0.0)
+                }
+                Some(ParameterSpec::Constant(x)) => {
+                    non_negative(*x, what, "length", report);
+                    Parameter::Constant(*x)
+                }
+                Some(ParameterSpec::Variable(v)) => match var_index.get(v.as_str()) {
+                    Some(&i) => Parameter::Variable(i),
+                    // Reported where frame-less variables are created.
+                    None => Parameter::Constant(0.0),
+                },
+            };
+            ConstraintKind::Distance { length }
+        }
+        "plane" => {
+            foreign("length", c.length.is_some(), report);
+            foreign("axes", c.axes.is_some(), report);
+            let normal = match c.normal {
+                None => {
+                    report.at(
+                    None,
+                    format!("{what}: a plane constraint needs `normal` (three numbers in frame a's axes)"),
+                );
+                    [0.0, 0.0, 1.0]
+                }
+                Some(n) => {
+                    let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                    if !(norm.is_finite() && norm > 0.0) {
+                        report.at(
+                            Some("normal"),
+                            format!(
+                                "{what}: normal [{}, {}, {}] must be finite and not zero",
+                                n[0], n[1], n[2]
+                            ),
+                        );
+                        [0.0, 0.0, 1.0]
+                    } else {
+                        n.map(|x| x / norm)
+                    }
+                }
+            };
+            ConstraintKind::Plane { normal }
+        }
+        "point" => {
+            foreign("length", c.length.is_some(), report);
+            foreign("normal", c.normal.is_some(), report);
+            let text = c.axes.as_deref().unwrap_or("xyz");
+            let mut axes = Vec::new();
+            for ch in text.chars() {
+                match "xyz".find(ch) {
+                    Some(a) if !axes.contains(&a) => axes.push(a),
+                    _ => {
+                        axes.clear();
+                        break;
+                    }
+                }
+            }
+            if axes.is_empty() {
+                report.at(
+                    Some("axes"),
+                    format!("{what}: axes `{text}` must list some of x, y, z, each once"),
+                );
+            }
+            ConstraintKind::Point { axes }
+        }
+        other => {
+            report.at(
+                Some("kind"),
+                format!("{what}: unknown kind `{other}`: expected distance, plane or point"),
+            );
+            return None;
+        }
+    })
+}
+
+/// The springs: between two frames or on one dynamic variable, stiffness and rest checked.
+fn springs_of(
+    spec: &ModelSpec,
+    index_of: &HashMap<&str, usize>,
+    var_index: &HashMap<&str, usize>,
+    variables: &[Variable],
+    problems: &mut Vec<Problem>,
+) -> Vec<Spring> {
     let mut springs = Vec::new();
     for (index, s) in spec.springs.iter().enumerate() {
         let report = &mut Report {
@@ -261,7 +299,15 @@ pub(crate) fn validate_elements(
             });
         }
     }
+    springs
+}
 
+/// The dampers: between two frames, damping checked.
+fn dampers_of(
+    spec: &ModelSpec,
+    index_of: &HashMap<&str, usize>,
+    problems: &mut Vec<Problem>,
+) -> Vec<Damper> {
     let mut dampers = Vec::new();
     for (index, d) in spec.dampers.iter().enumerate() {
         let report = &mut Report {
@@ -279,5 +325,5 @@ pub(crate) fn validate_elements(
             dampers.push(Damper { frames, damping });
         }
     }
-    (constraints, springs, dampers)
+    dampers
 }

@@ -38,6 +38,7 @@
 mod builder;
 mod elements;
 mod error;
+mod integrator;
 mod lock;
 mod model;
 mod motion;
@@ -52,6 +53,7 @@ mod validate;
 
 pub use builder::{n_link_pendulum, ModelBuilder};
 pub use error::{FrameField, ModelError, Problem, Section, Site};
+pub use integrator::Integrator;
 pub use lock::Lock;
 pub use model::{
     Constraint, ConstraintKind, Damper, Frame, Input, Joint, Mass, Model, Parameter, Spring,

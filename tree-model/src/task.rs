@@ -15,15 +15,9 @@ use crate::model::Model;
 use crate::source::LineIndex;
 use crate::urdf_format::{from_file, UrdfOptions};
 
-/// The integrator a task is discretised with.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum TaskIntegrator {
-    /// The midpoint variational integrator on `(q_d, p_d)` (default).
-    #[default]
-    Vi,
-    /// Classical RK4 on `(q_d, q̇_d)`.
-    Rk4,
-}
+/// The integrator a task steps with: `vi` (the default, on `(q_d, p_d)`) or `rk4` (on
+/// `(q_d, q̇_d)`); a task file refuses `rk45`.
+pub type TaskIntegrator = crate::Integrator;
 
 /// One decision per knot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -404,6 +398,79 @@ fn resolve(
     model_path: PathBuf,
     floating_base: bool,
 ) -> Task {
+    let settings = settings(p, &raw);
+    let (controls, control_lines) = controls_of(p, &raw, model);
+    if settings.integrator == TaskIntegrator::Rk4 {
+        kinematic_controls_need_the_vi(p, &raw, model, &controls);
+    }
+    let names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
+    let (q0, dq0) = start_of(p, &raw, model, &names);
+    let control_names: Vec<String> = controls
+        .iter()
+        .map(|c| match c {
+            Control::Input(k) => model.inputs[*k].name.clone(),
+            Control::Kinematic(i) => model.variables[*i].name.clone(),
+        })
+        .collect();
+    let (limits, limit_lines) = limits_of(p, &raw, model, &controls, &control_names, control_lines);
+    limits_hold_the_start(p, &controls, &control_names, (&limits, &limit_lines), &q0);
+    let cnames: Vec<&str> = control_names.iter().map(String::as_str).collect();
+    let costs = Costs {
+        model,
+        names: &names,
+        cnames: &cnames,
+        q0: &q0,
+        dq0: &dq0,
+    };
+    let running: Vec<CostTerm> = (raw.cost.iter())
+        .filter_map(|c| costs.term(p, c, false))
+        .collect();
+    let terminal: Vec<CostTerm> = (raw.terminal.iter())
+        .filter_map(|c| costs.term(p, c, true))
+        .collect();
+    if raw.cost.is_empty() && raw.terminal.is_empty() {
+        p.found.push(Problem {
+            site: Site::Model,
+            message: "the task has no cost: add [[cost]] or [[terminal]] terms".into(),
+            line: None,
+        });
+    }
+    let Settings {
+        dt,
+        knots,
+        integrator,
+        solver,
+        max_iterations,
+    } = settings;
+    Task {
+        model_path,
+        floating_base,
+        dt,
+        knots: knots.max(0) as usize,
+        integrator,
+        solver,
+        max_iterations,
+        controls,
+        q0,
+        dq0,
+        running,
+        terminal,
+        limits,
+        limit_lines,
+    }
+}
+
+/// The task's own settings, checked.
+struct Settings {
+    dt: f64,
+    knots: i64,
+    integrator: TaskIntegrator,
+    solver: TaskSolver,
+    max_iterations: Option<usize>,
+}
+
+/// `dt`, `knots`, `integrator`, `solver`, `max_iterations`: each in range or named.
+fn settings(p: &mut Problems, raw: &RawTask) -> Settings {
     let dt = *raw.dt.get_ref();
     if !(dt.is_finite() && dt > 0.0) {
         p.at(raw.dt.span(), format!("`dt` must be positive, got {dt}"));
@@ -415,10 +482,11 @@ fn resolve(
             format!("`knots` must be between 1 and 1000000, got {knots}"),
         );
     }
-    let integrator = match raw.integrator.as_ref().map(|s| s.get_ref().as_str()) {
-        None | Some("vi") => TaskIntegrator::Vi,
-        Some("rk4") => TaskIntegrator::Rk4,
-        Some(other) => {
+    let integrator = match raw.integrator.as_ref().map(|s| s.get_ref().parse()) {
+        None => TaskIntegrator::Vi,
+        Some(Ok(i @ (TaskIntegrator::Vi | TaskIntegrator::Rk4))) => i,
+        Some(_) => {
+            let other = raw.integrator.as_ref().unwrap().get_ref();
             let span = raw.integrator.as_ref().unwrap().span();
             p.at(
                 span,
@@ -451,8 +519,22 @@ fn resolve(
             Some(v as usize)
         }
     });
+    Settings {
+        dt,
+        knots,
+        integrator,
+        solver,
+        max_iterations,
+    }
+}
 
-    // Controls: named inputs or kinematic variables; default every input.
+/// The controls: named inputs or kinematic variables (default every input), with the line
+/// each is named on.
+fn controls_of(
+    p: &mut Problems,
+    raw: &RawTask,
+    model: &Model,
+) -> (Vec<Control>, Vec<Option<usize>>) {
     let mut controls = Vec::new();
     let mut control_lines = Vec::new();
     match &raw.controls {
@@ -503,39 +585,63 @@ fn resolve(
             line: None,
         });
     }
-    if integrator == TaskIntegrator::Rk4 {
-        if let Some(at) = controls
-            .iter()
-            .position(|c| matches!(c, Control::Kinematic(_)))
-        {
-            let name = match controls[at] {
-                Control::Kinematic(i) => model.variables[i].name.clone(),
-                Control::Input(_) => unreachable!(),
-            };
-            let span = raw.controls.as_ref().map_or(0..0, |c| c.span());
-            p.at(
-                span,
-                format!(
-                    "kinematic control `{name}` needs the VI: RK4 would need its velocity and acceleration between knots"
-                ),
-            );
-        }
-    }
+    (controls, control_lines)
+}
 
-    // The start.
-    let names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
+/// RK4 would need a kinematic control's velocity and acceleration between knots.
+fn kinematic_controls_need_the_vi(
+    p: &mut Problems,
+    raw: &RawTask,
+    model: &Model,
+    controls: &[Control],
+) {
+    if let Some(at) = controls
+        .iter()
+        .position(|c| matches!(c, Control::Kinematic(_)))
+    {
+        let name = match controls[at] {
+            Control::Kinematic(i) => model.variables[i].name.clone(),
+            Control::Input(_) => unreachable!(),
+        };
+        let span = raw.controls.as_ref().map_or(0..0, |c| c.span());
+        p.at(
+            span,
+            format!(
+                "kinematic control `{name}` needs the VI: RK4 would need its velocity and acceleration between knots"
+            ),
+        );
+    }
+}
+
+/// The start: the model's `q0`, `dq0`, or the file's by name.
+fn start_of(
+    p: &mut Problems,
+    raw: &RawTask,
+    model: &Model,
+    names: &[&str],
+) -> (Vec<f64>, Vec<f64>) {
     let mut q0: Vec<f64> = model.variables.iter().map(|v| v.q0).collect();
     let mut dq0: Vec<f64> = model.variables.iter().map(|v| v.dq0).collect();
     if let Some(start) = &raw.start {
         if let Some(q) = &start.q {
-            q0 = per_name(p, "`start.q`", q, &names, &q0);
+            q0 = per_name(p, "`start.q`", q, names, &q0);
         }
         if let Some(dq) = &start.dq {
-            dq0 = per_name(p, "`start.dq`", dq, &names, &dq0);
+            dq0 = per_name(p, "`start.dq`", dq, names, &dq0);
         }
     }
+    (q0, dq0)
+}
 
-    // Limits: the model's input limits, then the file's.
+/// The limits: the model's input limits, then the file's, with the line each came from.
+fn limits_of(
+    p: &mut Problems,
+    raw: &RawTask,
+    model: &Model,
+    controls: &[Control],
+    control_names: &[String],
+    control_lines: Vec<Option<usize>>,
+) -> (Vec<Option<[f64; 2]>>, Vec<Option<usize>>) {
     let mut limits: Vec<Option<[f64; 2]>> = controls
         .iter()
         .map(|c| match c {
@@ -543,14 +649,7 @@ fn resolve(
             Control::Kinematic(_) => None,
         })
         .collect();
-    let mut limit_lines = control_lines.clone();
-    let control_names: Vec<String> = controls
-        .iter()
-        .map(|c| match c {
-            Control::Input(k) => model.inputs[*k].name.clone(),
-            Control::Kinematic(i) => model.variables[*i].name.clone(),
-        })
-        .collect();
+    let mut limit_lines = control_lines;
     for (name, value) in raw.limits.iter().flatten() {
         let Some(c) = control_names.iter().position(|n| n == name) else {
             p.at(
@@ -573,6 +672,17 @@ fn resolve(
         limits[c] = Some([v[0], v[1]]);
         limit_lines[c] = Some(p.lines.of(value.span().start));
     }
+    (limits, limit_lines)
+}
+
+/// A kinematic control's limits must hold its start value.
+fn limits_hold_the_start(
+    p: &mut Problems,
+    controls: &[Control],
+    control_names: &[String],
+    (limits, limit_lines): (&[Option<[f64; 2]>], &[Option<usize>]),
+    q0: &[f64],
+) {
     for (c, control) in controls.iter().enumerate() {
         if let (Control::Kinematic(i), Some([lo, hi])) = (control, limits[c]) {
             let x = q0[*i];
@@ -588,9 +698,22 @@ fn resolve(
             }
         }
     }
+}
 
-    let cnames: Vec<&str> = control_names.iter().map(String::as_str).collect();
-    let mut term = |c: &Spanned<RawCost>, terminal: bool| -> Option<CostTerm> {
+/// What a cost term is resolved against: the model, its variables' and the controls'
+/// names, and the start (a state term's default reference).
+struct Costs<'a> {
+    model: &'a Model,
+    names: &'a [&'a str],
+    cnames: &'a [&'a str],
+    q0: &'a [f64],
+    dq0: &'a [f64],
+}
+
+impl Costs<'_> {
+    /// One `[[cost]]` (or, `terminal`, `[[terminal]]`) term: its kind, the fields that kind
+    /// takes, then its values.
+    fn term(&self, p: &mut Problems, c: &Spanned<RawCost>, terminal: bool) -> Option<CostTerm> {
         let whole = c.span();
         let rc = c.get_ref();
         let kind = rc.kind.get_ref().as_str();
@@ -641,149 +764,157 @@ fn resolve(
             );
             return None;
         }
-        let frame = |p: &mut Problems| -> Option<usize> {
-            let Some(f) = &rc.frame else {
-                p.at(whole.clone(), format!("a `{kind}` term needs `frame`"));
-                return None;
-            };
-            let found = model.frame_index(f.get_ref());
-            if found.is_none() {
-                p.at(
-                    f.span(),
-                    format!("frame `{}` is not in the model", f.get_ref()),
-                );
-            }
-            found
-        };
-        let axis_weight = |p: &mut Problems| -> [f64; 3] {
-            let w = weights(
-                p,
-                "weight",
-                rc.weight.as_ref(),
-                &["x", "y", "z"],
-                whole.clone(),
-            );
-            [w[0], w[1], w[2]]
-        };
         Some(match kind {
-            "state" => {
-                let q_ref = rc
-                    .q_ref
-                    .as_ref()
-                    .map_or(q0.clone(), |v| per_name(p, "`q_ref`", v, &names, &q0));
-                let dq_ref = rc
-                    .dq_ref
-                    .as_ref()
-                    .map_or(dq0.clone(), |v| per_name(p, "`dq_ref`", v, &names, &dq0));
-                // Either may be left out (zero), not both.
-                let mut optional = |what: &str, value: &Option<Spanned<Value>>| match value {
-                    Some(_) => weights(p, what, value.as_ref(), &names, whole.clone()),
-                    None => vec![0.0; names.len()],
-                };
-                let q_weight = optional("q_weight", &rc.q_weight);
-                let dq_weight = optional("dq_weight", &rc.dq_weight);
-                if rc.q_weight.is_none() && rc.dq_weight.is_none() {
-                    p.at(
-                        whole,
-                        "a `state` term needs `q_weight` or `dq_weight`".into(),
-                    );
-                }
-                CostTerm::State {
-                    q_ref,
-                    dq_ref,
-                    q_weight,
-                    dq_weight,
-                }
-            }
-            "control" => {
-                let about = match rc.about.as_ref().map(|a| a.get_ref().as_str()) {
-                    None | Some("gravity") => About::Gravity,
-                    Some("zero") => About::Zero,
-                    Some(other) => {
-                        p.at(
-                            rc.about.as_ref().unwrap().span(),
-                            format!("`about` is `{other}`; it must be `gravity` or `zero`"),
-                        );
-                        About::Gravity
-                    }
-                };
-                CostTerm::Control {
-                    weight: weights(p, "weight", rc.weight.as_ref(), &cnames, whole),
-                    about,
-                }
-            }
+            "state" => self.state(p, rc, whole),
+            "control" => self.control(p, rc, whole),
             "control_rate" => CostTerm::ControlRate {
-                weight: weights(p, "weight", rc.weight.as_ref(), &cnames, whole),
+                weight: weights(p, "weight", rc.weight.as_ref(), self.cnames, whole),
             },
-            "frame" => {
-                let frame = frame(p);
-                let weight = axis_weight(p);
-                let target = match (&rc.offset, &rc.target) {
-                    (Some(o), None) => Target::Offset(*o.get_ref()),
-                    (None, Some(t)) => Target::World(*t.get_ref()),
-                    _ => {
-                        p.at(
-                            whole,
-                            "a `frame` term needs exactly one of `offset` and `target`".into(),
-                        );
-                        return None;
-                    }
-                };
-                let finite = match target {
-                    Target::World(x) | Target::Offset(x) => x.iter().all(|v| v.is_finite()),
-                };
-                if !finite {
-                    p.at(whole, "the frame term's point must be finite".into());
-                }
-                CostTerm::Frame {
-                    frame: frame?,
-                    target,
-                    weight,
-                }
-            }
-            _ => {
-                let frame = frame(p);
-                let weight = axis_weight(p);
-                let target = rc.rpy.as_ref().map(|r| rpy_matrix(*r.get_ref()));
-                if rc
-                    .rpy
-                    .as_ref()
-                    .is_some_and(|r| r.get_ref().iter().any(|v| !v.is_finite()))
-                {
-                    p.at(whole, "`rpy` must be finite".into());
-                }
-                CostTerm::Orientation {
-                    frame: frame?,
-                    target,
-                    weight,
-                }
-            }
+            "frame" => self.frame_term(p, rc, whole)?,
+            _ => self.orientation(p, rc, whole)?,
         })
-    };
-    let running: Vec<CostTerm> = raw.cost.iter().filter_map(|c| term(c, false)).collect();
-    let terminal: Vec<CostTerm> = raw.terminal.iter().filter_map(|c| term(c, true)).collect();
-    if raw.cost.is_empty() && raw.terminal.is_empty() {
-        p.found.push(Problem {
-            site: Site::Model,
-            message: "the task has no cost: add [[cost]] or [[terminal]] terms".into(),
-            line: None,
-        });
     }
-    Task {
-        model_path,
-        floating_base,
-        dt,
-        knots: knots.max(0) as usize,
-        integrator,
-        solver,
-        max_iterations,
-        controls,
-        q0,
-        dq0,
-        running,
-        terminal,
-        limits,
-        limit_lines,
+
+    /// The frame a `frame` or `orientation` term names.
+    fn frame(
+        &self,
+        p: &mut Problems,
+        rc: &RawCost,
+        whole: std::ops::Range<usize>,
+    ) -> Option<usize> {
+        let kind = rc.kind.get_ref();
+        let model = self.model;
+        let Some(f) = &rc.frame else {
+            p.at(whole.clone(), format!("a `{kind}` term needs `frame`"));
+            return None;
+        };
+        let found = model.frame_index(f.get_ref());
+        if found.is_none() {
+            p.at(
+                f.span(),
+                format!("frame `{}` is not in the model", f.get_ref()),
+            );
+        }
+        found
+    }
+
+    /// The per-axis weight of a `frame` or `orientation` term.
+    fn axis_weight(
+        &self,
+        p: &mut Problems,
+        rc: &RawCost,
+        whole: std::ops::Range<usize>,
+    ) -> [f64; 3] {
+        let w = weights(p, "weight", rc.weight.as_ref(), &["x", "y", "z"], whole);
+        [w[0], w[1], w[2]]
+    }
+
+    /// A `state` term: references (default the start) and weights on `q` and `q̇`.
+    fn state(&self, p: &mut Problems, rc: &RawCost, whole: std::ops::Range<usize>) -> CostTerm {
+        let (names, q0, dq0) = (self.names, self.q0, self.dq0);
+        let q_ref = rc
+            .q_ref
+            .as_ref()
+            .map_or(q0.to_vec(), |v| per_name(p, "`q_ref`", v, names, q0));
+        let dq_ref = rc
+            .dq_ref
+            .as_ref()
+            .map_or(dq0.to_vec(), |v| per_name(p, "`dq_ref`", v, names, dq0));
+        // Either may be left out (zero), not both.
+        let mut optional = |what: &str, value: &Option<Spanned<Value>>| match value {
+            Some(_) => weights(p, what, value.as_ref(), names, whole.clone()),
+            None => vec![0.0; names.len()],
+        };
+        let q_weight = optional("q_weight", &rc.q_weight);
+        let dq_weight = optional("dq_weight", &rc.dq_weight);
+        if rc.q_weight.is_none() && rc.dq_weight.is_none() {
+            p.at(
+                whole,
+                "a `state` term needs `q_weight` or `dq_weight`".into(),
+            );
+        }
+        CostTerm::State {
+            q_ref,
+            dq_ref,
+            q_weight,
+            dq_weight,
+        }
+    }
+
+    /// A `control` term: weights on the controls, about gravity's or zero.
+    fn control(&self, p: &mut Problems, rc: &RawCost, whole: std::ops::Range<usize>) -> CostTerm {
+        let about = match rc.about.as_ref().map(|a| a.get_ref().as_str()) {
+            None | Some("gravity") => About::Gravity,
+            Some("zero") => About::Zero,
+            Some(other) => {
+                p.at(
+                    rc.about.as_ref().unwrap().span(),
+                    format!("`about` is `{other}`; it must be `gravity` or `zero`"),
+                );
+                About::Gravity
+            }
+        };
+        CostTerm::Control {
+            weight: weights(p, "weight", rc.weight.as_ref(), self.cnames, whole),
+            about,
+        }
+    }
+
+    /// A `frame` term: a point on a frame (`offset`) or in the world (`target`) to reach.
+    fn frame_term(
+        &self,
+        p: &mut Problems,
+        rc: &RawCost,
+        whole: std::ops::Range<usize>,
+    ) -> Option<CostTerm> {
+        let frame = self.frame(p, rc, whole.clone());
+        let weight = self.axis_weight(p, rc, whole.clone());
+        let target = match (&rc.offset, &rc.target) {
+            (Some(o), None) => Target::Offset(*o.get_ref()),
+            (None, Some(t)) => Target::World(*t.get_ref()),
+            _ => {
+                p.at(
+                    whole,
+                    "a `frame` term needs exactly one of `offset` and `target`".into(),
+                );
+                return None;
+            }
+        };
+        let finite = match target {
+            Target::World(x) | Target::Offset(x) => x.iter().all(|v| v.is_finite()),
+        };
+        if !finite {
+            p.at(whole, "the frame term's point must be finite".into());
+        }
+        Some(CostTerm::Frame {
+            frame: frame?,
+            target,
+            weight,
+        })
+    }
+
+    /// An `orientation` term: the frame's attitude against `rpy` (or none: kept level).
+    fn orientation(
+        &self,
+        p: &mut Problems,
+        rc: &RawCost,
+        whole: std::ops::Range<usize>,
+    ) -> Option<CostTerm> {
+        let frame = self.frame(p, rc, whole.clone());
+        let weight = self.axis_weight(p, rc, whole.clone());
+        let target = rc.rpy.as_ref().map(|r| rpy_matrix(*r.get_ref()));
+        if rc
+            .rpy
+            .as_ref()
+            .is_some_and(|r| r.get_ref().iter().any(|v| !v.is_finite()))
+        {
+            p.at(whole, "`rpy` must be finite".into());
+        }
+        Some(CostTerm::Orientation {
+            frame: frame?,
+            target,
+            weight,
+        })
     }
 }
 

@@ -164,8 +164,88 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         let msg = e.message().trim().to_string();
         ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
     })?;
+    check_samples(&raw, &line_index)
+        .map_err(|(message, line)| ModelError::single(src.clone(), message, Some(line)))?;
+    let mut lines = Lines::default();
+    let name = raw.name.clone().unwrap_or_else(|| {
+        source_name
+            .and_then(|s| Path::new(s).file_stem())
+            .map_or("model".into(), |s| s.to_string_lossy().into_owned())
+    });
+    let spec = ModelSpec {
+        name,
+        gravity: raw.gravity,
+        frames: frames_of(&raw, &line_index, &mut lines.frames),
+        variables: variables_of(&raw, &line_index, &mut lines.variables),
+        constraints: constraints_of(&raw, &line_index, &mut lines.constraints),
+        springs: springs_of(&raw, &line_index, &mut lines.springs),
+        dampers: dampers_of(&raw, &line_index, &mut lines.dampers),
+        inputs: inputs_of(&raw, &line_index, &mut lines.inputs),
+    };
+    validate(&spec).map_err(|mut problems| {
+        for p in &mut problems {
+            p.line = lines.of(&p.site);
+        }
+        ModelError {
+            source_name: src.clone(),
+            problems,
+        }
+    })
+}
 
-    let mut lines = Vec::new();
+/// Where each part of the model was written, for pointing problems at the source.
+#[derive(Default)]
+struct Lines {
+    frames: Vec<FrameLines>,
+    variables: BTreeMap<String, usize>,
+    constraints: Vec<ElementLines>,
+    springs: Vec<ElementLines>,
+    dampers: Vec<ElementLines>,
+    inputs: Vec<ElementLines>,
+}
+
+impl Lines {
+    /// The line of a problem's site (none for the model as a whole).
+    fn of(&self, site: &Site) -> Option<usize> {
+        match site {
+            Site::Model => None,
+            Site::VariableSettings { name } => self.variables.get(name).copied(),
+            Site::Element {
+                section,
+                index,
+                field,
+            } => {
+                let lines = match section {
+                    Section::Constraint => &self.constraints,
+                    Section::Spring => &self.springs,
+                    Section::Damper => &self.dampers,
+                    Section::Input => &self.inputs,
+                };
+                Some(lines[*index].line(*field))
+            }
+            Site::Frame { index, field } => {
+                let l = &self.frames[*index];
+                let specific = match field {
+                    FrameField::Whole => None,
+                    FrameField::Name => Some(l.name),
+                    FrameField::Parent => l.parent,
+                    FrameField::Primitive => l.primitive,
+                    FrameField::Mass => l.mass,
+                    FrameField::Inertia => l.inertia,
+                    FrameField::Com => l.com,
+                };
+                Some(specific.unwrap_or(l.whole))
+            }
+        }
+    }
+}
+
+/// The frames, with the line of each one's fields.
+fn frames_of(
+    raw: &RawModel,
+    line_index: &LineIndex,
+    lines: &mut Vec<FrameLines>,
+) -> Vec<FrameSpec> {
     let mut frames = Vec::new();
     for f in &raw.frame {
         let at = |s: std::ops::Range<usize>| line_index.of(s.start);
@@ -207,24 +287,36 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             inertia: rf.inertia.as_ref().map(|m| m.get_ref().clone()),
         });
     }
-    let mut variable_lines = BTreeMap::new();
+    frames
+}
+
+/// Each sample of a spline is a pair `[t, q]` (the error and its line).
+fn check_samples(raw: &RawModel, line_index: &LineIndex) -> Result<(), (String, usize)> {
     for (name, v) in &raw.variables {
         let Some(samples) = &v.get_ref().samples else {
             continue;
         };
         let rows = samples.get_ref().iter();
         if let Some((k, row)) = rows.enumerate().find(|(_, r)| r.len() != 2) {
-            return Err(ModelError::single(
-                src.clone(),
+            return Err((
                 format!(
                     "variable `{name}`: sample {} has {} numbers; each sample is a pair [t, q]",
                     k + 1,
                     row.len()
                 ),
-                Some(line_index.of(samples.span().start)),
+                line_index.of(samples.span().start),
             ));
         }
     }
+    Ok(())
+}
+
+/// The variables' settings, with the line of each.
+fn variables_of(
+    raw: &RawModel,
+    line_index: &LineIndex,
+    variable_lines: &mut BTreeMap<String, usize>,
+) -> Vec<VariableSpec> {
     let variables = raw
         .variables
         .iter()
@@ -251,23 +343,31 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             }
         })
         .collect();
+    variables
+}
+
+/// The constraints, with the line of each one's fields.
+fn constraints_of(
+    raw: &RawModel,
+    line_index: &LineIndex,
+    constraint_lines: &mut Vec<ElementLines>,
+) -> Vec<ConstraintSpec> {
     let value = |v: &RawValue| match v {
         RawValue::Number(x) => ParameterSpec::Constant(*x),
         RawValue::Name(n) => ParameterSpec::Variable(n.clone()),
     };
-    let mut constraint_lines = Vec::new();
     let constraints = raw
         .constraint
         .iter()
         .map(|c| {
-            let mut lines = ElementLines::new(&line_index, c.span());
+            let mut lines = ElementLines::new(line_index, c.span());
             let c = c.get_ref();
-            lines.field(&line_index, "name", &c.name);
-            lines.field(&line_index, "kind", &Some(c.kind.clone()));
-            lines.field(&line_index, "frames", &Some(c.frames.clone()));
-            lines.field(&line_index, "length", &c.length);
-            lines.field(&line_index, "normal", &c.normal);
-            lines.field(&line_index, "axes", &c.axes);
+            lines.field(line_index, "name", &c.name);
+            lines.field(line_index, "kind", &Some(c.kind.clone()));
+            lines.field(line_index, "frames", &Some(c.frames.clone()));
+            lines.field(line_index, "length", &c.length);
+            lines.field(line_index, "normal", &c.normal);
+            lines.field(line_index, "axes", &c.axes);
             constraint_lines.push(lines);
             ConstraintSpec {
                 name: c.name.as_ref().map(|n| n.get_ref().clone()),
@@ -279,17 +379,25 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             }
         })
         .collect();
-    let mut spring_lines = Vec::new();
+    constraints
+}
+
+/// The springs, with the line of each one's fields.
+fn springs_of(
+    raw: &RawModel,
+    line_index: &LineIndex,
+    spring_lines: &mut Vec<ElementLines>,
+) -> Vec<SpringSpec> {
     let springs = raw
         .spring
         .iter()
         .map(|s| {
-            let mut lines = ElementLines::new(&line_index, s.span());
+            let mut lines = ElementLines::new(line_index, s.span());
             let s = s.get_ref();
-            lines.field(&line_index, "frames", &s.frames);
-            lines.field(&line_index, "variable", &s.variable);
-            lines.field(&line_index, "stiffness", &s.stiffness);
-            lines.field(&line_index, "rest", &s.rest);
+            lines.field(line_index, "frames", &s.frames);
+            lines.field(line_index, "variable", &s.variable);
+            lines.field(line_index, "stiffness", &s.stiffness);
+            lines.field(line_index, "rest", &s.rest);
             spring_lines.push(lines);
             SpringSpec {
                 frames: s.frames.as_ref().map(|f| f.get_ref().clone()),
@@ -299,15 +407,23 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             }
         })
         .collect();
-    let mut damper_lines = Vec::new();
+    springs
+}
+
+/// The dampers, with the line of each one's fields.
+fn dampers_of(
+    raw: &RawModel,
+    line_index: &LineIndex,
+    damper_lines: &mut Vec<ElementLines>,
+) -> Vec<DamperSpec> {
     let dampers = raw
         .damper
         .iter()
         .map(|d| {
-            let mut lines = ElementLines::new(&line_index, d.span());
+            let mut lines = ElementLines::new(line_index, d.span());
             let d = d.get_ref();
-            lines.field(&line_index, "frames", &Some(d.frames.clone()));
-            lines.field(&line_index, "damping", &d.damping);
+            lines.field(line_index, "frames", &Some(d.frames.clone()));
+            lines.field(line_index, "damping", &d.damping);
             damper_lines.push(lines);
             DamperSpec {
                 frames: d.frames.get_ref().clone(),
@@ -315,16 +431,24 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             }
         })
         .collect();
-    let mut input_lines = Vec::new();
+    dampers
+}
+
+/// The inputs, with the line of each one's fields.
+fn inputs_of(
+    raw: &RawModel,
+    line_index: &LineIndex,
+    input_lines: &mut Vec<ElementLines>,
+) -> Vec<InputSpec> {
     let inputs = raw
         .input
         .iter()
         .map(|u| {
-            let mut lines = ElementLines::new(&line_index, u.span());
+            let mut lines = ElementLines::new(line_index, u.span());
             let u = u.get_ref();
-            lines.field(&line_index, "name", &Some(u.name.clone()));
-            lines.field(&line_index, "variable", &u.variable);
-            lines.field(&line_index, "limits", &u.limits);
+            lines.field(line_index, "name", &Some(u.name.clone()));
+            lines.field(line_index, "variable", &u.variable);
+            lines.field(line_index, "limits", &u.limits);
             input_lines.push(lines);
             InputSpec {
                 name: u.name.get_ref().clone(),
@@ -333,59 +457,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             }
         })
         .collect();
-    let name = raw.name.clone().unwrap_or_else(|| {
-        source_name
-            .and_then(|s| Path::new(s).file_stem())
-            .map_or("model".into(), |s| s.to_string_lossy().into_owned())
-    });
-    let spec = ModelSpec {
-        name,
-        gravity: raw.gravity,
-        frames,
-        variables,
-        constraints,
-        springs,
-        dampers,
-        inputs,
-    };
-    validate(&spec).map_err(|mut problems| {
-        for p in &mut problems {
-            p.line = match &p.site {
-                Site::Model => None,
-                Site::VariableSettings { name } => variable_lines.get(name).copied(),
-                Site::Element {
-                    section,
-                    index,
-                    field,
-                } => {
-                    let lines = match section {
-                        Section::Constraint => &constraint_lines,
-                        Section::Spring => &spring_lines,
-                        Section::Damper => &damper_lines,
-                        Section::Input => &input_lines,
-                    };
-                    Some(lines[*index].line(*field))
-                }
-                Site::Frame { index, field } => {
-                    let l = &lines[*index];
-                    let specific = match field {
-                        FrameField::Whole => None,
-                        FrameField::Name => Some(l.name),
-                        FrameField::Parent => l.parent,
-                        FrameField::Primitive => l.primitive,
-                        FrameField::Mass => l.mass,
-                        FrameField::Inertia => l.inertia,
-                        FrameField::Com => l.com,
-                    };
-                    Some(specific.unwrap_or(l.whole))
-                }
-            };
-        }
-        ModelError {
-            source_name: src.clone(),
-            problems,
-        }
-    })
+    inputs
 }
 
 /// Reads, parses and validates a model file.

@@ -60,145 +60,8 @@ pub fn from_urdf_str(
     source_name: Option<&str>,
     options: UrdfOptions,
 ) -> Result<Model, ModelError> {
-    let src = source_name.map(str::to_string);
-    let fail =
-        |message: String, line: Option<usize>| ModelError::single(src.clone(), message, line);
-    // Line of a byte offset (roxmltree's own lookup rescans the text each time).
-    let lines = LineIndex::new(text);
-    let line_at = |offset: usize| lines.of(offset);
-    // Bounded before parsing: urdf-rs recurses per level (a stack overflow at ~15 000), and
-    // roxmltree checks an element's attributes for duplicates pairwise.
-    check_xml_shape(text, &lines).map_err(|(message, line)| fail(message, Some(line)))?;
-    let document = roxmltree::Document::parse(text)
-        .map_err(|e| fail(format!("XML error: {e}"), Some(e.pos().row as usize)))?;
-    let root = document.root_element();
-    if root.tag_name().name() != "robot" {
-        return Err(fail(
-            format!(
-                "URDF: the root element is <{}>, not <robot>",
-                root.tag_name().name()
-            ),
-            Some(line_at(root.range().start)),
-        ));
-    }
-    // The line of each <link> and <joint>, by name.
-    let mut link_lines = HashMap::new();
-    let mut joint_lines = HashMap::new();
-    for node in root.children().filter(|n| n.is_element()) {
-        let line = line_at(node.range().start);
-        let name = node.attribute("name").unwrap_or_default().to_string();
-        let (lines, what) = match node.tag_name().name() {
-            "link" => (&mut link_lines, "link"),
-            "joint" => (&mut joint_lines, "joint"),
-            _ => continue,
-        };
-        if lines.insert(name.clone(), line).is_some() {
-            return Err(fail(format!("URDF: duplicate {what} `{name}`"), Some(line)));
-        }
-    }
-    check_numbers(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
-    check_required(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
-    let robot = urdf_rs::read_from_string(text).map_err(|e| fail(format!("URDF: {e}"), None))?;
-    let joint_line = |name: &str| joint_lines.get(name).copied();
-    let link_line = |name: &str| link_lines.get(name).copied();
-
-    // The tree: each link's parent joint, every link reached from one root.
-    let links: HashMap<&str, usize> = robot
-        .links
-        .iter()
-        .enumerate()
-        .map(|(i, l)| (l.name.as_str(), i))
-        .collect();
-    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
-    let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
-    for (j, joint) in robot.joints.iter().enumerate() {
-        let line = joint_line(&joint.name);
-        let name = &joint.name;
-        let Some(&p) = links.get(joint.parent.link.as_str()) else {
-            return Err(fail(
-                format!(
-                    "URDF: joint `{name}`: parent link `{}` does not exist",
-                    joint.parent.link
-                ),
-                line,
-            ));
-        };
-        let Some(&c) = links.get(joint.child.link.as_str()) else {
-            return Err(fail(
-                format!(
-                    "URDF: joint `{name}`: child link `{}` does not exist",
-                    joint.child.link
-                ),
-                line,
-            ));
-        };
-        if let Some(other) = parent_joint[c] {
-            return Err(fail(
-                format!(
-                    "URDF: link `{}` has two parents (joints `{}` and `{name}`); a tree has one",
-                    joint.child.link, robot.joints[other].name
-                ),
-                line,
-            ));
-        }
-        use urdf_rs::JointType::*;
-        match joint.joint_type {
-            Revolute | Continuous | Prismatic | Fixed => {}
-            ref other => {
-                return Err(fail(
-                    format!(
-                        "URDF: joint `{name}` is {}; only revolute, continuous, prismatic and fixed joints are supported inside the tree (a free root: the floating-base option)",
-                        format!("{other:?}").to_lowercase()
-                    ),
-                    line,
-                ));
-            }
-        }
-        if let Some(m) = &joint.mimic {
-            return Err(fail(
-                format!(
-                    "URDF: joint `{name}` mimics joint `{}`; mimic joints are not supported",
-                    m.joint
-                ),
-                line,
-            ));
-        }
-        parent_joint[c] = Some(j);
-        children[p].push(j);
-    }
-    if robot.links.is_empty() {
-        return Err(fail(
-            "URDF: <robot> has no <link>: a robot needs at least one".into(),
-            Some(line_at(root.range().start)),
-        ));
-    }
-    let roots: Vec<usize> = (0..robot.links.len())
-        .filter(|&l| parent_joint[l].is_none())
-        .collect();
-    let root_link = match roots[..] {
-        [r] => r,
-        [] => {
-            return Err(fail(
-                "URDF: every link has a parent joint: the joints form a cycle".into(),
-                None,
-            ))
-        }
-        _ => {
-            let names: Vec<&str> = roots
-                .iter()
-                .map(|&r| robot.links[r].name.as_str())
-                .collect();
-            return Err(fail(
-                format!(
-                    "URDF: {} links have no parent joint ({}); a tree has one root",
-                    names.len(),
-                    names.join(", ")
-                ),
-                link_line(names[1]),
-            ));
-        }
-    };
-
+    let (reader, robot) = Reader::read(text, source_name)?;
+    let tree = Tree::of(&robot, &reader)?;
     let name = if robot.name.is_empty() {
         source_name
             .and_then(|s| Path::new(s).file_stem())
@@ -206,16 +69,261 @@ pub fn from_urdf_str(
     } else {
         robot.name.clone()
     };
-    let mut spec = ModelSpec::new(name);
-    // The source line of each frame, for validation problems.
-    let mut frame_lines: Vec<Option<usize>> = Vec::new();
-    let mut push = |spec: &mut ModelSpec,
-                    name: String,
-                    parent: Option<String>,
-                    kind: PrimitiveKind,
-                    value: Value,
-                    line: Option<usize>| {
-        spec.frames.push(FrameSpec {
+    let mut out = Frames::new(ModelSpec::new(name), robot.links.len());
+    root_frames(&mut out, &robot, &tree, options, &reader)?;
+    // Parents before children: walk the tree with an explicit stack (no recursion depth).
+    let mut stack: Vec<usize> = tree.children[tree.root].iter().rev().copied().collect();
+    while let Some(j) = stack.pop() {
+        joint_frames(&mut out, &robot, &robot.joints[j], &tree, &reader)?;
+        let child = tree.links[robot.joints[j].child.link.as_str()];
+        stack.extend(tree.children[child].iter().rev().copied());
+    }
+    // A link the walk never reached hangs in a cycle of its own, apart from the root.
+    let reached = |l: usize| l == tree.root || out.link_frame[l].is_some();
+    if let Some(l) = (0..robot.links.len()).find(|&l| !reached(l)) {
+        let (name, root) = (&robot.links[l].name, &robot.links[tree.root].name);
+        return Err(reader.fail(
+            format!(
+                "URDF: link `{name}` is not reachable from the root link `{root}`: its joints form a cycle"
+            ),
+            reader.link_line(name),
+        ));
+    }
+    bodies(&mut out, &robot, &reader);
+    out.validate(&reader)
+}
+
+/// The text's lines, and the line of each `<link>` and `<joint>` by name: every problem
+/// names where it is.
+struct Reader {
+    source_name: Option<String>,
+    /// The line of `<robot>`.
+    robot_line: usize,
+    link_lines: HashMap<String, usize>,
+    joint_lines: HashMap<String, usize>,
+}
+
+impl Reader {
+    /// Checks the XML's shape, numbers and required attributes with their lines, then reads
+    /// the robot with urdf-rs.
+    fn read(text: &str, source_name: Option<&str>) -> Result<(Self, urdf_rs::Robot), ModelError> {
+        let src = source_name.map(str::to_string);
+        let fail =
+            |message: String, line: Option<usize>| ModelError::single(src.clone(), message, line);
+        // Line of a byte offset (roxmltree's own lookup rescans the text each time).
+        let lines = LineIndex::new(text);
+        let line_at = |offset: usize| lines.of(offset);
+        // Bounded before parsing: urdf-rs recurses per level (a stack overflow at ~15 000),
+        // and roxmltree checks an element's attributes for duplicates pairwise.
+        check_xml_shape(text, &lines).map_err(|(message, line)| fail(message, Some(line)))?;
+        let document = roxmltree::Document::parse(text)
+            .map_err(|e| fail(format!("XML error: {e}"), Some(e.pos().row as usize)))?;
+        let root = document.root_element();
+        if root.tag_name().name() != "robot" {
+            return Err(fail(
+                format!(
+                    "URDF: the root element is <{}>, not <robot>",
+                    root.tag_name().name()
+                ),
+                Some(line_at(root.range().start)),
+            ));
+        }
+        let mut link_lines = HashMap::new();
+        let mut joint_lines = HashMap::new();
+        for node in root.children().filter(|n| n.is_element()) {
+            let line = line_at(node.range().start);
+            let name = node.attribute("name").unwrap_or_default().to_string();
+            let (lines, what) = match node.tag_name().name() {
+                "link" => (&mut link_lines, "link"),
+                "joint" => (&mut joint_lines, "joint"),
+                _ => continue,
+            };
+            if lines.insert(name.clone(), line).is_some() {
+                return Err(fail(format!("URDF: duplicate {what} `{name}`"), Some(line)));
+            }
+        }
+        check_numbers(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
+        check_required(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
+        let robot =
+            urdf_rs::read_from_string(text).map_err(|e| fail(format!("URDF: {e}"), None))?;
+        let reader = Reader {
+            source_name: src,
+            robot_line: line_at(root.range().start),
+            link_lines,
+            joint_lines,
+        };
+        Ok((reader, robot))
+    }
+
+    /// The error `message` at `line`.
+    fn fail(&self, message: String, line: Option<usize>) -> ModelError {
+        ModelError::single(self.source_name.clone(), message, line)
+    }
+
+    fn joint_line(&self, name: &str) -> Option<usize> {
+        self.joint_lines.get(name).copied()
+    }
+
+    fn link_line(&self, name: &str) -> Option<usize> {
+        self.link_lines.get(name).copied()
+    }
+}
+
+/// The robot as a tree: each link's index by name, its children (joints), one root link.
+struct Tree<'a> {
+    links: HashMap<&'a str, usize>,
+    children: Vec<Vec<usize>>,
+    root: usize,
+}
+
+impl<'a> Tree<'a> {
+    /// Every joint between existing links, one parent a link, one link without: the root.
+    fn of(robot: &'a urdf_rs::Robot, reader: &Reader) -> Result<Self, ModelError> {
+        let links: HashMap<&str, usize> = (robot.links.iter().enumerate())
+            .map(|(i, l)| (l.name.as_str(), i))
+            .collect();
+        let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+        for (j, joint) in robot.joints.iter().enumerate() {
+            let (p, c) = joint_links(robot, joint, &links, &parent_joint, reader)?;
+            check_joint_type(joint, reader)?;
+            parent_joint[c] = Some(j);
+            children[p].push(j);
+        }
+        if robot.links.is_empty() {
+            return Err(reader.fail(
+                "URDF: <robot> has no <link>: a robot needs at least one".into(),
+                Some(reader.robot_line),
+            ));
+        }
+        let roots: Vec<usize> = (0..robot.links.len())
+            .filter(|&l| parent_joint[l].is_none())
+            .collect();
+        let root = match roots[..] {
+            [r] => r,
+            [] => {
+                return Err(reader.fail(
+                    "URDF: every link has a parent joint: the joints form a cycle".into(),
+                    None,
+                ))
+            }
+            _ => {
+                let names: Vec<&str> = (roots.iter())
+                    .map(|&r| robot.links[r].name.as_str())
+                    .collect();
+                return Err(reader.fail(
+                    format!(
+                        "URDF: {} links have no parent joint ({}); a tree has one root",
+                        names.len(),
+                        names.join(", ")
+                    ),
+                    reader.link_line(names[1]),
+                ));
+            }
+        };
+        Ok(Tree {
+            links,
+            children,
+            root,
+        })
+    }
+}
+
+/// A joint's parent and child links: both exist, and the child has no other parent.
+fn joint_links(
+    robot: &urdf_rs::Robot,
+    joint: &urdf_rs::Joint,
+    links: &HashMap<&str, usize>,
+    parent_joint: &[Option<usize>],
+    reader: &Reader,
+) -> Result<(usize, usize), ModelError> {
+    let (line, name) = (reader.joint_line(&joint.name), &joint.name);
+    let Some(&p) = links.get(joint.parent.link.as_str()) else {
+        return Err(reader.fail(
+            format!(
+                "URDF: joint `{name}`: parent link `{}` does not exist",
+                joint.parent.link
+            ),
+            line,
+        ));
+    };
+    let Some(&c) = links.get(joint.child.link.as_str()) else {
+        return Err(reader.fail(
+            format!(
+                "URDF: joint `{name}`: child link `{}` does not exist",
+                joint.child.link
+            ),
+            line,
+        ));
+    };
+    if let Some(other) = parent_joint[c] {
+        return Err(reader.fail(
+            format!(
+                "URDF: link `{}` has two parents (joints `{}` and `{name}`); a tree has one",
+                joint.child.link, robot.joints[other].name
+            ),
+            line,
+        ));
+    }
+    Ok((p, c))
+}
+
+/// Only revolute, continuous, prismatic and fixed joints, none mimicking another.
+fn check_joint_type(joint: &urdf_rs::Joint, reader: &Reader) -> Result<(), ModelError> {
+    let (line, name) = (reader.joint_line(&joint.name), &joint.name);
+    use urdf_rs::JointType::*;
+    match joint.joint_type {
+        Revolute | Continuous | Prismatic | Fixed => {}
+        ref other => {
+            return Err(reader.fail(
+                format!(
+                    "URDF: joint `{name}` is {}; only revolute, continuous, prismatic and fixed joints are supported inside the tree (a free root: the floating-base option)",
+                    format!("{other:?}").to_lowercase()
+                ),
+                line,
+            ));
+        }
+    }
+    if let Some(m) = &joint.mimic {
+        return Err(reader.fail(
+            format!(
+                "URDF: joint `{name}` mimics joint `{}`; mimic joints are not supported",
+                m.joint
+            ),
+            line,
+        ));
+    }
+    Ok(())
+}
+
+/// The spec being written, with the source line of each frame and body, and each link's
+/// frame (`None`: the world, or not reached yet).
+struct Frames {
+    spec: ModelSpec,
+    frame_lines: Vec<Option<usize>>,
+    body_lines: HashMap<usize, Option<usize>>,
+    link_frame: Vec<Option<usize>>,
+}
+
+impl Frames {
+    fn new(spec: ModelSpec, links: usize) -> Self {
+        Frames {
+            spec,
+            frame_lines: Vec::new(),
+            body_lines: HashMap::new(),
+            link_frame: vec![None; links],
+        }
+    }
+
+    /// A frame of one primitive, from `line`.
+    fn push(
+        &mut self,
+        name: String,
+        parent: Option<String>,
+        (kind, value): (PrimitiveKind, Value),
+        line: Option<usize>,
+    ) {
+        self.spec.frames.push(FrameSpec {
             name,
             parent,
             primitives: vec![Primitive { kind, value }],
@@ -223,28 +331,68 @@ pub fn from_urdf_str(
             com: None,
             inertia: None,
         });
-        frame_lines.push(line);
-    };
+        self.frame_lines.push(line);
+    }
 
-    let root_name = robot.links[root_link].name.clone();
-    // A root link called `world` is the world frame itself (ROS's convention for a robot
-    // bolted to the ground); its children hang off our world.
-    let root_is_world = root_name == "world";
-    if root_is_world {
-        let inertial = &robot.links[root_link].inertial;
+    /// The model, its problems given the lines of the frames, bodies and joints at fault.
+    fn validate(self, reader: &Reader) -> Result<Model, ModelError> {
+        let Frames {
+            spec,
+            frame_lines,
+            body_lines,
+            ..
+        } = self;
+        validate(&spec).map_err(|problems| ModelError {
+            source_name: reader.source_name.clone(),
+            problems: problems
+                .into_iter()
+                .map(|p| {
+                    let line = match &p.site {
+                        Site::Frame { index, field } => match field {
+                            FrameField::Mass | FrameField::Inertia | FrameField::Com => {
+                                body_lines.get(index).copied().flatten()
+                            }
+                            _ => frame_lines.get(*index).copied().flatten(),
+                        },
+                        Site::VariableSettings { name } => reader.joint_line(name),
+                        _ => None,
+                    };
+                    Problem { line, ..p }
+                })
+                .collect(),
+        })
+    }
+}
+
+/// The root link's frame: none for a root called `world` (ROS's convention for a robot
+/// bolted to the ground: its children hang off our world), six variables before it for a
+/// floating base, else a constant frame at the origin.
+fn root_frames(
+    out: &mut Frames,
+    robot: &urdf_rs::Robot,
+    tree: &Tree,
+    options: UrdfOptions,
+    reader: &Reader,
+) -> Result<(), ModelError> {
+    let root_name = robot.links[tree.root].name.clone();
+    let line = reader.link_line(&root_name);
+    if root_name == "world" {
+        let inertial = &robot.links[tree.root].inertial;
         if inertial.mass.value != 0.0 || options.floating_base {
-            return Err(fail(
+            return Err(reader.fail(
                 "URDF: the root link is `world`, the fixed ground: it can carry no mass and take no floating base".into(),
-                link_line(&root_name),
+                line,
             ));
         }
-    } else if options.floating_base {
+        return Ok(());
+    }
+    if options.floating_base {
         let mut parent = None;
         for (k, (var, kind)) in FLOATING_BASE.iter().enumerate() {
-            if joint_lines.contains_key(*var) {
-                return Err(fail(
+            if reader.joint_lines.contains_key(*var) {
+                return Err(reader.fail(
                     format!("URDF: joint `{var}` clashes with the floating base's variable of that name"),
-                    joint_line(var),
+                    reader.joint_line(var),
                 ));
             }
             let name = if k == 5 {
@@ -252,169 +400,166 @@ pub fn from_urdf_str(
             } else {
                 var.to_string()
             };
-            push(
-                &mut spec,
-                name.clone(),
-                parent,
-                *kind,
-                Value::Variable(var.to_string()),
-                link_line(&root_name),
-            );
+            let motion = (*kind, Value::Variable(var.to_string()));
+            out.push(name.clone(), parent, motion, line);
             parent = Some(name);
         }
     } else {
-        push(
-            &mut spec,
-            root_name.clone(),
-            None,
-            PrimitiveKind::Tx,
-            Value::Constant(0.0),
-            link_line(&root_name),
-        );
+        let origin = (PrimitiveKind::Tx, Value::Constant(0.0));
+        out.push(root_name, None, origin, line);
     }
-    // Each link's frame; `None` is the world.
-    let mut link_frame: Vec<Option<usize>> = vec![None; robot.links.len()];
-    if !root_is_world {
-        link_frame[root_link] = Some(spec.frames.len() - 1);
-    }
+    out.link_frame[tree.root] = Some(out.spec.frames.len() - 1);
+    Ok(())
+}
 
-    // Parents before children: walk the tree with an explicit stack (no recursion depth).
-    let mut stack: Vec<usize> = children[root_link].iter().rev().copied().collect();
-    while let Some(j) = stack.pop() {
-        let joint = &robot.joints[j];
-        let line = joint_line(&joint.name);
-        let parent_link = links[joint.parent.link.as_str()];
-        let child_link = links[joint.child.link.as_str()];
-        let mut chain: Vec<(PrimitiveKind, Value)> = Vec::new();
-        let constant = |kind, x: f64| (kind, Value::Constant(x));
-        let xyz = joint.origin.xyz.0;
-        let rpy = joint.origin.rpy.0;
-        if xyz.iter().chain(rpy.iter()).any(|x| !x.is_finite()) {
-            return Err(fail(
-                format!("URDF: joint `{}`: origin is not finite", joint.name),
-                line,
-            ));
-        }
-        for (k, kind) in [PrimitiveKind::Tx, PrimitiveKind::Ty, PrimitiveKind::Tz]
-            .into_iter()
-            .enumerate()
-        {
-            if xyz[k] != 0.0 {
-                chain.push(constant(kind, xyz[k]));
-            }
-        }
-        for (x, kind) in [
-            (rpy[2], PrimitiveKind::Rz),
-            (rpy[1], PrimitiveKind::Ry),
-            (rpy[0], PrimitiveKind::Rx),
-        ] {
-            if x != 0.0 {
-                chain.push(constant(kind, x));
-            }
-        }
-        use urdf_rs::JointType::*;
-        if joint.joint_type != Fixed {
-            let a = joint.axis.xyz.0;
-            let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-            if !(norm.is_finite() && norm > 0.0) {
-                return Err(fail(
-                    format!(
-                        "URDF: joint `{}`: axis [{} {} {}] is zero or not finite",
-                        joint.name, a[0], a[1], a[2]
-                    ),
-                    line,
-                ));
-            }
-            let a = a.map(|x| x / norm);
-            let prismatic = joint.joint_type == Prismatic;
-            let variable = Value::Variable(joint.name.clone());
-            let on_axis = (0..3).find(|&k| a[k] == 1.0);
-            match on_axis {
-                Some(k) => {
-                    let kinds = if prismatic {
-                        [PrimitiveKind::Tx, PrimitiveKind::Ty, PrimitiveKind::Tz]
-                    } else {
-                        [PrimitiveKind::Rx, PrimitiveKind::Ry, PrimitiveKind::Rz]
-                    };
-                    chain.push((kinds[k], variable));
-                }
-                None => {
-                    // Rz(α) Ry(β) e_z = a.
-                    let beta = a[2].clamp(-1.0, 1.0).acos();
-                    let alpha = a[1].atan2(a[0]);
-                    if alpha != 0.0 {
-                        chain.push(constant(PrimitiveKind::Rz, alpha));
-                    }
-                    chain.push(constant(PrimitiveKind::Ry, beta));
-                    let kind = if prismatic {
-                        PrimitiveKind::Tz
-                    } else {
-                        PrimitiveKind::Rz
-                    };
-                    chain.push((kind, variable));
-                    chain.push(constant(PrimitiveKind::Ry, -beta));
-                    if alpha != 0.0 {
-                        chain.push(constant(PrimitiveKind::Rz, -alpha));
-                    }
-                }
-            }
-            let mut settings = VariableSpec {
-                name: joint.name.clone(),
-                ..VariableSpec::default()
-            };
-            if let Some(d) = &joint.dynamics {
-                if d.damping != 0.0 {
-                    settings.damping = Some(d.damping);
-                }
-            }
-            if joint.joint_type != Continuous {
-                let l = &joint.limit;
-                if l.lower != 0.0 || l.upper != 0.0 {
-                    settings.limits = Some([l.lower, l.upper]);
-                }
-            }
-            // Every joint is actuated: an input on its variable, named after it, with
-            // ±effort as its limits when the URDF gives an effort.
-            let effort = joint.limit.effort;
-            spec.inputs.push(InputSpec {
-                name: joint.name.clone(),
-                variable: Some(joint.name.clone()),
-                limits: (effort > 0.0).then_some([-effort, effort]),
-            });
-            spec.variables.push(settings);
-        }
-        if chain.is_empty() {
-            chain.push(constant(PrimitiveKind::Tx, 0.0));
-        }
-        let mut parent = link_frame[parent_link].map(|f| spec.frames[f].name.clone());
-        let last = chain.len() - 1;
-        for (i, (kind, value)) in chain.into_iter().enumerate() {
-            let name = if i == last {
-                robot.links[child_link].name.clone()
-            } else {
-                format!("{}_{}", joint.name, i + 1)
-            };
-            push(&mut spec, name.clone(), parent, kind, value, line);
-            parent = Some(name);
-        }
-        link_frame[child_link] = Some(spec.frames.len() - 1);
-        stack.extend(children[child_link].iter().rev().copied());
+/// A joint's chain of frames (its origin, then its motion about its axis), the last one its
+/// child link's; a moving joint's variable with its damping and limits, and an input on it.
+fn joint_frames(
+    out: &mut Frames,
+    robot: &urdf_rs::Robot,
+    joint: &urdf_rs::Joint,
+    tree: &Tree,
+    reader: &Reader,
+) -> Result<(), ModelError> {
+    let line = reader.joint_line(&joint.name);
+    let parent_link = tree.links[joint.parent.link.as_str()];
+    let child_link = tree.links[joint.child.link.as_str()];
+    let mut chain = origin_chain(joint, reader)?;
+    if joint.joint_type != urdf_rs::JointType::Fixed {
+        chain.extend(axis_chain(joint, reader)?);
+        actuate(&mut out.spec, joint);
     }
-    // A link the walk never reached hangs in a cycle of its own, apart from the root.
-    let reached = |l: usize| l == root_link || link_frame[l].is_some();
-    if let Some(l) = (0..robot.links.len()).find(|&l| !reached(l)) {
-        let name = &robot.links[l].name;
-        return Err(fail(
-            format!(
-                "URDF: link `{name}` is not reachable from the root link `{root_name}`: its joints form a cycle"
-            ),
-            link_line(name),
+    if chain.is_empty() {
+        chain.push((PrimitiveKind::Tx, Value::Constant(0.0)));
+    }
+    let mut parent = out.link_frame[parent_link].map(|f| out.spec.frames[f].name.clone());
+    let last = chain.len() - 1;
+    for (i, motion) in chain.into_iter().enumerate() {
+        let name = if i == last {
+            robot.links[child_link].name.clone()
+        } else {
+            format!("{}_{}", joint.name, i + 1)
+        };
+        out.push(name.clone(), parent, motion, line);
+        parent = Some(name);
+    }
+    out.link_frame[child_link] = Some(out.spec.frames.len() - 1);
+    Ok(())
+}
+
+/// `<origin xyz rpy>`: `tx ty tz` (the non-zero ones), then `rz(yaw) ry(pitch) rx(roll)`.
+fn origin_chain(
+    joint: &urdf_rs::Joint,
+    reader: &Reader,
+) -> Result<Vec<(PrimitiveKind, Value)>, ModelError> {
+    let xyz = joint.origin.xyz.0;
+    let rpy = joint.origin.rpy.0;
+    if xyz.iter().chain(rpy.iter()).any(|x| !x.is_finite()) {
+        return Err(reader.fail(
+            format!("URDF: joint `{}`: origin is not finite", joint.name),
+            reader.joint_line(&joint.name),
         ));
     }
+    let translations = [PrimitiveKind::Tx, PrimitiveKind::Ty, PrimitiveKind::Tz]
+        .into_iter()
+        .zip(xyz);
+    let rotations = [
+        (PrimitiveKind::Rz, rpy[2]),
+        (PrimitiveKind::Ry, rpy[1]),
+        (PrimitiveKind::Rx, rpy[0]),
+    ];
+    Ok(translations
+        .chain(rotations)
+        .filter(|&(_, x)| x != 0.0)
+        .map(|(kind, x)| (kind, Value::Constant(x)))
+        .collect())
+}
 
-    // Bodies: <inertial> origin and tensor, turned into the link's axes.
-    // Problems with a body point at its <link>, other frame problems at the joint.
-    let mut body_lines: HashMap<usize, Option<usize>> = HashMap::new();
+/// The motion about (or along) `<axis>`: `rk(q)`/`tk(q)` when the axis is `+e_k`, else
+/// `rz(α) ry(β)` turning `e_z` onto the axis, `rz(q)`/`tz(q)`, and `ry(−β) rz(−α)` back.
+fn axis_chain(
+    joint: &urdf_rs::Joint,
+    reader: &Reader,
+) -> Result<Vec<(PrimitiveKind, Value)>, ModelError> {
+    let a = joint.axis.xyz.0;
+    let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    if !(norm.is_finite() && norm > 0.0) {
+        return Err(reader.fail(
+            format!(
+                "URDF: joint `{}`: axis [{} {} {}] is zero or not finite",
+                joint.name, a[0], a[1], a[2]
+            ),
+            reader.joint_line(&joint.name),
+        ));
+    }
+    let a = a.map(|x| x / norm);
+    let prismatic = joint.joint_type == urdf_rs::JointType::Prismatic;
+    let variable = Value::Variable(joint.name.clone());
+    let constant = |kind, x: f64| (kind, Value::Constant(x));
+    let mut chain = Vec::new();
+    match (0..3).find(|&k| a[k] == 1.0) {
+        Some(k) => {
+            let kinds = if prismatic {
+                [PrimitiveKind::Tx, PrimitiveKind::Ty, PrimitiveKind::Tz]
+            } else {
+                [PrimitiveKind::Rx, PrimitiveKind::Ry, PrimitiveKind::Rz]
+            };
+            chain.push((kinds[k], variable));
+        }
+        None => {
+            // Rz(α) Ry(β) e_z = a.
+            let beta = a[2].clamp(-1.0, 1.0).acos();
+            let alpha = a[1].atan2(a[0]);
+            if alpha != 0.0 {
+                chain.push(constant(PrimitiveKind::Rz, alpha));
+            }
+            chain.push(constant(PrimitiveKind::Ry, beta));
+            let kind = if prismatic {
+                PrimitiveKind::Tz
+            } else {
+                PrimitiveKind::Rz
+            };
+            chain.push((kind, variable));
+            chain.push(constant(PrimitiveKind::Ry, -beta));
+            if alpha != 0.0 {
+                chain.push(constant(PrimitiveKind::Rz, -alpha));
+            }
+        }
+    }
+    Ok(chain)
+}
+
+/// A moving joint's variable (its damping, and limits unless continuous), and an input on
+/// it named after it, with ±effort as its limits when the URDF gives an effort: every joint
+/// is actuated.
+fn actuate(spec: &mut ModelSpec, joint: &urdf_rs::Joint) {
+    let mut settings = VariableSpec {
+        name: joint.name.clone(),
+        ..VariableSpec::default()
+    };
+    if let Some(d) = &joint.dynamics {
+        if d.damping != 0.0 {
+            settings.damping = Some(d.damping);
+        }
+    }
+    if joint.joint_type != urdf_rs::JointType::Continuous {
+        let l = &joint.limit;
+        if l.lower != 0.0 || l.upper != 0.0 {
+            settings.limits = Some([l.lower, l.upper]);
+        }
+    }
+    let effort = joint.limit.effort;
+    spec.inputs.push(InputSpec {
+        name: joint.name.clone(),
+        variable: Some(joint.name.clone()),
+        limits: (effort > 0.0).then_some([-effort, effort]),
+    });
+    spec.variables.push(settings);
+}
+
+/// Bodies: each link's `<inertial>` origin and tensor, turned into the link's axes, on its
+/// frame. Problems with a body point at its `<link>`.
+fn bodies(out: &mut Frames, robot: &urdf_rs::Robot, reader: &Reader) {
     for (l, link) in robot.links.iter().enumerate() {
         let inertial = &link.inertial;
         let i = &inertial.inertia;
@@ -440,9 +585,9 @@ pub fn from_urdf_str(
                     .sum();
             }
         }
-        let Some(f) = link_frame[l] else { continue };
-        body_lines.insert(f, link_line(&link.name));
-        let frame = &mut spec.frames[f];
+        let Some(f) = out.link_frame[l] else { continue };
+        out.body_lines.insert(f, reader.link_line(&link.name));
+        let frame = &mut out.spec.frames[f];
         frame.mass = Some(m);
         let com = inertial.origin.xyz.0;
         frame.com = (com != [0.0; 3]).then_some(com);
@@ -455,26 +600,6 @@ pub fn from_urdf_str(
             turned[1][2],
         ]);
     }
-
-    validate(&spec).map_err(|problems| ModelError {
-        source_name: src.clone(),
-        problems: problems
-            .into_iter()
-            .map(|p| {
-                let line = match &p.site {
-                    Site::Frame { index, field } => match field {
-                        FrameField::Mass | FrameField::Inertia | FrameField::Com => {
-                            body_lines.get(index).copied().flatten()
-                        }
-                        _ => frame_lines.get(*index).copied().flatten(),
-                    },
-                    Site::VariableSettings { name } => joint_line(name),
-                    _ => None,
-                };
-                Problem { line, ..p }
-            })
-            .collect(),
-    })
 }
 
 /// The numeric attributes URDF's dynamics read, and how many numbers each holds.

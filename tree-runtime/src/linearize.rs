@@ -187,19 +187,58 @@ where
     P: Prescription,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    factor_kkt(cx, q, dq, ws, out)?;
+    let n = q.len();
+    let cols = 2 * n + cx.u.len();
+    let k = ws.pivots.len();
+    ws.rows.resize(k * cols, 0.0);
+    // The q̇ directions ride in the q sweeps' spare lanes when they all fit there (n ≤
+    // LANES / 2: no sweep more); otherwise the closed forms take them.
+    let swept = if 2 * n <= n.div_ceil(LANES) * LANES {
+        2 * n
+    } else {
+        n
+    };
+    let mut first = 0;
+    if rows_along_jets(cx, q, dq, ws, swept) {
+        if swept == n {
+            rows_along_velocity(cx, q, dq, ws);
+        }
+        solve_rows(cx, ws, out);
+        first = cols;
+    }
+    if first < cols {
+        solve_each_direction(cx, q, dq, ws, out, first);
+    }
+    Ok(())
+}
+
+/// `q̈` and `λ` at the state into `out`, and the KKT matrix `[[M_dd, −Dh_dᵀ], [Dh_d, 0]]`
+/// factored in `ws`.
+fn factor_kkt<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    ws: &mut ContinuousWorkspace<S::N>,
+    out: &mut ContinuousDerivatives,
+) -> Result<(), SimError>
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let n = q.len();
     let dynamics = &mut ws.dynamics;
-    let qdd = &mut ws.qdd;
-    dynamics.acceleration(cx, q, dq, qdd)?;
+    dynamics.acceleration(cx, q, dq, &mut ws.qdd)?;
     let (dynamic, m, nu) = (&dynamics.split.dynamic, dynamics.split.rows, cx.u.len());
     let (nd, k) = (dynamic.len(), dynamic.len() + m);
     out.fit(nd, n, m, nu);
-    let lambda = &dynamics.lambda;
     for (r, &i) in dynamic.iter().enumerate() {
-        out.qdd[r] = qdd[i];
+        out.qdd[r] = ws.qdd[i];
     }
-    out.lambda.copy_from(lambda);
-    // The KKT matrix [[M_dd, −Dh_dᵀ], [Dh_d, 0]] at the state, column-major.
+    out.lambda.copy_from(&dynamics.lambda);
+    // Column-major.
     let mass = &dynamics.terms.mass;
     let dh = &dynamics.constraint_terms.dh;
     for c in 0..k {
@@ -212,59 +251,38 @@ where
             };
         }
     }
-    let singular = || SimError::SingularConstraints {
+    lu_factor_packed(&mut ws.kkt, k, &mut ws.pivots).map_err(|_| SimError::SingularConstraints {
         step: cx.index,
         t: cx.t,
         constraint: "(the linearisation's KKT system)".into(),
-    };
-    lu_factor_packed(&mut ws.kkt, k, &mut ws.pivots).map_err(|_| singular())?;
-    let lvq = &dynamics.terms.d2l_ddq_dq;
-    // The right side of the differentiated equations along one direction.
-    let rhs_along = |d: &DualOutputs, dir_dq: &[f64], du: Option<usize>, sys: &S, b: &mut [f64]| {
-        for (r, &i) in dynamic.iter().enumerate() {
-            let mut x = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d;
-            for j in 0..n {
-                x -= d.get(Output::D2lDdqDq(i, j)).d * dq[j] + lvq[(i, j)] * dir_dq[j];
-                x -= d.get(Output::Mass(i, j)).d * qdd[j];
-            }
-            for s in 0..m {
-                x += d.get(Output::Dh(s, i)).d * lambda[s];
-            }
-            if let Some(k) = du {
-                if sys.input_variable(k) == i {
-                    x += 1.0;
-                }
-            }
-            b[r] = x;
-        }
-        for s in 0..m {
-            let mut x = -d.get(Output::DhDot(s)).d;
-            for j in 0..n {
-                x -= d.get(Output::Dh(s, j)).d * qdd[j];
-            }
-            b[nd + s] = x;
-        }
-    };
-    // The right sides along `q` come from the inverse dynamics over jets: along a direction,
-    // the dynamic rows are `−δr + δDh_dᵀλ` for the residual `r = τ(q, q̇, q̈) −
-    // ∂L_springs/∂q − F` at the solved q̈, and the constraint rows `−δ(q̇ᵀD²h q̇) − δDh q̈`:
-    // one recursive Newton–Euler sweep (and one of the constraints) for LANES directions at
-    // once (O(frames)), where differentiating the whole evaluation forms `δM`,
-    // `δ(∂²L/∂q̇∂q)` (O(frames · depth)) and contracts them with q̈ and q̇ (O(n²)) a
-    // direction. Along `q̇` they are closed forms (below).
-    let mut first = 0;
-    // Every column's right side, row-major (row r at r·cols), solved at once.
-    let cols = 2 * n + nu;
-    ws.rows.resize(k * cols, 0.0);
+    })
+}
+
+/// The right sides along `q` (and, for `swept = 2n`, along `q̇`) from the inverse dynamics
+/// over jets into `ws.rows`: along a direction, the dynamic rows are `−δr + δDh_dᵀλ` for
+/// the residual `r = τ(q, q̇, q̈) − ∂L_springs/∂q − F` at the solved q̈, and the constraint
+/// rows `−δ(q̇ᵀD²h q̇) − δDh q̈`: one recursive Newton–Euler sweep (and one of the
+/// constraints) for LANES directions at once (O(frames)), where differentiating the whole
+/// evaluation forms `δM`, `δ(∂²L/∂q̇∂q)` (O(frames · depth)) and contracts them with q̈ and
+/// q̇ (O(n²)) a direction. `false` when the system offers no jets.
+fn rows_along_jets<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    ws: &mut ContinuousWorkspace<S::N>,
+    swept: usize,
+) -> bool
+where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let n = q.len();
+    let (dynamic, m) = (&ws.dynamics.split.dynamic, ws.dynamics.split.rows);
+    let (nd, lambda, qdd) = (dynamic.len(), &ws.dynamics.lambda, &ws.qdd);
+    let cols = 2 * n + cx.u.len();
     let (qj, vj, jets, rows) = (&mut ws.qj, &mut ws.vj, &mut ws.jets, &mut ws.rows);
-    let mut offered = true;
-    // The q̇ directions ride in the q sweeps' spare lanes when they all fit there (n ≤
-    // LANES / 2: no sweep more); otherwise the closed forms below take them.
-    let swept = if 2 * n <= n.div_ceil(LANES) * LANES {
-        2 * n
-    } else {
-        n
-    };
     for group in (0..swept).step_by(LANES) {
         for (x, &v) in qj.iter_mut().zip(q.iter()) {
             *x = Jet::constant(v);
@@ -282,8 +300,7 @@ where
             }
         }
         if !cx.sys.inverse_dynamics_jet(qj, vj, qdd.as_slice(), jets) {
-            offered = false;
-            break;
+            return false;
         }
         for (r, &i) in dynamic.iter().enumerate() {
             let (f, s, t) = (&jets.force[i].d, &jets.dl_dq[i].d, &jets.tau[i].d);
@@ -312,75 +329,119 @@ where
             }
         }
     }
-    if offered && swept == n {
-        // Along q̇_j (docs/derivations.md §9, "Along q̇"): L is quadratic in q̇, so with
-        // B = ∂²L/∂q̇∂q, τ's derivative is Ṁ + B − Bᵀ (Ṁ = Σ_l ∂M/∂q_l q̇_l, the Christoffel
-        // terms' 2Γq̇) and the dynamic row i is `∂F_i/∂q̇_j − Ṁ_ij − B_ij + B_ji`; Dh, the
-        // springs and M do not move, and the constraint row s is `−2 (D²h_s q̇)_j`. Ṁ and
-        // D²h q̇ are one evaluation over dual numbers along q̇, ∂F/∂q̇ the forces' own
-        // derivatives: two evaluations for all n directions, where jets take n / LANES
-        // sweeps.
-        cx.sys.lagrangian(q, dq, Order::Full, &mut ws.full);
-        for ((x, &v), &w) in ws.qd.iter_mut().zip(q.iter()).zip(dq.iter()) {
-            *x = Dual::new(v, w);
-        }
-        for (x, &v) in ws.vd.iter_mut().zip(dq.iter()) {
-            *x = Dual::new(v, 0.0);
-        }
-        let along = ws
-            .along
-            .get_or_insert_with(|| Box::new(DualOutputs::new(n, m)));
-        cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, along);
-        let full = &ws.full;
-        for (r, &i) in dynamic.iter().enumerate() {
-            let row = &mut rows[r * cols + n..r * cols + 2 * n];
-            for (j, x) in row.iter_mut().enumerate() {
-                let force = match full.force_derivatives {
-                    Sparsity::Zero => 0.0,
-                    Sparsity::Diagonal if i != j => 0.0,
-                    _ => full.dforce_ddq[(i, j)],
-                };
-                *x = force - along.get(Output::Mass(i, j)).d - lvq[(i, j)] + lvq[(j, i)];
-            }
-        }
-        for c in 0..m {
-            let row = &mut rows[(nd + c) * cols + n..(nd + c) * cols + 2 * n];
-            for (j, x) in row.iter_mut().enumerate() {
-                *x = -2.0 * along.get(Output::Dh(c, j)).d;
-            }
-        }
+    true
+}
+
+/// The right sides along `q̇_j` in closed form into `ws.rows` (docs/derivations.md §9,
+/// "Along q̇"): L is quadratic in q̇, so with B = ∂²L/∂q̇∂q, τ's derivative is Ṁ + B − Bᵀ
+/// (Ṁ = Σ_l ∂M/∂q_l q̇_l, the Christoffel terms' 2Γq̇) and the dynamic row i is
+/// `∂F_i/∂q̇_j − Ṁ_ij − B_ij + B_ji`; Dh, the springs and M do not move, and the constraint
+/// row s is `−2 (D²h_s q̇)_j`. Ṁ and D²h q̇ are one evaluation over dual numbers along q̇,
+/// ∂F/∂q̇ the forces' own derivatives: two evaluations for all n directions, where jets take
+/// n / LANES sweeps.
+fn rows_along_velocity<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    ws: &mut ContinuousWorkspace<S::N>,
+) where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let n = q.len();
+    let (dynamic, m) = (&ws.dynamics.split.dynamic, ws.dynamics.split.rows);
+    let (nd, lvq) = (dynamic.len(), &ws.dynamics.terms.d2l_ddq_dq);
+    let cols = 2 * n + cx.u.len();
+    cx.sys.lagrangian(q, dq, Order::Full, &mut ws.full);
+    for ((x, &v), &w) in ws.qd.iter_mut().zip(q.iter()).zip(dq.iter()) {
+        *x = Dual::new(v, w);
     }
-    if offered {
-        // An input moves only its own row of B u.
-        for r in 0..k {
-            for c in 0..nu {
-                let moved = r < nd && cx.sys.input_variable(c) == dynamic[r];
-                rows[r * cols + 2 * n + c] = f64::from(u8::from(moved));
-            }
-        }
-        lu_solve_packed_rows(&ws.kkt, k, &ws.pivots, rows, cols);
-        for r in 0..k {
-            let row = &rows[r * cols..(r + 1) * cols];
-            let (dq_block, ddq_block, du_block) = if r < nd {
-                (&mut out.qdd_dq, &mut out.qdd_ddq, &mut out.qdd_du)
-            } else {
-                (&mut out.lambda_dq, &mut out.lambda_ddq, &mut out.lambda_du)
+    for (x, &v) in ws.vd.iter_mut().zip(dq.iter()) {
+        *x = Dual::new(v, 0.0);
+    }
+    let along = ws
+        .along
+        .get_or_insert_with(|| Box::new(DualOutputs::new(n, m)));
+    cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, along);
+    let (full, rows) = (&ws.full, &mut ws.rows);
+    for (r, &i) in dynamic.iter().enumerate() {
+        let row = &mut rows[r * cols + n..r * cols + 2 * n];
+        for (j, x) in row.iter_mut().enumerate() {
+            let force = match full.force_derivatives {
+                Sparsity::Zero => 0.0,
+                Sparsity::Diagonal if i != j => 0.0,
+                _ => full.dforce_ddq[(i, j)],
             };
-            let i = if r < nd { r } else { r - nd };
-            for j in 0..n {
-                dq_block[(i, j)] = row[j];
-                ddq_block[(i, j)] = row[n + j];
-            }
-            for c in 0..nu {
-                du_block[(i, c)] = row[2 * n + c];
-            }
+            *x = force - along.get(Output::Mass(i, j)).d - lvq[(i, j)] + lvq[(j, i)];
         }
-        first = cols;
     }
-    if first == 2 * n + nu {
-        return Ok(());
+    for c in 0..m {
+        let row = &mut rows[(nd + c) * cols + n..(nd + c) * cols + 2 * n];
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = -2.0 * along.get(Output::Dh(c, j)).d;
+        }
     }
-    // The fallback: each direction's right side from the whole evaluation over dual numbers.
+}
+
+/// The inputs' right sides (an input moves only its own row of B u), then every column
+/// solved at once and scattered into `out`'s blocks.
+fn solve_rows<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    ws: &mut ContinuousWorkspace<S::N>,
+    out: &mut ContinuousDerivatives,
+) where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (n, nu, k) = (ws.qdd.len(), cx.u.len(), ws.pivots.len());
+    let dynamic = &ws.dynamics.split.dynamic;
+    let (nd, cols, rows) = (dynamic.len(), 2 * n + nu, &mut ws.rows);
+    for r in 0..k {
+        for c in 0..nu {
+            let moved = r < nd && cx.sys.input_variable(c) == dynamic[r];
+            rows[r * cols + 2 * n + c] = f64::from(u8::from(moved));
+        }
+    }
+    lu_solve_packed_rows(&ws.kkt, k, &ws.pivots, rows, cols);
+    for r in 0..k {
+        let row = &rows[r * cols..(r + 1) * cols];
+        let (dq_block, ddq_block, du_block) = if r < nd {
+            (&mut out.qdd_dq, &mut out.qdd_ddq, &mut out.qdd_du)
+        } else {
+            (&mut out.lambda_dq, &mut out.lambda_ddq, &mut out.lambda_du)
+        };
+        let i = if r < nd { r } else { r - nd };
+        for j in 0..n {
+            dq_block[(i, j)] = row[j];
+            ddq_block[(i, j)] = row[n + j];
+        }
+        for c in 0..nu {
+            du_block[(i, c)] = row[2 * n + c];
+        }
+    }
+}
+
+/// The fallback for the columns from `first` on: each direction's right side from the whole
+/// evaluation over dual numbers, solved one at a time.
+fn solve_each_direction<S, F, P>(
+    cx: &mut StepContext<S, F, P>,
+    q: &Vector<S::N>,
+    dq: &Vector<S::N>,
+    ws: &mut ContinuousWorkspace<S::N>,
+    out: &mut ContinuousDerivatives,
+    first: usize,
+) where
+    S: System,
+    F: GeneralizedForce<S::N>,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (n, nu, k) = (q.len(), cx.u.len(), ws.pivots.len());
+    let (nd, m) = (ws.dynamics.split.dynamic.len(), ws.dynamics.split.rows);
     for (x, &v) in ws.qd.iter_mut().zip(q.iter()) {
         *x = Dual::new(v, 0.0);
     }
@@ -391,6 +452,11 @@ where
         .along
         .get_or_insert_with(|| Box::new(DualOutputs::new(n, m)));
     let (e, zero, b) = (&mut ws.e, &ws.zero, &mut ws.b);
+    let along = Along {
+        dynamics: &ws.dynamics,
+        qdd: &ws.qdd,
+        dq,
+    };
     for j in first..(2 * n + nu) {
         if j < 2 * n {
             // Seed the one coordinate direction j.
@@ -407,14 +473,14 @@ where
                 .for_each(|(x, &de)| x.d = de);
             other.iter_mut().for_each(|x| x.d = 0.0);
             cx.sys.evaluate_dual(&ws.qd, &ws.vd, Order::Dynamics, d);
-            rhs_along(d, if j < n { zero } else { e }, None, cx.sys, b);
+            along.rhs(d, if j < n { zero } else { e }, None, cx.sys, b);
         } else {
             // An input moves only its own row of B u.
             d.clear();
-            rhs_along(d, zero, Some(j - 2 * n), cx.sys, b);
+            along.rhs(d, zero, Some(j - 2 * n), cx.sys, b);
         }
         lu_solve_packed(&ws.kkt, k, &ws.pivots, b);
-        let (qcol, lcol) = match j {
+        let (mut qcol, mut lcol) = match j {
             j if j < n => (out.qdd_dq.column_mut(j), out.lambda_dq.column_mut(j)),
             j if j < 2 * n => (
                 out.qdd_ddq.column_mut(j - n),
@@ -425,11 +491,63 @@ where
                 out.lambda_du.column_mut(j - 2 * n),
             ),
         };
-        let (mut qcol, mut lcol) = (qcol, lcol);
         qcol.copy_from_slice(&b[..nd]);
         lcol.copy_from_slice(&b[nd..]);
     }
-    Ok(())
+}
+
+/// What the right side of the differentiated equations along one direction reads: the
+/// dynamics at the state, its accelerations and velocity.
+struct Along<'a, N: nalgebra::Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    dynamics: &'a Dynamics<N>,
+    qdd: &'a Vector<N>,
+    dq: &'a Vector<N>,
+}
+
+impl<N: nalgebra::Dim> Along<'_, N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// The right side along the direction `d` was evaluated on (`dir_dq` its q̇ part; `du`
+    /// an input's direction) into `b`.
+    fn rhs<S: System<N = N>>(
+        &self,
+        d: &DualOutputs,
+        dir_dq: &[f64],
+        du: Option<usize>,
+        sys: &S,
+        b: &mut [f64],
+    ) {
+        let (dynamic, m) = (&self.dynamics.split.dynamic, self.dynamics.split.rows);
+        let (lvq, lambda) = (&self.dynamics.terms.d2l_ddq_dq, &self.dynamics.lambda);
+        let (n, nd, dq, qdd) = (self.dq.len(), dynamic.len(), self.dq, self.qdd);
+        for (r, &i) in dynamic.iter().enumerate() {
+            let mut x = d.get(Output::Force(i)).d + d.get(Output::DlDq(i)).d;
+            for j in 0..n {
+                x -= d.get(Output::D2lDdqDq(i, j)).d * dq[j] + lvq[(i, j)] * dir_dq[j];
+                x -= d.get(Output::Mass(i, j)).d * qdd[j];
+            }
+            for s in 0..m {
+                x += d.get(Output::Dh(s, i)).d * lambda[s];
+            }
+            if let Some(k) = du {
+                if sys.input_variable(k) == i {
+                    x += 1.0;
+                }
+            }
+            b[r] = x;
+        }
+        for s in 0..m {
+            let mut x = -d.get(Output::DhDot(s)).d;
+            for j in 0..n {
+                x -= d.get(Output::Dh(s, j)).d * qdd[j];
+            }
+            b[nd + s] = x;
+        }
+    }
 }
 
 /// An explicit Runge–Kutta method: stage times `c`, the strictly lower-triangular stage

@@ -3,13 +3,15 @@
 //! `tree-mech linearize` prints as JSON and the Python package's `Model.linearize` returns
 //! as arrays. One place computes them; each front end only formats.
 
-use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dyn};
+use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dyn};
 
 use crate::context::StepContext;
 use crate::dynamics::{ModelMotions, NoForce, Prescription};
 use crate::error::SimError;
 use crate::integrate::{Forcing, MidpointVi, StepInput, StepOutput, ViSettings};
-use crate::linearize::{continuous_derivatives, explicit_step_derivatives, DORMAND_PRINCE, RK4};
+use crate::linearize::{
+    continuous_derivatives, explicit_step_derivatives, ContinuousDerivatives, DORMAND_PRINCE, RK4,
+};
 use crate::system::{ConstraintTerms, Order, System, Vector};
 
 /// One named value.
@@ -35,6 +37,17 @@ pub enum Explicit {
     Rk4,
     /// Dormand–Prince's fifth-order step of the given length.
     Rk45,
+}
+
+impl Explicit {
+    /// The explicit step `integrator` takes: `None` for the VI.
+    pub fn of(integrator: tree_model::Integrator) -> Option<Explicit> {
+        match integrator {
+            tree_model::Integrator::Vi => None,
+            tree_model::Integrator::Rk4 => Some(Explicit::Rk4),
+            tree_model::Integrator::Rk45 => Some(Explicit::Rk45),
+        }
+    }
 }
 
 /// What to linearise.
@@ -116,6 +129,37 @@ pub fn linearize_with<S: System<N = Dyn>, P: Prescription>(
 where
     DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
 {
+    check_request(request)?;
+    let (mut q, mut dq) = (q.clone(), dq.clone());
+    let t = request.t;
+    for k in (0..sys.dof()).filter(|&i| sys.is_kinematic(i)) {
+        [q[k], dq[k], _] = motion.kinematic(k, t);
+    }
+    let mut force = NoForce;
+    let names = sys.input_names();
+    let inputs: &[f64] = &request.u;
+    let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
+    cx.u = inputs;
+    let d = continuous_derivatives(cx.at(0, t), &q, &dq)
+        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, inputs).at_this_state()))?;
+    let continuous = continuous_entries(&q, &dq, request, &d);
+    let step = match (request.dt, request.explicit) {
+        (None, _) => None,
+        (Some(dt), Some(method)) => {
+            cx.dt = dt;
+            Some(explicit_step(&mut cx, &q, &dq, t, method)?)
+        }
+        (Some(dt), None) => {
+            cx.dt = dt;
+            Some(("vi", vi_step(&mut cx, &q, &dq, request, &d.lambda)?))
+        }
+    };
+    Ok(Report { continuous, step })
+}
+
+/// A request's own numbers: second derivatives only for the VI with a step, a finite time,
+/// a positive step.
+fn check_request(request: &Request) -> Result<(), SimError> {
     let bad = |m: String| Err(SimError::InvalidInput(m));
     if request.second_order && (request.explicit.is_some() || request.dt.is_none()) {
         return bad("second-order derivatives are for the VI step: give a step length (and not an explicit integrator)".into());
@@ -128,22 +172,17 @@ where
             return bad(format!("the step must be a positive number, got {dt}"));
         }
     }
-    let n = sys.dof();
-    let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
-    let kinematic: Vec<usize> = (0..n).filter(|&i| sys.is_kinematic(i)).collect();
-    let (mut q, mut dq) = (q.clone(), dq.clone());
-    let t = request.t;
-    for &k in &kinematic {
-        [q[k], dq[k], _] = motion.kinematic(k, t);
-    }
-    let mut force = NoForce;
-    let names = sys.input_names();
-    let inputs: &[f64] = &request.u;
-    let mut cx = StepContext::new(sys, &mut force, motion, 0.0);
-    cx.u = inputs;
-    let d = continuous_derivatives(cx.at(0, t), &q, &dq)
-        .map_err(|e| SimError::InvalidInput(e.under_inputs(&names, inputs).at_this_state()))?;
-    let continuous = vec![
+    Ok(())
+}
+
+/// The continuous linearisation's entries.
+fn continuous_entries(
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    request: &Request,
+    d: &ContinuousDerivatives,
+) -> Entries {
+    vec![
         name("q", Entry::Vector(q.as_slice().to_vec())),
         name("dq", Entry::Vector(dq.as_slice().to_vec())),
         name("u", Entry::Vector(request.u.clone())),
@@ -155,32 +194,54 @@ where
         name("lambda_dq", Entry::Matrix(d.lambda_dq.clone())),
         name("lambda_ddq", Entry::Matrix(d.lambda_ddq.clone())),
         name("lambda_du", Entry::Matrix(d.lambda_du.clone())),
-    ];
-    let Some(dt) = request.dt else {
-        return Ok(Report {
-            continuous,
-            step: None,
-        });
+    ]
+}
+
+/// One explicit step of length `cx.dt` and its derivatives, under its key.
+fn explicit_step<S, P>(
+    cx: &mut StepContext<S, NoForce, P>,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    t: f64,
+    method: Explicit,
+) -> Result<(&'static str, Entries), SimError>
+where
+    S: System<N = Dyn>,
+    P: Prescription,
+    DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
+{
+    let dt = cx.dt;
+    let (key, tableau, what) = match method {
+        Explicit::Rk4 => ("rk4", &RK4, "the RK4 step"),
+        Explicit::Rk45 => ("rk45", &DORMAND_PRINCE, "the Dormand–Prince step"),
     };
-    if let Some(method) = request.explicit {
-        cx.dt = dt;
-        let (key, tableau, what) = match method {
-            Explicit::Rk4 => ("rk4", &RK4, "the RK4 step"),
-            Explicit::Rk45 => ("rk45", &DORMAND_PRINCE, "the Dormand–Prince step"),
-        };
-        let d = explicit_step_derivatives(cx.at(0, t), &q, &dq, tableau)
-            .map_err(|e| SimError::InvalidInput(format!("{what}: {e}")))?;
-        let step = vec![
-            name("t2", Entry::Scalar(t + dt)),
-            name("x2", Entry::Vector(d.x2.as_slice().to_vec())),
-            name("x2_dx1", Entry::Matrix(d.x2_dx1)),
-            name("x2_du1", Entry::Matrix(d.x2_du1)),
-        ];
-        return Ok(Report {
-            continuous,
-            step: Some((key, step)),
-        });
-    }
+    let d = explicit_step_derivatives(cx.at(0, t), q, dq, tableau)
+        .map_err(|e| SimError::InvalidInput(format!("{what}: {e}")))?;
+    let step = vec![
+        name("t2", Entry::Scalar(t + dt)),
+        name("x2", Entry::Vector(d.x2.as_slice().to_vec())),
+        name("x2_dx1", Entry::Matrix(d.x2_dx1)),
+        name("x2_du1", Entry::Matrix(d.x2_du1)),
+    ];
+    Ok((key, step))
+}
+
+/// One VI step of length `cx.dt` from `(q, p₁)` (`p₁` the request's or `∂L/∂q̇`), its first
+/// (and, asked, second) derivatives as trep names them.
+fn vi_step<S, P>(
+    cx: &mut StepContext<S, NoForce, P>,
+    q: &Vector<Dyn>,
+    dq: &Vector<Dyn>,
+    request: &Request,
+    lambda: &DVector<f64>,
+) -> Result<Entries, SimError>
+where
+    S: System<N = Dyn>,
+    P: Prescription,
+    DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
+{
+    let (t, dt) = (request.t, cx.dt);
+    let bad = |m: String| Err(SimError::InvalidInput(m));
     if !(0.0..=1.0).contains(&request.alpha) {
         return bad(format!(
             "VI alpha must lie in [0, 1], got {}",
@@ -194,37 +255,18 @@ where
         derivatives: true,
         ..ViSettings::default()
     };
+    let dynamic: Vec<usize> = (0..q.len()).filter(|&i| !cx.sys.is_kinematic(i)).collect();
     let mut vi = MidpointVi::new(&*cx.sys, settings);
-    let mut p1 = vi.initial_momentum(cx.sys, &q, &dq);
+    let mut p1 = vi.initial_momentum(cx.sys, q, dq);
     if let Some(p) = &request.p {
-        if p.len() != dynamic.len() {
-            let noun = match dynamic.len() {
-                1 => "dynamic variable",
-                _ => "dynamic variables",
-            };
-            return bad(format!(
-                "p has {} entries; the model has {} {noun}",
-                p.len(),
-                dynamic.len()
-            ));
-        }
-        if let Some((c, x)) = p.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-            return bad(format!(
-                "p[{c}] (the momentum of `{}`) is {x}: every entry must be a finite number",
-                cx.sys.variable_name(dynamic[c])
-            ));
-        }
-        for (c, &i) in dynamic.iter().enumerate() {
-            p1[i] = p[c];
-        }
+        given_momentum(&*cx.sys, &dynamic, p, &mut p1)?;
     }
     // A guess for λ: the continuous equations'.
-    vi.lambda.copy_from(&d.lambda);
+    vi.lambda.copy_from(lambda);
     let (mut q2, mut p2, mut next) = (q.clone(), p1.clone(), q.clone());
-    cx.dt = dt;
     let failed = |e: SimError| SimError::InvalidInput(format!("the VI step: {e}"));
     if let Err(e) = vi.step(cx.at(0, t), &mut q2, &mut p2, &mut next) {
-        return Err(off_the_constraints(cx.sys, &q).map_or_else(
+        return Err(off_the_constraints(cx.sys, q).map_or_else(
             || failed(e.clone()),
             |(name, h)| {
                 SimError::InvalidInput(format!(
@@ -237,12 +279,12 @@ where
     }
     let (s, second) = if request.second_order {
         let (s, second) = vi
-            .second_derivatives(cx.at(0, t), &q, &p1, &q2)
+            .second_derivatives(cx.at(0, t), q, &p1, &q2)
             .map_err(failed)?;
         (s, Some(second))
     } else {
         (
-            vi.derivatives(cx.at(0, t), &q, &p1, &q2).map_err(failed)?,
+            vi.derivatives(cx.at(0, t), q, &p1, &q2).map_err(failed)?,
             None,
         )
     };
@@ -286,8 +328,39 @@ where
             }
         }
     }
-    Ok(Report {
-        continuous,
-        step: Some(("vi", step)),
-    })
+    Ok(step)
+}
+
+/// The request's momenta of the dynamic variables into `p1`: one finite number each.
+fn given_momentum<S: System<N = Dyn>>(
+    sys: &S,
+    dynamic: &[usize],
+    p: &[f64],
+    p1: &mut Vector<Dyn>,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
+{
+    let bad = |m: String| Err(SimError::InvalidInput(m));
+    if p.len() != dynamic.len() {
+        let noun = match dynamic.len() {
+            1 => "dynamic variable",
+            _ => "dynamic variables",
+        };
+        return bad(format!(
+            "p has {} entries; the model has {} {noun}",
+            p.len(),
+            dynamic.len()
+        ));
+    }
+    if let Some((c, x)) = p.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+        return bad(format!(
+            "p[{c}] (the momentum of `{}`) is {x}: every entry must be a finite number",
+            sys.variable_name(dynamic[c])
+        ));
+    }
+    for (c, &i) in dynamic.iter().enumerate() {
+        p1[i] = p[c];
+    }
+    Ok(())
 }

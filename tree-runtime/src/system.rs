@@ -59,8 +59,8 @@ where
 /// The compiled evaluation (its model's key and its order) whose assigned entries are the
 /// only non-zeros of a [`Terms`]' n × n matrices, if the terms are kept for it: a compiled
 /// evaluation assigns the same entries on every call and leaves the others alone, so from one
-/// call to the next at the same order only the vectors need clearing — on trep's Puppet
-/// 38 KB of `memset` per second-order evaluation saved. Equal whatever it holds, and a
+/// call to the next at the same order only the vectors need clearing (what that saves:
+/// docs/benchmarks.md, stop 39). Equal whatever it holds, and a
 /// clone keeps nothing (the copy's owner may write where the evaluation does not).
 #[derive(Debug, Default)]
 struct Assigned {

@@ -130,7 +130,7 @@ where
                     if watch.stop.load(Ordering::Relaxed) {
                         return Err(stopped());
                     }
-                    worker.linearise_into(run, first + i, o)?;
+                    worker.linearize_into(run, first + i, o)?;
                     watch.done.fetch_add(1, Ordering::Relaxed);
                     Ok(())
                 })
@@ -219,7 +219,7 @@ where
     }
 
     /// Step k's first derivatives into `out`, once its end is checked to solve its equations.
-    fn linearise_into(
+    fn linearize_into(
         &mut self,
         run: &Trajectory,
         k: usize,

@@ -246,6 +246,36 @@ where
     run_with_inputs(sys, q0, dq0, options, force, motion, &none, observe)
 }
 
+/// The inputs one value each a step, the start one entry per variable.
+fn check_sizes<S: System>(
+    sys: &S,
+    q0: &Vector<S::N>,
+    dq0: &Vector<S::N>,
+    inputs: &InputSchedule,
+) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    if !inputs.is_empty() && inputs.width() != sys.input_count() {
+        return Err(SimError::InvalidInput(format!(
+            "{} input values given a step; the system has {} inputs ({})",
+            inputs.width(),
+            sys.input_count(),
+            sys.input_names().join(", ")
+        )));
+    }
+    let n = sys.dof();
+    if q0.len() != n || dq0.len() != n {
+        return Err(SimError::InvalidInput(format!(
+            "initial state has {} and {} entries; the system has {} variables",
+            q0.len(),
+            dq0.len(),
+            n
+        )));
+    }
+    Ok(())
+}
+
 /// [`run`] with the system's inputs `u` given by `inputs` (held over each step; an empty
 /// schedule: all zero).
 #[allow(clippy::too_many_arguments)] // run's, and the inputs
@@ -266,23 +296,8 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let steps = check_options(options)?;
-    if !inputs.is_empty() && inputs.width() != sys.input_count() {
-        return Err(SimError::InvalidInput(format!(
-            "{} input values given a step; the system has {} inputs ({})",
-            inputs.width(),
-            sys.input_count(),
-            sys.input_names().join(", ")
-        )));
-    }
+    check_sizes(sys, q0, dq0, inputs)?;
     let n = sys.dim();
-    if q0.len() != n.value() || dq0.len() != n.value() {
-        return Err(SimError::InvalidInput(format!(
-            "initial state has {} and {} entries; the system has {} variables",
-            q0.len(),
-            dq0.len(),
-            n.value()
-        )));
-    }
     let mut q = q0.clone();
     let mut dq = dq0.clone();
     let mut dynamics = Dynamics::new(sys);

@@ -243,7 +243,7 @@ where
     /// Subdivisions the last step needed (0 when it went through whole).
     pub subdivisions: usize,
     /// The derivatives' workspace, made on their first call.
-    linearisation: Option<Box<derivatives::Linearisation>>,
+    linearization: Option<Box<derivatives::Linearization>>,
     /// The second derivatives' scratch over dual numbers, made on their first use.
     dual_jacobians: Option<Box<derivatives::DualJacobians>>,
     /// The energy the model's own forces (damping, dampers) took out over the last step:
@@ -305,7 +305,7 @@ where
             iterations: 0,
             subdivisions: 0,
             dissipated: 0.0,
-            linearisation: None,
+            linearization: None,
             dual_jacobians: None,
             angles: split
                 .dynamic
@@ -719,11 +719,34 @@ where
         F: GeneralizedForce<N>,
         P: Prescription,
     {
-        let (step, t, dt) = (cx.index, cx.t, cx.dt);
         self.prepare(cx.sys, q);
-        // Predict q_{k+1}: the average velocities of the last two steps extrapolated
-        // (q_k + Δt(2v_k − v_{k−1}) at a constant Δt, an error O(Δt³), so one exact Newton
-        // iteration usually converges); kinematic entries from their prescription.
+        let continuing = self.predict(cx, q, q_next);
+        let solved = self.solve(cx, q, p, q_next);
+        self.iterations += match solved {
+            Ok(iterations) | Err((iterations, _)) => iterations,
+        };
+        if let Err((_, e)) = solved {
+            return Err(e);
+        }
+        self.finish(cx, q, p, q_next, continuing)
+    }
+
+    /// Predicts `q_{k+1}` into `q_next`: the average velocities of the last two steps
+    /// extrapolated (`q_k + Δt(2v_k − v_{k−1})` at a constant Δt, an error O(Δt³), so one
+    /// exact Newton iteration usually converges); kinematic entries from their prescription.
+    /// Whether the last step continues into this one (its velocity extrapolated).
+    fn predict<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> bool
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        let (t, dt) = (cx.t, cx.dt);
         let continuing = self.predictor.continues_at(q);
         q_next.copy_from(q);
         q_next.axpy(dt, &self.last_velocity, 1.0);
@@ -734,6 +757,27 @@ where
         for &i in &self.split.kinematic {
             q_next[i] = cx.motion.kinematic(i, t + dt)[0];
         }
+        continuing
+    }
+
+    /// Newton on the discrete Euler–Lagrange equations (eq. (23)) and the constraints from
+    /// the prediction in `q_next`: the exact Jacobian factored once and reused as a chord
+    /// while it contracts (or every iteration), until the relative residual and the violation
+    /// meet their tolerances or sit at their rounding floor. The iterations taken, also on
+    /// failure.
+    fn solve<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q: &Vector<N>,
+        p: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> Result<usize, (usize, SimError)>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        let (step, t) = (cx.index, cx.t);
         // With derivatives to follow, a check expected to converge is of second order: it
         // leaves the terms the derivatives need at the solution, and a Jacobian to refactor.
         // One expected to fail is of first order (docs/derivations.md, "Predictor and chord").
@@ -763,12 +807,8 @@ where
             let (residual, violation) = self.residual_norms();
             let mut relative = self.relative_residual();
             if !residual.is_finite() || !violation.is_finite() || !relative.is_finite() {
-                self.iterations += iterations;
-                return Err(SimError::NonFinite {
-                    step,
-                    t,
-                    what: "discrete Euler–Lagrange residual".into(),
-                });
+                let what = "discrete Euler–Lagrange residual".into();
+                return Err((iterations, SimError::NonFinite { step, t, what }));
             }
             if relative <= self.settings.tolerance
                 && violation <= self.settings.constraint_tolerance
@@ -776,14 +816,14 @@ where
                 break;
             }
             if iterations >= self.settings.max_iterations {
-                self.iterations += iterations;
-                return Err(SimError::NewtonFailed {
+                let failed = SimError::NewtonFailed {
                     step,
                     t,
                     iterations,
                     residual: relative,
                     violation,
-                });
+                };
+                return Err((iterations, failed));
             }
             let mut refactor = fresh;
             if check_first {
@@ -828,31 +868,70 @@ where
                 chord_next <= self.settings.tolerance
             };
             if refactor {
-                self.factor(cx.sys, step, t)?;
+                self.factor(cx.sys, step, t).map_err(|e| (0, e))?;
                 factored = true;
             }
             exact_update = refactor;
             last_residual = relative + violation;
             iterations += 1;
-            self.newton_update(cx.sys, step, t)?;
-            let mut largest: f64 = 0.0;
-            for &i in &self.split.dynamic {
-                q_next[i] += self.residual[i];
-                let x = self.residual[i].abs();
-                // (A plain comparison: f64::max's NaN test made each row wait on the last.)
-                largest = if x > largest { x } else { largest };
-            }
-            if self.split.rows > 0 {
-                self.lambda += &self.dlambda;
-            }
-            // An update lost in the last bits of q: the residual is at its rounding floor
-            // (≈ ε‖M‖‖q‖/Δt), which a large, stiff model can hold above the tolerance.
-            if largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
-                self.evaluate_residual(cx, q, p, q_next, derivatives);
+            if self.apply_update(cx, q, p, q_next).map_err(|e| (0, e))? {
                 break;
             }
         }
-        self.iterations += iterations;
+        Ok(iterations)
+    }
+
+    /// Solves for the Newton update and applies it to `q_next` and `λ`. `true` when the
+    /// update was lost in the last bits of `q` (the residual is at its rounding floor,
+    /// ≈ ε‖M‖‖q‖/Δt, which a large, stiff model can hold above the tolerance): the terms are
+    /// then evaluated at the solution and Newton ends.
+    fn apply_update<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q: &Vector<N>,
+        p: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> Result<bool, SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        let (step, t) = (cx.index, cx.t);
+        self.newton_update(cx.sys, step, t)?;
+        let mut largest: f64 = 0.0;
+        for &i in &self.split.dynamic {
+            q_next[i] += self.residual[i];
+            let x = self.residual[i].abs();
+            // (A plain comparison: f64::max's NaN test made each row wait on the last.)
+            largest = if x > largest { x } else { largest };
+        }
+        if self.split.rows > 0 {
+            self.lambda += &self.dlambda;
+        }
+        if largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
+            self.evaluate_residual(cx, q, p, q_next, self.settings.derivatives);
+            return Ok(true);
+        }
+        Ok(false)
+    }
+
+    /// The step's end: `p_{k+1}` (eq. (24)), checked finite and the turn of every angle
+    /// within a quarter; the work of the model's forces; the predictor's record; `q ← q_{k+1}`.
+    fn finish<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q: &mut Vector<N>,
+        p: &mut Vector<N>,
+        q_next: &mut Vector<N>,
+        continuing: bool,
+    ) -> Result<(), SimError>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        let (step, t, dt) = (cx.index, cx.t, cx.dt);
         // p_{k+1} = D₂L_d + f⁺ (eq. (24)), terms at the solution.
         for i in 0..self.q_alpha.len() {
             self.q_alpha[i] = self.end_momentum(dt, i);

@@ -22,7 +22,7 @@ use crate::system::{ConstraintTerms, Sparsity};
 /// The step linearised at its solution, and the buffers for it: sized on the first call,
 /// reused after (nothing allocated per step).
 #[derive(Clone, Debug)]
-pub(crate) struct Linearisation {
+pub(crate) struct Linearization {
     pub(super) shape: Shape,
     /// `L_q̇q` at the quadrature point, row-major n × n (the dynamic variables' rows).
     pub(super) lvq: Vec<f64>,
@@ -72,7 +72,7 @@ pub(crate) struct Linearisation {
     pub(super) q2: Vec<f64>,
 }
 
-impl Linearisation {
+impl Linearization {
     /// Buffers for `shape`'s step; `c1` holds the constraints at `q₁` (`ConstraintTerms::of`
     /// the system, so that `D²h` is cleared on each row's own variables where the default
     /// weighted evaluation forms it), its weighted Hessian sized here: zero where nothing
@@ -100,7 +100,7 @@ impl Linearisation {
             tangent[(xc, c)] = 1.0;
         }
         let lu = OrderedFactor::new(shape.nd(), m);
-        Linearisation {
+        Linearization {
             lvq: vec![0.0; n * n],
             forces: Sparsity::Zero,
             fq: vec![0.0; n * n],
@@ -296,7 +296,7 @@ impl Linearisation {
     }
 }
 
-/// Where a column of `x` is found among the solved ones ([`Linearisation::source`]).
+/// Where a column of `x` is found among the solved ones ([`Linearization::source`]).
 #[derive(Clone, Copy, Debug)]
 enum Source {
     /// Solved column `s`.

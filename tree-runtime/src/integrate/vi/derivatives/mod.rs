@@ -45,7 +45,7 @@ mod first;
 mod jacobians;
 mod second;
 
-pub(crate) use first::Linearisation;
+pub(crate) use first::Linearization;
 use jacobians::{gather_rows, row_major_into, Shape};
 pub(crate) use second::DualJacobians;
 
@@ -236,7 +236,7 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
-        self.linearise(cx, q1, p1, q2)?.first_into(out);
+        self.linearize(cx, q1, p1, q2)?.first_into(out);
         Ok(())
     }
 
@@ -255,7 +255,7 @@ where
         F: GeneralizedForce<N>,
     {
         let cached = self.dual_jacobians.take();
-        let lin = self.linearise(cx, q1, p1, q2)?;
+        let lin = self.linearize(cx, q1, p1, q2)?;
         lin.fill_tangent();
         let mut first = StepDerivatives::empty();
         lin.first_into(&mut first);
@@ -328,7 +328,7 @@ where
         F: GeneralizedForce<N>,
     {
         let cached = self.dual_jacobians.take();
-        let lin = self.linearise(cx, q1, p1, q2)?;
+        let lin = self.linearize(cx, q1, p1, q2)?;
         lin.fill_tangent();
         let sh = &lin.shape;
         let (nd, m, x) = (sh.nd(), sh.m, sh.x());
@@ -371,13 +371,13 @@ where
 
     /// Evaluates the step's terms at its solution into the workspace (made on the first
     /// call) and solves for the tangent.
-    fn linearise<S, F, P>(
+    fn linearize<S, F, P>(
         &mut self,
         cx: &mut StepContext<S, F, P>,
         q1: &Vector<N>,
         p1: &Vector<N>,
         q2: &Vector<N>,
-    ) -> Result<&mut Linearisation, SimError>
+    ) -> Result<&mut Linearization, SimError>
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
@@ -387,7 +387,7 @@ where
         let (left, plus) = self.settings.forcing.weights(a);
         let (left, plus) = (left * dt, plus * dt);
         let ld = DiscreteLagrangian { alpha: a, dt };
-        let mut lin = self.linearisation.take().unwrap_or_else(|| {
+        let mut lin = self.linearization.take().unwrap_or_else(|| {
             let shape = Shape::new(
                 n,
                 (self.split.dynamic.clone(), self.split.kinematic.clone()),
@@ -398,7 +398,7 @@ where
                 ld,
                 (left, plus),
             );
-            Box::new(Linearisation::new(shape, ConstraintTerms::of(cx.sys)))
+            Box::new(Linearization::new(shape, ConstraintTerms::of(cx.sys)))
         });
         (lin.shape.ld, lin.shape.left, lin.shape.plus) = (ld, left, plus);
         let m = lin.shape.m;
@@ -462,7 +462,7 @@ where
         row_major_into(self.constraint_terms.dh.as_slice(), m, &mut lin.dh2);
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
-        let lin = self.linearisation.insert(lin);
+        let lin = self.linearization.insert(lin);
         let in_place = (
             t.d2l_dq_dq.as_slice(),
             t.mass.as_slice(),

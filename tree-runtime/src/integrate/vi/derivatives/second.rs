@@ -5,7 +5,7 @@
 
 use nalgebra::{allocator::Allocator, DVectorView, DefaultAllocator};
 
-use super::first::Linearisation;
+use super::first::Linearization;
 use super::jacobians::{jacobians_f64, row_major_into, Shape, StepTerms};
 use crate::linalg::dot;
 use crate::system::{row_variables, Order, Sparsity, System};
@@ -81,7 +81,7 @@ impl DualJacobians {
 
     /// The Jacobians' derivatives along the tangent's column `j` (`D_j J`, `D_j P`):
     /// the quadrature point moves by `δq_α = (1−α)δq₁ + αδq₂`, `δv = (δq₂ − δq₁)/Δt`.
-    pub(super) fn along<S: System>(&mut self, sys: &mut S, lin: &Linearisation, j: usize)
+    pub(super) fn along<S: System>(&mut self, sys: &mut S, lin: &Linearization, j: usize)
     where
         DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
     {

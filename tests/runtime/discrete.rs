@@ -2,7 +2,7 @@
 //! against central finite differences of `L_d(q₁, q₂) = Δt L(q₁ + α(q₂ − q₁), (q₂ − q₁)/Δt)`
 //! and of its first slot derivatives, at α = ½ and α ≠ ½, on models with every kind of term.
 
-mod common;
+use crate::common;
 
 use common::{load, Rng};
 use nalgebra::{DMatrix, Dyn};

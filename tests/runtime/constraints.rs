@@ -1,7 +1,7 @@
 //! Constraints, springs, dampers and kinematic variables: derivatives against finite
 //! differences, compiled equal to interpreted, and analytic cases.
 
-mod common;
+use crate::common;
 
 use common::{assert_close, interpreted, simulate_from_start, Rng};
 use nalgebra::Dyn;

@@ -1,7 +1,7 @@
 //! Every derivative the interpreted system returns, against central finite differences, on
 //! seeded random states of every model in `models/`; and caching on vs off.
 
-mod common;
+use crate::common;
 
 use common::{assert_close, model_files, Rng};
 use nalgebra::Dyn;

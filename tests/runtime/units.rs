@@ -3,7 +3,7 @@
 //! constraint forces by `s`. The VI's Newton test is relative to each row's momentum scale;
 //! with an absolute one a 1e-13 kg pendulum stood still.
 
-mod common;
+use crate::common;
 
 use common::load;
 use tree_mech::integrate::{Method, SimOptions, ViSettings};

@@ -3,7 +3,7 @@
 //! dissipates ∫cḋ²dt; the constrained, damped VI converges with order 2 (`split` forcing)
 //! and 1 (`left`); the 40-link pendulum dropped from horizontal completes 10 s.
 
-mod common;
+use crate::common;
 
 use common::{interpreted, load, simulate_from_start};
 use tree_mech::integrate::{simulate, Forcing, Method, SimOptions, Tolerance, ViSettings};

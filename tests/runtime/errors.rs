@@ -1,6 +1,6 @@
 //! Failures are errors that name the step and the cause — never a panic or a NaN trajectory.
 
-mod common;
+use crate::common;
 
 use common::{interpreted, load};
 use nalgebra::Dyn;

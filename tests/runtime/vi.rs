@@ -1,7 +1,7 @@
 //! The variational integrator's Newton iteration: its exact Jacobian (paper eq. (26), with
 //! damping) against finite differences of its residual, and the Jacobian-reuse option.
 
-mod common;
+use crate::common;
 
 use common::{interpreted, load, Rng};
 use nalgebra::Dyn;

@@ -2,7 +2,7 @@
 //! accelerations and constraint forces: with constraints, kinematic inputs, springs, dampers,
 //! damping and inputs.
 
-mod common;
+use crate::common;
 
 use nalgebra::Dyn;
 use tree_mech::integrate::{project_initial_state, StepContext};
@@ -314,7 +314,7 @@ impl System for DualOnly {
 }
 
 /// The continuous linearisation of `sys` at `(q, q̇, u)`, t = 0.3.
-fn linearise<S: System<N = Dyn>>(
+fn linearize<S: System<N = Dyn>>(
     sys: &mut S,
     q: &Vector<Dyn>,
     dq: &Vector<Dyn>,
@@ -351,8 +351,8 @@ fn the_dual_fallback_equals_the_jets() {
         let u: Vec<f64> = (0..jets.input_count())
             .map(|k| 0.3 * k as f64 - 0.2)
             .collect();
-        let a = linearise(&mut jets, &q, &dq, &u);
-        let b = linearise(&mut duals, &q, &dq, &u);
+        let a = linearize(&mut jets, &q, &dq, &u);
+        let b = linearize(&mut duals, &q, &dq, &u);
         for (what, x, y) in [
             ("qdd_dq", &a.qdd_dq, &b.qdd_dq),
             ("qdd_ddq", &a.qdd_ddq, &b.qdd_ddq),

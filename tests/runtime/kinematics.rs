@@ -6,7 +6,7 @@
 //! rate of its origin; the centre of mass likewise. Pinocchio's numbers for the same
 //! functions are in tests/pinocchio.rs.
 
-mod common;
+use crate::common;
 
 use common::{model_files, Rng};
 use tree_mech::model::{self, Model, UrdfOptions};

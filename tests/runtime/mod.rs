@@ -1,0 +1,14 @@
+//! One module per topic (each was a test binary of its own).
+
+#[cfg(feature = "cli")]
+mod cli;
+mod constraints;
+mod continuous_derivatives;
+mod derivatives;
+mod discrete;
+mod errors;
+mod forcing;
+mod fuzz;
+mod kinematics;
+mod units;
+mod vi;
