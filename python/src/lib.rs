@@ -1202,55 +1202,13 @@ impl Model {
                 shape_text(dq0.shape())
             )));
         }
-        let width = self.model.inputs.len();
-        // What `u` may be, said in the error of a wrong one.
-        let expected = if width == 0 {
-            format!("the model has no inputs: leave u out, or give ({batch}, 0)")
-        } else {
-            format!("u must be ({batch}, {width}) or ({batch}, steps, {width})")
-        };
-        let schedules: Vec<InputSchedule> = match u {
-            None => vec![InputSchedule::default(); batch],
-            Some(u) if u.is_none() => vec![InputSchedule::default(); batch],
-            Some(u) => {
-                if let Ok(a) = u.extract::<PyArrayLike2<f64, AllowTypeChange>>() {
-                    let a = a.as_array();
-                    if a.shape() != [batch, width] {
-                        return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));
-                    }
-                    let names = self.input_names();
-                    (0..batch)
-                        .map(|b| {
-                            let row = a.row(b).to_vec();
-                            check_finite(&format!("u[{b}]"), &row, &names)?;
-                            Ok(InputSchedule::constant(row))
-                        })
-                        .collect::<PyResult<_>>()?
-                } else {
-                    let a = u
-                        .extract::<PyArrayLike3<f64, AllowTypeChange>>()
-                        .map_err(|_| bad(format!("{expected}; got no array of numbers")))?;
-                    let a = a.as_array();
-                    if a.shape()[0] != batch || a.shape()[2] != width {
-                        return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));
-                    }
-                    check_rows(a.shape()[1], duration, dt)?;
-                    let mut out = Vec::with_capacity(batch);
-                    for b in 0..batch {
-                        let rows = (0..a.shape()[1])
-                            .map(|k| {
-                                (
-                                    k as f64 * dt,
-                                    a.slice(numpy::ndarray::s![b, k, ..]).to_vec(),
-                                )
-                            })
-                            .collect();
-                        out.push(InputSchedule::from_rows(rows).map_err(|e| bad(e.to_string()))?);
-                    }
-                    out
-                }
-            }
-        };
+        let schedules = input_schedules(
+            u,
+            batch,
+            self.model.inputs.len(),
+            &self.input_names(),
+            (duration, dt),
+        )?;
         let starts: Vec<Rollout> = (0..batch)
             .map(|b| Rollout {
                 q0: q0.row(b).to_vec(),
@@ -1290,47 +1248,7 @@ impl Model {
             }
         }
         .map_err(|e| sim_error(py, &e))?;
-        let longest = results
-            .iter()
-            .filter_map(|r| r.as_ref().ok())
-            .max_by_key(|t| t.len());
-        let t: Vec<f64> = longest.map_or_else(Vec::new, |l| l.t.clone());
-        let samples = t.len();
-        let mut q = Array3::from_elem((batch, samples, n), f64::NAN);
-        let mut dq = Array3::from_elem((batch, samples, n), f64::NAN);
-        let mut energy = Array2::from_elem((batch, samples), f64::NAN);
-        let mut errors = Vec::with_capacity(batch);
-        for (b, r) in results.iter().enumerate() {
-            match r {
-                Ok(traj) => {
-                    // Each rollout's samples are contiguous on both sides: one copy each.
-                    let k = traj.len().min(samples);
-                    let rows = |a: &mut Array3<f64>, from: &[f64]| {
-                        let mut to = a.slice_mut(s![b, ..k, ..]);
-                        match to.as_slice_mut() {
-                            Some(to) => to.copy_from_slice(&from[..k * n]),
-                            None => to.iter_mut().zip(from).for_each(|(o, &x)| *o = x),
-                        }
-                    };
-                    rows(&mut q, traj.q_rows());
-                    rows(&mut dq, traj.dq_rows());
-                    energy
-                        .slice_mut(s![b, ..k])
-                        .iter_mut()
-                        .zip(&traj.energy)
-                        .for_each(|(e, &x)| *e = x);
-                    errors.push(None);
-                }
-                Err(e) => errors.push(Some(in_python_terms(e))),
-            }
-        }
-        Ok(Rollouts {
-            t: vector(py, &t),
-            q: q.into_pyarray(py).into_any().unbind(),
-            dq: dq.into_pyarray(py).into_any().unbind(),
-            energy: energy.into_pyarray(py).into_any().unbind(),
-            errors,
-        })
+        Ok(gathered(py, &results, n))
     }
 }
 
@@ -1737,4 +1655,113 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ModelError", m.py().get_type::<ModelError>())?;
     m.add("SimulationError", m.py().get_type::<SimulationError>())?;
     Ok(())
+}
+
+/// Each rollout's inputs from `u`: none, a row each held constant, or a row each a step
+/// (`(batch, steps, width)`); the error says which shapes fit.
+fn input_schedules(
+    u: Option<&Bound<'_, PyAny>>,
+    batch: usize,
+    width: usize,
+    names: &[String],
+    (duration, dt): (f64, f64),
+) -> PyResult<Vec<InputSchedule>> {
+    // What `u` may be, said in the error of a wrong one.
+    let expected = if width == 0 {
+        format!("the model has no inputs: leave u out, or give ({batch}, 0)")
+    } else {
+        format!("u must be ({batch}, {width}) or ({batch}, steps, {width})")
+    };
+    Ok(match u {
+        None => vec![InputSchedule::default(); batch],
+        Some(u) if u.is_none() => vec![InputSchedule::default(); batch],
+        Some(u) => {
+            if let Ok(a) = u.extract::<PyArrayLike2<f64, AllowTypeChange>>() {
+                let a = a.as_array();
+                if a.shape() != [batch, width] {
+                    return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));
+                }
+                (0..batch)
+                    .map(|b| {
+                        let row = a.row(b).to_vec();
+                        check_finite(&format!("u[{b}]"), &row, names)?;
+                        Ok(InputSchedule::constant(row))
+                    })
+                    .collect::<PyResult<_>>()?
+            } else {
+                let a = u
+                    .extract::<PyArrayLike3<f64, AllowTypeChange>>()
+                    .map_err(|_| bad(format!("{expected}; got no array of numbers")))?;
+                let a = a.as_array();
+                if a.shape()[0] != batch || a.shape()[2] != width {
+                    return Err(bad(format!("{expected}; got {}", shape_text(a.shape()))));
+                }
+                check_rows(a.shape()[1], duration, dt)?;
+                let mut out = Vec::with_capacity(batch);
+                for b in 0..batch {
+                    let rows = (0..a.shape()[1])
+                        .map(|k| {
+                            (
+                                k as f64 * dt,
+                                a.slice(numpy::ndarray::s![b, k, ..]).to_vec(),
+                            )
+                        })
+                        .collect();
+                    out.push(InputSchedule::from_rows(rows).map_err(|e| bad(e.to_string()))?);
+                }
+                out
+            }
+        }
+    })
+}
+
+/// The rollouts as arrays: every one padded with NaN to the longest's samples, and each
+/// one's error (None where it ran through).
+fn gathered(
+    py: Python<'_>,
+    results: &[Result<tree_mech::Trajectory, SimError>],
+    n: usize,
+) -> Rollouts {
+    let batch = results.len();
+    let longest = results
+        .iter()
+        .filter_map(|r| r.as_ref().ok())
+        .max_by_key(|t| t.len());
+    let t: Vec<f64> = longest.map_or_else(Vec::new, |l| l.t.clone());
+    let samples = t.len();
+    let mut q = Array3::from_elem((batch, samples, n), f64::NAN);
+    let mut dq = Array3::from_elem((batch, samples, n), f64::NAN);
+    let mut energy = Array2::from_elem((batch, samples), f64::NAN);
+    let mut errors = Vec::with_capacity(batch);
+    for (b, r) in results.iter().enumerate() {
+        match r {
+            Ok(traj) => {
+                // Each rollout's samples are contiguous on both sides: one copy each.
+                let k = traj.len().min(samples);
+                let rows = |a: &mut Array3<f64>, from: &[f64]| {
+                    let mut to = a.slice_mut(s![b, ..k, ..]);
+                    match to.as_slice_mut() {
+                        Some(to) => to.copy_from_slice(&from[..k * n]),
+                        None => to.iter_mut().zip(from).for_each(|(o, &x)| *o = x),
+                    }
+                };
+                rows(&mut q, traj.q_rows());
+                rows(&mut dq, traj.dq_rows());
+                energy
+                    .slice_mut(s![b, ..k])
+                    .iter_mut()
+                    .zip(&traj.energy)
+                    .for_each(|(e, &x)| *e = x);
+                errors.push(None);
+            }
+            Err(e) => errors.push(Some(in_python_terms(e))),
+        }
+    }
+    Rollouts {
+        t: vector(py, &t),
+        q: q.into_pyarray(py).into_any().unbind(),
+        dq: dq.into_pyarray(py).into_any().unbind(),
+        energy: energy.into_pyarray(py).into_any().unbind(),
+        errors,
+    }
 }

@@ -442,8 +442,47 @@ where
         derivatives: bool,
         needs: Needs,
     ) -> Result<(), SimError> {
+        self.place_knot(k, x, out, derivatives);
+        let nd = self.layout.dynamic.len();
+        match self.method {
+            Stepper::Rk4(_) => {
+                let dq = &mut self.buf.p1;
+                for (r, &i) in self.layout.dynamic.iter().enumerate() {
+                    dq[i] = x[nd + r];
+                    if derivatives {
+                        out.dq_x[(i, nd + r)] = 1.0;
+                    }
+                }
+            }
+            Stepper::Vi(_) if !needs.velocity => {}
+            Stepper::Vi(_) => self.velocity_from_momentum(k, x, out, derivatives)?,
+        }
+        out.q.as_mut_slice().copy_from_slice(self.buf.q1.as_slice());
+        out.dq
+            .as_mut_slice()
+            .copy_from_slice(self.buf.p1.as_slice());
+        if needs.gravity {
+            self.knot_gravity(out, derivatives);
+        }
+        if let Some(bad) = out
+            .dq
+            .iter()
+            .chain(out.gravity.iter())
+            .find(|v| !v.is_finite())
+        {
+            return Err(SimError::InvalidInput(format!(
+                "the velocity or gravity compensation at knot {k} is not finite ({bad})"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Knot `k`'s buffers sized, `x` and the controls' previous values copied, `q` and the
+    /// kinematic `q̇` placed in the step buffers (the dynamic `q̇` zero until known), and (with
+    /// `derivatives`) the columns of `∂q/∂x`, `∂q̇_k/∂x` that select one entry each.
+    fn place_knot(&mut self, k: usize, x: &[f64], out: &mut Knot, derivatives: bool) {
         let l = &self.layout;
-        let (n, nx, nu, nd) = (self.sys.dof(), l.states, l.controls.len(), l.dynamic.len());
+        let (n, nx, nu) = (self.sys.dof(), l.states, l.controls.len());
         if out.q.len() != n || out.x.len() != nx || out.gravity.len() != nu {
             *out = Knot {
                 x: DVector::zeros(nx),
@@ -458,7 +497,6 @@ where
             };
         }
         out.x.as_mut_slice().copy_from_slice(x);
-        // q and q̇ in the step buffers (q̇'s dynamic entries zero until known).
         let (q, dq) = (&mut self.buf.q1, &mut self.buf.p1);
         dq.as_mut_slice().fill(0.0);
         l.place(&mut self.motion, self.t0 + k as f64 * self.dt, x, q, dq);
@@ -477,122 +515,116 @@ where
                 }
             }
         }
+    }
+
+    /// The VI's dynamic velocities from the state's momenta into the step buffer, and (with
+    /// `derivatives`) their Jacobian `∂q̇_d/∂x` into `out`.
+    fn velocity_from_momentum(
+        &mut self,
+        k: usize,
+        x: &[f64],
+        out: &mut Knot,
+        derivatives: bool,
+    ) -> Result<(), SimError> {
+        let l = &self.layout;
+        let (nx, nd) = (l.states, l.dynamic.len());
+        let (q, dq) = (&mut self.buf.q1, &mut self.buf.p1);
         let (terms, mdd, pivots, rhs) = (
             &mut self.buf.terms,
             &mut self.buf.mdd,
             &mut self.buf.pivots,
             &mut self.buf.velocity_rhs,
         );
-        match self.method {
-            Stepper::Rk4(_) => {
-                for (r, &i) in l.dynamic.iter().enumerate() {
-                    dq[i] = x[nd + r];
-                    if derivatives {
-                        out.dq_x[(i, nd + r)] = 1.0;
-                    }
-                }
+        // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇ (M does
+        // not depend on q̇, so q̇_d = 0 here is as good as any).
+        self.sys.mass_matrix(q, terms);
+        let m = &terms.mass;
+        for (c, &j) in l.dynamic.iter().enumerate() {
+            for (r, &i) in l.dynamic.iter().enumerate() {
+                mdd[c * nd + r] = m[(i, j)];
             }
-            Stepper::Vi(_) if !needs.velocity => {}
-            Stepper::Vi(_) => {
-                // q̇_d = M_dd⁻¹ (p_d − M_dk q̇_k): L is quadratic in q̇, so p = M q̇ (M does
-                // not depend on q̇, so q̇_d = 0 here is as good as any).
-                self.sys.mass_matrix(q, terms);
-                let m = &terms.mass;
-                for (c, &j) in l.dynamic.iter().enumerate() {
-                    for (r, &i) in l.dynamic.iter().enumerate() {
-                        mdd[c * nd + r] = m[(i, j)];
-                    }
-                }
-                let singular = || {
-                    SimError::InvalidInput(format!(
-                        "at knot {k} the mass matrix of the dynamic variables is singular: no velocity matches the momentum"
-                    ))
+        }
+        let singular = || {
+            SimError::InvalidInput(format!(
+                "at knot {k} the mass matrix of the dynamic variables is singular: no velocity matches the momentum"
+            ))
+        };
+        lu_factor_packed(mdd, nd, pivots).map_err(|_| singular())?;
+        rhs.resize(nd * nx, 0.0);
+        for (r, &i) in l.dynamic.iter().enumerate() {
+            rhs[r] = x[nd + r];
+            for &j in &l.kinematic {
+                rhs[r] -= m[(i, j)] * dq[j];
+            }
+        }
+        lu_solve_packed(mdd, nd, pivots, &mut rhs[..nd]);
+        for (r, &i) in l.dynamic.iter().enumerate() {
+            dq[i] = rhs[r];
+        }
+        if dq.iter().any(|v| !v.is_finite()) {
+            return Err(singular());
+        }
+        if derivatives {
+            // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇; dq/dx
+            // and dq̇_k/dx select one column each (set above), so the products are
+            // lookups.
+            self.sys.lagrangian(q, dq, Order::Dynamics, terms);
+            let m = &terms.mass;
+            let rhs = &mut rhs[..nd * nx];
+            rhs.fill(0.0);
+            for r in 0..nd {
+                rhs[r * nx + nd + r] = 1.0;
+            }
+            for (c, column) in l.x_column.iter().enumerate() {
+                let Some(StepColumn::Q1(j)) = *column else {
+                    continue;
                 };
-                lu_factor_packed(mdd, nd, pivots).map_err(|_| singular())?;
-                rhs.resize(nd * nx, 0.0);
+                let kinematic = l.kinematic.contains(&j);
                 for (r, &i) in l.dynamic.iter().enumerate() {
-                    rhs[r] = x[nd + r];
-                    for &j in &l.kinematic {
-                        rhs[r] -= m[(i, j)] * dq[j];
-                    }
-                }
-                lu_solve_packed(mdd, nd, pivots, &mut rhs[..nd]);
-                for (r, &i) in l.dynamic.iter().enumerate() {
-                    dq[i] = rhs[r];
-                }
-                if dq.iter().any(|v| !v.is_finite()) {
-                    return Err(singular());
-                }
-                if derivatives {
-                    // M_dd dq̇_d = dp_d − (∂²L/∂q̇_d∂q) dq − M_dk dq̇_k, at the true q̇; dq/dx
-                    // and dq̇_k/dx select one column each (set above), so the products are
-                    // lookups.
-                    self.sys.lagrangian(q, dq, Order::Dynamics, terms);
-                    let m = &terms.mass;
-                    let rhs = &mut rhs[..nd * nx];
-                    rhs.fill(0.0);
-                    for r in 0..nd {
-                        rhs[r * nx + nd + r] = 1.0;
-                    }
-                    for (c, column) in l.x_column.iter().enumerate() {
-                        let Some(StepColumn::Q1(j)) = *column else {
-                            continue;
-                        };
-                        let kinematic = l.kinematic.contains(&j);
-                        for (r, &i) in l.dynamic.iter().enumerate() {
-                            rhs[r * nx + c] -= terms.d2l_ddq_dq[(i, j)];
-                            if kinematic {
-                                rhs[r * nx + c + 1] -= m[(i, j)];
-                            }
-                        }
-                    }
-                    lu_solve_packed_rows(mdd, nd, pivots, rhs, nx);
-                    for (r, &i) in l.dynamic.iter().enumerate() {
-                        for c in 0..nx {
-                            out.dq_x[(i, c)] = rhs[r * nx + c];
-                        }
+                    rhs[r * nx + c] -= terms.d2l_ddq_dq[(i, j)];
+                    if kinematic {
+                        rhs[r * nx + c + 1] -= m[(i, j)];
                     }
                 }
             }
-        }
-        out.q.as_mut_slice().copy_from_slice(q.as_slice());
-        out.dq.as_mut_slice().copy_from_slice(dq.as_slice());
-        if needs.gravity {
-            dq.as_mut_slice().fill(0.0);
-            let order = if derivatives {
-                Order::Full
-            } else {
-                Order::First
-            };
-            self.sys.lagrangian(q, dq, order, terms);
-            out.gravity_x.as_mut_slice().fill(0.0);
-            for (c, control) in l.controls.iter().enumerate() {
-                out.gravity[c] = 0.0;
-                if let Control::Input(kin) = *control {
-                    let i = self.sys.input_variable(kin);
-                    out.gravity[c] = -terms.dl_dq[i];
-                    if derivatives {
-                        // dq/dx selects one column per variable.
-                        for (col, column) in l.x_column.iter().enumerate() {
-                            if let Some(StepColumn::Q1(j)) = *column {
-                                out.gravity_x[(c, col)] = -terms.d2l_dq_dq[(i, j)];
-                            }
-                        }
-                    }
+            lu_solve_packed_rows(mdd, nd, pivots, rhs, nx);
+            for (r, &i) in l.dynamic.iter().enumerate() {
+                for c in 0..nx {
+                    out.dq_x[(i, c)] = rhs[r * nx + c];
                 }
             }
-        }
-        if let Some(bad) = out
-            .dq
-            .iter()
-            .chain(out.gravity.iter())
-            .find(|v| !v.is_finite())
-        {
-            return Err(SimError::InvalidInput(format!(
-                "the velocity or gravity compensation at knot {k} is not finite ({bad})"
-            )));
         }
         Ok(())
+    }
+
+    /// The gravity compensation of each input control, `g = −∂L/∂q` at `q̇ = 0` on its
+    /// variable, and (with `derivatives`) its Jacobian by the state.
+    fn knot_gravity(&mut self, out: &mut Knot, derivatives: bool) {
+        let l = &self.layout;
+        let (q, dq, terms) = (&mut self.buf.q1, &mut self.buf.p1, &mut self.buf.terms);
+        dq.as_mut_slice().fill(0.0);
+        let order = if derivatives {
+            Order::Full
+        } else {
+            Order::First
+        };
+        self.sys.lagrangian(q, dq, order, terms);
+        out.gravity_x.as_mut_slice().fill(0.0);
+        for (c, control) in l.controls.iter().enumerate() {
+            out.gravity[c] = 0.0;
+            if let Control::Input(kin) = *control {
+                let i = self.sys.input_variable(kin);
+                out.gravity[c] = -terms.dl_dq[i];
+                if derivatives {
+                    // dq/dx selects one column per variable.
+                    for (col, column) in l.x_column.iter().enumerate() {
+                        if let Some(StepColumn::Q1(j)) = *column {
+                            out.gravity_x[(c, col)] = -terms.d2l_dq_dq[(i, j)];
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Sets up step `k` from `x` with controls `u` (`q₁`, `p₁` (VI) or `q̇₁` (RK4), the
