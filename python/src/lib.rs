@@ -1406,27 +1406,7 @@ impl VariationalStepper {
         let (q2, p2, lambda, iterations, derivatives) = result.map_err(|e| sim_error(py, &e))?;
         self.last = q2.as_slice().to_vec();
         let p2: Vec<f64> = self.dynamic.iter().map(|&i| p2[i]).collect();
-        let out = PyDict::new(py);
-        if let Some((first, second)) = derivatives {
-            for of in StepOutput::ALL {
-                let scale = if of == StepOutput::Lambda { -dt } else { 1.0 };
-                for by in StepInput::ALL {
-                    let name = format!("{}_d{}", step_output_name(of), by.name());
-                    out.set_item(name, matrix(py, &(first.block(of, by) * scale)))?;
-                }
-                if let Some(second) = &second {
-                    for (k, &a) in StepInput::ALL.iter().enumerate() {
-                        for &b in &StepInput::ALL[k..] {
-                            let rows: Vec<DMatrix<f64>> =
-                                second.block(of, a, b).iter().map(|h| h * scale).collect();
-                            let name =
-                                format!("{}_d{}d{}", step_output_name(of), a.name(), b.name());
-                            out.set_item(name, entry(py, &Entry::Stack(rows)))?;
-                        }
-                    }
-                }
-            }
-        }
+        let out = step_derivatives(py, derivatives, dt)?;
         (
             vector(py, q2.as_slice()),
             vector(py, &p2),
@@ -1764,4 +1744,37 @@ fn gathered(
         energy: energy.into_pyarray(py).into_any().unbind(),
         errors,
     }
+}
+
+/// A step's derivatives as a dict under trep's names (`q2_dq1` …, `lambda1_*` scaled by
+/// `−Δt`), second ones as (output, input₁, input₂) stacks; empty without derivatives.
+fn step_derivatives<'py>(
+    py: Python<'py>,
+    derivatives: Option<(
+        tree_mech::integrate::StepDerivatives,
+        Option<tree_mech::integrate::StepSecondDerivatives>,
+    )>,
+    dt: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    if let Some((first, second)) = derivatives {
+        for of in StepOutput::ALL {
+            let scale = if of == StepOutput::Lambda { -dt } else { 1.0 };
+            for by in StepInput::ALL {
+                let name = format!("{}_d{}", step_output_name(of), by.name());
+                out.set_item(name, matrix(py, &(first.block(of, by) * scale)))?;
+            }
+            if let Some(second) = &second {
+                for (k, &a) in StepInput::ALL.iter().enumerate() {
+                    for &b in &StepInput::ALL[k..] {
+                        let rows: Vec<DMatrix<f64>> =
+                            second.block(of, a, b).iter().map(|h| h * scale).collect();
+                        let name = format!("{}_d{}d{}", step_output_name(of), a.name(), b.name());
+                        out.set_item(name, entry(py, &Entry::Stack(rows)))?;
+                    }
+                }
+            }
+        }
+    }
+    Ok(out)
 }
