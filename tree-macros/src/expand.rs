@@ -16,7 +16,7 @@ use tree_model::{Model, ModelSpec, ParameterSpec, Value};
 
 use crate::ast::{Input, Source};
 use crate::lower;
-use crate::program::{constant, identifier_part, Emitted, Flavour, Program};
+use crate::program::{constant, identifier_part, Flavour, Program, Programs};
 use crate::system_impl;
 use crate::trace::{self, Term};
 
@@ -515,31 +515,6 @@ fn load(input: &Input) -> syn::Result<Loaded> {
     })
 }
 
-/// Every program of the expansion, traced from the kernel and emitted: over `f64` into the
-/// runtime's terms (`first` … `c_full`), generic for dual numbers (`d_*`, `dc_*`), and the
-/// optional ones a model may not have.
-pub(crate) struct Programs {
-    pub(crate) first: Emitted,
-    pub(crate) mass: Emitted,
-    pub(crate) energy: Emitted,
-    pub(crate) dynamics: Emitted,
-    pub(crate) full: Emitted,
-    pub(crate) poses: Emitted,
-    pub(crate) c_first: Emitted,
-    pub(crate) c_dynamics: Emitted,
-    pub(crate) c_full: Emitted,
-    pub(crate) d_dynamics: Emitted,
-    pub(crate) d_full: Emitted,
-    pub(crate) dc_dynamics: Emitted,
-    pub(crate) dc_full: Emitted,
-    /// `Σ_r w_r D²h_r` over `f64` and over dual numbers (constrained models only).
-    pub(crate) weighted: Option<(Emitted, Emitted)>,
-    /// The articulated-body algorithm (models it resolves, without constraints).
-    pub(crate) articulated: Option<Emitted>,
-    /// The inverse dynamics and the constraints over jets.
-    pub(crate) inverse: Emitted,
-}
-
 impl Programs {
     /// Traces and emits every program of `model`'s plan.
     fn emit(plan: &TreePlan, model: &Model) -> Self {
@@ -607,30 +582,6 @@ impl Programs {
                 .map(|program| program.emit("__articulated", vars, articulated)),
             inverse: inverse_program(plan).emit("__d_inverse", vars, generic),
         }
-    }
-
-    /// Every program's helper functions (associated functions of the generated type).
-    fn functions(&self) -> impl Iterator<Item = &TokenStream> {
-        let always = [
-            &self.first,
-            &self.mass,
-            &self.energy,
-            &self.dynamics,
-            &self.full,
-            &self.poses,
-            &self.c_first,
-            &self.c_dynamics,
-            &self.c_full,
-            &self.d_dynamics,
-            &self.d_full,
-            &self.dc_dynamics,
-            &self.dc_full,
-        ];
-        let weighted = self.weighted.iter().flat_map(|(a, b)| [a, b]);
-        (always.into_iter().chain(self.articulated.iter()))
-            .chain(weighted)
-            .chain([&self.inverse])
-            .map(|e| &e.functions)
     }
 }
 

@@ -253,6 +253,57 @@ pub struct Emitted {
     pub statements: usize,
 }
 
+/// Every program of the expansion, traced from the kernel and emitted: over `f64` into the
+/// runtime's terms (`first` … `c_full`), generic for dual numbers (`d_*`, `dc_*`), and the
+/// optional ones a model may not have.
+pub(crate) struct Programs {
+    pub(crate) first: Emitted,
+    pub(crate) mass: Emitted,
+    pub(crate) energy: Emitted,
+    pub(crate) dynamics: Emitted,
+    pub(crate) full: Emitted,
+    pub(crate) poses: Emitted,
+    pub(crate) c_first: Emitted,
+    pub(crate) c_dynamics: Emitted,
+    pub(crate) c_full: Emitted,
+    pub(crate) d_dynamics: Emitted,
+    pub(crate) d_full: Emitted,
+    pub(crate) dc_dynamics: Emitted,
+    pub(crate) dc_full: Emitted,
+    /// `Σ_r w_r D²h_r` over `f64` and over dual numbers (constrained models only).
+    pub(crate) weighted: Option<(Emitted, Emitted)>,
+    /// The articulated-body algorithm (models it resolves, without constraints).
+    pub(crate) articulated: Option<Emitted>,
+    /// The inverse dynamics and the constraints over jets.
+    pub(crate) inverse: Emitted,
+}
+
+impl Programs {
+    /// Every program's helper functions (associated functions of the generated type).
+    pub(crate) fn functions(&self) -> impl Iterator<Item = &TokenStream> {
+        let always = [
+            &self.first,
+            &self.mass,
+            &self.energy,
+            &self.dynamics,
+            &self.full,
+            &self.poses,
+            &self.c_first,
+            &self.c_dynamics,
+            &self.c_full,
+            &self.d_dynamics,
+            &self.d_full,
+            &self.dc_dynamics,
+            &self.dc_full,
+        ];
+        let weighted = self.weighted.iter().flat_map(|(a, b)| [a, b]);
+        (always.into_iter().chain(self.articulated.iter()))
+            .chain(weighted)
+            .chain([&self.inverse])
+            .map(|e| &e.functions)
+    }
+}
+
 impl Program {
     /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)`, over
     /// `flavour`'s number type, and their variant `{prefix}_fma_{n}` for AVX2 and FMA; the

@@ -7,7 +7,7 @@ use quote::{format_ident, quote};
 use tree_kernel::plan::TreePlan;
 use tree_model::Model;
 
-use crate::expand::Programs;
+use crate::program::Programs;
 
 /// The `System` impl: what the model is (sizes, names, initial values), then its
 /// evaluations.
