@@ -285,7 +285,7 @@ struct Row {
     order: Order,
 }
 
-/// A distance constraint's row `h = ‖p_a − p_b‖² − ℓ²` (eq. in docs/derivations.md §5);
+/// A distance constraint's row `h = ‖p_a − p_b‖² − ℓ²` (docs/derivations.md §5);
 /// the rows written (one).
 fn distance_row<S: Scalar>(
     plan: &TreePlan,
