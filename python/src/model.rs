@@ -1,0 +1,329 @@
+//! `Model`: a model read at run time with its interpreted system — what it is made of (names,
+//! defaults), its arguments checked against it, and `load`/`loads`. What it computes lives by
+//! topic: `evaluation.rs`, `frames.rs`, `simulate.rs`, `linearize.rs`, `rollouts.rs`.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use numpy::ndarray::Ix1;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use tree_mech::model;
+use tree_mech::nalgebra::Dyn;
+use tree_mech::runtime::kinematics::Kinematics as FrameKinematics;
+use tree_mech::runtime::Vector;
+use tree_mech::runtime::{ModelMotions, Prescription};
+use tree_mech::TreeSystem;
+
+use crate::arrays::{check_finite, vector};
+use crate::errors::{bad, model_error, ModelError};
+use crate::numbers::Numbers;
+
+/// A model read at run time, with its interpreted system.
+#[pyclass(module = "tree_mech", frozen)]
+pub(crate) struct Model {
+    pub(crate) model: model::Model,
+    pub(crate) sys: Mutex<TreeSystem>,
+    /// The frames' kinematics (`frame_jacobian` and the rest).
+    pub(crate) frames: Mutex<FrameKinematics>,
+}
+
+impl Model {
+    pub(crate) fn of(model: model::Model) -> PyResult<Self> {
+        let sys = TreeSystem::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
+        let frames =
+            FrameKinematics::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
+        Ok(Model {
+            model,
+            sys: Mutex::new(sys),
+            frames: Mutex::new(frames),
+        })
+    }
+
+    /// The frames' kinematics at `(q, dq, ddq)` (defaults: the model's q0, dq0 and zero).
+    pub(crate) fn frames_at(
+        &self,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<std::sync::MutexGuard<'_, FrameKinematics>> {
+        let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
+        let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
+        let ddq = self.vector("ddq", ddq, |_| 0.0)?;
+        let mut k = self.frames.lock().expect("no panic holds the lock");
+        k.update(q.as_slice(), Some(dq.as_slice()), Some(ddq.as_slice()))
+            .map_err(|e| bad(e.to_string()))?;
+        Ok(k)
+    }
+
+    /// The frame `name`'s kinematics at `(q, dq, ddq)` and its index.
+    pub(crate) fn frame_at(
+        &self,
+        name: &str,
+        q: Option<Numbers<'_, Ix1>>,
+        dq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<(std::sync::MutexGuard<'_, FrameKinematics>, usize)> {
+        let k = self.frames_at(q, dq, ddq)?;
+        let f = k.frame(name).map_err(|e| bad(e.to_string()))?;
+        Ok((k, f))
+    }
+
+    pub(crate) fn system(&self) -> TreeSystem {
+        self.sys.lock().expect("no panic holds the lock").clone()
+    }
+
+    /// A dict naming the model's parts in order (`variables`, `dynamic`, `kinematic`,
+    /// `inputs`, `constraints`): how a linearisation's dict begins.
+    pub(crate) fn named_parts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let out = PyDict::new(py);
+        out.set_item("variables", self.names())?;
+        out.set_item("dynamic", self.dynamic())?;
+        out.set_item("kinematic", self.kinematic())?;
+        out.set_item("inputs", self.inputs())?;
+        out.set_item("constraints", self.constraints())?;
+        Ok(out)
+    }
+
+    pub(crate) fn n(&self) -> usize {
+        self.model.variables.len()
+    }
+
+    /// A vector of every variable, or the model's default.
+    pub(crate) fn vector(
+        &self,
+        what: &str,
+        given: Option<Numbers<'_, Ix1>>,
+        default: impl Fn(usize) -> f64,
+    ) -> PyResult<Vector<Dyn>> {
+        let n = self.n();
+        match given {
+            None => Ok(Vector::<Dyn>::from_fn(n, |i, _| default(i))),
+            Some(a) => {
+                let v = a.as_array();
+                if v.len() != n {
+                    return Err(bad(format!(
+                        "{what} has {} entries; the model has {n} variables ({})",
+                        v.len(),
+                        self.names().join(", ")
+                    )));
+                }
+                let v: Vec<f64> = v.iter().copied().collect();
+                check_finite(what, &v, &self.names())?;
+                Ok(Vector::<Dyn>::from_vec(v))
+            }
+        }
+    }
+
+    /// One number per variable, as a numpy array.
+    pub(crate) fn per_variable(
+        &self,
+        py: Python<'_>,
+        of: impl Fn(&model::Variable) -> f64,
+    ) -> Py<PyAny> {
+        vector(py, &self.model.variables.iter().map(of).collect::<Vec<_>>())
+    }
+
+    pub(crate) fn input_names(&self) -> Vec<String> {
+        self.model.inputs.iter().map(|u| u.name.clone()).collect()
+    }
+
+    /// The inputs at one state: one finite value per input, or zeros.
+    pub(crate) fn input_vector(&self, given: Option<Numbers<'_, Ix1>>) -> PyResult<Vec<f64>> {
+        match given {
+            None => Ok(vec![0.0; self.model.inputs.len()]),
+            Some(u) => self.checked_inputs(u.as_array().to_vec()),
+        }
+    }
+
+    /// `u` if it holds one finite value per input, else a `ValueError` naming the inputs.
+    pub(crate) fn checked_inputs(&self, u: Vec<f64>) -> PyResult<Vec<f64>> {
+        if u.len() != self.model.inputs.len() {
+            return Err(bad(format!(
+                "u has {} entries; the model has {}",
+                u.len(),
+                self.inputs_phrase()
+            )));
+        }
+        check_finite("u", &u, &self.input_names())?;
+        Ok(u)
+    }
+
+    /// "no inputs", or "2 inputs (push, pull)".
+    pub(crate) fn inputs_phrase(&self) -> String {
+        match self.model.inputs.len() {
+            0 => "no inputs".to_string(),
+            n => format!("{n} inputs ({})", self.input_names().join(", ")),
+        }
+    }
+
+    /// The kinematic variables' motion for a call at one state: the model's prescription, or
+    /// with `ddq` given, held at the given `q`, `dq` and `ddq`.
+    pub(crate) fn kinematics(
+        &self,
+        sys: &TreeSystem,
+        q: &Vector<Dyn>,
+        dq: &Vector<Dyn>,
+        ddq: Option<Numbers<'_, Ix1>>,
+    ) -> PyResult<Kinematics> {
+        Ok(match ddq {
+            None => Kinematics::Model(ModelMotions::of(sys)),
+            Some(ddq) => {
+                let ddq = self.vector("ddq", Some(ddq), |_| 0.0)?;
+                Kinematics::Given(q.clone(), dq.clone(), ddq)
+            }
+        })
+    }
+
+    pub(crate) fn names(&self) -> Vec<String> {
+        self.model
+            .variables
+            .iter()
+            .map(|v| v.name.clone())
+            .collect()
+    }
+
+    /// The names of variables `list`.
+    pub(crate) fn named(&self, list: &[usize]) -> Vec<String> {
+        list.iter()
+            .map(|&i| self.model.variables[i].name.clone())
+            .collect()
+    }
+}
+
+#[pymethods]
+impl Model {
+    /// The model's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.model.name.clone()
+    }
+
+    /// Every variable's name, in order (the order of q).
+    #[getter]
+    fn variables(&self) -> Vec<String> {
+        self.names()
+    }
+
+    /// The dynamic (simulated) variables' names.
+    #[getter]
+    fn dynamic(&self) -> Vec<String> {
+        self.named(&self.model.dynamic())
+    }
+
+    /// The kinematic (prescribed) variables' names.
+    #[getter]
+    fn kinematic(&self) -> Vec<String> {
+        self.named(&self.model.kinematic())
+    }
+
+    /// The inputs' names (u's order).
+    #[getter]
+    fn inputs(&self) -> Vec<String> {
+        self.model.inputs.iter().map(|i| i.name.clone()).collect()
+    }
+
+    /// The constraint equations' names (λ's order).
+    #[getter]
+    fn constraints(&self) -> Vec<String> {
+        self.model.constraint_row_names()
+    }
+
+    /// The frames' names.
+    #[getter]
+    fn frames(&self) -> Vec<String> {
+        self.model.frames.iter().map(|f| f.name.clone()).collect()
+    }
+
+    /// The initial configuration.
+    #[getter]
+    fn q0(&self, py: Python<'_>) -> Py<PyAny> {
+        self.per_variable(py, |v| v.q0)
+    }
+
+    /// The initial velocity.
+    #[getter]
+    fn dq0(&self, py: Python<'_>) -> Py<PyAny> {
+        self.per_variable(py, |v| v.dq0)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Model({:?}: {} variables, {} frames, {} inputs, {} constraint rows)",
+            self.model.name,
+            self.n(),
+            self.model.frames.len(),
+            self.model.inputs.len(),
+            self.model.constraint_rows()
+        )
+    }
+
+    /// A copy with other parameters: `masses` {frame: kg} (its centre of mass and inertia
+    /// kept), `constants` {frame: the value of its constant primitive, m or rad},
+    /// `gravity` [x, y, z] — a parameter sweep's model (`rollouts(..., models=[…])`).
+    #[pyo3(signature = (masses=None, constants=None, gravity=None))]
+    fn with_parameters(
+        &self,
+        masses: Option<std::collections::BTreeMap<String, f64>>,
+        constants: Option<std::collections::BTreeMap<String, f64>>,
+        gravity: Option<[f64; 3]>,
+    ) -> PyResult<Model> {
+        let mut m = self.model.clone();
+        for (frame, mass) in masses.iter().flatten() {
+            m.set_mass(frame, *mass).map_err(bad)?;
+        }
+        for (frame, value) in constants.iter().flatten() {
+            m.set_constant(frame, *value).map_err(bad)?;
+        }
+        if let Some(g) = gravity {
+            if g.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!("gravity must be finite, got {g:?}")));
+            }
+            m.gravity = g;
+        }
+        Model::of(m)
+    }
+}
+
+/// The kinematic variables' motion at one state: the model's prescription at `t`, or the
+/// caller's own `(q, dq, ddq)` (trep's way: `ddq=` given).
+pub(crate) enum Kinematics {
+    Model(ModelMotions),
+    Given(Vector<Dyn>, Vector<Dyn>, Vector<Dyn>),
+}
+
+impl Prescription for Kinematics {
+    fn kinematic(&mut self, i: usize, t: f64) -> [f64; 3] {
+        match self {
+            Kinematics::Model(m) => m.kinematic(i, t),
+            Kinematics::Given(q, dq, ddq) => [q[i], dq[i], ddq[i]],
+        }
+    }
+}
+
+/// Reads a model file (TOML, or URDF by its extension).
+#[pyfunction]
+#[pyo3(signature = (path, floating_base=false))]
+pub(crate) fn load(py: Python<'_>, path: PathBuf, floating_base: bool) -> PyResult<Model> {
+    let m = model::from_file(&path, model::UrdfOptions { floating_base })
+        .map_err(|e| model_error(py, &e))?;
+    Model::of(m)
+}
+
+/// Reads a model from text: `format` "toml" or "urdf".
+#[pyfunction]
+#[pyo3(signature = (text, format="toml", floating_base=false))]
+pub(crate) fn loads(
+    py: Python<'_>,
+    text: &str,
+    format: &str,
+    floating_base: bool,
+) -> PyResult<Model> {
+    let m = match format {
+        "toml" => model::from_toml_str(text, None),
+        "urdf" => model::from_urdf_str(text, None, model::UrdfOptions { floating_base }),
+        other => return Err(bad(format!("format `{other}`: use `toml` or `urdf`"))),
+    }
+    .map_err(|e| model_error(py, &e))?;
+    Model::of(m)
+}
