@@ -73,7 +73,7 @@ fn solution_dict<'py>(
     out.set_item(
         "controls",
         (0..task.controls.len())
-            .map(|c| task.control_name(&m, c).to_string())
+            .map(|c| task.control_name(m, c).to_string())
             .collect::<Vec<_>>(),
     )?;
     out.set_item("q_final", vector(py, res.q[n].as_slice()))?;
