@@ -773,53 +773,42 @@ class System:
 
     # The model ----------------------------------------------------------------------
     def _toml(self) -> str:
-        gravity = [0.0, 0.0, 0.0]
-        for p in self._potentials:
-            if isinstance(p, _Gravity):
-                gravity = [a + b for a, b in zip(gravity, p.gravity)]
+        """The model file of the system: its frames and configs, then each potential, force
+        and constraint's own lines (``_toml``), gravity and damping summed over the parts
+        that contribute them."""
+        parts = [*self._potentials, *self._forces]
+        gravity = [sum(g) for g in zip([0.0, 0.0, 0.0], *(p._gravity() for p in parts))]
         out = ['name = "trep"', f"gravity = {json.dumps([float(g) for g in gravity])}", ""]
-        attached = [*self._constraints, *self._potentials, *self._forces]
-        if any(self._world in getattr(c, "_frames", tuple)() for c in attached):
+        attached = [*self._constraints, *parts]
+        if any(self._world in c._frames() for c in attached):
             # An element on the world frame attaches to a fixed frame at the origin.
             out += ["[[frame]]", 'name = "World"', "tx = 0.0", ""]
         for f in self._frames_created:
-            out.append("[[frame]]")
-            out.append(f"name = {_toml_string(self._frame_key(f))}")
-            if f.parent is not self._world:
-                out.append(f"parent = {_toml_string(self._frame_key(f.parent))}")
-            value = _toml_string(f.config.name) if f.config else repr(f._value)
-            out.append(f"{f.transform_type} = {value}")
-            if f.mass or any(f._inertia):
-                out.append(f"mass = {f.mass!r}")
-                out.append(f"inertia = {json.dumps(list(f._inertia))}")
-            out.append("")
-        damping: Dict[str, float] = {}
-        for force in self._forces:
-            if isinstance(force, _Damping):
-                for c in self.dyn_configs:
-                    damping[c.name] = damping.get(c.name, 0.0) + force.get_damping_coefficient(c)
+            out += self._frame_toml(f)
         for c in self._configs:
+            damping = sum(p._damping_on(c) for p in parts) if not c.kinematic else 0.0
             out.append(f"[variables.{_toml_string(c.name)}]")
             if c.kinematic:
                 out.append("kinematic = true")
-            if damping.get(c.name):
-                out.append(f"damping = {damping[c.name]!r}")
+            if damping:
+                out.append(f"damping = {damping!r}")
             out.append("")
-        for p in self._potentials:
-            if isinstance(p, _ConfigSpring):
-                out += ["[[spring]]", f"variable = {_toml_string(p.config.name)}",
-                        f"stiffness = {p.k!r}", f"rest = {p.q0!r}", ""]
-            elif isinstance(p, _LinearSpring):
-                out += p._toml()
-        for force in self._forces:
-            if isinstance(force, _LinearDamper):
-                out += force._toml()
-            if isinstance(force, _ConfigForce):
-                out += ["[[input]]", f"name = {_toml_string(force.finput.name)}",
-                        f"variable = {_toml_string(force.config.name)}", ""]
-        for c in self._constraints:
-            out += c._toml()
+        for part in [*parts, *self._constraints]:
+            out += part._toml()
         return "\n".join(out)
+
+    def _frame_toml(self, f: Frame) -> List[str]:
+        """Frame ``f``'s ``[[frame]]`` table."""
+        out = ["[[frame]]", f"name = {_toml_string(self._frame_key(f))}"]
+        if f.parent is not self._world:
+            out.append(f"parent = {_toml_string(self._frame_key(f.parent))}")
+        value = _toml_string(f.config.name) if f.config else repr(f._value)
+        out.append(f"{f.transform_type} = {value}")
+        if f.mass or any(f._inertia):
+            out.append(f"mass = {f.mass!r}")
+            out.append(f"inertia = {json.dumps(list(f._inertia))}")
+        out.append("")
+        return out
 
     def _native_model(self) -> _native.Model:
         if self._holds:
@@ -1168,7 +1157,8 @@ class System:
         return self.q
 
 
-# Potentials, forces and constraints (re-exported by the submodules of trep's names) -------
+# The bases of potentials, forces and constraints (each kind lives in trep's module of its
+# name: potentials.py, forces.py, constraints.py, and writes its own model text) ----------
 class _Part:
     """Something a system holds in one of its lists (``_list`` names it); adding one is a
     structure change."""
@@ -1185,30 +1175,28 @@ class _Part:
     def system(self) -> System:
         return self._system
 
+    # What the part adds to the model file (each kind overrides what it has):
+    def _toml(self) -> List[str]:
+        """Its own tables of the model file."""
+        return []
+
+    def _gravity(self) -> Sequence[float]:
+        """Its share of the uniform gravity."""
+        return (0.0, 0.0, 0.0)
+
+    def _damping_on(self, config: Config) -> float:
+        """Its viscous damping coefficient on the dynamic ``config``."""
+        return 0.0
+
+    def _frames(self) -> tuple:
+        """The frames it is attached to."""
+        return ()
+
 
 class Potential(_Part):
     """A potential energy term of the system."""
 
     _list = "_potentials"
-
-
-class _Gravity(Potential):
-    """Uniform gravity ``gravity`` (default ``[0, 0, -9.8]``) on every mass."""
-
-    def __init__(self, system: System, gravity: Sequence[float] = (0.0, 0.0, -9.8),
-                 name: Optional[str] = None):
-        self.gravity = _vector3(gravity, "Gravity: gravity")
-        super().__init__(system, name)
-
-
-class _ConfigSpring(Potential):
-    """``½k(q − q0)²`` on one config."""
-
-    def __init__(self, system: System, config: Any, k: float, q0: float = 0.0,
-                 name: Optional[str] = None):
-        self.config = system.get_config(config) if not isinstance(config, Config) else config
-        self.k, self.q0 = float(k), float(q0)
-        super().__init__(system, name)
 
 
 class _BetweenFrames:
@@ -1226,80 +1214,10 @@ class _BetweenFrames:
                 f"{_toml_string(system._frame_key(self.frame2))}]")
 
 
-class _LinearSpring(_BetweenFrames, Potential):
-    """A spring between two frames' origins, ``½k(|p₁ − p₂| − x0)²``."""
-
-    def __init__(self, system: System, frame1: Any, frame2: Any, k: float, x0: float = 0.0,
-                 name: Optional[str] = None):
-        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
-        self.k, self.x0 = float(k), float(x0)
-        super().__init__(system, name)
-
-    def _toml(self) -> List[str]:
-        return ["[[spring]]", self._frames_line(self._system), f"stiffness = {self.k!r}",
-                f"rest = {self.x0!r}", ""]
-
-
 class Force(_Part):
     """A generalized force of the system."""
 
     _list = "_forces"
-
-
-class _Damping(Force):
-    """Viscous damping ``−c q̇`` on every dynamic config: ``damping`` maps config names to
-    ``c``, ``default_damping`` for the rest."""
-
-    def __init__(self, system: System, default_damping: float = 0.0,
-                 damping: Optional[Dict[Any, float]] = None, name: Optional[str] = None):
-        self.default_damping = float(default_damping)
-        self._damping = {}
-        known = system._config_names()
-        for k, v in (damping or {}).items():
-            key = k.name if isinstance(k, Config) else k
-            if key not in known:
-                raise KeyError(f"Damping: no config {key!r} in the system")
-            self._damping[key] = float(v)
-        super().__init__(system, name)
-
-    def get_damping_coefficient(self, config: Config) -> float:
-        """The damping coefficient on ``config`` (the default where none was set)."""
-        return self._damping.get(config.name, self.default_damping)
-
-    def set_damping_coefficient(self, config: Config, coefficient: float) -> None:
-        """Sets the damping coefficient on ``config``."""
-        self._damping[config.name] = float(coefficient)
-        self._system._structure_changed()
-
-
-class _ConfigForce(Force):
-    """The input ``finput`` as a generalized force on ``config``."""
-
-    def __init__(self, system: System, config: Any, finput: Optional[str],
-                 name: Optional[str] = None):
-        self.config = system.get_config(config) if not isinstance(config, Config) else config
-        if self.config.kinematic:
-            raise ValueError(f"a ConfigForce acts on a dynamic config; `{self.config.name}` "
-                             "is kinematic")
-        system._hold()
-        try:
-            self.finput = Input(system, finput)
-            super().__init__(system, name)
-        finally:
-            system._release()
-
-
-class _LinearDamper(_BetweenFrames, Force):
-    """A damper between two frames' origins: ``−c ℓ̇`` along the line, ``ℓ = |p₁ − p₂|``."""
-
-    def __init__(self, system: System, frame1: Any, frame2: Any, c: float,
-                 name: Optional[str] = None):
-        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
-        self.c = float(c)
-        super().__init__(system, name)
-
-    def _toml(self) -> List[str]:
-        return ["[[damper]]", self._frames_line(self._system), f"damping = {self.c!r}", ""]
 
 
 class Constraint:
@@ -1320,7 +1238,12 @@ class Constraint:
         return self._system
 
     def _frames(self) -> tuple:
+        """The frames it is attached to."""
         return ()
+
+    def _toml(self) -> List[str]:
+        """Its own table of the model file."""
+        raise NotImplementedError(f"{type(self).__name__} has no model text")
 
     def h(self) -> float:
         """The constraint's value at the current state (trep's form)."""
@@ -1330,144 +1253,6 @@ class Constraint:
         """``∂h/∂q1`` at the current state (trep's form)."""
         s = self._system
         return self._sign * float(np.asarray(s._state()["dh_dq"])[self.index][s._i(q1)])
-
-
-class _Distance(_BetweenFrames, Constraint):
-    """``|p₁ − p₂|² − ℓ²`` for two frames' origins (trep's row, and tree-mech's); ``distance``
-    a number or the name of a new kinematic config holding ℓ."""
-
-    def __init__(self, system: System, frame1: Any, frame2: Any, distance: Any,
-                 name: Optional[str] = None):
-        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
-        system._hold()
-        try:
-            super().__init__(system, name)
-            if isinstance(distance, str):
-                self.config: Optional[Config] = Config(system, distance, kinematic=True)
-                self._distance = 0.0
-            else:
-                self.config = None
-                self._distance = float(distance)
-        finally:
-            system._release()
-
-    @property
-    def distance(self) -> float:
-        """The distance held: its kinematic config's ``q``, or the constant."""
-        return self.config.q if self.config else self._distance
-
-    def _toml(self) -> List[str]:
-        length = _toml_string(self.config.name) if self.config else repr(self._distance)
-        return ["[[constraint]]", f"name = {_toml_string(self.name)}", 'kind = "distance"',
-                self._frames_line(self._system), f"length = {length}", ""]
-
-
-class _PointOnPlane(Constraint):
-    """trep's ``n·(p_plane − p_point)``, the normal ``plane_normal`` in ``plane_frame``'s
-    axes (tree-mech's plane row with the opposite sign)."""
-
-    _sign = -1.0
-
-    def __init__(self, system: System, plane_frame: Any, plane_normal: Sequence[float],
-                 point_frame: Any, name: Optional[str] = None):
-        self.plane_frame = system.get_frame(plane_frame)
-        self.point_frame = system.get_frame(point_frame)
-        where = _between("PointOnPlane", self.plane_frame, self.point_frame)
-        self.normal = _vector3(plane_normal, f"{where}: plane_normal")
-        if not any(self.normal):
-            raise ValueError(f"{where}: plane_normal must not be zero")
-        system._hold()
-        try:
-            super().__init__(system, name)
-        finally:
-            system._release()
-
-    def _frames(self) -> tuple:
-        return (self.plane_frame, self.point_frame)
-
-    def _toml(self) -> List[str]:
-        s = self._system
-        return ["[[constraint]]", f"name = {_toml_string(self.name)}", 'kind = "plane"',
-                f"frames = [{_toml_string(s._frame_key(self.plane_frame))}, "
-                f"{_toml_string(s._frame_key(self.point_frame))}]",
-                f"normal = {json.dumps(self.normal)}", ""]
-
-
-class _PointToPoint1D(_BetweenFrames, Constraint):
-    """trep's ``(p₁ − p₂)[axis]`` for two frames' origins along one world axis (``"x"``,
-    ``"y"`` or ``"z"``): tree-mech's point row on that axis."""
-
-    def __init__(self, system: System, axis: str, frame1: Any, frame2: Any,
-                 name: Optional[str] = None):
-        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
-        if axis not in ("x", "y", "z"):
-            raise ValueError(f"{_between('PointToPoint1D', self.frame1, self.frame2)}: axis "
-                             f"must be 'x', 'y' or 'z', got {axis!r}")
-        self.axis = axis
-        system._hold()
-        try:
-            super().__init__(system, name)
-        finally:
-            system._release()
-
-    def get_actual_distance(self) -> float:
-        """``|p₁ − p₂|``, the whole distance between the origins (zero when held)."""
-        return _actual_distance(self.frame1, self.frame2)
-
-    def _toml(self) -> List[str]:
-        # trep lets a 3-D point constraint's three rows share one name; the model's rows
-        # need their own.
-        earlier = [c.name for c in self._system._constraints[: self.index]]
-        key = self.name if self.name not in earlier else f"{self.name}#{self.index}"
-        return ["[[constraint]]", f"name = {_toml_string(key)}", 'kind = "point"',
-                self._frames_line(self._system), f"axes = {_toml_string(self.axis)}", ""]
-
-
-def _between(kind: str, frame1: Frame, frame2: Frame) -> str:
-    """Where an error is: the element's kind and its two frames."""
-    return f"{kind} between `{frame1.name}` and `{frame2.name}`"
-
-
-def _actual_distance(frame1: Frame, frame2: Frame) -> float:
-    return float(np.linalg.norm(np.asarray(frame1.p())[:3] - np.asarray(frame2.p())[:3]))
-
-
-class _PointToPoint:
-    """trep's ``PointToPoint2D``/``3D``: one :class:`_PointToPoint1D` row per axis, all
-    named ``name``."""
-
-    def __init__(self, system: System, axes: str, frame1: Any, frame2: Any,
-                 name: Optional[str]):
-        self.frame1, self.frame2 = system.get_frame(frame1), system.get_frame(frame2)
-        system._hold()
-        try:
-            self.constraints = [_PointToPoint1D(system, a, frame1, frame2, name) for a in axes]
-        finally:
-            system._release()
-
-    def get_actual_distance(self) -> float:
-        """``|p₁ − p₂|``, the whole distance between the origins (zero when held)."""
-        return _actual_distance(self.frame1, self.frame2)
-
-
-class _PointToPoint3D(_PointToPoint):
-    """trep's ``PointToPoint3D(system, frame1, frame2, name=None)``: the origins held
-    together, three rows (x, y, z)."""
-
-    def __init__(self, system: System, frame1: Any, frame2: Any, name: Optional[str] = None):
-        super().__init__(system, "xyz", frame1, frame2, name)
-
-
-class _PointToPoint2D(_PointToPoint):
-    """trep's ``PointToPoint2D(system, plane, frame1, frame2, name=None)``: the origins held
-    together in ``plane`` (``"xy"``, ``"xz"`` or ``"yz"``), two rows."""
-
-    def __init__(self, system: System, plane: str, frame1: Any, frame2: Any,
-                 name: Optional[str] = None):
-        if plane not in ("xy", "xz", "yz"):
-            where = _between("PointToPoint2D", system.get_frame(frame1), system.get_frame(frame2))
-            raise ValueError(f"{where}: plane must be 'xy', 'xz' or 'yz', got {plane!r}")
-        super().__init__(system, plane, frame1, frame2, name)
 
 
 class MidpointVI:
