@@ -55,6 +55,16 @@ pub use tree_runtime::{
 #[doc = include_str!("../README.md")]
 struct ReadmeExamples;
 
+/// docs/model-format.md's Rust examples, run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/model-format.md")]
+struct ModelFormatExamples;
+
+/// docs/library.md's Rust examples, run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/library.md")]
+struct LibraryExamples;
+
 /// What the code `tree_model!` generates names, and nothing else: its one door into the
 /// crates beneath (as thiserror's `__private`). Not a public interface; it changes with the
 /// macro.

@@ -13,9 +13,11 @@
 //!     pub struct DoublePendulum;
 //!     gravity = [0.0, 0.0, -9.81];
 //!     frame shoulder = rx(theta1) {
-//!         frame upper = tz(-1.0) { mass = 1.0; }
-//!         frame elbow = rx(theta2) {
-//!             frame lower = tz(-1.0) { mass = 1.0; inertia = [0.0, 0.0, 0.0]; }
+//!         frame upper = tz(-1.0) {
+//!             mass = 1.0;
+//!             frame elbow = rx(theta2) {
+//!                 frame lower = tz(-1.0) { mass = 1.0; inertia = [0.0, 0.0, 0.0]; }
+//!             }
 //!         }
 //!     }
 //!     variable theta1 { q0 = 0.5; dq0 = 0.0; damping = 0.0; }
