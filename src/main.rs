@@ -6,5 +6,10 @@ mod cli;
 use clap::Parser;
 
 fn main() -> std::process::ExitCode {
-    tree_mech::run_main(|| Ok(cli::Cli::parse().run()?))
+    cli::interrupt::install();
+    let status = tree_mech::run_main(|| Ok(cli::Cli::parse().run()?));
+    if cli::interrupt::requested() {
+        return std::process::ExitCode::from(cli::interrupt::STATUS);
+    }
+    status
 }

@@ -22,32 +22,32 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
 fn run_check(path: &Path, source: &Source) -> Result<(), String> {
     let model = source.model(path)?;
     let sys = TreeSystem::new(&model).map_err(|e| e.to_string())?;
-    println!("model `{}`: valid", model.name);
+    say!("model `{}`: valid", model.name);
     if !source.locks.is_empty() {
-        println!("locked (held as constants): {}", source.locks.join(", "));
+        say!("locked (held as constants): {}", source.locks.join(", "));
     }
-    println!(
+    say!(
         "gravity: [{}, {}, {}]",
         Given(model.gravity[0]),
         Given(model.gravity[1]),
         Given(model.gravity[2])
     );
-    println!(
+    say!(
         "{}, {}:",
         counted(model.frames.len(), "frame"),
         counted(sys.dof(), "variable")
     );
-    print_variables(&model);
-    print_constraints(&model);
-    print_inputs(&model);
-    print_elements(&model);
-    print_masses(&model);
-    println!("tree:\n{}", model.tree_text().trim_end());
+    print_variables(&model)?;
+    print_constraints(&model)?;
+    print_inputs(&model)?;
+    print_elements(&model)?;
+    print_masses(&model)?;
+    say!("tree:\n{}", model.tree_text().trim_end());
     Ok(())
 }
 
 /// Each variable: what it drives, its start, dynamic or how it is prescribed, its limits.
-fn print_variables(model: &model::Model) {
+fn print_variables(model: &model::Model) -> Result<(), String> {
     for v in &model.variables {
         let drives = match v.frame {
             Some(f) => format!(
@@ -90,19 +90,20 @@ fn print_variables(model: &model::Model) {
             .limits
             .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
             .unwrap_or_default();
-        println!(
+        say!(
             "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}{limits}",
             v.name,
             Given(v.q0),
             Given(v.dq0)
         );
     }
+    Ok(())
 }
 
 /// Each constraint: its kind and its frames.
-fn print_constraints(model: &model::Model) {
+fn print_constraints(model: &model::Model) -> Result<(), String> {
     if !model.constraints.is_empty() {
-        println!("{}:", counted(model.constraints.len(), "constraint"));
+        say!("{}:", counted(model.constraints.len(), "constraint"));
         for c in &model.constraints {
             let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
             let what = match &c.kind {
@@ -120,15 +121,16 @@ fn print_constraints(model: &model::Model) {
                     axes.iter().map(|&k| ["x", "y", "z"][k]).collect::<String>()
                 ),
             };
-            println!("  {:<20} {what} between `{a}` and `{b}`", c.name);
+            say!("  {:<20} {what} between `{a}` and `{b}`", c.name);
         }
     }
+    Ok(())
 }
 
 /// Each input: the variable it pushes on and its limits.
-fn print_inputs(model: &model::Model) {
+fn print_inputs(model: &model::Model) -> Result<(), String> {
     if !model.inputs.is_empty() {
-        println!(
+        say!(
             "{} (generalized forces u):",
             counted(model.inputs.len(), "input")
         );
@@ -137,26 +139,28 @@ fn print_inputs(model: &model::Model) {
                 .limits
                 .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
                 .unwrap_or_default();
-            println!(
+            say!(
                 "  {:<20} on `{}`{limits}",
-                u.name, model.variables[u.variable].name
+                u.name,
+                model.variables[u.variable].name
             );
         }
     }
+    Ok(())
 }
 
 /// Springs and dampers.
-fn print_elements(model: &model::Model) {
+fn print_elements(model: &model::Model) -> Result<(), String> {
     for s in &model.springs {
         match s.kind {
-            model::SpringKind::Frames([a, b]) => println!(
+            model::SpringKind::Frames([a, b]) => say!(
                 "spring between `{}` and `{}`: k = {}, rest = {}",
                 model.frames[a].name,
                 model.frames[b].name,
                 Given(s.stiffness),
                 Given(s.rest)
             ),
-            model::SpringKind::Variable(i) => println!(
+            model::SpringKind::Variable(i) => say!(
                 "spring on `{}`: k = {}, rest = {}",
                 model.variables[i].name,
                 Given(s.stiffness),
@@ -165,25 +169,27 @@ fn print_elements(model: &model::Model) {
         }
     }
     for d in &model.dampers {
-        println!(
+        say!(
             "damper between `{}` and `{}`: c = {}",
             model.frames[d.frames[0]].name,
             model.frames[d.frames[1]].name,
             Given(d.damping)
         );
     }
+    Ok(())
 }
 
 /// The masses and their total.
-fn print_masses(model: &model::Model) {
+fn print_masses(model: &model::Model) -> Result<(), String> {
     let masses: Vec<_> = model.frames.iter().filter(|f| f.mass.is_some()).collect();
-    println!(
+    say!(
         "{}, total mass {} kg:",
         counted(masses.len(), "mass"),
         Rounded(model.total_mass(), 12)
     );
     for f in masses {
         let m = f.mass.unwrap();
-        println!("  {:<20} {}", f.name, m.describe());
+        say!("  {:<20} {}", f.name, m.describe());
     }
+    Ok(())
 }

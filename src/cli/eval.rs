@@ -172,7 +172,7 @@ fn run_eval(
         },
         "frames": frame_entries,
     });
-    println!(
+    say!(
         "{}",
         serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?
     );

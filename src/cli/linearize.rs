@@ -222,7 +222,7 @@ fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), Strin
         }
         out[*key] = step;
     }
-    println!(
+    say!(
         "{}",
         serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?
     );

@@ -1,9 +1,18 @@
 //! The command line, a module a command: each reads its own arguments (a `clap::Args`
 //! struct) and the model as [`Source`] says, and returns an error as a sentence.
 
+/// `println!` for a command's output: a write that fails (a full disk, a device that takes
+/// nothing) returns an error sentence from the enclosing function instead of a panic.
+macro_rules! say {
+    ($($arg:tt)*) => {
+        $crate::cli::write_line(format_args!($($arg)*))?
+    };
+}
+
 mod animate;
 mod check;
 mod eval;
+pub mod interrupt;
 mod linearize;
 mod optimize;
 mod output;
@@ -178,4 +187,13 @@ fn parse_list(
         ));
     }
     Ok(values)
+}
+
+/// Writes one line to standard output and flushes it; a failure is a sentence.
+pub fn write_line(line: std::fmt::Arguments<'_>) -> Result<(), String> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}")
+        .and_then(|()| out.flush())
+        .map_err(|e| format!("cannot write to standard output: {e}"))
 }

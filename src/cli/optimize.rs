@@ -2,11 +2,13 @@
 //! DDP, print each iteration and a summary, and write the optimal trajectory (CSV), a plot,
 //! an animation, a JSON summary and the feedback gains.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use serde_json::json;
 use tree_mech::control::{
-    solve_task, BoxPhase, Iteration, Solver, Stop, TaskOptions, TaskResult, TaskSolver, MAX_MU,
+    solve_task_until, BoxPhase, Iteration, Solver, Stop, TaskOptions, TaskResult, TaskSolver,
+    MAX_MU,
 };
 use tree_mech::model::{self, Model, Task};
 use tree_mech::nalgebra::Dyn;
@@ -15,6 +17,7 @@ use tree_mech::runtime::{Pose, Seconds, Vector};
 use tree_mech::{System, Terms, Trajectory, TreeSystem};
 
 use super::animate;
+use super::interrupt;
 use super::output::OutputFile;
 use super::plot::{plot_with, Panel};
 
@@ -111,39 +114,64 @@ pub fn run(r: Request) -> Result<(), String> {
         }),
         max_iterations: r.max_iterations,
     };
-    let mut count = 0;
+    let (mut count, mut failed) = (0, None);
     let mut print = |it: &Iteration| {
         count += 1;
-        // The header with the first iteration: a task refused while setting up prints
-        // nothing on stdout.
-        if !r.quiet && count == 1 {
-            println!(
-                "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}  {:>5}  {:>6}",
-                "iter", "cost", "step", "μ", "max |k|", "model", "limits"
-            );
-        }
         if !r.quiet {
-            // The backward pass's model (DDP's full one, or Gauss–Newton) and how it took
-            // the limits (clamped in the forward pass, or the box QP).
-            let model = match it.model {
-                Solver::Ddp => "ddp",
-                Solver::Ilqr => "gn",
-            };
-            let limits = match it.limits {
-                None => "—",
-                Some(BoxPhase::Clamped) => "clamp",
-                Some(BoxPhase::Boxed) => "box",
-            };
-            println!(
-                "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}  {model:>5}  {limits:>6}",
-                it.cost, it.step, it.mu, it.gradient
-            );
+            if let Err(e) = print_iteration(count, it) {
+                failed = Some(e);
+                return ControlFlow::Break(());
+            }
+        }
+        // Ctrl-C: the solve stops after this iteration and its best plan is written.
+        match interrupt::requested() {
+            true => ControlFlow::Break(()),
+            false => ControlFlow::Continue(()),
         }
     };
     // The step is the task file's `dt`, not a command-line option.
-    let result = solve_task(sys, &task, &model, &options, &mut print)
+    let result = solve_task_until(sys, &task, &model, &options, &mut print)
         .map_err(|e| e.to_string().replace("--dt", "the task's `dt`"))?;
+    if let Some(e) = failed {
+        return Err(e);
+    }
     write_outputs(&r.task, &task, &model, &result, files)
+}
+
+/// One line of the iteration table (the header with the first: a task refused while setting
+/// up prints nothing on standard output).
+fn print_iteration(count: usize, it: &Iteration) -> Result<(), String> {
+    if count == 1 {
+        say!(
+            "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}  {:>5}  {:>6}",
+            "iter",
+            "cost",
+            "step",
+            "μ",
+            "max |k|",
+            "model",
+            "limits"
+        );
+    }
+    // The backward pass's model (DDP's full one, or Gauss–Newton) and how it took the limits
+    // (clamped in the forward pass, or the box QP).
+    let model = match it.model {
+        Solver::Ddp => "ddp",
+        Solver::Ilqr => "gn",
+    };
+    let limits = match it.limits {
+        None => "—",
+        Some(BoxPhase::Clamped) => "clamp",
+        Some(BoxPhase::Boxed) => "box",
+    };
+    say!(
+        "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}  {model:>5}  {limits:>6}",
+        it.cost,
+        it.step,
+        it.mu,
+        it.gradient
+    );
+    Ok(())
 }
 
 fn write_outputs(
@@ -171,8 +199,8 @@ fn write_outputs(
     if let Some(file) = &files.gains {
         write_gains(&plan, file)?;
     }
-    print_summary(path, &plan, &frames);
-    for file in [
+    // Every output complete: now they take their names, then the summary says so.
+    for mut file in [
         files.out,
         files.plot,
         files.animate,
@@ -184,7 +212,7 @@ fn write_outputs(
     {
         file.commit()?;
     }
-    Ok(())
+    print_summary(path, &plan, &frames)
 }
 
 /// The solved plan knot by knot, with the names and energies every output writes.
@@ -372,14 +400,18 @@ fn write_gains(plan: &Knots, file: &OutputFile) -> Result<(), String> {
 }
 
 /// The solve's one-line summary, and why it stopped when it did not converge.
-fn print_summary(path: &Path, plan: &Knots, frames: &serde_json::Map<String, serde_json::Value>) {
+fn print_summary(
+    path: &Path,
+    plan: &Knots,
+    frames: &serde_json::Map<String, serde_json::Value>,
+) -> Result<(), String> {
     let (task, res) = (plan.task, plan.res);
     let sol = &res.solution;
     let place = frames
         .iter()
         .map(|(name, p)| format!(" `{name}` ends at {p}."))
         .collect::<String>();
-    println!(
+    say!(
         "{} `{}` ({} knots of {} s, {}) in {} iterations, {:.3} s: cost {:.6e}.{place}",
         if sol.converged {
             "Solved"
@@ -397,20 +429,21 @@ fn print_summary(path: &Path, plan: &Knots, frames: &serde_json::Map<String, ser
     match sol.stop {
         Stop::Converged => {}
         Stop::IterationLimit => {
-            println!("The best trajectory found is written; raise --max-iterations to go on.")
+            say!("The best trajectory found is written; raise --max-iterations to go on.")
         }
-        Stop::Regularisation => println!(
+        Stop::Regularisation => say!(
             "The solver stopped: its regularisation passed {:e} (relative to the controls' \
              curvature) before the local model gave a step that lowers the cost — the cost is \
              not smooth enough about this trajectory for its quadratic model. The best \
              trajectory found is written.",
             MAX_MU
         ),
-        // The command line's report never asks to stop.
+        // Ctrl-C (or SIGTERM) during the solve.
         Stop::Interrupted => {
-            println!("The solve was interrupted; the best trajectory found is written.")
+            say!("The solve was interrupted; the best trajectory found is written.")
         }
     }
+    Ok(())
 }
 
 fn write_text(file: &OutputFile, text: &str) -> Result<(), String> {

@@ -1,7 +1,9 @@
-//! The files `simulate` writes: each checked before the run starts (its directory exists, its
-//! extension fits, it is neither the model nor another output), written to a temporary file
-//! beside it, and renamed into place only when complete — a failed run leaves no half file
-//! and never touches the model.
+//! The files the commands write: each checked before the run starts (its directory exists,
+//! its extension fits, it is neither the model nor another output). A regular file (or a new
+//! one) is written to a temporary file beside it and renamed into place only when complete —
+//! a failed or interrupted run leaves no half file and never touches the model; a symbolic
+//! link is followed, so the file it names is replaced and the link kept; a device, a FIFO or
+//! a socket is written through, as `tee` or `cp` would, never replaced.
 
 use std::path::{Path, PathBuf};
 
@@ -9,10 +11,16 @@ use plotters::drawing::DrawingAreaErrorKind;
 use plotters_backend::DrawingErrorKind;
 use plotters_bitmap::BitMapBackendError;
 
+use super::interrupt;
+
 /// One output file under way.
 pub struct OutputFile {
-    path: PathBuf,
+    /// Where it is written: the temporary file, or the device itself.
     temp: PathBuf,
+    /// The path renamed onto when complete (None: written through).
+    target: Option<PathBuf>,
+    /// The path as given, for messages.
+    path: PathBuf,
     done: bool,
 }
 
@@ -37,22 +45,6 @@ impl OutputFile {
                 ));
             }
         }
-        let Some(name) = path.file_name() else {
-            return Err(format!("--{what} `{shown}` names no file"));
-        };
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        if !dir.is_dir() {
-            return Err(format!(
-                "--{what} `{shown}`: the directory `{}` does not exist",
-                dir.display()
-            ));
-        }
-        if path.is_dir() {
-            return Err(format!("--{what} `{shown}` is a directory"));
-        }
         let resolved = resolve(path);
         if let Some(other) = taken.iter().find(|p| resolve(p) == resolved) {
             return Err(format!(
@@ -60,19 +52,36 @@ impl OutputFile {
                 other.display()
             ));
         }
-        // The temporary keeps the extension: the image encoders choose the format by it.
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(name);
-        temp_name.push(format!(".partial-{}", std::process::id()));
-        if let Some(ext) = path.extension() {
-            temp_name.push(".");
-            temp_name.push(ext);
+        let target = follow_links(path).map_err(|e| format!("--{what} `{shown}`: {e}"))?;
+        if let Ok(meta) = std::fs::metadata(&target) {
+            if meta.is_dir() {
+                return Err(format!("--{what} `{shown}` is a directory"));
+            }
+            if !meta.is_file() {
+                // A device, FIFO or socket: written through, in place.
+                return Ok(OutputFile {
+                    temp: path.to_path_buf(),
+                    target: None,
+                    path: path.to_path_buf(),
+                    done: false,
+                });
+            }
         }
-        let temp = dir.join(temp_name);
+        let temp =
+            temporary_beside(&target).ok_or_else(|| format!("--{what} `{shown}` names no file"))?;
+        let dir = temp.parent().unwrap_or(Path::new("."));
+        if !dir.is_dir() {
+            return Err(format!(
+                "--{what} `{shown}`: the directory `{}` does not exist",
+                dir.display()
+            ));
+        }
         std::fs::File::create(&temp).map_err(|e| format!("cannot write `{shown}`: {e}"))?;
+        interrupt::remove_on_interrupt(&temp);
         Ok(OutputFile {
-            path: path.to_path_buf(),
             temp,
+            target: Some(target),
+            path: path.to_path_buf(),
             done: false,
         })
     }
@@ -87,10 +96,13 @@ impl OutputFile {
         &self.path
     }
 
-    /// Moves the finished file into place.
-    pub fn commit(mut self) -> Result<(), String> {
-        std::fs::rename(&self.temp, &self.path)
-            .map_err(|e| format!("cannot write `{}`: {e}", self.path.display()))?;
+    /// Moves the finished file into place (a file written through is already there).
+    pub fn commit(&mut self) -> Result<(), String> {
+        if let Some(target) = &self.target {
+            std::fs::rename(&self.temp, target)
+                .map_err(|e| format!("cannot write `{}`: {e}", self.path.display()))?;
+            interrupt::keep(&self.temp);
+        }
         self.done = true;
         Ok(())
     }
@@ -99,10 +111,48 @@ impl OutputFile {
 impl Drop for OutputFile {
     /// An output never committed (the run failed) leaves nothing behind.
     fn drop(&mut self) {
-        if !self.done {
+        if !self.done && self.target.is_some() {
             let _ = std::fs::remove_file(&self.temp);
+            interrupt::keep(&self.temp);
         }
     }
+}
+
+/// The file `path` names once its symbolic links are followed (the path itself where it is
+/// none, or does not exist yet); a link to a missing file names that file.
+fn follow_links(path: &Path) -> Result<PathBuf, String> {
+    let mut at = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&at) {
+            Ok(meta) if meta.file_type().is_symlink() => {
+                let next = std::fs::read_link(&at).map_err(|e| e.to_string())?;
+                at = match at.parent() {
+                    Some(dir) if next.is_relative() => dir.join(next),
+                    _ => next,
+                };
+            }
+            _ => return Ok(at),
+        }
+    }
+    Err("too many levels of symbolic links".into())
+}
+
+/// `.NAME.partial-PID.EXT` beside `target` (the extension kept: the image encoders choose
+/// the format by it).
+fn temporary_beside(target: &Path) -> Option<PathBuf> {
+    let name = target.file_name()?;
+    let dir = match target.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut temp_name = std::ffi::OsString::from(".");
+    temp_name.push(name);
+    temp_name.push(format!(".partial-{}", std::process::id()));
+    if let Some(ext) = target.extension() {
+        temp_name.push(".");
+        temp_name.push(ext);
+    }
+    Some(dir.join(temp_name))
 }
 
 /// A path as the file system sees it: its directory resolved, so `x.csv` and `./x.csv` are

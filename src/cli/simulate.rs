@@ -15,6 +15,7 @@ use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::{Baumgarte, CsvStream, ModelMotions, Sample, Seconds, Vector};
 use tree_mech::{NoForce, PaperEvaluation, PaperSystem, SimError, System, Trajectory, TreeSystem};
 
+use super::interrupt;
 use super::output::OutputFile;
 use super::{animate, integrator_arg, parse_list, parse_vector, plot, ForcingArg, Source};
 
@@ -289,7 +290,7 @@ fn run_simulate<S: System<N = Dyn>>(
     mut sys: S,
     model: &model::Model,
     options: SimOptions,
-    outputs: Outputs,
+    mut outputs: Outputs,
 ) -> Result<(), String> {
     let (q0, dq0) = start_state(&sys, &outputs.start)?;
     let names = variable_names(&sys);
@@ -317,6 +318,7 @@ fn run_simulate<S: System<N = Dyn>>(
         &mut motion,
         &outputs.inputs,
         &mut |sample| {
+            interrupt::check().map_err(SimError::InvalidInput)?;
             if let Some(csv) = csv.as_mut() {
                 csv.write(sample).map_err(|e| {
                     SimError::InvalidInput(format!("cannot write the trajectory: {e}"))
@@ -326,7 +328,10 @@ fn run_simulate<S: System<N = Dyn>>(
             Ok(())
         },
     )
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| match interrupt::requested() {
+        true => "the run was interrupted: no output was written".to_string(),
+        false => e.to_string(),
+    })?;
     record.bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
     if let Some(csv) = csv {
@@ -334,15 +339,14 @@ fn run_simulate<S: System<N = Dyn>>(
             .map_err(|e| format!("cannot write the trajectory: {e}"))?;
     }
     draw(&mut sys, model, &record, &outputs)?;
-    print_summary(&sys, model, &options, &summary, &record, wall, &outputs);
-    // Every output complete: now they take their names.
-    let Outputs {
-        csv, plot, animate, ..
-    } = outputs;
-    for file in [csv, plot, animate].into_iter().flatten() {
+    // Every output complete: now they take their names, then the summary names them.
+    for file in [&mut outputs.csv, &mut outputs.plot, &mut outputs.animate]
+        .into_iter()
+        .flatten()
+    {
         file.commit()?;
     }
-    Ok(())
+    print_summary(&sys, model, &options, &summary, &record, wall, &outputs)
 }
 
 /// The variables' names, in order.
@@ -529,9 +533,9 @@ fn print_summary<S: System<N = Dyn>>(
     record: &Record,
     wall: f64,
     outputs: &Outputs,
-) {
+) -> Result<(), String> {
     for m in &summary.moved {
-        println!(
+        say!(
             "Initial {} of `{}` moved from {} to {} to satisfy the constraints.",
             if m.velocity { "velocity" } else { "value" },
             m.variable,
@@ -575,7 +579,7 @@ fn print_summary<S: System<N = Dyn>>(
     } else {
         "variables"
     };
-    println!(
+    say!(
         "Simulated `{}` ({} {variables}) for {} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
          Energy went from {} to {} J ({energy}).{constrained}{}{}{}",
         model.name,
@@ -589,6 +593,7 @@ fn print_summary<S: System<N = Dyn>>(
         shown(&outputs.plot, "Plot"),
         shown(&outputs.animate, "Animation"),
     );
+    Ok(())
 }
 
 /// Where the energy went: a drift, damping's share, or kinematic inputs' work.

@@ -2,7 +2,7 @@
 
 use std::process::Command;
 
-fn tree_mech(args: &[&str]) -> (bool, String, String) {
+pub(super) fn tree_mech(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_tree-mech"))
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -426,7 +426,7 @@ fn a_sparsely_recorded_animation_still_plays_in_real_time() {
 
 /// A fresh scratch directory for one test, removed when the test passes (a failing test's
 /// files stay, to be looked at).
-struct Scratch(std::path::PathBuf);
+pub(super) struct Scratch(std::path::PathBuf);
 
 impl std::ops::Deref for Scratch {
     type Target = std::path::Path;
@@ -449,7 +449,7 @@ impl Drop for Scratch {
     }
 }
 
-fn scratch(name: &str) -> Scratch {
+pub(super) fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("tree-mech-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -457,7 +457,7 @@ fn scratch(name: &str) -> Scratch {
 }
 
 /// A shipped task file's text with its model path made absolute (to be written elsewhere).
-fn shipped_task(name: &str) -> String {
+pub(super) fn shipped_task(name: &str) -> String {
     let root = env!("CARGO_MANIFEST_DIR");
     std::fs::read_to_string(format!("{root}/tasks/{name}.toml"))
         .unwrap()

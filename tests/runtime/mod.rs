@@ -2,6 +2,8 @@
 
 #[cfg(feature = "cli")]
 mod cli;
+#[cfg(all(feature = "cli", unix))]
+mod cli_edges;
 mod constraints;
 mod continuous_derivatives;
 mod derivatives;

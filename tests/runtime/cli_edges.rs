@@ -1,0 +1,238 @@
+//! The command line at its edges (issue 43): outputs that are links, devices or FIFOs, a
+//! standard output that takes nothing, and Ctrl-C in the middle of a run or a solve.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use super::cli::{scratch, shipped_task, tree_mech};
+
+fn spawn(args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_tree-mech"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Sends SIGINT to `child`, as Ctrl-C in its terminal would.
+fn interrupt(child: &Child) {
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Waits (at most a minute) until `what` holds.
+fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !done() {
+        assert!(start.elapsed() < Duration::from_secs(60), "never: {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn partials(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".partial-"))
+        .collect()
+}
+
+#[test]
+fn an_output_through_a_symbolic_link_writes_its_target_and_keeps_the_link() {
+    let dir = scratch("link");
+    let (target, link) = (dir.join("target.csv"), dir.join("link.csv"));
+    std::fs::write(&target, "old").unwrap();
+    std::os::unix::fs::symlink("target.csv", &link).unwrap();
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--duration",
+        "0.5",
+        "--out",
+        link.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    let text = std::fs::read_to_string(&target).unwrap();
+    assert!(text.starts_with("t,theta,dtheta"), "{text}");
+    // A link to a file not there yet makes that file.
+    std::os::unix::fs::symlink("new.csv", dir.join("dangling.csv")).unwrap();
+    let dangling = dir.join("dangling.csv");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--duration",
+        "0.5",
+        "--out",
+        dangling.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(dir.join("new.csv").is_file());
+    assert!(partials(&dir).is_empty());
+}
+
+#[test]
+fn a_device_is_written_through_and_never_replaced() {
+    use std::os::unix::fs::FileTypeExt;
+    let (ok, stdout, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--duration",
+        "0.5",
+        "--out",
+        "/dev/null",
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("Trajectory: /dev/null."), "{stdout}");
+    let kind = std::fs::metadata("/dev/null").unwrap().file_type();
+    assert!(kind.is_char_device());
+    // A full device: the write's error, as a sentence, and a failing exit.
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--duration",
+        "0.5",
+        "--out",
+        "/dev/full",
+    ]);
+    assert!(
+        !ok && stderr.contains("cannot write the trajectory"),
+        "{stderr}"
+    );
+    assert!(std::fs::metadata("/dev/full")
+        .unwrap()
+        .file_type()
+        .is_char_device());
+}
+
+#[test]
+fn a_fifo_is_written_through_to_its_reader() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = scratch("fifo");
+    let fifo = dir.join("pipe.csv");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--duration",
+        "0.5",
+        "--out",
+        fifo.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = reader.join().unwrap();
+    assert_eq!(text.lines().count(), 52, "a header and 51 samples");
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+}
+
+#[test]
+fn a_standard_output_that_takes_nothing_is_an_error_not_a_panic() {
+    for args in [
+        &["check", "models/pendulum.toml"][..],
+        &["simulate", "models/pendulum.toml", "--duration", "0.1"],
+        &["eval", "models/pendulum.toml"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_tree-mech"))
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .stdout(std::fs::File::create("/dev/full").unwrap())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("cannot write to standard output") && !stderr.contains("panicked"),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn ctrl_c_stops_a_run_and_leaves_no_half_file() {
+    let dir = scratch("sigint-run");
+    let out = dir.join("run.csv");
+    let mut child = spawn(&[
+        "simulate",
+        "models/marionette.toml",
+        "--duration",
+        "100000",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    wait_until("the partial file grows", || {
+        std::fs::read_dir(&dir).unwrap().any(|e| {
+            let e = e.unwrap();
+            e.file_name().to_string_lossy().contains(".partial-")
+                && e.metadata().unwrap().len() > 1_000_000
+        })
+    });
+    interrupt(&child);
+    let status = child.wait().unwrap();
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    assert!(
+        partials(&dir).is_empty() && !out.exists(),
+        "{:?}",
+        partials(&dir)
+    );
+}
+
+#[test]
+fn ctrl_c_stops_a_solve_and_writes_its_best_plan() {
+    let dir = scratch("sigint-solve");
+    // The marionette's wave over ten times the knots: long enough to interrupt.
+    let task = dir.join("long.toml");
+    let text = shipped_task("marionette-wave").replace("knots = 150", "knots = 3000");
+    std::fs::write(&task, text).unwrap();
+    let plan = dir.join("plan.csv");
+    let mut child = spawn(&[
+        "optimize",
+        task.to_str().unwrap(),
+        "--out",
+        plan.to_str().unwrap(),
+        "--max-iterations",
+        "400",
+    ]);
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut seen = String::new();
+    // The first iteration's line, then Ctrl-C.
+    while !seen.lines().any(|l| l.trim_start().starts_with("1 ")) {
+        assert!(stdout.read_line(&mut seen).unwrap() > 0, "{seen}");
+    }
+    interrupt(&child);
+    stdout.read_to_string(&mut seen).unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130), "{seen}");
+    assert!(
+        seen.contains("The solve was interrupted; the best trajectory found is written."),
+        "{seen}"
+    );
+    let written = std::fs::read_to_string(&plan).unwrap();
+    assert_eq!(written.lines().count(), 3002, "a header and 3001 knots");
+    assert!(partials(&dir).is_empty());
+}
