@@ -5,8 +5,8 @@ use numpy::ndarray::Ix1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use tree_mech::integrate::{
-    MidpointVi, StepContext, StepDerivatives, StepInput, StepOutput, StepSecondDerivatives,
-    ViSettings,
+    loose_tolerance, MidpointVi, StepContext, StepDerivatives, StepInput, StepOutput,
+    StepSecondDerivatives, ViSettings, LOOSEST_NEWTON_TOLERANCE,
 };
 use tree_mech::nalgebra::{DMatrix, Dyn};
 use tree_mech::runtime::report::Entry;
@@ -48,6 +48,9 @@ impl VariationalStepper {
                 return Err(bad(format!(
                     "the tolerance must be a positive number, got {tol}"
                 )));
+            }
+            if tol > LOOSEST_NEWTON_TOLERANCE {
+                return Err(bad(loose_tolerance("tolerance", tol)));
             }
             settings.tolerance = tol;
         }

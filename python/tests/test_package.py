@@ -571,3 +571,17 @@ def test_frame_kinematics_agree_with_the_evaluation_and_their_own_differences():
         m.frame_velocity("tool0", reference="body")
     with pytest.raises(ValueError, match=r"q has 2 entries; the model has 6 variables"):
         m.frame_pose("tool0", [0.0, 0.0])
+
+
+def test_a_newton_tolerance_too_loose_to_solve_the_step_is_refused():
+    """newton_tol=1e-3 let Newton accept its predictor (the pendulum gained 40 J in 100 s):
+    refused above 1e-6, as the command line refuses it; the stepper's tolerance too."""
+    m = tm.load(PENDULUM)
+    with pytest.raises(tm.SimulationError, match="looser than 1e-6"):
+        m.simulate(1.0, 0.01, newton_tol=1e-3)
+    loose = m.simulate(100.0, 0.01, newton_tol=1e-6).energy[-1]
+    tight = m.simulate(100.0, 0.01).energy[-1]
+    assert abs(loose - tight) < 1e-6 * abs(tight)
+    from tree_mech import _native
+    with pytest.raises(ValueError, match="looser than 1e-6"):
+        _native.VariationalStepper(m, tolerance=1e-4)

@@ -638,8 +638,16 @@ fn input_schedule(
     let Some(path) = file else {
         return Ok(InputSchedule::default());
     };
+    read_input_csv(path, &names)
+}
+
+/// An input schedule from a CSV file: a header naming `t` and each input (as `u_NAME`, or
+/// `NAME` where that is not the time), then rows of numbers, times increasing from 0.
+fn read_input_csv(path: &Path, names: &[String]) -> Result<InputSchedule, String> {
     let shown = path.display();
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read `{shown}`: {e}"))?;
+    let text = read_capped(path, MAX_INPUT_FILE)?;
+    // A UTF-8 byte-order mark (spreadsheets write one) is not part of the first name.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let mut lines = text
         .lines()
         .enumerate()
@@ -654,18 +662,8 @@ fn input_schedule(
         .split(',')
         .map(|h| h.trim().trim_matches('"'))
         .collect();
-    let column = |name: &str| header.iter().position(|h| *h == name);
-    let t_column = column("t").ok_or_else(|| format!("`{shown}`:1: no column `t`"))?;
-    let columns: Vec<usize> = names
-        .iter()
-        // `u_<name>` is how simulate's and optimize's CSVs name it (beside a variable that may
-        // bear the input's own name, a joint's): where it is there, it is the input.
-        .map(|n| {
-            column(&format!("u_{n}"))
-                .or_else(|| column(n))
-                .ok_or_else(|| format!("`{shown}`:1: no column for input `{n}` (or `u_{n}`)"))
-        })
-        .collect::<Result<_, _>>()?;
+    let (t_column, columns) =
+        input_columns(&header, names).map_err(|e| format!("`{shown}`:1: {e}"))?;
     let mut rows: Vec<(f64, Vec<f64>)> = Vec::new();
     for (i, line) in lines {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -709,6 +707,58 @@ fn input_schedule(
         return Err(format!("`{shown}` has a header but no rows"));
     }
     InputSchedule::from_rows(rows).map_err(|e| format!("`{shown}`: {e}"))
+}
+
+/// The columns of the time and of each input in `header`. A name twice is refused (which
+/// would be meant?); an input is its `u_NAME` column (how simulate's and optimize's CSVs
+/// name it, beside a variable that may bear the input's own name, a joint's), or else its
+/// `NAME` column unless that is the time's.
+fn input_columns(header: &[&str], names: &[String]) -> Result<(usize, Vec<usize>), String> {
+    for (i, h) in header.iter().enumerate() {
+        if let Some(j) = header[i + 1..].iter().position(|o| o == h) {
+            return Err(format!(
+                "column `{h}` appears twice (columns {} and {}): name each once",
+                i + 1,
+                i + j + 2
+            ));
+        }
+    }
+    let column = |name: &str| header.iter().position(|h| *h == name);
+    let t_column = column("t").ok_or("no column `t`")?;
+    let columns = names
+        .iter()
+        .map(|n| {
+            column(&format!("u_{n}"))
+                .or_else(|| column(n).filter(|&c| c != t_column))
+                .ok_or_else(|| match n.as_str() {
+                    "t" => "no column `u_t` for input `t` (the column `t` is the time)".to_string(),
+                    _ => format!("no column for input `{n}` (or `u_{n}`)"),
+                })
+        })
+        .collect::<Result<_, _>>()?;
+    Ok((t_column, columns))
+}
+
+/// The most an input file may hold: far more than any schedule, and a bound on a file that
+/// never ends (`--inputs /dev/zero`).
+const MAX_INPUT_FILE: u64 = 256 << 20;
+
+/// The text of `path`, refused past `cap` bytes (read no further) or when not UTF-8.
+fn read_capped(path: &Path, cap: u64) -> Result<String, String> {
+    use std::io::Read;
+    let shown = path.display();
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read `{shown}`: {e}"))?;
+    let mut bytes = Vec::new();
+    file.take(cap + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read `{shown}`: {e}"))?;
+    if bytes.len() as u64 > cap {
+        return Err(format!(
+            "`{shown}` is larger than {} MB: an input schedule is far smaller (is it the right file?)",
+            cap >> 20
+        ));
+    }
+    String::from_utf8(bytes).map_err(|_| format!("cannot read `{shown}`: it is not UTF-8 text"))
 }
 
 /// ` Label: path.` for the summary.

@@ -236,3 +236,109 @@ fn ctrl_c_stops_a_solve_and_writes_its_best_plan() {
     assert_eq!(written.lines().count(), 3002, "a header and 3001 knots");
     assert!(partials(&dir).is_empty());
 }
+
+#[test]
+fn a_newton_tolerance_too_loose_to_solve_the_step_is_refused() {
+    // At 1e-3 Newton accepted its predictor and the pendulum gained 40 J over 100 s.
+    let (ok, _, stderr) = tree_mech(&["simulate", "models/pendulum.toml", "--newton-tol", "1e-3"]);
+    assert!(!ok, "accepted");
+    assert!(
+        stderr.contains("Newton tolerance 1e-3 is looser than 1e-6"),
+        "{stderr}"
+    );
+    // The loosest accepted keeps the energy the exact solve keeps.
+    let energy_at = |tol: &str| {
+        let (ok, stdout, stderr) = tree_mech(&[
+            "simulate",
+            "models/pendulum.toml",
+            "--duration",
+            "100",
+            "--newton-tol",
+            tol,
+        ]);
+        assert!(ok, "{stderr}");
+        let end = stdout.split(" to ").nth(1).unwrap();
+        end.split(' ').next().unwrap().parse::<f64>().unwrap()
+    };
+    let (loose, tight) = (energy_at("1e-6"), energy_at("1e-12"));
+    assert!(
+        (loose - tight).abs() < 1e-6 * tight.abs(),
+        "{loose} vs {tight}"
+    );
+}
+
+/// A model of one pendulum whose variable is `var` and, with `input`, an input on it.
+fn pendulum_named(dir: &Path, var: &str, input: Option<&str>) -> String {
+    let mut text = format!(
+        "[[frame]]\nname = \"arm\"\nrx = \"{var}\"\n\n[[frame]]\nname = \"bob\"\nparent = \"arm\"\ntz = -1.0\nmass = 1.0\n"
+    );
+    if let Some(u) = input {
+        text += &format!("\n[[input]]\nname = \"{u}\"\nvariable = \"{var}\"\n");
+    }
+    let path = dir.join(format!("{var}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+#[test]
+fn trajectory_columns_that_would_share_a_name_are_refused_before_the_run() {
+    let dir = scratch("columns");
+    let out = dir.join("run.csv");
+    let out = out.to_str().unwrap();
+    // A variable `t`: its column would be the time's.
+    let model = pendulum_named(&dir, "t", None);
+    let (ok, _, stderr) = tree_mech(&["simulate", &model, "--out", out]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("the time and variable `t` would both be named `t`"),
+        "{stderr}"
+    );
+    // Variables `theta` and `dtheta`: `dtheta` twice.
+    let two = dir.join("two.toml");
+    std::fs::write(
+        &two,
+        "[[frame]]\nname = \"a\"\nrx = \"theta\"\n\n[[frame]]\nname = \"b\"\nparent = \"a\"\nrx = \"dtheta\"\n\n[[frame]]\nname = \"bob\"\nparent = \"b\"\ntz = -1.0\nmass = 1.0\n",
+    )
+    .unwrap();
+    let (ok, _, stderr) = tree_mech(&["simulate", two.to_str().unwrap(), "--out", out]);
+    assert!(!ok);
+    assert!(
+        stderr
+            .contains("variable `dtheta` and the velocity of `theta` would both be named `dtheta`"),
+        "{stderr}"
+    );
+    assert!(!Path::new(out).exists() && partials(&dir).is_empty());
+}
+
+#[test]
+fn an_input_file_is_read_for_what_it_says_or_refused() {
+    let dir = scratch("input-file");
+    let model = pendulum_named(&dir, "theta", Some("t"));
+    let schedule = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path.to_str().unwrap().to_string()
+    };
+    let run = |file: &str| tree_mech(&["simulate", &model, "--duration", "0.5", "--inputs", file]);
+    // An input named `t`: the time column is not the input.
+    let (ok, _, stderr) = run(&schedule("a.csv", "t\n0,1\n"));
+    assert!(
+        !ok && stderr.contains("no column `u_t` for input `t`"),
+        "{stderr}"
+    );
+    // A column twice.
+    let (ok, _, stderr) = run(&schedule("b.csv", "t,t\n0,1\n"));
+    assert!(
+        !ok && stderr.contains("column `t` appears twice (columns 1 and 2)"),
+        "{stderr}"
+    );
+    // A schedule that starts after the run.
+    let (ok, _, stderr) = run(&schedule("c.csv", "t,u_t\n0.2,1\n0.4,2\n"));
+    assert!(!ok && stderr.contains("after the run's start"), "{stderr}");
+    // A byte-order mark before the header, as spreadsheets write: read.
+    let (ok, _, stderr) = run(&schedule("d.csv", "\u{feff}t,u_t\n0,1\n"));
+    assert!(ok, "{stderr}");
+    // A file that never ends is read no further than a bound.
+    let (ok, _, stderr) = run("/dev/zero");
+    assert!(!ok && stderr.contains("is larger than 256 MB"), "{stderr}");
+}

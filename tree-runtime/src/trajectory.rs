@@ -198,15 +198,7 @@ impl<W: Write> CsvStream<W> {
         constraints: &[String],
         inputs: &[String],
     ) -> io::Result<Self> {
-        let mut header = vec!["t".to_string()];
-        header.extend(variables.iter().cloned());
-        header.extend(variables.iter().map(|v| format!("d{v}")));
-        header.push("energy".into());
-        header.extend(constraints.iter().map(|c| format!("lambda_{c}")));
-        if !constraints.is_empty() {
-            header.push("violation".into());
-        }
-        header.extend(inputs.iter().map(|u| format!("u_{u}")));
+        let header = csv_header(variables, constraints, inputs)?;
         let header: Vec<String> = header.iter().map(|h| csv_field(h)).collect();
         writeln!(out, "{}", header.join(","))?;
         Ok(CsvStream {
@@ -247,6 +239,56 @@ impl<W: Write> CsvStream<W> {
     pub fn finish(mut self) -> io::Result<()> {
         self.out.flush()
     }
+}
+
+/// The trajectory's column names — `t`, each variable, `d` + each variable, `energy`,
+/// `lambda_` + each constraint row, `violation` (with constraints), `u_` + each input — or an
+/// `InvalidInput` error naming the first two columns that would bear one name (a variable `t`,
+/// or `theta` beside a variable `dtheta`), so that a reader can never take one for the other.
+fn csv_header(
+    variables: &[String],
+    constraints: &[String],
+    inputs: &[String],
+) -> io::Result<Vec<String>> {
+    let mut named: Vec<(String, String)> = vec![("t".into(), "the time".into())];
+    named.extend(
+        variables
+            .iter()
+            .map(|v| (v.clone(), format!("variable `{v}`"))),
+    );
+    named.extend(
+        variables
+            .iter()
+            .map(|v| (format!("d{v}"), format!("the velocity of `{v}`"))),
+    );
+    named.push(("energy".into(), "the energy".into()));
+    named.extend(constraints.iter().map(|c| {
+        (
+            format!("lambda_{c}"),
+            format!("the force of constraint `{c}`"),
+        )
+    }));
+    if !constraints.is_empty() {
+        named.push(("violation".into(), "the constraint violation".into()));
+    }
+    named.extend(
+        inputs
+            .iter()
+            .map(|u| (format!("u_{u}"), format!("input `{u}`"))),
+    );
+    let mut seen: std::collections::HashMap<&str, &str> = std::collections::HashMap::new();
+    for (name, what) in &named {
+        if let Some(first) = seen.insert(name, what) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "the trajectory's columns for {first} and {what} would both be named \
+                     `{name}`: rename one (a CSV column must name one thing)"
+                ),
+            ));
+        }
+    }
+    Ok(named.into_iter().map(|(name, _)| name).collect())
 }
 
 /// A CSV field as RFC 4180 writes it: quoted, with quotes doubled, when it holds a comma, a

@@ -144,6 +144,14 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
         }
         positive(s.tolerance, "the VI's Newton tolerance")?;
         positive(s.constraint_tolerance, "the VI's constraint tolerance")?;
+        for (x, what) in [
+            (s.tolerance, "Newton tolerance"),
+            (s.constraint_tolerance, "constraint tolerance"),
+        ] {
+            if x > LOOSEST_NEWTON_TOLERANCE {
+                return Err(SimError::InvalidInput(loose_tolerance(what, x)));
+            }
+        }
         if s.max_iterations == 0 {
             return Err(SimError::InvalidInput(
                 "the VI needs at least one Newton iteration a step".into(),
@@ -171,6 +179,20 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
         )));
     }
     Ok(steps as usize)
+}
+
+/// The loosest Newton tolerance the VI accepts: looser, Newton can accept its predictor and
+/// a run gains or loses energy unseen; at this one a step is solved to well below the
+/// integrator's own error (docs/derivations.md §7).
+pub const LOOSEST_NEWTON_TOLERANCE: f64 = 1e-6;
+
+/// The sentence refusing a tolerance looser than [`LOOSEST_NEWTON_TOLERANCE`].
+pub fn loose_tolerance(what: &str, x: f64) -> String {
+    format!(
+        "the VI's {what} {x:e} is looser than {LOOSEST_NEWTON_TOLERANCE:e}: Newton would stop \
+         short of the step's solution and the run would gain or lose energy unseen; use at \
+         most {LOOSEST_NEWTON_TOLERANCE:e} (the default is 1e-12)"
+    )
 }
 
 /// Simulates from `(q0, q̇0)` with the model's own prescriptions and no external force
@@ -730,8 +752,15 @@ impl InputSchedule {
         }
     }
 
-    /// Rows `(t, u)`: times strictly increasing and finite, every `u` of one width and finite.
+    /// Rows `(t, u)`: times strictly increasing and finite, the first at the run's start
+    /// (t = 0; or before it), every `u` of one width and finite.
     pub fn from_rows(rows: Vec<(f64, Vec<f64>)>) -> Result<Self, SimError> {
+        if let Some(&(first, _)) = rows.first().filter(|(t, _)| *t > 1e-9) {
+            return Err(SimError::InvalidInput(format!(
+                "input row 1 is at t = {first} s, after the run's start at t = 0: the inputs \
+                 before it would be unknown; give a row at t = 0"
+            )));
+        }
         let width = rows.first().map_or(0, |r| r.1.len());
         let mut schedule = InputSchedule {
             width,
