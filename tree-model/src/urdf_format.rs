@@ -101,6 +101,8 @@ struct Reader {
     robot_line: usize,
     link_lines: HashMap<String, usize>,
     joint_lines: HashMap<String, usize>,
+    /// The joints whose `<limit>` says an `effort` (urdf-rs reads an absent one as 0).
+    efforts: std::collections::HashSet<String>,
 }
 
 impl Reader {
@@ -146,11 +148,21 @@ impl Reader {
         check_required(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
         let robot =
             urdf_rs::read_from_string(text).map_err(|e| fail(format!("URDF: {e}"), None))?;
+        let efforts = root
+            .children()
+            .filter(|j| j.has_tag_name("joint"))
+            .filter(|j| {
+                j.children()
+                    .any(|l| l.has_tag_name("limit") && l.has_attribute("effort"))
+            })
+            .map(|j| j.attribute("name").unwrap_or_default().to_string())
+            .collect();
         let reader = Reader {
             source_name: src,
             robot_line: line_at(root.range().start),
             link_lines,
             joint_lines,
+            efforts,
         };
         Ok((reader, robot))
     }
@@ -427,7 +439,7 @@ fn joint_frames(
     let mut chain = origin_chain(joint, reader)?;
     if joint.joint_type != urdf_rs::JointType::Fixed {
         chain.extend(axis_chain(joint, reader)?);
-        actuate(&mut out.spec, joint);
+        actuate(&mut out.spec, joint, reader.efforts.contains(&joint.name));
     }
     if chain.is_empty() {
         chain.push((PrimitiveKind::Tx, Value::Constant(0.0)));
@@ -530,9 +542,9 @@ fn axis_chain(
 }
 
 /// A moving joint's variable (its damping, and limits unless continuous), and an input on
-/// it named after it, with ±effort as its limits when the URDF gives an effort: every joint
-/// is actuated.
-fn actuate(spec: &mut ModelSpec, joint: &urdf_rs::Joint) {
+/// it named after it, with ±effort as its limits when the URDF gives an effort (`effort_given`;
+/// 0 is a joint that exerts none): every joint is actuated.
+fn actuate(spec: &mut ModelSpec, joint: &urdf_rs::Joint, effort_given: bool) {
     let mut settings = VariableSpec {
         name: joint.name.clone(),
         ..VariableSpec::default()
@@ -552,7 +564,8 @@ fn actuate(spec: &mut ModelSpec, joint: &urdf_rs::Joint) {
     spec.inputs.push(InputSpec {
         name: joint.name.clone(),
         variable: Some(joint.name.clone()),
-        limits: (effort > 0.0).then_some([-effort, effort]),
+        // `0.0 - effort`, not `-effort`: an effort of 0 gives [0, 0], not [-0, 0].
+        limits: effort_given.then_some([0.0 - effort, effort]),
     });
     spec.variables.push(settings);
 }
@@ -647,7 +660,17 @@ fn check_numbers(
                     continue;
                 };
                 let numbers: Vec<&str> = text.split_whitespace().collect();
-                if numbers.len() != count || numbers.iter().any(|x| x.parse::<f64>().is_err()) {
+                let parsed: Vec<Option<f64>> = numbers.iter().map(|x| x.parse().ok()).collect();
+                if let Some(problem) = bound_problem(attribute, &parsed) {
+                    return Err((
+                        format!(
+                            "URDF: {owner}: <{} {attribute}=\"{text}\"> {problem}",
+                            node.tag_name().name()
+                        ),
+                        line_at(node.range().start),
+                    ));
+                }
+                if numbers.len() != count || parsed.iter().any(Option::is_none) {
                     let expected = if count == 1 {
                         "a number".to_string()
                     } else {
@@ -665,6 +688,18 @@ fn check_numbers(
         }
     }
     Ok(())
+}
+
+/// What is wrong with an attribute's numbers beyond their count: NaN anywhere; an `effort`
+/// or `velocity` (a bound on the joint's force and speed) that is not finite or is negative.
+fn bound_problem(attribute: &str, numbers: &[Option<f64>]) -> Option<&'static str> {
+    let numbers = numbers.iter().flatten();
+    if numbers.clone().any(|x| x.is_nan()) {
+        return Some("is not a number");
+    }
+    let bound = matches!(attribute, "effort" | "velocity");
+    (bound && numbers.clone().any(|&x| !x.is_finite() || x < 0.0))
+        .then_some("must be a finite number ≥ 0 (the joint's largest force or torque, or speed)")
 }
 
 /// What urdf-rs requires of an element, by tag and parent tag (`""`: any parent): its

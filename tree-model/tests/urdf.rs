@@ -299,3 +299,37 @@ pub fn growth(time: impl Fn(usize) -> f64, n: usize) -> f64 {
         .map(|_| time(8 * n) / time(n))
         .fold(f64::INFINITY, f64::min)
 }
+
+/// `joint2` as a revolute joint whose `<limit>` says `effort`.
+fn with_effort(effort: &str) -> String {
+    arm(&format!(
+        r#"  <joint name="joint2" type="revolute">
+    <parent link="upper"/><child link="lower"/>
+    <axis xyz="1 0 0"/>
+    <limit lower="-1" upper="1" effort="{effort}" velocity="1"/>
+  </joint>"#
+    ))
+}
+
+#[test]
+fn an_effort_limits_its_input_to_what_the_file_says_or_is_refused_with_its_line() {
+    let limits = |text: &str| {
+        let m = from_urdf_str(text, Some("r.urdf"), FIXED).unwrap();
+        let u = m.inputs.iter().find(|u| u.name == "joint2").unwrap();
+        u.limits
+    };
+    assert_eq!(limits(&with_effort("36")), Some([-36.0, 36.0]));
+    // An effort of 0 is a joint that exerts none, not one without limits.
+    assert_eq!(limits(&with_effort("0")), Some([0.0, 0.0]));
+    // No effort said (no <limit> at all): no limits.
+    assert_eq!(limits(&arm(GOOD_JOINT2)), None);
+    for bad in ["nan", "NaN", "-5", "inf", "-inf"] {
+        let e = error_of(&with_effort(bad));
+        assert!(e.starts_with("r.urdf:21:"), "{bad}: {e}");
+        assert!(e.contains("joint `joint2`"), "{bad}: {e}");
+        assert!(
+            e.contains("is not a number") || e.contains("must be a finite number ≥ 0"),
+            "{bad}: {e}"
+        );
+    }
+}
