@@ -2,7 +2,7 @@
 //! as `ModelError` with its file and line, a run's as `SimulationError` with its step, a
 //! caller's wrong argument as `ValueError`.
 
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use tree_mech::model::ModelError as CoreModelError;
 use tree_mech::SimError;
@@ -45,8 +45,12 @@ pub(crate) fn in_python_terms(e: &SimError) -> String {
     })
 }
 
-/// A `SimulationError` with `step` set.
+/// A `SimulationError` with `step` set (a request too large for memory: Python's
+/// `MemoryError`, checked before anything was taken).
 pub(crate) fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
+    if let SimError::OutOfMemory { .. } = e {
+        return PyMemoryError::new_err(in_python_terms(e));
+    }
     let err = SimulationError::new_err(in_python_terms(e));
     let _ = err.value(py).setattr("step", e.step());
     err
@@ -54,4 +58,13 @@ pub(crate) fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
 
 pub(crate) fn bad(message: impl Into<String>) -> PyErr {
     PyValueError::new_err(message.into())
+}
+
+/// A system that cannot be built for a model: `MemoryError` when it would not fit, else a
+/// `ModelError`.
+pub(crate) fn system_error(e: &SimError) -> PyErr {
+    match e {
+        SimError::OutOfMemory { .. } => PyMemoryError::new_err(e.to_string()),
+        _ => ModelError::new_err(e.to_string()),
+    }
 }

@@ -16,7 +16,7 @@ use tree_mech::runtime::{ModelMotions, Prescription};
 use tree_mech::TreeSystem;
 
 use crate::arrays::{check_finite, vector};
-use crate::errors::{bad, model_error, ModelError};
+use crate::errors::{bad, model_error, system_error, ModelError};
 use crate::numbers::Numbers;
 
 /// A model read at run time, with its interpreted system.
@@ -30,7 +30,7 @@ pub(crate) struct Model {
 
 impl Model {
     pub(crate) fn of(model: model::Model) -> PyResult<Self> {
-        let sys = TreeSystem::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
+        let sys = TreeSystem::new(&model).map_err(|e| system_error(&e))?;
         let frames =
             FrameKinematics::new(&model).map_err(|e| ModelError::new_err(e.to_string()))?;
         Ok(Model {

@@ -13,7 +13,7 @@ use tree_mech::nalgebra::DVector;
 use tree_mech::TreeSystem;
 
 use crate::arrays::{rows, vector};
-use crate::errors::{bad, model_error, sim_error, ModelError};
+use crate::errors::{bad, model_error, sim_error, system_error};
 
 /// Solves a task (the text of a task file; its `model` relative to `base`): returns a dict
 /// with the summary of `tree-mech optimize --json` and the trajectory and gains as arrays.
@@ -39,7 +39,7 @@ pub(crate) fn optimize_text<'py>(
         Some("ddp") => Some(TaskSolver::Ddp),
         Some(other) => return Err(bad(format!("solver `{other}`: use `ilqr` or `ddp`"))),
     };
-    let sys = TreeSystem::new(&m).map_err(|e| ModelError::new_err(e.to_string()))?;
+    let sys = TreeSystem::new(&m).map_err(|e| system_error(&e))?;
     let options = TaskOptions {
         solver,
         max_iterations,

@@ -585,3 +585,17 @@ def test_a_newton_tolerance_too_loose_to_solve_the_step_is_refused():
     from tree_mech import _native
     with pytest.raises(ValueError, match="looser than 1e-6"):
         _native.VariationalStepper(m, tolerance=1e-4)
+
+
+def test_what_would_not_fit_in_memory_is_a_memory_error_not_a_dead_interpreter():
+    """A run, or a batch, whose recorded samples would not fit in memory raises MemoryError
+    before anything is taken (the marionette for 10⁶ s: about 100 GB)."""
+    m = tm.load(str(ROOT / "models/marionette.toml"))
+    with pytest.raises(MemoryError, match="would need about"):
+        m.simulate(1e6, 0.01)
+    n = len(m.variables)
+    q0 = np.tile(m.q0, (1000, 1))
+    with pytest.raises(MemoryError, match="1000 runs"):
+        m.rollouts(q0, np.zeros_like(q0), 1e4, 0.01)
+    # The interpreter is alive and the model still runs.
+    assert len(m.simulate(0.02, 0.01).t) == 3

@@ -342,3 +342,52 @@ fn an_input_file_is_read_for_what_it_says_or_refused() {
     let (ok, _, stderr) = run("/dev/zero");
     assert!(!ok && stderr.contains("is larger than 256 MB"), "{stderr}");
 }
+
+/// A robot of `n` links, each on a revolute joint to one base.
+fn star_urdf(dir: &Path, n: usize) -> String {
+    let mut text = String::from("<robot name=\"star\">\n<link name=\"base\"/>\n");
+    for i in 0..n {
+        text += &format!(
+            "<link name=\"l{i}\"><inertial><mass value=\"1\"/><inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial></link>\n<joint name=\"j{i}\" type=\"revolute\"><parent link=\"base\"/><child link=\"l{i}\"/><axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>\n"
+        );
+    }
+    text += "</robot>\n";
+    let path = dir.join("star.urdf");
+    std::fs::write(&path, text).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+#[test]
+fn what_would_not_fit_in_memory_is_refused_in_a_sentence_before_it_is_asked_for() {
+    let dir = scratch("memory");
+    // 40 000 joints and no elements: checked without the elements' n × n scratch (12.8 GB).
+    let star = star_urdf(&dir, 40_000);
+    let (ok, stdout, stderr) = tree_mech(&["check", &star]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("40000 variables"), "{stdout}");
+    // Its dense matrices (about 200 GB) are refused, not an abort.
+    let (ok, _, stderr) = tree_mech(&["eval", &star]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("40000 variables would need about") && stderr.contains("GB of memory"),
+        "{stderr}"
+    );
+    // A million knots of the marionette: about 100 GB.
+    let task = dir.join("long.toml");
+    let text = shipped_task("marionette-wave").replace("knots = 150", "knots = 1000000");
+    std::fs::write(&task, text).unwrap();
+    let (ok, _, stderr) = tree_mech(&["optimize", task.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("the task's 1000000 knots would need about"),
+        "{stderr}"
+    );
+    // An iteration bound is not an allocation.
+    let (ok, _, stderr) = tree_mech(&[
+        "optimize",
+        "tasks/ur5-reach.toml",
+        "--max-iterations",
+        "4294967296",
+    ]);
+    assert!(ok, "{stderr}");
+}

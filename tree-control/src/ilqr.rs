@@ -227,7 +227,8 @@ where
         total,
     };
     let mut mu = settings.mu;
-    let mut history = Vec::with_capacity(settings.max_iterations);
+    // Grown as iterations run: `max_iterations` is a bound, not a size (4e9 would abort).
+    let mut history = Vec::new();
     let has_limits = settings.limits.is_some();
     let mut record = |cost: f64, step: f64, mu: f64, gradient: f64, pass: (Solver, BoxPhase)| {
         let it = Iteration {

@@ -89,6 +89,19 @@ where
     })
 }
 
+/// `Ok` when the solve's knots fit in memory: each holds its state and controls, the step's
+/// Jacobians and the cost's and value function's quadratic models, about
+/// `nx² + 3 nx nu + nu²` numbers.
+fn check_task_memory(task: &Task, dof: usize) -> Result<(), SimError> {
+    let (nx, nu) = ((2 * dof) as f64, task.controls.len() as f64);
+    let per_knot = 8.0 * (nx * nx + 3.0 * nx * nu + nu * nu + 6.0 * nx + 4.0 * nu);
+    tree_runtime::memory::check(
+        (task.knots + 1) as f64 * per_knot,
+        || format!("the task's {} knots", task.knots),
+        "take fewer knots (a longer dt, or a shorter horizon)",
+    )
+}
+
 /// [`solve_task`] whose `report` may end the solve ([`solve_until`]): the result is then the
 /// best trajectory found, its `solution.stop` [`Stop::Interrupted`](super::Stop::Interrupted).
 pub fn solve_task_until<S: System>(
@@ -108,6 +121,7 @@ where
             model.variables.len()
         )));
     }
+    check_task_memory(task, sys.dof())?;
     let mut dynamics = task_system(sys, task)?;
     let (mut q0, mut dq0) = (dynamics.sys.zero_vector(), dynamics.sys.zero_vector());
     for i in 0..q0.len() {

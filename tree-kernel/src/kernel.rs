@@ -28,7 +28,9 @@ impl<S: Scalar> Kernel<S> {
     pub fn new(plan: &TreePlan) -> Self {
         Kernel {
             tree: Workspace::new(plan),
-            elements: Scratch::new(plan.dof()),
+            // The elements' scratch is n × n: none without elements (a 40 000-joint robot
+            // would otherwise ask for 12.8 GB it never uses).
+            elements: Scratch::new(if plan.has_elements() { plan.dof() } else { 0 }),
             newton_euler: NewtonEuler::new(plan),
         }
     }

@@ -408,6 +408,11 @@ impl TreePlan {
         rows
     }
 
+    /// Whether the tree has elements (constraints, springs or dampers).
+    pub fn has_elements(&self) -> bool {
+        !(self.constraints.is_empty() && self.springs.is_empty() && self.dampers.is_empty())
+    }
+
     /// Number of configuration variables.
     pub fn dof(&self) -> usize {
         self.variable_frames.len()

@@ -34,6 +34,18 @@ pub enum SimError {
         /// Its `|h|` after the projection gave up.
         violation: f64,
     },
+    /// What was asked would need more memory than the machine has free (checked before it is
+    /// taken: [`crate::memory::check`]).
+    OutOfMemory {
+        /// What needs it, as a phrase.
+        what: String,
+        /// The bytes it needs.
+        bytes: f64,
+        /// The bytes free.
+        available: f64,
+        /// How to ask for less.
+        advice: String,
+    },
     /// The run would take more steps than can be stored or finished.
     TooManySteps {
         /// The steps the run would take.
@@ -133,6 +145,7 @@ impl SimError {
             | SimError::StepBudget { step, t, .. } => Some((*step, *t)),
             SimError::Unsatisfiable { .. }
             | SimError::TooManySteps { .. }
+            | SimError::OutOfMemory { .. }
             | SimError::InvalidInput(_)
             | SimError::Unsupported(_) => None,
         }
@@ -184,6 +197,17 @@ impl fmt::Display for Detail<'_> {
             SimError::Unsatisfiable { constraint, violation } => write!(
                 f,
                 "cannot satisfy constraint `{constraint}` at the start by moving the dynamic variables (it stays violated by {violation:e})"
+            ),
+            SimError::OutOfMemory {
+                what,
+                bytes,
+                available,
+                advice,
+            } => write!(
+                f,
+                "{what} would need about {:.1} GB of memory, more than the {:.1} GB free: {advice}",
+                bytes / 1e9,
+                available / 1e9
             ),
             SimError::TooManySteps { steps } => write!(
                 f,

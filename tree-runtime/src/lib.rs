@@ -32,6 +32,7 @@ pub mod kinematics;
 #[doc(hidden)]
 pub mod linalg;
 pub mod linearize;
+pub mod memory;
 pub mod reference;
 pub mod report;
 pub mod system;

@@ -31,7 +31,9 @@ use rayon::prelude::*;
 use crate::dynamics::{ModelMotions, NoForce};
 use crate::error::SimError;
 use crate::integrate::laned::{rk4_lanes, LaneStart, Observer};
-use crate::integrate::{finish, recording, run_with_inputs, InputSchedule, Method, SimOptions};
+use crate::integrate::{
+    check_recordings, finish, recording, run_with_inputs, InputSchedule, Method, SimOptions,
+};
 use crate::system::System;
 use crate::trajectory::{Sample, Trajectory};
 use tree_kernel::lanes::WIDTH;
@@ -144,6 +146,7 @@ where
     S: System + Clone + Send + Sync,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    check_recordings(sys, options, starts.len())?;
     let pool = pool(threads)?;
     let alone = |sys: &mut S, start| watch.run(|tick| trajectory(sys, start, options, tick));
     let results = pool.install(|| {
@@ -239,7 +242,11 @@ where
             inputs: &r.inputs,
         }
     };
-    let mut runs: Vec<Trajectory> = (0..WIDTH).map(|_| recording(sys, options)).collect();
+    // (A recording too large for memory: not in lanes; alone, the run says so.)
+    let mut runs: Vec<Trajectory> = (0..WIDTH)
+        .map(|_| recording(sys, options))
+        .collect::<Result<_, _>>()
+        .ok()?;
     let mut observers: Vec<_> = (runs.iter_mut())
         .map(|traj| {
             move |s: &Sample| {
@@ -295,6 +302,9 @@ where
             starts.len()
         )));
     }
+    if let Some(sys) = systems.first() {
+        check_recordings(sys, options, starts.len())?;
+    }
     let pool = pool(threads)?;
     let results = pool.install(|| {
         systems
@@ -348,7 +358,7 @@ where
     let (mut q0, mut dq0) = (sys.zero_vector(), sys.zero_vector());
     q0.as_mut_slice().copy_from_slice(&start.q0);
     dq0.as_mut_slice().copy_from_slice(&start.dq0);
-    let mut traj = recording(sys, options);
+    let mut traj = recording(sys, options)?;
     let mut motion = ModelMotions::of(sys);
     let summary = run_with_inputs(
         sys,

@@ -212,7 +212,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let mut motion = ModelMotions::of(sys);
-    let mut traj = recording(sys, options);
+    let mut traj = recording(sys, options)?;
     let summary = run(sys, q0, dq0, options, force, &mut motion, &mut |s| {
         traj.push(s);
         progress(s.t);
@@ -222,21 +222,53 @@ where
     Ok(traj)
 }
 
-/// An empty trajectory of `sys`'s variables and constraints, with room for the samples a run
-/// under `options` records.
-pub(crate) fn recording<S>(sys: &S, options: &SimOptions) -> Trajectory
+/// The samples a run under `options` records.
+fn recorded_samples(options: &SimOptions) -> f64 {
+    (options.duration / options.dt / options.every.max(1) as f64).ceil() + 2.0
+}
+
+/// `Ok` when `runs` recorded runs of `sys` under `options` fit in memory (each sample: the
+/// time, q, q̇, p, energy, λ, the violation and u), else an error saying how to ask for less.
+pub(crate) fn check_recordings<S>(
+    sys: &S,
+    options: &SimOptions,
+    runs: usize,
+) -> Result<(), SimError>
 where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    let numbers = 3 * sys.dof() + sys.constraint_count() + sys.input_count() + 3;
+    let samples = recorded_samples(options);
+    let bytes = runs as f64 * samples * numbers as f64 * 8.0;
+    let what = || match runs {
+        1 => format!("the run's {samples:.3e} recorded samples of {numbers} numbers"),
+        _ => format!("{runs} runs of {samples:.3e} recorded samples of {numbers} numbers"),
+    };
+    crate::memory::check(
+        bytes,
+        what,
+        "record every K-th step (`every`), shorten the run, or run fewer at once",
+    )
+}
+
+/// An empty trajectory of `sys`'s variables and constraints, with room for the samples a run
+/// under `options` records (checked to fit in memory first).
+pub(crate) fn recording<S>(sys: &S, options: &SimOptions) -> Result<Trajectory, SimError>
+where
+    S: System,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    check_recordings(sys, options, 1)?;
     let names = (0..sys.dof())
         .map(|i| sys.variable_name(i).to_string())
         .collect();
     let constraints = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
-    let samples = (options.duration / options.dt / options.every.max(1) as f64).ceil() as usize + 2;
-    Trajectory::new(names, constraints, samples.min(1 << 24))
+    // Room for every sample at once (checked above): no doubling past what was checked.
+    let samples = recorded_samples(options) as usize;
+    Ok(Trajectory::new(names, constraints, samples))
 }
 
 /// A recorded run's totals, from its summary.

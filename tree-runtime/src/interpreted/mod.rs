@@ -57,7 +57,7 @@ struct Laned {
 
 /// An error when `model` would need more Jacobian columns than the runtime allocates (each
 /// frame keeps one for every variable at or above it).
-pub(crate) fn columns_fit(model: &Model) -> Result<(), SimError> {
+pub fn columns_fit(model: &Model) -> Result<(), SimError> {
     let (columns, deepest) = tree_kernel::plan::column_count(model);
     if columns > tree_kernel::plan::MAX_COLUMNS {
         return Err(SimError::InvalidInput(format!(
@@ -68,6 +68,21 @@ pub(crate) fn columns_fit(model: &Model) -> Result<(), SimError> {
         )));
     }
     Ok(())
+}
+
+/// An error when `model`'s evaluation would not fit in memory.
+fn memory_fits(model: &Model) -> Result<(), SimError> {
+    let (columns, _) = tree_kernel::plan::column_count(model);
+    // Its dense matrices (M, ∂²L/∂q̇∂q, ∂²L/∂q², their factorisations and the integrators'
+    // Newton matrices: about sixteen n × n) and the Jacobian columns' twists and their
+    // derivatives (about a dozen numbers a column).
+    let n = model.variables.len() as f64;
+    let bytes = 8.0 * (16.0 * n * n + 12.0 * columns as f64);
+    crate::memory::check(
+        bytes,
+        || format!("model `{}`'s {n} variables", model.name),
+        "lock variables (--lock) to simulate a smaller model",
+    )
 }
 
 /// [`kernel::elements_at`] (the outward sweep of the recursive dynamics, then the elements'
@@ -153,6 +168,7 @@ impl TreeSystem {
     /// Builds the interpreted system for a validated model.
     pub fn new(model: &Model) -> Result<Self, SimError> {
         columns_fit(model)?;
+        memory_fits(model)?;
         let plan = TreePlan::folded(model);
         Ok(TreeSystem {
             model: model.clone(),
