@@ -536,7 +536,6 @@ def test_optimize_reports_each_iteration_and_stops_on_an_exception():
 def test_frame_kinematics_agree_with_the_evaluation_and_their_own_differences():
     rng = np.random.default_rng(11)
     m = tm.load(str(ROOT / "models/ur5.urdf"))
-    n = len(m.variables)
     q, dq, ddq = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
     e = m.evaluate(q, dq)
     for frame in ("tool0", "wrist_2_link"):
@@ -593,7 +592,6 @@ def test_what_would_not_fit_in_memory_is_a_memory_error_not_a_dead_interpreter()
     m = tm.load(str(ROOT / "models/marionette.toml"))
     with pytest.raises(MemoryError, match="would need about"):
         m.simulate(1e6, 0.01)
-    n = len(m.variables)
     q0 = np.tile(m.q0, (1000, 1))
     with pytest.raises(MemoryError, match="1000 runs"):
         m.rollouts(q0, np.zeros_like(q0), 1e4, 0.01)
