@@ -24,6 +24,9 @@ use tree_runtime::linalg::{
 };
 use tree_runtime::system::System;
 
+/// How many iterations' records a solve reserves before it starts (more grow the list).
+const HISTORY_RESERVE: usize = 4096;
+
 /// Which second-order model of the dynamics the backward pass uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Solver {
@@ -227,8 +230,9 @@ where
         total,
     };
     let mut mu = settings.mu;
-    // Grown as iterations run: `max_iterations` is a bound, not a size (4e9 would abort).
-    let mut history = Vec::new();
+    // Reserved up to a cap so ordinary solves allocate nothing per iteration; past the
+    // cap it grows: `max_iterations` is a bound, not a size (4e9 would abort).
+    let mut history = Vec::with_capacity(settings.max_iterations.min(HISTORY_RESERVE));
     let has_limits = settings.limits.is_some();
     let mut record = |cost: f64, step: f64, mu: f64, gradient: f64, pass: (Solver, BoxPhase)| {
         let it = Iteration {
