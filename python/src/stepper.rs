@@ -46,7 +46,8 @@ impl VariationalStepper {
         if let Some(tol) = tolerance {
             if !(tol > 0.0 && tol.is_finite()) {
                 return Err(bad(format!(
-                    "the tolerance must be a positive number, got {tol}"
+                    "the tolerance must be a positive number, got {}",
+                    tree_mech::model::Given(tol)
                 )));
             }
             if tol > LOOSEST_NEWTON_TOLERANCE {

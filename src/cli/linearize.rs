@@ -129,7 +129,10 @@ fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), Strin
     }
     if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
-            return Err(format!("--dt must be a positive number, got {dt}"));
+            return Err(format!(
+                "--dt must be a positive number, got {}",
+                tree_mech::model::Given(dt)
+            ));
         }
     }
     if !request.t.is_finite() {

@@ -399,11 +399,12 @@ fn note_a_large_csv(file: &OutputFile, options: &SimOptions, n: usize, rows_of_h
     };
     let columns = 2 + 2 * n + rows_of_h + usize::from(rows_of_h > 0);
     let bytes = rows * columns as f64 * 20.0;
-    if bytes > LARGE_OUTPUT {
+    // Not finite: the options are bad (a step of 0), which the run refuses in a sentence.
+    if bytes > LARGE_OUTPUT && bytes.is_finite() {
         eprintln!(
-            "note: `{}` may grow to about {:.1} GB ({:.2e} rows of {columns} numbers); --every K records every K-th step",
+            "note: `{}` may grow to about {} GB ({:.2e} rows of {columns} numbers); --every K records every K-th step",
             file.path().display(),
-            bytes / 1e9,
+            tree_mech::model::Rounded(bytes / 1e9, 3),
             rows
         );
     }

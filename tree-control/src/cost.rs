@@ -149,7 +149,10 @@ impl Cost for QuadraticCost {
             ));
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(format!("the cost's dt must be positive, got {}", self.dt));
+            return Err(format!(
+                "the cost's dt must be positive, got {}",
+                tree_model::Given(self.dt)
+            ));
         }
         Ok(())
     }

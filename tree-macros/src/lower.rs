@@ -396,6 +396,7 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<(Mode
             }
             let span = match &p.site {
                 Site::Model => name.span(),
+                Site::Gravity => inline.gravity.map_or(name.span(), |g| g.1),
                 Site::VariableSettings { name: v } => variable_spans
                     .iter()
                     .find(|(n, _)| n == v)

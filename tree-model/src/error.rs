@@ -24,8 +24,10 @@ pub enum FrameField {
 /// Where in a model a problem sits.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Site {
-    /// The model as a whole (no variables, bad gravity, a syntax error, a missing file).
+    /// The model as a whole (no variables, a syntax error, a missing file).
     Model,
+    /// The model's `gravity`.
+    Gravity,
     /// The frame at this position of the specification's frame list.
     Frame {
         /// Position in the frame list.

@@ -368,7 +368,8 @@ impl Model {
         let f = self.frame_for_change(frame)?;
         if !(mass.is_finite() && mass > 0.0) {
             return Err(format!(
-                "the mass of frame `{frame}` must be finite and positive, got {mass}"
+                "the mass of frame `{frame}` must be finite and positive, got {}",
+                crate::Given(mass)
             ));
         }
         let body = self.frames[f].mass.get_or_insert(Mass::point(mass));
@@ -383,7 +384,8 @@ impl Model {
         let f = self.frame_for_change(frame)?;
         if !value.is_finite() {
             return Err(format!(
-                "the parameter of frame `{frame}` must be finite, got {value}"
+                "the parameter of frame `{frame}` must be finite, got {}",
+                crate::Given(value)
             ));
         }
         match &mut self.frames[f].joint {

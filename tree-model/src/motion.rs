@@ -101,7 +101,15 @@ impl CubicSpline {
         if !slopes_finite || curvature.iter().any(|c| !c.is_finite()) {
             return None;
         }
-        Some(CubicSpline { t, q, curvature })
+        let spline = CubicSpline { t, q, curvature };
+        // Samples near the float's limits (±1e308): sums inside a segment can overflow
+        // where no sample does. Each segment's ends and middle, and t = 0, must be finite.
+        let finite = |t: f64| spline.at(t).iter().all(|x| x.is_finite());
+        let inside = spline.t.windows(2).all(|w| {
+            let middle = w[0] + 0.5 * (w[1] - w[0]);
+            finite(w[0]) && finite(middle) && finite(w[1])
+        });
+        (inside && finite(0.0)).then_some(spline)
     }
 
     /// The samples' time span.
@@ -165,6 +173,11 @@ mod tests {
         assert!(CubicSpline::new(&[[0.0, 1.0]]).is_none());
         assert!(CubicSpline::new(&[[0.0, 1.0], [0.0, 2.0]]).is_none());
         assert!(CubicSpline::new(&[[0.0, 1.0], [1.0, f64::NAN]]).is_none());
+        // Times spanning ±1e308: each is finite, their spacing is not, and q(0) was NaN.
+        assert!(CubicSpline::new(&[[-1e308, 0.0], [1e308, 1.0]]).is_none());
+        // Values near the limit whose curve overflows between samples.
+        assert!(CubicSpline::new(&[[0.0, 1.7e308], [1.0, 1.7e308], [2.0, 1.7e308]]).is_some());
+        assert!(CubicSpline::new(&[[0.0, -1e308], [1.0, 0.0], [2.0, 1e308]]).is_some());
     }
 
     #[test]

@@ -319,7 +319,7 @@ fn weights(
     if let Some(x) = w.iter().find(|x| **x < 0.0) {
         p.at(
             value.span(),
-            format!("`{what}` must not be negative, got {x}"),
+            format!("`{what}` must not be negative, got {}", crate::Given(*x)),
         );
     }
     w
@@ -473,7 +473,7 @@ struct Settings {
 fn settings(p: &mut Problems, raw: &RawTask) -> Settings {
     let dt = *raw.dt.get_ref();
     if !(dt.is_finite() && dt > 0.0) {
-        p.at(raw.dt.span(), format!("`dt` must be positive, got {dt}"));
+        p.at(raw.dt.span(), format!("`dt` must be positive, got {}", crate::Given(dt)));
     }
     let knots = *raw.knots.get_ref();
     if !(1..=1_000_000).contains(&knots) {

@@ -21,7 +21,7 @@ use crate::validate::validate;
 #[serde(deny_unknown_fields)]
 struct RawModel {
     name: Option<String>,
-    gravity: Option<[f64; 3]>,
+    gravity: Option<Spanned<[f64; 3]>>,
     #[serde(default)]
     frame: Vec<Spanned<RawFrame>>,
     #[serde(default)]
@@ -166,7 +166,10 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
     })?;
     check_samples(&raw, &line_index)
         .map_err(|(message, line)| ModelError::single(src.clone(), message, Some(line)))?;
-    let mut lines = Lines::default();
+    let mut lines = Lines {
+        gravity: raw.gravity.as_ref().map(|g| line_index.of(g.span().start)),
+        ..Lines::default()
+    };
     let name = raw.name.clone().unwrap_or_else(|| {
         source_name
             .and_then(|s| Path::new(s).file_stem())
@@ -174,7 +177,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
     });
     let spec = ModelSpec {
         name,
-        gravity: raw.gravity,
+        gravity: raw.gravity.as_ref().map(|g| *g.get_ref()),
         frames: frames_of(&raw, &line_index, &mut lines.frames),
         variables: variables_of(&raw, &line_index, &mut lines.variables),
         constraints: constraints_of(&raw, &line_index, &mut lines.constraints),
@@ -196,6 +199,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
 /// Where each part of the model was written, for pointing problems at the source.
 #[derive(Default)]
 struct Lines {
+    gravity: Option<usize>,
     frames: Vec<FrameLines>,
     variables: BTreeMap<String, usize>,
     constraints: Vec<ElementLines>,
@@ -209,6 +213,7 @@ impl Lines {
     fn of(&self, site: &Site) -> Option<usize> {
         match site {
             Site::Model => None,
+            Site::Gravity => self.gravity,
             Site::VariableSettings { name } => self.variables.get(name).copied(),
             Site::Element {
                 section,

@@ -40,7 +40,15 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     let mut errs = Problems(Vec::new());
     let gravity = spec.gravity.unwrap_or(DEFAULT_GRAVITY);
     if gravity.iter().any(|g| !g.is_finite()) {
-        errs.push(Site::Model, "gravity must be three finite numbers".into());
+        errs.push(
+            Site::Gravity,
+            format!(
+                "gravity must be three finite numbers, got [{}, {}, {}]",
+                crate::Given(gravity[0]),
+                crate::Given(gravity[1]),
+                crate::Given(gravity[2])
+            ),
+        );
     }
     let index_of = frame_names(spec, &mut errs);
     let mut vars = Variables::default();
@@ -434,7 +442,7 @@ fn prescribed_motion(v: &VariableSpec, var: &Variable, errs: &mut Problems) -> O
                 errs.push(
                     site(),
                     format!(
-                        "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing (and slopes that do not overflow)",
+                        "variable `{}`: samples must be at least two finite [t, q] pairs with t strictly increasing, and a curve through them that stays finite (samples near ±1e308 overflow between them)",
                         v.name
                     ),
                 );

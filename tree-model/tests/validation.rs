@@ -179,6 +179,15 @@ fn settings_for_a_variable_that_drives_nothing() {
 }
 
 #[test]
+fn non_finite_gravity_names_its_line() {
+    let text = GOOD_HEAD.replace("name = \"t\"\n", "name = \"t\"\ngravity = [0, 0, -inf]\n");
+    assert_reports(
+        &text,
+        &["m.toml:2: gravity must be three finite numbers, got [0, 0, -inf]"],
+    );
+}
+
+#[test]
 fn model_without_variables() {
     assert_reports(
         "name = \"t\"\n[[frame]]\nname = \"a\"\ntz = 1.0\nmass = 1.0\n",
@@ -402,6 +411,11 @@ fn kinematic_variable_problems_name_their_line() {
     assert_reports(
         &format!("{head}[variables.cx]\nkinematic = true\nsamples = [[0, 1], [1, nan]]\n"),
         &["samples must be at least two finite"],
+    );
+    // Times spanning ±1e308: finite samples whose curve is not (`check` printed q0 = NaN).
+    assert_reports(
+        &format!("{head}[variables.cx]\nkinematic = true\nsamples = [[-1e308, 0], [1e308, 1]]\n"),
+        &["m.toml:22: variable `cx`: samples must be", "stays finite"],
     );
     assert_reports(
         &format!("{head}[variables.cx]\nkinematic = true\nsamples = [[0, 1], [1, 2]]\nmotion = {{ amplitude = 1.0 }}\n"),

@@ -205,9 +205,9 @@ impl fmt::Display for Detail<'_> {
                 advice,
             } => write!(
                 f,
-                "{what} would need about {:.1} GB of memory, more than the {:.1} GB free: {advice}",
-                bytes / 1e9,
-                available / 1e9
+                "{what} would need about {} GB of memory, more than the {} GB free: {advice}",
+                tree_model::Rounded(bytes / 1e9, 3),
+                tree_model::Rounded(available / 1e9, 3)
             ),
             SimError::TooManySteps { steps } => write!(
                 f,

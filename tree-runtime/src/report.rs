@@ -169,7 +169,8 @@ fn check_request(request: &Request) -> Result<(), SimError> {
     }
     if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
-            return bad(format!("the step must be a positive number, got {dt}"));
+            return bad(format!("the step must be a positive number, got {}",
+                tree_model::Given(dt)));
         }
     }
     Ok(())
@@ -245,7 +246,7 @@ where
     if !(0.0..=1.0).contains(&request.alpha) {
         return bad(format!(
             "VI alpha must lie in [0, 1], got {}",
-            request.alpha
+            tree_model::Given(request.alpha)
         ));
     }
     let settings = ViSettings {

@@ -131,7 +131,8 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
             Ok(())
         } else {
             Err(SimError::InvalidInput(format!(
-                "{what} must be a positive number, got {x}"
+                "{what} must be a positive number, got {}",
+                tree_model::Given(x)
             )))
         }
     };
@@ -139,7 +140,7 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
         if !(0.0..=1.0).contains(&s.alpha) {
             return Err(SimError::InvalidInput(format!(
                 "VI alpha must lie in [0, 1], got {}",
-                s.alpha
+                tree_model::Given(s.alpha)
             )));
         }
         positive(s.tolerance, "the VI's Newton tolerance")?;
@@ -171,7 +172,9 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
     if steps > MAX_STEPS {
         return Err(SimError::TooManySteps { steps });
     }
-    if steps < 1.0 && !matches!(o.method, Method::Rk45(_)) {
+    // One rule for every front end: a run no longer than one step simulates nothing the
+    // user asked for (a duration of 1 s at a step of 2 s would end at t = 2).
+    if (steps < 1.0 || o.duration < o.dt) && !matches!(o.method, Method::Rk45(_)) {
         return Err(SimError::InvalidInput(format!(
             "the duration {} s is shorter than one step of {} s: nothing would be simulated",
             Seconds(o.duration),
@@ -238,6 +241,8 @@ where
     S: System,
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    // The options first: a step of 0 or 1e-300 is a bad option, not a lack of memory.
+    check_options(options)?;
     let numbers = 3 * sys.dof() + sys.constraint_count() + sys.input_count() + 3;
     let samples = recorded_samples(options);
     let bytes = runs as f64 * samples * numbers as f64 * 8.0;
