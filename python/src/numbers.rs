@@ -6,8 +6,9 @@ use std::ops::Deref;
 
 use numpy::ndarray::Dimension;
 use numpy::{AllowTypeChange, PyArrayLike};
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::{PyByteArray, PyBytes, PyString};
 
 /// A `D`-dimensional array argument of numbers (a list, a nested list or any numpy array,
 /// converted to `float64`).
@@ -25,6 +26,7 @@ impl<'a, 'py, D: Dimension + 'py> FromPyObject<'a, 'py> for Numbers<'py, D> {
     type Error = PyErr;
 
     fn extract(ob: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        refuse_what_is_not_numbers(&ob)?;
         let error = match ob.extract::<PyArrayLike<'py, f64, D, AllowTypeChange>>() {
             Ok(array) => return Ok(Numbers(array)),
             Err(e) => e,
@@ -42,4 +44,34 @@ impl<'a, 'py, D: Dimension + 'py> FromPyObject<'a, 'py> for Numbers<'py, D> {
             _ => Err(error),
         }
     }
+}
+
+/// Text and bytes are not numbers, though numpy reads bytes as their codes (`b"ab"` as
+/// [97, 98]); a masked array's masked entries have no value to use (numpy would use what
+/// lies under the mask).
+fn refuse_what_is_not_numbers(ob: &Borrowed<'_, '_, PyAny>) -> PyResult<()> {
+    if ob.is_instance_of::<PyBytes>()
+        || ob.is_instance_of::<PyByteArray>()
+        || ob.is_instance_of::<PyString>()
+    {
+        let kind = ob.get_type().name()?;
+        return Err(PyTypeError::new_err(format!(
+            "expected an array of numbers, got {kind}"
+        )));
+    }
+    // Only a masked array has a mask: the common arguments pay one attribute lookup.
+    let masked = ob.hasattr("mask").unwrap_or(false)
+        && ob
+            .py()
+            .import("numpy.ma")
+            .and_then(|ma| ma.call_method1("is_masked", (&**ob,)))
+            .and_then(|m| m.extract::<bool>())
+            .unwrap_or(false);
+    if masked {
+        return Err(PyValueError::new_err(
+            "the masked array has masked entries, which have no value: fill them first \
+             (a.filled(x)) or pass a.data to use what lies under the mask",
+        ));
+    }
+    Ok(())
 }

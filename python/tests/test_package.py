@@ -597,3 +597,33 @@ def test_what_would_not_fit_in_memory_is_a_memory_error_not_a_dead_interpreter()
         m.rollouts(q0, np.zeros_like(q0), 1e4, 0.01)
     # The interpreter is alive and the model still runs.
     assert len(m.simulate(0.02, 0.01).t) == 3
+
+
+def test_one_rule_for_every_front_end_and_no_argument_taken_for_what_it_is_not():
+    """A run shorter than its step and a solve of no iterations are refused here as on the
+    command line; bytes, text and masked entries are not numbers; a task dict takes numpy
+    scalars and says what is wrong with a cost that is not a list of terms."""
+    m = tm.load(PENDULUM)
+    with pytest.raises(tm.SimulationError, match="shorter than one step"):
+        m.simulate(1.0, 2.0)
+    with pytest.raises(TypeError, match="got bytes"):
+        m.simulate(0.1, 0.01, q0=b"a")
+    with pytest.raises(TypeError, match="got str"):
+        m.simulate(0.1, 0.01, q0="1")
+    masked = np.ma.masked_array([0.3], mask=[True])
+    with pytest.raises(ValueError, match="masked entries"):
+        m.simulate(0.1, 0.01, q0=masked)
+    unmasked = np.ma.masked_array([0.3], mask=[False])
+    assert m.simulate(0.1, 0.01, q0=unmasked).q[0, 0] == 0.3
+    task = {
+        "model": str(ROOT / "models/cartpole.toml"),
+        "dt": np.float32(0.02),
+        "knots": np.int64(10),
+        "start": {"q": {"theta": np.float64(3.0)}},
+        "cost": [{"kind": "control", "weight": np.float32(0.5), "about": "zero"}],
+    }
+    assert tm.optimize(task, max_iterations=2)["iterations"] >= 1
+    with pytest.raises(tm.SimulationError, match="at least one iteration"):
+        tm.optimize(task, max_iterations=0)
+    with pytest.raises(TypeError, match="`cost` must be a list of terms"):
+        tm.optimize(dict(task, cost={"kind": "control", "weight": 1.0}))

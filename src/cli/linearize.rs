@@ -127,6 +127,13 @@ fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), Strin
                 .into(),
         );
     }
+    if request.p.is_some() && (request.explicit.is_some() || request.dt.is_none()) {
+        return Err(
+            "--p is the VI step's momentum at its start: give --dt (and not --integrator rk4 \
+             or rk45); the continuous linearisation takes --dq"
+                .into(),
+        );
+    }
     if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(format!(

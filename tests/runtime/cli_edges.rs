@@ -391,3 +391,70 @@ fn what_would_not_fit_in_memory_is_refused_in_a_sentence_before_it_is_asked_for(
     ]);
     assert!(ok, "{stderr}");
 }
+
+#[test]
+fn options_that_would_be_ignored_are_refused_and_messages_say_the_cause() {
+    let refused = |args: &[&str], expected: &str| {
+        let (ok, _, stderr) = tree_mech(args);
+        assert!(!ok && stderr.contains(expected), "{args:?}: {stderr}");
+    };
+    refused(
+        &["linearize", "tests/models/cart.toml", "--p", "0.1"],
+        "--p is the VI step's momentum at its start: give --dt",
+    );
+    refused(
+        &[
+            "linearize",
+            "tests/models/cart.toml",
+            "--p",
+            "0.1",
+            "--dt",
+            "0.01",
+            "--integrator",
+            "rk4",
+        ],
+        "--p is the VI step's momentum",
+    );
+    refused(
+        &["simulate", "models/pendulum.toml", "--baumgarte", "1,1"],
+        "Baumgarte stabilisation is for the explicit integrators",
+    );
+    // A run shorter than its step, and a step of 0: refused by the options' check, with no
+    // note of a CSV growing to "inf GB" before it.
+    refused(
+        &[
+            "simulate",
+            "models/pendulum.toml",
+            "--duration",
+            "1",
+            "--dt",
+            "2",
+        ],
+        "shorter than one step",
+    );
+    let dir = scratch("ignored-options");
+    let out = dir.join("o.csv");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--dt",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && stderr.contains("time step must be a positive"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("GB"), "{stderr}");
+    // Numbers as given, never as hundreds of digits.
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/pendulum.toml",
+        "--rtol",
+        "-1e300",
+        "--integrator",
+        "rk45",
+    ]);
+    assert!(!ok && stderr.contains("got -1e300"), "{stderr}");
+}

@@ -119,7 +119,13 @@ fn bad_arguments_are_errors() {
     let e = simulate(&mut sys, &short, &dq0, &ok, &mut NoForce, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("the system has 1 variables"), "{e}");
     // A duration shorter than one step: refused by every front end (it would end at t = dt).
-    for (dt, duration) in [(0.0, 1.0), (-0.1, 1.0), (f64::NAN, 1.0), (0.1, -1.0), (2.0, 1.0)] {
+    for (dt, duration) in [
+        (0.0, 1.0),
+        (-0.1, 1.0),
+        (f64::NAN, 1.0),
+        (0.1, -1.0),
+        (2.0, 1.0),
+    ] {
         let o = SimOptions { dt, duration, ..ok };
         assert!(matches!(
             simulate(&mut sys, &q0, &dq0, &o, &mut NoForce, &mut |_| {}),

@@ -335,8 +335,15 @@ where
     {
         return Err(SimError::InvalidInput(format!(
             "the optimiser's cost tolerance ({}), decrease tolerance ({}) and regularisation ({}) must be finite and non-negative",
-            settings.cost_tolerance, settings.decrease_tolerance, settings.mu
+            tree_model::Given(settings.cost_tolerance),
+            tree_model::Given(settings.decrease_tolerance),
+            tree_model::Given(settings.mu)
         )));
+    }
+    if settings.max_iterations == 0 {
+        return Err(SimError::InvalidInput(
+            "the optimiser needs at least one iteration (max_iterations ≥ 1)".into(),
+        ));
     }
     if settings.solver == Solver::Ddp && !dynamics.is_vi() {
         return Err(SimError::InvalidInput(

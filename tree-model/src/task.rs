@@ -473,7 +473,10 @@ struct Settings {
 fn settings(p: &mut Problems, raw: &RawTask) -> Settings {
     let dt = *raw.dt.get_ref();
     if !(dt.is_finite() && dt > 0.0) {
-        p.at(raw.dt.span(), format!("`dt` must be positive, got {}", crate::Given(dt)));
+        p.at(
+            raw.dt.span(),
+            format!("`dt` must be positive, got {}", crate::Given(dt)),
+        );
     }
     let knots = *raw.knots.get_ref();
     if !(1..=1_000_000).contains(&knots) {

@@ -169,8 +169,10 @@ fn check_request(request: &Request) -> Result<(), SimError> {
     }
     if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
-            return bad(format!("the step must be a positive number, got {}",
-                tree_model::Given(dt)));
+            return bad(format!(
+                "the step must be a positive number, got {}",
+                tree_model::Given(dt)
+            ));
         }
     }
     Ok(())

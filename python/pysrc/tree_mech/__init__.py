@@ -56,6 +56,8 @@ __all__ = [
 
 
 def _toml_value(v: Any) -> str:
+    if hasattr(v, "item") and getattr(v, "shape", None) == ():
+        v = v.item()  # a numpy scalar (np.float32(1.5), np.int64(3), np.bool_) or 0-d array
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (int, float)):
@@ -90,7 +92,14 @@ def _task_toml(task: Mapping[str, Any]) -> str:
         lines.append(f"[{key}]")
         lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
     for key in ("cost", "terminal"):
-        for term in task.get(key, []):
+        terms = task.get(key, [])
+        if isinstance(terms, (Mapping, str)) or not hasattr(terms, "__iter__"):
+            raise TypeError(f"`{key}` must be a list of terms (dicts), got a "
+                            f"{type(terms).__name__}: write [{{...}}] for one term")
+        for term in terms:
+            if not isinstance(term, Mapping):
+                raise TypeError(f"each term of `{key}` must be a dict of the term's keys, "
+                                f"got a {type(term).__name__}")
             lines.append(f"[[{key}]]")
             lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in term.items()]
     return "\n".join(lines) + "\n"

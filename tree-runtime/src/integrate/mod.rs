@@ -137,6 +137,14 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
         }
     };
     if let Method::Vi(s) = o.method {
+        if o.baumgarte.a != 0.0 || o.baumgarte.b != 0.0 {
+            return Err(SimError::InvalidInput(
+                "Baumgarte stabilisation is for the explicit integrators (rk4, rk45), whose \
+                 constraints drift; the VI holds its constraints at every step, so it would \
+                 be ignored"
+                    .into(),
+            ));
+        }
         if !(0.0..=1.0).contains(&s.alpha) {
             return Err(SimError::InvalidInput(format!(
                 "VI alpha must lie in [0, 1], got {}",
