@@ -536,6 +536,7 @@ def test_optimize_reports_each_iteration_and_stops_on_an_exception():
 def test_frame_kinematics_agree_with_the_evaluation_and_their_own_differences():
     rng = np.random.default_rng(11)
     m = tm.load(str(ROOT / "models/ur5.urdf"))
+    n = len(m.variables)
     q, dq, ddq = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
     e = m.evaluate(q, dq)
     for frame in ("tool0", "wrist_2_link"):

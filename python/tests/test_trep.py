@@ -7,6 +7,7 @@ import pathlib
 import numpy as np
 import pytest
 
+import tree_mech as tm
 from tree_mech import trep
 
 import trep_scripts
@@ -233,6 +234,13 @@ def test_errors_are_plain():
     with pytest.raises(ValueError, match="call step first"):
         mvi.q2_dq1()
     assert trep.__version__ == "v1.0.2"
+    # A system no model can be made of: named by its parts, not by lines of a generated
+    # file the user never sees.
+    massless = trep.System()
+    trep.Frame(massless.world_frame, trep.RX, "th", name="arm")
+    with pytest.raises(tm.ModelError, match="the system is not a valid model: variable `th`") as e:
+        massless.L()
+    assert "line" not in str(e.value) and e.value.line is None
 
 
 def test_a_failed_step_leaves_the_integrator_where_it_was():

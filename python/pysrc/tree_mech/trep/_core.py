@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from typing import Any, Dict, List, Optional, Sequence, Union
 
 import numpy as np
@@ -490,6 +491,19 @@ class Input:
         return f"<Input {self.name!r}>"
 
 
+def _loads_generated(text: str) -> _native.Model:
+    """The model of a System's generated TOML. Its problems name frames, configs and
+    constraints by the names the script gave; the lines of a text the user never sees are
+    dropped from the message."""
+    try:
+        return _native.loads(text)
+    except _native.ModelError as e:
+        lines = [re.sub(r"^line \d+: ", "", m) for m in str(e).splitlines()]
+        err = _native.ModelError("the system is not a valid model: " + "\n".join(lines))
+        err.file, err.line = None, None
+        raise err from None
+
+
 class System:
     """A trep system over tree-mech: frames from ``world_frame`` out, configs, potentials,
     forces, inputs and constraints; state ``q``, ``dq``, ``ddq`` (kinematic accelerations are
@@ -816,7 +830,7 @@ class System:
         if self._model is None:
             if not self._configs:
                 raise ValueError("the system has no configs")
-            self._model = _native.loads(self._toml())
+            self._model = _loads_generated(self._toml())
             index = {name: i for i, name in enumerate(self._model.variables)}
             dynamic = {name: i for i, name in enumerate(self._model.dynamic)}
             kinematic = {name: i for i, name in enumerate(self._model.kinematic)}
