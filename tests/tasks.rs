@@ -342,6 +342,8 @@ fn task_file_errors_name_the_problem_and_line() {
         (&format!("{good}integrator = \"rk4\"\ncontrols = [\"hand_y\"]\n{cost}"), "kinematic control `hand_y` needs the VI"),
         (&format!("{good}integrator = \"euler\"\n{cost}"), "t.toml:4: `integrator` is `euler`"),
         (&format!("{good}[[cost]]\nkind = \"frame\"\nframe = \"nowhere\"\ntarget = [0.0, 0.0, 0.0]\nweight = 1.0\n"), "t.toml:6: frame `nowhere` is not in the model"),
+        // A typo is offered its fix first.
+        (&format!("{good}[[cost]]\nkind = \"frame\"\nframe = \"hnad\"\ntarget = [0.0, 0.0, 0.0]\nweight = 1.0\n"), "frame `hnad` is not in the model; the nearest of its 7 names are `hand`"),
         (&format!("{good}[[cost]]\nkind = \"state\"\nq_weight = [1.0, 2.0]\n"), "t.toml:6: `q_weight` has 2 entries; it needs 4"),
         (&format!("{good}[[cost]]\nkind = \"state\"\nq_weight = {{ theta9 = 1.0 }}\n"), "names `theta9`, which is not one of"),
         (&format!("{good}[[cost]]\nkind = \"control\"\nweight = -1.0\n"), "t.toml:6: `weight` must not be negative"),

@@ -458,3 +458,17 @@ fn options_that_would_be_ignored_are_refused_and_messages_say_the_cause() {
     ]);
     assert!(!ok && stderr.contains("got -1e300"), "{stderr}");
 }
+
+#[test]
+fn a_urdf_saved_as_xml_is_read_as_urdf() {
+    let dir = scratch("urdf-as-xml");
+    let xml = dir.join("solo12.xml");
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("models/solo12.urdf"),
+        &xml,
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = tree_mech(&["check", xml.to_str().unwrap(), "--floating-base"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("18 variables"), "{stdout}");
+}

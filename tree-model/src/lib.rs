@@ -46,6 +46,7 @@ mod number;
 mod primitive;
 mod source;
 mod spec;
+mod suggest;
 mod task;
 mod toml_format;
 mod urdf_format;
@@ -67,6 +68,7 @@ pub use spec::{
     ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,
     SpringSpec, VariableSpec,
 };
+pub use suggest::nearest;
 pub use task::{
     read_task, task_from_str, About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver,
 };

@@ -795,7 +795,18 @@ impl Costs<'_> {
         if found.is_none() {
             p.at(
                 f.span(),
-                format!("frame `{}` is not in the model", f.get_ref()),
+                format!(
+                    "frame `{}` is not in the model{}",
+                    f.get_ref(),
+                    crate::nearest(
+                        f.get_ref(),
+                        &model
+                            .frames
+                            .iter()
+                            .map(|f| f.name.as_str())
+                            .collect::<Vec<_>>()
+                    )
+                ),
             );
         }
         found

@@ -162,7 +162,10 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
     let raw: RawModel = toml::from_str(text).map_err(|e| {
         let line = e.span().map(|s| line_index.of(s.start));
         let msg = e.message().trim().to_string();
-        ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
+        let hint = e
+            .span()
+            .map_or(String::new(), |s| unquoted_name_hint(text, s.start));
+        ModelError::single(src.clone(), format!("TOML error: {msg}{hint}"), line)
     })?;
     check_samples(&raw, &line_index)
         .map_err(|(message, line)| ModelError::single(src.clone(), message, Some(line)))?;
@@ -194,6 +197,33 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
             problems,
         }
     })
+}
+
+/// When the value at `offset` is a bare word (`rx = theta`), TOML read it as a misspelt
+/// `true`/`false`/`inf`: the hint says a name is written in quotes.
+fn unquoted_name_hint(text: &str, offset: usize) -> String {
+    let start = text[..offset.min(text.len())]
+        .rfind('\n')
+        .map_or(0, |i| i + 1);
+    let line = text[start..].lines().next().unwrap_or("");
+    let value = line
+        .split_once('=')
+        .map(|(_, v)| v.split('#').next().unwrap_or("").trim());
+    let Some(word) = value else {
+        return String::new();
+    };
+    let bare = word
+        .chars()
+        .next()
+        .is_some_and(|c| c.is_alphabetic() || c == '_')
+        && word
+            .chars()
+            .all(|c| c.is_alphanumeric() || c == '_' || c == '-');
+    if bare && !matches!(word, "true" | "false" | "inf" | "nan") {
+        format!(" (a name is text in TOML: write \"{word}\" in quotes)")
+    } else {
+        String::new()
+    }
 }
 
 /// Where each part of the model was written, for pointing problems at the source.

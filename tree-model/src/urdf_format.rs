@@ -784,22 +784,30 @@ pub fn from_urdf_file(path: impl AsRef<Path>, options: UrdfOptions) -> Result<Mo
     from_urdf_str(&text, Some(&shown), options)
 }
 
-/// Reads a model file by its extension: `.urdf` as URDF (with `options`), anything else as
-/// TOML (where `options.floating_base` is an error: a TOML model says its own variables).
+/// Reads a model file: as URDF (with `options`) when it ends in `.urdf` or its text is XML
+/// (a URDF saved as `.xml`), else as TOML (where `options.floating_base` is an error: a TOML
+/// model says its own variables).
 pub fn from_file(path: impl AsRef<Path>, options: UrdfOptions) -> Result<Model, ModelError> {
     let path = path.as_ref();
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
+    let shown = path.display().to_string();
+    let text = crate::source::read_model_file(path)?;
+    let xml = text
+        .trim_start_matches('\u{feff}')
+        .trim_start()
+        .starts_with('<');
+    if xml
+        || path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
     {
-        return from_urdf_file(path, options);
+        return from_urdf_str(&text, Some(&shown), options);
     }
     if options.floating_base {
         return Err(ModelError::single(
-            Some(path.display().to_string()),
+            Some(shown),
             "a floating base is added to URDF models only; a TOML model declares its own base variables".into(),
             None,
         ));
     }
-    crate::toml_format::from_toml_file(path)
+    crate::toml_format::from_toml_str(&text, Some(&shown))
 }

@@ -179,6 +179,18 @@ fn settings_for_a_variable_that_drives_nothing() {
 }
 
 #[test]
+fn an_unquoted_name_is_said_to_need_quotes() {
+    let text = GOOD_HEAD.replace("rx = \"q\"", "rx = theta");
+    assert_reports(
+        &text,
+        &["m.toml:4: TOML error", "write \"theta\" in quotes"],
+    );
+    // A number or a boolean misspelt gets no such hint.
+    let msg = error_of(&GOOD_HEAD.replace("rx = \"q\"", "rx = 1.2.3"));
+    assert!(!msg.contains("quotes"), "{msg}");
+}
+
+#[test]
 fn non_finite_gravity_names_its_line() {
     let text = GOOD_HEAD.replace("name = \"t\"\n", "name = \"t\"\ngravity = [0, 0, -inf]\n");
     assert_reports(
