@@ -230,6 +230,11 @@ impl fmt::Display for Detail<'_> {
                 // Finite at the start and not after: the run diverged.
                 if *step > 0 {
                     f.write_str(" (the run diverged: lower --dt)")?;
+                } else {
+                    f.write_str(
+                        " at the start: the start state, or the model's masses, inertias or \
+                         lengths, overflow double precision (the largest number is 1.8e308)",
+                    )?;
                 }
                 Ok(())
             }

@@ -551,6 +551,15 @@ where
                 }
             }
         }
+        // Overflowed entries make every pivot NaN: that is the model's numbers, not a
+        // singular matrix.
+        if packed[..nd * nd].iter().any(|x| !x.is_finite()) {
+            return Err(SimError::NonFinite {
+                step,
+                t,
+                what: "the VI's Newton matrix".into(),
+            });
+        }
         lu_factor_packed(packed, nd, self.pivots.as_mut_slice()).map_err(|c| {
             SimError::SingularJacobian {
                 step,
