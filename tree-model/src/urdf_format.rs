@@ -761,6 +761,23 @@ fn check_required(
             return Err((format!("URDF: {owner}<{tag}> has no <{c}>"), line));
         }
     }
+    // A shape the reader does not use, but urdf-rs fails on without one (and without a line).
+    for node in root.descendants().filter(|n| n.has_tag_name("geometry")) {
+        if !node.children().any(|n| n.is_element()) {
+            let owner = node
+                .ancestors()
+                .find(|a| a.has_tag_name("link"))
+                .and_then(|a| a.attribute("name"))
+                .unwrap_or_default();
+            return Err((
+                format!(
+                    "URDF: link `{owner}`: <geometry> has no shape (<box>, <cylinder>, \
+                     <sphere> or <mesh>)"
+                ),
+                line_at(node.range().start),
+            ));
+        }
+    }
     Ok(())
 }
 

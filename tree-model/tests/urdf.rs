@@ -254,6 +254,12 @@ fn what_urdf_rs_requires_is_named_with_its_element_and_line() {
         msg.contains(":19: URDF: joint `joint2`: <limit> has no `velocity` attribute"),
         "{msg}"
     );
+    // An empty <geometry>: urdf-rs's own error named no line and showed its parser's insides.
+    let shapeless = "<robot name=\"r\">\n<link name=\"base\">\n<visual>\n<geometry>\n</geometry>\n</visual>\n</link>\n</robot>";
+    assert_eq!(
+        error_of(shapeless),
+        "r.urdf:4: URDF: link `base`: <geometry> has no shape (<box>, <cylinder>, <sphere> or <mesh>)"
+    );
     assert_eq!(
         error_of("<robot name=\"empty\">\n</robot>"),
         "r.urdf:1: URDF: <robot> has no <link>: a robot needs at least one"
