@@ -14,7 +14,7 @@ use tree_mech::{ConstraintTerms, Order, System, Terms};
 use crate::arrays::{matrix, vector};
 use crate::errors::{bad, sim_error};
 use crate::model::Model;
-use crate::numbers::Numbers;
+use crate::numbers::{Numbers, PerVariable};
 
 #[pymethods]
 impl Model {
@@ -24,11 +24,11 @@ impl Model {
     fn evaluate<'py>(
         &self,
         py: Python<'py>,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
         t: f64,
         u: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
@@ -81,11 +81,11 @@ impl Model {
     fn forward_dynamics(
         &self,
         py: Python<'_>,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
         t: f64,
         u: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<Py<PyAny>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
@@ -110,9 +110,9 @@ impl Model {
     fn inverse_dynamics(
         &self,
         py: Python<'_>,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<Py<PyAny>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
@@ -133,7 +133,7 @@ impl Model {
     fn constraints_at<'py>(
         &self,
         py: Python<'py>,
-        q: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
@@ -161,7 +161,7 @@ impl Model {
 
     /// The mass matrix M(q), every variable (`evaluate()["M"]` alone; Pinocchio's `crba`).
     #[pyo3(signature = (q=None))]
-    fn mass_matrix(&self, py: Python<'_>, q: Option<Numbers<'_, Ix1>>) -> PyResult<Py<PyAny>> {
+    fn mass_matrix(&self, py: Python<'_>, q: Option<PerVariable<'_>>) -> PyResult<Py<PyAny>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
         let mut terms = Terms::zeros(Dyn(self.n()));

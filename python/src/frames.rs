@@ -1,7 +1,6 @@
 //! A model's frames: poses, Jacobians, twists and accelerations in a named reference, and the
 //! centre of mass (Pinocchio's names where it has them).
 
-use numpy::ndarray::Ix1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use tree_mech::nalgebra::DMatrix;
@@ -10,7 +9,7 @@ use tree_mech::runtime::kinematics::Reference;
 use crate::arrays::{matrix, vector};
 use crate::errors::bad;
 use crate::model::Model;
-use crate::numbers::Numbers;
+use crate::numbers::PerVariable;
 
 /// A frame reference by its name, or a `ValueError` naming the three.
 pub(crate) fn parse_reference(name: &str) -> PyResult<Reference> {
@@ -30,7 +29,7 @@ impl Model {
         &self,
         py: Python<'_>,
         frame: &str,
-        q: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
     ) -> PyResult<Py<PyAny>> {
         let (k, f) = self.frame_at(frame, q, None, None)?;
         let m = k.pose(f).matrix();
@@ -46,7 +45,7 @@ impl Model {
         &self,
         py: Python<'_>,
         frame: &str,
-        q: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
         reference: &str,
     ) -> PyResult<Py<PyAny>> {
         let reference = parse_reference(reference)?;
@@ -61,8 +60,8 @@ impl Model {
         &self,
         py: Python<'_>,
         frame: &str,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
         reference: &str,
     ) -> PyResult<Py<PyAny>> {
         let reference = parse_reference(reference)?;
@@ -81,9 +80,9 @@ impl Model {
         &self,
         py: Python<'_>,
         frame: &str,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
+        ddq: Option<PerVariable<'_>>,
         reference: &str,
         classical: bool,
     ) -> PyResult<Py<PyAny>> {
@@ -102,9 +101,9 @@ impl Model {
     fn center_of_mass<'py>(
         &self,
         py: Python<'py>,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let k = self.frames_at(q, dq, ddq)?;
         let c = k.center_of_mass();
@@ -119,7 +118,7 @@ impl Model {
     /// The centre of mass's Jacobian at `q`: 3 × (variables), `vcom = J @ dq` (Pinocchio's
     /// `jacobianCenterOfMass`, every body counted).
     #[pyo3(signature = (q=None))]
-    fn com_jacobian(&self, py: Python<'_>, q: Option<Numbers<'_, Ix1>>) -> PyResult<Py<PyAny>> {
+    fn com_jacobian(&self, py: Python<'_>, q: Option<PerVariable<'_>>) -> PyResult<Py<PyAny>> {
         let k = self.frames_at(q, None, None)?;
         Ok(matrix(py, &k.com_jacobian()))
     }

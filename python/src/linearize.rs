@@ -16,7 +16,7 @@ use tree_mech::{Trajectory as CoreTrajectory, TreeSystem};
 use crate::arrays::{count, entry};
 use crate::errors::{bad, sim_error};
 use crate::model::Model;
-use crate::numbers::Numbers;
+use crate::numbers::{Numbers, PerVariable};
 use crate::progress::watched;
 use crate::simulate::method;
 use crate::trajectory::Trajectory;
@@ -107,8 +107,8 @@ impl Model {
     fn linearize<'py>(
         &self,
         py: Python<'py>,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
         u: Option<Numbers<'_, Ix1>>,
         t: f64,
         dt: Option<f64>,
@@ -117,7 +117,7 @@ impl Model {
         forcing: &str,
         alpha: f64,
         second_order: bool,
-        ddq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;

@@ -17,7 +17,7 @@ use tree_mech::TreeSystem;
 
 use crate::arrays::{check_finite, vector};
 use crate::errors::{bad, model_error, system_error, ModelError};
-use crate::numbers::Numbers;
+use crate::numbers::{Numbers, PerVariable};
 
 /// A model read at run time, with its interpreted system.
 #[pyclass(module = "tree_mech", frozen)]
@@ -43,9 +43,9 @@ impl Model {
     /// The frames' kinematics at `(q, dq, ddq)` (defaults: the model's q0, dq0 and zero).
     pub(crate) fn frames_at(
         &self,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<std::sync::MutexGuard<'_, FrameKinematics>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
@@ -60,9 +60,9 @@ impl Model {
     pub(crate) fn frame_at(
         &self,
         name: &str,
-        q: Option<Numbers<'_, Ix1>>,
-        dq: Option<Numbers<'_, Ix1>>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        q: Option<PerVariable<'_>>,
+        dq: Option<PerVariable<'_>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<(std::sync::MutexGuard<'_, FrameKinematics>, usize)> {
         let k = self.frames_at(q, dq, ddq)?;
         let f = k.frame(name).map_err(|e| bad(e.to_string()))?;
@@ -93,13 +93,29 @@ impl Model {
     pub(crate) fn vector(
         &self,
         what: &str,
-        given: Option<Numbers<'_, Ix1>>,
+        given: Option<PerVariable<'_>>,
         default: impl Fn(usize) -> f64,
     ) -> PyResult<Vector<Dyn>> {
         let n = self.n();
         match given {
             None => Ok(Vector::<Dyn>::from_fn(n, |i, _| default(i))),
-            Some(a) => {
+            Some(PerVariable::Named(named)) => {
+                let mut v = Vector::<Dyn>::from_fn(n, |i, _| default(i));
+                for (name, x) in named {
+                    let Some(i) = self.model.variable_index(&name) else {
+                        let names = self.names();
+                        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+                        return Err(bad(format!(
+                            "{what} names `{name}`, which is not a variable of the model{}",
+                            model::nearest(&name, &names)
+                        )));
+                    };
+                    v[i] = x;
+                }
+                check_finite(what, v.as_slice(), &self.names())?;
+                Ok(v)
+            }
+            Some(PerVariable::Array(a)) => {
                 let v = a.as_array();
                 if v.len() != n {
                     return Err(bad(format!(
@@ -164,7 +180,7 @@ impl Model {
         sys: &TreeSystem,
         q: &Vector<Dyn>,
         dq: &Vector<Dyn>,
-        ddq: Option<Numbers<'_, Ix1>>,
+        ddq: Option<PerVariable<'_>>,
     ) -> PyResult<Kinematics> {
         Ok(match ddq {
             None => Kinematics::Model(ModelMotions::of(sys)),
@@ -203,6 +219,19 @@ impl Model {
     #[getter]
     fn variables(&self) -> Vec<String> {
         self.names()
+    }
+
+    /// The number of configuration variables (Pinocchio's `nq`); q has this many entries.
+    #[getter]
+    fn nq(&self) -> usize {
+        self.n()
+    }
+
+    /// The number of velocity variables (Pinocchio's `nv`): every variable here is one
+    /// number (no quaternions), so it equals `nq`.
+    #[getter]
+    fn nv(&self) -> usize {
+        self.n()
     }
 
     /// The dynamic (simulated) variables' names.
@@ -301,23 +330,30 @@ impl Prescription for Kinematics {
     }
 }
 
-/// Reads a model file (TOML, or URDF by its extension).
+/// Reads a model file (TOML, or URDF by its extension or its XML), with the variables of
+/// `lock` held still (the command line's `--lock`).
 #[pyfunction]
-#[pyo3(signature = (path, floating_base=false))]
-pub(crate) fn load(py: Python<'_>, path: PathBuf, floating_base: bool) -> PyResult<Model> {
+#[pyo3(signature = (path, floating_base=false, lock=None))]
+pub(crate) fn load(
+    py: Python<'_>,
+    path: PathBuf,
+    floating_base: bool,
+    lock: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Model> {
     let m = model::from_file(&path, model::UrdfOptions { floating_base })
         .map_err(|e| model_error(py, &e))?;
-    Model::of(m)
+    Model::of(locked(py, m, lock)?)
 }
 
-/// Reads a model from text: `format` "toml" or "urdf".
+/// Reads a model from text: `format` "toml" or "urdf"; `lock` as [`load`]'s.
 #[pyfunction]
-#[pyo3(signature = (text, format="toml", floating_base=false))]
+#[pyo3(signature = (text, format="toml", floating_base=false, lock=None))]
 pub(crate) fn loads(
     py: Python<'_>,
     text: &str,
     format: &str,
     floating_base: bool,
+    lock: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Model> {
     let m = match format {
         "toml" => model::from_toml_str(text, None),
@@ -325,5 +361,45 @@ pub(crate) fn loads(
         other => return Err(bad(format!("format `{other}`: use `toml` or `urdf`"))),
     }
     .map_err(|e| model_error(py, &e))?;
-    Model::of(m)
+    Model::of(locked(py, m, lock)?)
+}
+
+/// `m` with the variables of `lock` held: a dict `{name: value or None}` (None: at its
+/// q0), a list of `"name"`/`"name=value"`, or one such string, comma-separated.
+fn locked(
+    py: Python<'_>,
+    m: model::Model,
+    lock: Option<&Bound<'_, PyAny>>,
+) -> PyResult<model::Model> {
+    let Some(lock) = lock else {
+        return Ok(m);
+    };
+    let in_python = |e: String| bad(e.replace("--lock", "lock"));
+    let mut locks = Vec::new();
+    if let Ok(dict) = lock.cast::<pyo3::types::PyDict>() {
+        for (name, value) in dict.iter() {
+            let variable: String = name
+                .extract()
+                .map_err(|_| bad("lock's keys are variable names"))?;
+            let value: Option<f64> = value
+                .extract()
+                .map_err(|_| bad(format!("lock's `{variable}`: a number, or None for its q0")))?;
+            if value.is_some_and(|x| !x.is_finite()) {
+                return Err(bad(format!("lock's `{variable}` must be a finite number")));
+            }
+            locks.push(model::Lock { variable, value });
+        }
+    } else if let Ok(text) = lock.extract::<String>() {
+        for part in text.split(',') {
+            locks.push(model::Lock::parse(part).map_err(in_python)?);
+        }
+    } else {
+        let parts: Vec<String> = lock.extract().map_err(|_| {
+            bad("lock is a dict {name: value or None}, a list of \"name\" or \"name=value\", or such a string")
+        })?;
+        for part in &parts {
+            locks.push(model::Lock::parse(part).map_err(in_python)?);
+        }
+    }
+    m.locked(&locks).map_err(|e| model_error(py, &e))
 }

@@ -75,3 +75,35 @@ fn refuse_what_is_not_numbers(ob: &Borrowed<'_, '_, PyAny>) -> PyResult<()> {
     }
     Ok(())
 }
+
+/// A number per variable: an array in the model's order, or a dict by name (`{"theta":
+/// 0.3}`, as task files allow) whose missing variables keep their default.
+pub(crate) enum PerVariable<'py> {
+    /// Every variable, in order.
+    Array(Numbers<'py, numpy::Ix1>),
+    /// Some variables by name.
+    Named(Vec<(String, f64)>),
+}
+
+impl<'a, 'py> FromPyObject<'a, 'py> for PerVariable<'py> {
+    type Error = PyErr;
+
+    fn extract(ob: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        let Ok(dict) = ob.cast::<pyo3::types::PyDict>() else {
+            return ob
+                .extract::<Numbers<'py, numpy::Ix1>>()
+                .map(PerVariable::Array);
+        };
+        let mut named = Vec::with_capacity(dict.len());
+        for (key, value) in dict.iter() {
+            let name: String = key.extract().map_err(|_| {
+                PyTypeError::new_err("a dict of values per variable is keyed by variable name")
+            })?;
+            let x: f64 = value.extract().map_err(|_| {
+                PyTypeError::new_err(format!("the value of `{name}` must be a number"))
+            })?;
+            named.push((name, x));
+        }
+        Ok(PerVariable::Named(named))
+    }
+}

@@ -1,7 +1,6 @@
 //! `Model.simulate`: one run from a start, its integrator and inputs named as the CLI names
 //! them, Ctrl-C and progress honoured while it runs.
 
-use numpy::ndarray::Ix1;
 use numpy::{AllowTypeChange, PyArrayLike1, PyArrayLike2};
 use pyo3::prelude::*;
 use tree_mech::integrate::{Forcing, InputSchedule, Method, SimOptions, Tolerance, ViSettings};
@@ -12,7 +11,7 @@ use tree_mech::{SimError, Trajectory as CoreTrajectory, TreeSystem};
 use crate::arrays::{check_rows, count};
 use crate::errors::{bad, sim_error};
 use crate::model::Model;
-use crate::numbers::Numbers;
+use crate::numbers::PerVariable;
 use crate::trajectory::Trajectory;
 
 /// The integrator named by `integrator` with the options of `simulate`.
@@ -89,8 +88,8 @@ impl Model {
         duration: f64,
         dt: f64,
         integrator: &str,
-        q0: Option<Numbers<'_, Ix1>>,
-        dq0: Option<Numbers<'_, Ix1>>,
+        q0: Option<PerVariable<'_>>,
+        dq0: Option<PerVariable<'_>>,
         u: Option<&Bound<'_, PyAny>>,
         every: i64,
         alpha: f64,

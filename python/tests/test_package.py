@@ -628,3 +628,32 @@ def test_one_rule_for_every_front_end_and_no_argument_taken_for_what_it_is_not()
         tm.optimize(task, max_iterations=0)
     with pytest.raises(TypeError, match="`cost` must be a list of terms"):
         tm.optimize(dict(task, cost={"kind": "control", "weight": 1.0}))
+
+
+def test_a_newcomers_calls_lock_sizes_and_values_by_name():
+    """load(lock=…) as the command line's --lock; nq and nv; q and dq by name as task files
+    allow, the rest at the model's own start."""
+    panda = str(ROOT / "models/panda.urdf")
+    full = tm.load(panda)
+    fingers = [v for v in full.variables if "finger" in v]
+    assert len(fingers) == 2
+    for lock in (",".join(fingers), fingers, {f: None for f in fingers}):
+        held = tm.load(panda, lock=lock)
+        assert held.nq == held.nv == full.nq - 2 and not set(fingers) & set(held.variables)
+    at = tm.load(panda, lock={fingers[0]: 0.02, fingers[1]: 0.01})
+    assert at.nq == full.nq - 2
+    with pytest.raises(tm.ModelError, match="no such variable"):
+        tm.load(panda, lock=["nowhere"])
+    with pytest.raises(ValueError, match="lock `a=x`: `x` is not a finite number"):
+        tm.load(panda, lock="a=x")
+    m = tm.load(str(ROOT / "models/cartpole.toml"))
+    by_name = m.simulate(0.5, 0.01, q0={"theta": 0.3})
+    q0 = np.array(m.q0)
+    q0[m.variables.index("theta")] = 0.3
+    by_array = m.simulate(0.5, 0.01, q0=q0)
+    assert np.array_equal(by_name.q, by_array.q)
+    assert np.array_equal(m.evaluate(q={"theta": 0.3})["M"], m.evaluate(q=q0)["M"])
+    with pytest.raises(ValueError, match="q0 names `thta`, which is not a variable of the model; the names are `theta`"):
+        m.simulate(0.5, 0.01, q0={"thta": 0.3})
+    with pytest.raises(ValueError, match=r"dq0\[0\] \(`x`\) is NaN"):
+        m.simulate(0.5, 0.01, dq0={"x": float("nan")})

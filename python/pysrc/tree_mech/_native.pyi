@@ -1,9 +1,12 @@
 from os import PathLike
-from typing import Any, Callable, Optional, Sequence, Union, final
+from typing import Any, Callable, Mapping, Optional, Sequence, Union, final
 
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import ArrayLike
+
+# A number per variable: an array in the model's order, or a dict of some by name.
+_PerVariable = Union[ArrayLike, Mapping[str, float]]
 
 __all__ = [
     "Model",
@@ -51,6 +54,8 @@ class Rollouts:
 class Model:
     name: str
     variables: list[str]
+    nq: int
+    nv: int
     dynamic: list[str]
     kinematic: list[str]
     inputs: list[str]
@@ -60,65 +65,65 @@ class Model:
     dq0: npt.NDArray[np.float64]
     def evaluate(
         self,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
         t: float = 0.0,
         u: Optional[ArrayLike] = None,
-        ddq: Optional[ArrayLike] = None,
+        ddq: Optional[_PerVariable] = None,
     ) -> dict: ...
     def forward_dynamics(
         self,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
         t: float = 0.0,
         u: Optional[ArrayLike] = None,
-        ddq: Optional[ArrayLike] = None,
+        ddq: Optional[_PerVariable] = None,
     ) -> npt.NDArray[np.float64]: ...
     def inverse_dynamics(
         self,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
-        ddq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
+        ddq: Optional[_PerVariable] = None,
     ) -> npt.NDArray[np.float64]: ...
-    def constraints_at(self, q: Optional[ArrayLike] = None) -> dict: ...
-    def mass_matrix(self, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
-    def frame_pose(self, frame: str, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
+    def constraints_at(self, q: Optional[_PerVariable] = None) -> dict: ...
+    def mass_matrix(self, q: Optional[_PerVariable] = None) -> npt.NDArray[np.float64]: ...
+    def frame_pose(self, frame: str, q: Optional[_PerVariable] = None) -> npt.NDArray[np.float64]: ...
     def frame_jacobian(
         self,
         frame: str,
-        q: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
         reference: str = "local_world_aligned",
     ) -> npt.NDArray[np.float64]: ...
     def frame_velocity(
         self,
         frame: str,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
         reference: str = "local_world_aligned",
     ) -> npt.NDArray[np.float64]: ...
     def frame_acceleration(
         self,
         frame: str,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
-        ddq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
+        ddq: Optional[_PerVariable] = None,
         reference: str = "local_world_aligned",
         classical: bool = False,
     ) -> npt.NDArray[np.float64]: ...
     def center_of_mass(
         self,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
-        ddq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
+        ddq: Optional[_PerVariable] = None,
     ) -> dict: ...
-    def com_jacobian(self, q: Optional[ArrayLike] = None) -> npt.NDArray[np.float64]: ...
+    def com_jacobian(self, q: Optional[_PerVariable] = None) -> npt.NDArray[np.float64]: ...
     def simulate(
         self,
         duration: float,
         dt: float,
         integrator: str = "vi",
-        q0: Optional[ArrayLike] = None,
-        dq0: Optional[ArrayLike] = None,
+        q0: Optional[_PerVariable] = None,
+        dq0: Optional[_PerVariable] = None,
         u: Optional[ArrayLike] = None,
         every: int = 1,
         alpha: float = 0.5,
@@ -131,8 +136,8 @@ class Model:
     ) -> Trajectory: ...
     def linearize(
         self,
-        q: Optional[ArrayLike] = None,
-        dq: Optional[ArrayLike] = None,
+        q: Optional[_PerVariable] = None,
+        dq: Optional[_PerVariable] = None,
         u: Optional[ArrayLike] = None,
         t: float = 0.0,
         dt: Optional[float] = None,
@@ -141,7 +146,7 @@ class Model:
         forcing: str = "split",
         alpha: float = 0.5,
         second_order: bool = False,
-        ddq: Optional[ArrayLike] = None,
+        ddq: Optional[_PerVariable] = None,
     ) -> dict: ...
     def linearize_trajectory(
         self,
@@ -191,8 +196,17 @@ class VariationalStepper:
     ) -> tuple: ...
     def momentum(self, t1: float, q1: ArrayLike, t2: float, q2: ArrayLike) -> np.ndarray: ...
 
-def load(path: Union[str, PathLike], floating_base: bool = False) -> Model: ...
-def loads(text: str, format: str = "toml", floating_base: bool = False) -> Model: ...
+def load(
+    path: Union[str, PathLike],
+    floating_base: bool = False,
+    lock: Union[str, Sequence[str], Mapping[str, Optional[float]], None] = None,
+) -> Model: ...
+def loads(
+    text: str,
+    format: str = "toml",
+    floating_base: bool = False,
+    lock: Union[str, Sequence[str], Mapping[str, Optional[float]], None] = None,
+) -> Model: ...
 def optimize_text(
     text: str,
     base: Union[str, PathLike],
