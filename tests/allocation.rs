@@ -309,3 +309,25 @@ fn task_iterations_allocate_nothing() {
         none_between(file, &counts);
     }
 }
+
+/// A stepper's steps (the VI and RK4, a constraint and a prescribed variable among them)
+/// allocate nothing after the first.
+#[test]
+fn a_stepper_allocates_nothing_a_step() {
+    use tree_mech::integrate::{Method, Stepper};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/trep-vi.toml");
+    let m = tree_mech::model::from_toml_file(path).unwrap();
+    for method in [Method::Vi(ViSettings::default()), Method::Rk4] {
+        let sys = TreeSystem::new(&m).unwrap();
+        let (q0, dq0) = sys.initial_state();
+        let mut s = Stepper::new(sys, method, 0.01, q0.as_slice(), dq0.as_slice()).unwrap();
+        s.step(&[0.1]).unwrap();
+        let n = allocations(|| {
+            for k in 0..20 {
+                s.step(&[0.1 * k as f64]).unwrap();
+                std::hint::black_box(s.energy());
+            }
+        });
+        assert_eq!(n, 0, "{method:?}: {n} allocations in 20 steps");
+    }
+}

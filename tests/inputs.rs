@@ -3,7 +3,9 @@
 
 mod common;
 
-use tree_mech::integrate::{run_with_inputs, InputSchedule, Method, SimOptions, ViSettings};
+use tree_mech::integrate::{
+    run_with_inputs, InputSchedule, Method, SimOptions, Stepper, ViSettings,
+};
 use tree_mech::model::{self, Model};
 use tree_mech::runtime::ModelMotions;
 use tree_mech::{tree_model, NoForce, System, TreeSystem};
@@ -198,4 +200,153 @@ fn input_errors_name_the_entry_and_its_line() {
         e.contains("input `k`: variable `theta` is kinematic"),
         "{e}"
     );
+}
+
+tree_model!(struct TrepVi from "tests/models/trep-vi.toml");
+
+/// Every sample `(t, q, q̇, E)` of a run of `sys` from its start under `u_k` at step k.
+fn samples<S: System>(sys: &mut S, method: Method, u: &[f64]) -> Vec<(f64, Vec<f64>, Vec<f64>, f64)>
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let (q0, dq0) = sys.initial_state();
+    let rows = u
+        .iter()
+        .enumerate()
+        .map(|(k, &x)| (k as f64 * 0.01, vec![x]));
+    let schedule = InputSchedule::from_rows(rows.collect()).unwrap();
+    let options = SimOptions::new(method, 0.01, 0.01 * u.len() as f64);
+    let mut motion = ModelMotions::of(sys);
+    let mut out = Vec::new();
+    run_with_inputs(
+        sys,
+        &q0,
+        &dq0,
+        &options,
+        &mut NoForce,
+        &mut motion,
+        &schedule,
+        &mut |s| {
+            out.push((s.t, s.q.to_vec(), s.dq.to_vec(), s.energy));
+            Ok(())
+        },
+    )
+    .unwrap();
+    out
+}
+
+/// A stepper under `u_k` at step k hands out what a run under the same schedule records.
+fn stepped_like_a_run<S: System>(mut sys: S, method: Method, what: &str)
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let u: Vec<f64> = (0..200).map(|k| 2.0 * (0.05 * k as f64).sin()).collect();
+    let run = samples(&mut sys, method, &u);
+    let (q0, dq0) = sys.initial_state();
+    let mut stepper = Stepper::new(sys, method, 0.01, q0.as_slice(), dq0.as_slice()).unwrap();
+    let close = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= 1e-13 * (1.0 + y.abs()))
+    };
+    for (k, (t, q, dq, energy)) in run.iter().enumerate() {
+        assert!(
+            (stepper.t() - t).abs() < 1e-12,
+            "{what}: t {} vs {t}",
+            stepper.t()
+        );
+        assert!(
+            close(stepper.q().as_slice(), q),
+            "{what} step {k}: q {:?} vs {q:?}",
+            stepper.q()
+        );
+        assert!(
+            close(stepper.dq().as_slice(), dq),
+            "{what} step {k}: dq {:?} vs {dq:?}",
+            stepper.dq()
+        );
+        let e = stepper.energy();
+        assert!(
+            (e - energy).abs() <= 1e-12 * (1.0 + energy.abs()),
+            "{what} step {k}: E {e} vs {energy}"
+        );
+        if k < u.len() {
+            stepper.step(&[u[k]]).unwrap();
+        }
+    }
+    assert_eq!(stepper.steps(), u.len());
+    // The string holds: the VI's constraint and the start's projection act in the stepper too.
+    assert_eq!(
+        stepper.p().is_some(),
+        matches!(method, Method::Vi(_)),
+        "{what}"
+    );
+}
+
+#[test]
+fn a_stepper_steps_as_a_run_under_the_same_inputs() {
+    // A kinematic hand on a prescribed motion, a string constraint, damping, a spring and an
+    // input: each in force a step at a time as over a whole run, compiled and interpreted.
+    for method in [Method::Vi(ViSettings::default()), Method::Rk4] {
+        stepped_like_a_run(TrepVi, method, &format!("compiled {method:?}"));
+        let interpreted = TreeSystem::new(&TrepVi::model()).unwrap();
+        stepped_like_a_run(interpreted, method, &format!("interpreted {method:?}"));
+    }
+}
+
+#[test]
+fn a_stepper_refuses_what_it_cannot_step_and_stops_after_a_failure() {
+    #[track_caller]
+    fn err(r: Result<(), tree_mech::SimError>) -> String {
+        r.unwrap_err().to_string()
+    }
+    let vi = Method::Vi(ViSettings::default());
+    let (q0, dq0) = Slider.initial_state();
+    let (q0, dq0) = (q0.as_slice().to_vec(), dq0.as_slice().to_vec());
+    let rk45 = Method::Rk45(Default::default());
+    assert_eq!(
+        Stepper::new(Slider, rk45, 0.01, &q0, &dq0)
+            .unwrap_err()
+            .to_string(),
+        "a stepper advances by fixed steps of dt, and rk45 chooses its own: use rk4 or the VI"
+    );
+    assert!(Stepper::new(Slider, vi, 0.0, &q0, &dq0)
+        .unwrap_err()
+        .to_string()
+        .contains("time step must be a positive finite number"));
+    let mut s = Stepper::new(Slider, vi, 0.01, &q0, &dq0).unwrap();
+    assert_eq!(
+        err(s.step(&[1.0, 2.0])),
+        "2 input values given; the system has 1 (push)"
+    );
+    assert_eq!(
+        err(s.step(&[f64::NAN])),
+        "input `push` is NaN, not a finite number"
+    );
+    assert_eq!(s.steps(), 0, "a refused step is not taken");
+    // No input: zero. F = 3 N on 2 kg from rest: x = ¾ t² exactly.
+    s.step(&[]).unwrap();
+    for _ in 0..100 {
+        s.step(&[3.0]).unwrap();
+    }
+    assert!((s.q()[0] - 0.75).abs() < 1e-9, "x = {}", s.q()[0]);
+    // A push that overflows the velocity (by 5e305 m/s a step) fails a step; the stepper
+    // then refuses until it is reset.
+    let failed = (0..1000).find_map(|_| s.step(&[1e308]).err()).unwrap();
+    let e = failed.to_string();
+    assert!(e.contains("not finite"), "{e}");
+    let k = s.steps() + 1;
+    assert!(k > 102, "{k}");
+    let e = err(s.step(&[0.0]));
+    assert!(
+        e.starts_with(&format!("the stepper stopped (step {k} failed: ")),
+        "{e}"
+    );
+    assert!(e.ends_with("; start it again with reset"), "{e}");
+    assert!(err(s.reset(&[0.0, 1.0], &dq0)).contains("the start has 2 and 1 entries"));
+    s.reset(&q0, &dq0).unwrap();
+    s.step(&[3.0]).unwrap();
+    assert_eq!((s.steps(), s.q()[0]), (1, 0.75 * 0.01 * 0.01));
 }

@@ -8,6 +8,7 @@ pub(crate) mod laned;
 mod projection;
 mod rk4;
 pub(crate) mod rk45;
+mod stepper;
 mod vi;
 
 pub use crate::context::StepContext;
@@ -15,6 +16,7 @@ pub use discrete::DiscreteLagrangian;
 pub use projection::{project_initial_state, Moved};
 pub use rk4::Rk4;
 pub use rk45::{Rk45, Tolerance};
+pub use stepper::Stepper;
 pub use vi::{
     Forcing, JacobianUpdate, MidpointVi, StepCovector, StepDerivatives, StepInput, StepOutput,
     StepSecondDerivatives, ViSettings, MAX_TURN,
@@ -23,7 +25,7 @@ pub use vi::{
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
 use crate::dynamics::{
-    prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription,
+    prescribe, Baumgarte, Dynamics, GeneralizedForce, ModelMotions, Prescription, Split,
 };
 use crate::error::{Seconds, SimError};
 use crate::system::{System, Terms, Vector};
@@ -369,22 +371,7 @@ where
     let mut dq = dq0.clone();
     let mut dynamics = Dynamics::new(sys);
     dynamics.baumgarte = options.baumgarte;
-    prescribe(
-        &dynamics.split.kinematic,
-        motion,
-        0.0,
-        &mut q,
-        &mut dq,
-        None,
-    );
-    if q.iter().chain(dq.iter()).any(|x| !x.is_finite()) {
-        return Err(SimError::NonFinite {
-            step: 0,
-            t: 0.0,
-            what: "initial state".into(),
-        });
-    }
-    let moved = project_initial_state(sys, &dynamics.split, &mut q, &mut dq)?;
+    let moved = start_state(sys, &dynamics.split, motion, &mut q, &mut dq)?;
     let mut rec = Recorder {
         summary: RunSummary {
             moved,
@@ -451,6 +438,31 @@ where
         e.under_inputs(&sys.input_names(), inputs.at(t))
     })?;
     Ok(rec.summary)
+}
+
+/// The start of a run: `(q0, q̇0)` with the kinematic entries set from `motion` at `t = 0`,
+/// checked finite, and projected onto the constraints (what moved is returned).
+fn start_state<S, P>(
+    sys: &mut S,
+    split: &Split,
+    motion: &mut P,
+    q: &mut Vector<S::N>,
+    dq: &mut Vector<S::N>,
+) -> Result<Vec<Moved>, SimError>
+where
+    S: System,
+    P: Prescription,
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    prescribe(&split.kinematic, motion, 0.0, q, dq, None);
+    if q.iter().chain(dq.iter()).any(|x| !x.is_finite()) {
+        return Err(SimError::NonFinite {
+            step: 0,
+            t: 0.0,
+            what: "initial state".into(),
+        });
+    }
+    project_initial_state(sys, split, q, dq)
 }
 
 /// An integrator as [`run`] drives it: it hands out its start, then steps, saying when it
