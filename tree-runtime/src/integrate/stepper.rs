@@ -16,7 +16,7 @@ enum Stepping<S: System>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    Rk4(Rk4<S::N>),
+    Rk4(Box<Rk4<S::N>>),
     /// The VI on `(q, p)`; `q_next` is its buffer for the next configuration.
     Vi {
         vi: Box<MidpointVi<S::N>>,
@@ -75,7 +75,7 @@ where
     pub fn new(sys: S, method: Method, dt: f64, q0: &[f64], dq0: &[f64]) -> Result<Self, SimError> {
         check_options(&SimOptions::new(method, dt, dt))?;
         let stepping = match method {
-            Method::Rk4 => Stepping::Rk4(Rk4::new(&sys)),
+            Method::Rk4 => Stepping::Rk4(Box::new(Rk4::new(&sys))),
             Method::Vi(settings) => Stepping::Vi {
                 vi: Box::new(MidpointVi::new(&sys, settings)),
                 p: sys.zero_vector(),
