@@ -131,7 +131,7 @@ fn the_cart_is_pushed_the_same_compiled_and_interpreted() {
     .unwrap_err();
     assert_eq!(
         err.to_string(),
-        "2 input values given a step; the system has 1 inputs (push)"
+        "2 input values given a step; the system has 1 input (push)"
     );
 }
 

@@ -357,7 +357,7 @@ fn task_file_errors_name_the_problem_and_line() {
         (&format!("{good}controls = [\"hand_y\"]\n{cost}[limits]\nhand_y = [0.5, 1.0]\n"), "t.toml:9: the limits [0.5, 1] of `hand_y` exclude its start value 0.1"),
         (good, "the task has no cost"),
         (&format!("{good}colour = 3\n{cost}"), "t.toml:4: TOML error: unknown field `colour`"),
-        (&format!("{good}[start]\nq = [0.0]\n{cost}"), "t.toml:5: `start.q` has 1 entries; it needs 4"),
+        (&format!("{good}[start]\nq = [0.0]\n{cost}"), "t.toml:5: `start.q` has 1 entry; it needs 4"),
     ];
     for (text, want) in cases {
         let err = task_from_str(text, Some("t.toml"), &base)

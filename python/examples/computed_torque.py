@@ -1,7 +1,7 @@
 """Computed-torque control of the UR5 from Python: the arm follows a joint-space sine, its
 torques from the model's inverse dynamics, τ = ID(q, q̇, q̈_ref + Kp e + Kd ė), held over each
-10 ms step of an RK4 simulation started from a pushed state. The error decays as the
-closed loop ë + Kd ė + Kp e = 0 says it should.
+10 ms step of RK4, stepped one step at a time by `Model.stepper` from a pushed state. The
+error decays as the closed loop ë + Kd ė + Kp e = 0 says it should.
 
     pip install ./python
     python python/examples/computed_torque.py
@@ -31,17 +31,16 @@ def track(duration: float = 2.0, push: float = 0.2) -> tuple[np.ndarray, np.ndar
     """Runs the loop; returns the times and the largest joint error at each."""
     arm = tm.load(str(ROOT / "models/ur5.urdf"))
     q0 = arm.q0.copy()
-    q, dq = q0 + push, np.zeros_like(q0)  # started off the reference
+    # Started off the reference.
+    loop = arm.stepper(DT, integrator="rk4", q0=q0 + push, dq0=np.zeros_like(q0))
     times, errors = [], []
-    for k in range(round(duration / DT)):
-        t = k * DT
-        q_ref, dq_ref, ddq_ref = reference(t, q0)
+    for _ in range(round(duration / DT)):
+        q, dq = loop.q, loop.dq
+        q_ref, dq_ref, ddq_ref = reference(loop.t, q0)
         e, de = q_ref - q, dq_ref - dq
-        tau = arm.inverse_dynamics(q, dq, ddq_ref + KP * e + KD * de)
-        step = arm.simulate(DT, DT, integrator="rk4", q0=q, dq0=dq, u=tau)
-        q, dq = step.q[-1], step.dq[-1]
-        times.append(t + DT)
-        errors.append(float(np.max(np.abs(reference(t + DT, q0)[0] - q))))
+        loop.step(arm.inverse_dynamics(q, dq, ddq_ref + KP * e + KD * de))
+        times.append(loop.t)
+        errors.append(float(np.max(np.abs(reference(loop.t, q0)[0] - loop.q))))
     return np.array(times), np.array(errors)
 
 

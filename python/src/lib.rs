@@ -5,11 +5,13 @@
 //! One module a topic: `errors` (the two exceptions), `numbers` and `arrays` (arguments in,
 //! arrays out), `progress` (Ctrl-C and progress while the GIL is released), `model` (a model
 //! and what it is made of), then what a model computes — `evaluation`, `frames`, `simulate`
-//! with `trajectory`, `linearize`, `rollouts` — and `stepper` (the VI a step at a time) and
-//! `optimize` (a task file solved). `Model`'s Python methods sit in the topic's module, each
+//! with `trajectory`, `linearize`, `rollouts`, `closed_loop` (a model stepped under inputs
+//! given a step at a time) — and `stepper` (trep's VI a step at a time) and `optimize` (a
+//! task file solved). `Model`'s Python methods sit in the topic's module, each
 //! a `#[pymethods]` block of its own.
 
 mod arrays;
+mod closed_loop;
 mod errors;
 mod evaluation;
 mod frames;
@@ -38,6 +40,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Trajectory>()?;
     m.add_class::<Rollouts>()?;
     m.add_class::<VariationalStepper>()?;
+    m.add_class::<closed_loop::Stepper>()?;
     m.add_function(wrap_pyfunction!(model::load, m)?)?;
     m.add_function(wrap_pyfunction!(model::loads, m)?)?;
     m.add_function(wrap_pyfunction!(optimize::optimize_text, m)?)?;

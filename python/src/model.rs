@@ -119,8 +119,9 @@ impl Model {
                 let v = a.as_array();
                 if v.len() != n {
                     return Err(bad(format!(
-                        "{what} has {} entries; the model has {n} variables ({})",
-                        v.len(),
+                        "{what} has {}; the model has {} ({})",
+                        model::Counted(v.len(), "entry"),
+                        model::Counted(n, "variable"),
                         self.names().join(", ")
                     )));
                 }
@@ -156,8 +157,8 @@ impl Model {
     pub(crate) fn checked_inputs(&self, u: Vec<f64>) -> PyResult<Vec<f64>> {
         if u.len() != self.model.inputs.len() {
             return Err(bad(format!(
-                "u has {} entries; the model has {}",
-                u.len(),
+                "u has {}; the model has {}",
+                model::Counted(u.len(), "entry"),
                 self.inputs_phrase()
             )));
         }
@@ -165,11 +166,15 @@ impl Model {
         Ok(u)
     }
 
-    /// "no inputs", or "2 inputs (push, pull)".
+    /// "no inputs", "1 input (push)", or "2 inputs (push, pull)".
     pub(crate) fn inputs_phrase(&self) -> String {
         match self.model.inputs.len() {
             0 => "no inputs".to_string(),
-            n => format!("{n} inputs ({})", self.input_names().join(", ")),
+            n => format!(
+                "{} ({})",
+                model::Counted(n, "input"),
+                self.input_names().join(", ")
+            ),
         }
     }
 

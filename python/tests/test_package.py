@@ -44,7 +44,7 @@ def test_evaluate_gives_the_pendulums_terms():
 
 def test_bad_input_is_an_exception_with_a_sentence():
     m = tm.load(PENDULUM)
-    with pytest.raises(ValueError, match="q has 2 entries; the model has 1 variables"):
+    with pytest.raises(ValueError, match="q has 2 entries; the model has 1 variable"):
         m.evaluate(q=[0.1, 0.2])
     with pytest.raises(tm.SimulationError, match="not finite"):
         m.evaluate(q=[0.1], dq=[1e200])
@@ -423,7 +423,7 @@ def test_evaluate_linearize_and_forward_dynamics_refuse_bad_inputs_by_name():
     for call in (m.evaluate, m.forward_dynamics, m.linearize):
         with pytest.raises(ValueError, match=r"u\[0\] \(`push`\) is NaN"):
             call(u=[np.nan])
-        with pytest.raises(ValueError, match=r"u has 2 entries; the model has 1 inputs \(push\)"):
+        with pytest.raises(ValueError, match=r"u has 2 entries; the model has 1 input \(push\)"):
             call(u=[1.0, 2.0])
         # Finite but too large for the model: the overflow names the input behind it.
         with pytest.raises(tm.SimulationError, match=r"under the inputs push = 1e308, is not finite"):
@@ -453,7 +453,7 @@ def test_forward_dynamics_and_the_mass_matrix_alone_equal_the_evaluation():
     assert abs(qdd[0] - 1.2) < 1e-12
     with pytest.raises(ValueError, match=r"q has 3 entries; the model has 2 variables"):
         cart.mass_matrix([0.0, 0.0, 0.0])
-    with pytest.raises(ValueError, match=r"u has 1 entries; the model has no inputs$"):
+    with pytest.raises(ValueError, match=r"u has 1 entry; the model has no inputs$"):
         tm.load(PENDULUM).forward_dynamics(u=[1.0])
 
 
@@ -657,3 +657,76 @@ def test_a_newcomers_calls_lock_sizes_and_values_by_name():
         m.simulate(0.5, 0.01, q0={"thta": 0.3})
     with pytest.raises(ValueError, match=r"dq0\[0\] \(`x`\) is NaN"):
         m.simulate(0.5, 0.01, dq0={"x": float("nan")})
+
+
+@pytest.mark.parametrize("integrator", ["vi", "rk4"])
+def test_a_stepper_steps_as_simulate_runs_under_the_same_inputs(integrator):
+    # The cart-pole pushed by u_k at step k: stepped one step at a time (the VI keeping its
+    # momentum between steps) it is the run simulate takes under the same schedule.
+    m = tm.load(CART)
+    u = 2.0 * np.sin(0.05 * np.arange(150))[:, None]
+    run = m.simulate(1.5, 0.01, integrator=integrator, u=u)
+    s = m.stepper(0.01, integrator=integrator)
+    assert isinstance(s, tm.Stepper) and s.t == 0.0 and s.dt == 0.01
+    for k in range(len(run)):
+        assert s.t == pytest.approx(run.t[k], abs=1e-12)
+        np.testing.assert_allclose(s.q, run.q[k], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(s.dq, run.dq[k], rtol=1e-13, atol=1e-13)
+        assert s.energy == pytest.approx(run.energy[k], rel=1e-12, abs=1e-12)
+        if k < len(u):
+            s.step(u[k])
+    assert s.steps == 150 and (s.p is None) == (integrator == "rk4")
+    # reset starts again from the model's start, or from a state by name.
+    s.reset()
+    assert s.t == 0.0 and s.steps == 0 and np.array_equal(s.q, m.q0)
+    s.reset(q0={"theta": 0.3})
+    assert list(s.q) == [0.0, 0.3]
+
+
+def test_a_stepper_closes_the_loop():
+    # PD on the pendulum's torque-free joint via a model with an input: the loop reads the
+    # state each step and brings the pendulum from 0.5 rad to rest (ω² = kp + g, ζ ≈ 0.73).
+    m = tm.loads(
+        '[[frame]]\nname = "pivot"\nrx = "theta"\n[[frame]]\nname = "bob"\nparent = "pivot"\n'
+        'tz = -1.0\nmass = 1.0\n[variables.theta]\nq0 = 0.5\n'
+        '[[input]]\nname = "torque"\nvariable = "theta"\n'
+    )
+    s = m.stepper(0.01)
+    for _ in range(1000):
+        s.step([-20.0 * s.q[0] - 8.0 * s.dq[0]])
+    assert abs(s.q[0]) < 1e-6 and s.t == pytest.approx(10.0, abs=1e-12)
+    free = m.stepper(0.01)
+    for _ in range(1000):
+        free.step()
+    # Without the loop it keeps swinging: the VI holds its energy.
+    assert free.energy == pytest.approx(-9.81 * math.cos(0.5), rel=1e-4)
+
+
+def test_a_stepper_refuses_bad_arguments_and_stops_after_a_failure():
+    m = tm.load(CART)
+    with pytest.raises(ValueError, match="rk45 chooses its own"):
+        m.stepper(0.01, integrator="rk45")
+    with pytest.raises(ValueError, match="time step must be a positive finite number"):
+        m.stepper(0.0)
+    with pytest.raises(ValueError, match="looser than"):
+        m.stepper(0.01, newton_tol=1e-3)
+    s = m.stepper(0.01)
+    with pytest.raises(ValueError, match=r"u has 2 entries; the model has 1 input \(push\)"):
+        s.step([1.0, 2.0])
+    with pytest.raises(ValueError, match="input `push` is NaN, not a finite number"):
+        s.step([float("nan")])
+    with pytest.raises(TypeError):
+        s.step("ab")
+    assert s.steps == 0
+    with pytest.raises(tm.SimulationError, match="not finite") as failed:
+        for _ in range(1000):
+            s.step([1e308])
+    k = failed.value.step
+    assert k is not None and k <= s.steps + 1
+    with pytest.raises(tm.SimulationError, match="the stepper stopped .* start it again with reset"):
+        s.step([0.0])
+    with pytest.raises(ValueError, match="q0 names `thta`.*theta"):
+        s.reset(q0={"thta": 0.1})
+    s.reset()
+    s.step([1.0])
+    assert s.steps == 1

@@ -31,6 +31,10 @@ def test_the_readme_python_example_runs_and_means_what_it_says():
     assert lin["qdd_dq"].shape == (2, 2) and lin["vi"]["q2_dq1"].shape == (2, 2)
     traj = scope["traj"]
     assert traj.q.shape == (201, 2) and np.all(np.isfinite(traj.energy))
+    # The cart held within 0.1 m of x = 0 by its PD while the pole, let go 0.3 rad from
+    # upright, falls through hanging (θ = π) within the 1 s.
+    s = scope["s"]
+    assert abs(s.t - 1.0) < 1e-12 and abs(s.q[0]) < 0.1 and s.q[1] > np.pi
     batch = scope["batch"]
     assert batch.q.shape[0] == 64 and all(e is None for e in batch.errors)
     assert scope["plan"]["converged"]

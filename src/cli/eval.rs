@@ -84,7 +84,7 @@ fn run_eval(
     }
     let input_names: Vec<String> = sys.input_names();
     let u = match u {
-        Some(text) => parse_list(text, input_names.len(), "u", &input_names, "inputs")?,
+        Some(text) => parse_list(text, input_names.len(), "u", &input_names, "input")?,
         None => vec![0.0; sys.input_count()],
     };
     let e = evaluate_state(&mut sys, time, &q, &dq, &u).map_err(|e| e.to_string())?;

@@ -183,7 +183,7 @@ fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), Strin
         .dq
         .map_or(Ok(dq0), |s| parse_vector(s, n, "dq", &names))?;
     let u = match request.u {
-        Some(text) => parse_list(text, inputs.len(), "u", &inputs, "inputs")?,
+        Some(text) => parse_list(text, inputs.len(), "u", &inputs, "input")?,
         None => vec![0.0; inputs.len()],
     };
     let p = match request.p {
@@ -192,7 +192,7 @@ fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), Strin
             dynamic.len(),
             "p",
             &dynamic,
-            "dynamic variables",
+            "dynamic variable",
         )?),
         None => None,
     };

@@ -157,11 +157,11 @@ fn counted(n: usize, noun: &str) -> String {
 
 /// Parses a comma-separated vector of exactly `n` numbers.
 fn parse_vector(text: &str, n: usize, what: &str, names: &[String]) -> Result<Vector<Dyn>, String> {
-    parse_list(text, n, what, names, "variables").map(Vector::<Dyn>::from_vec)
+    parse_list(text, n, what, names, "variable").map(Vector::<Dyn>::from_vec)
 }
 
 /// Parses a comma-separated list of exactly `n` finite numbers for option `--{what}`, one per
-/// entry of `names` (the model's `kind`).
+/// entry of `names` (the model's `kind`s).
 fn parse_list(
     text: &str,
     n: usize,
@@ -181,8 +181,9 @@ fn parse_list(
         .collect::<Result<_, _>>()?;
     if values.len() != n {
         return Err(format!(
-            "--{what} has {} values; the model has {n} {kind} ({})",
+            "--{what} has {} values; the model has {} ({})",
             values.len(),
+            tree_mech::model::Counted(n, kind),
             names.join(", ")
         ));
     }

@@ -633,7 +633,7 @@ fn input_schedule(
         ));
     }
     if let Some(text) = u {
-        let values = parse_list(text, names.len(), "u", &names, "inputs")?;
+        let values = parse_list(text, names.len(), "u", &names, "input")?;
         return Ok(InputSchedule::constant(values));
     }
     let Some(path) = file else {

@@ -251,7 +251,7 @@ fn bad_input_is_a_short_error_and_a_failing_exit() {
         (&["simulate"], "required"),
         (
             &["eval", "models/pendulum.toml", "--q", "1,2"],
-            "--q has 2 values; the model has 1 variables (theta)",
+            "--q has 2 values; the model has 1 variable (theta)",
         ),
         (
             &["eval", "models/pendulum.toml", "--dq", "x"],
@@ -769,7 +769,7 @@ fn simulate_takes_inputs_constant_or_from_a_file_and_writes_them() {
     for (args, expected) in [
         (
             vec!["--u", "1,2"],
-            "--u has 2 values; the model has 1 inputs (push)",
+            "--u has 2 values; the model has 1 input (push)",
         ),
         (vec!["--u", "x"], "--u: `x` is not a finite number"),
         (vec!["--inputs", "missing.csv"], "cannot read `missing.csv`"),

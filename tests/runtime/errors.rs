@@ -117,7 +117,7 @@ fn bad_arguments_are_errors() {
         ..Default::default()
     };
     let e = simulate(&mut sys, &short, &dq0, &ok, &mut NoForce, &mut |_| {}).unwrap_err();
-    assert!(e.to_string().contains("the system has 1 variables"), "{e}");
+    assert!(e.to_string().contains("the system has 1 variable"), "{e}");
     // A duration shorter than one step: refused by every front end (it would end at t = dt).
     for (dt, duration) in [
         (0.0, 1.0),

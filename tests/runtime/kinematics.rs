@@ -176,7 +176,7 @@ fn bad_input_is_a_clear_error() {
     );
     let e = k.update(&[0.0], None, None).unwrap_err().to_string();
     assert!(
-        e.contains("q has 1 entries; the model has 2 variables"),
+        e.contains("q has 1 entry; the model has 2 variables"),
         "{e}"
     );
     let e = k

@@ -61,7 +61,7 @@ pub use model::{
     SpringKind, Variable, DEFAULT_GRAVITY,
 };
 pub use motion::{CubicSpline, Motion};
-pub use number::{Given, Rounded};
+pub use number::{Counted, Given, Rounded};
 pub use primitive::{Primitive, PrimitiveKind, Value};
 pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{

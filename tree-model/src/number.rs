@@ -81,3 +81,31 @@ mod tests {
         assert_eq!(rounded(-0.1), "-0.1");
     }
 }
+
+/// A count with its noun, plural unless one (a consonant's `y` becomes `ies`):
+/// `Counted(1, "input")` is `1 input`, `Counted(2, "entry")` is `2 entries`.
+///
+/// ```
+/// use tree_model::Counted;
+/// assert_eq!(Counted(1, "input").to_string(), "1 input");
+/// assert_eq!(Counted(0, "variable").to_string(), "0 variables");
+/// assert_eq!(Counted(3, "entry").to_string(), "3 entries");
+/// assert_eq!(Counted(1, "entry").to_string(), "1 entry");
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Counted<'a>(pub usize, pub &'a str);
+
+impl fmt::Display for Counted<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (n, noun) = (self.0, self.1);
+        if n == 1 {
+            return write!(f, "1 {noun}");
+        }
+        let consonant_y =
+            noun.ends_with('y') && !noun[..noun.len() - 1].ends_with(['a', 'e', 'i', 'o', 'u']);
+        match consonant_y {
+            true => write!(f, "{n} {}ies", &noun[..noun.len() - 1]),
+            false => write!(f, "{n} {noun}s"),
+        }
+    }
+}

@@ -247,8 +247,8 @@ fn per_name(
                 p.at(
                     span,
                     format!(
-                        "{what} has {} entries; it needs {} ({})",
-                        items.len(),
+                        "{what} has {}; it needs {} ({})",
+                        crate::Counted(items.len(), "entry"),
                         names.len(),
                         names.join(", ")
                     ),

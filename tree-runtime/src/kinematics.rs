@@ -179,8 +179,9 @@ impl Kinematics {
             let Some(x) = x else { continue };
             if x.len() != n {
                 return Err(SimError::InvalidInput(format!(
-                    "{what} has {} entries; the model has {n} variables",
-                    x.len()
+                    "{what} has {}; the model has {}",
+                    tree_model::Counted(x.len(), "entry"),
+                    tree_model::Counted(n, "variable")
                 )));
             }
             if let Some(i) = x.iter().position(|x| !x.is_finite()) {

@@ -12,6 +12,7 @@ __all__ = [
     "Model",
     "Trajectory",
     "Rollouts",
+    "Stepper",
     "VariationalStepper",
     "load",
     "loads",
@@ -170,12 +171,37 @@ class Model:
         models: Optional[Sequence["Model"]] = None,
         progress: Optional[Callable[[int, int], object]] = None,
     ) -> Rollouts: ...
+    def stepper(
+        self,
+        dt: float,
+        integrator: str = "vi",
+        q0: Optional[_PerVariable] = None,
+        dq0: Optional[_PerVariable] = None,
+        alpha: float = 0.5,
+        forcing: str = "split",
+        newton_tol: Optional[float] = None,
+    ) -> Stepper: ...
     def with_parameters(
         self,
         masses: Optional[dict[str, float]] = None,
         constants: Optional[dict[str, float]] = None,
         gravity: Optional[Sequence[float]] = None,
     ) -> "Model": ...
+
+@final
+class Stepper:
+    """A model stepped by fixed steps of dt under inputs given a step at a time."""
+    t: float
+    q: npt.NDArray[np.float64]
+    dq: npt.NDArray[np.float64]
+    p: Optional[npt.NDArray[np.float64]]
+    energy: float
+    dt: float
+    steps: int
+    def step(self, u: Optional[ArrayLike] = None) -> None: ...
+    def reset(
+        self, q0: Optional[_PerVariable] = None, dq0: Optional[_PerVariable] = None
+    ) -> None: ...
 
 @final
 class VariationalStepper:

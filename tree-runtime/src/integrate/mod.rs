@@ -327,19 +327,19 @@ where
 {
     if !inputs.is_empty() && inputs.width() != sys.input_count() {
         return Err(SimError::InvalidInput(format!(
-            "{} input values given a step; the system has {} inputs ({})",
+            "{} input values given a step; the system has {} ({})",
             inputs.width(),
-            sys.input_count(),
+            tree_model::Counted(sys.input_count(), "input"),
             sys.input_names().join(", ")
         )));
     }
     let n = sys.dof();
     if q0.len() != n || dq0.len() != n {
         return Err(SimError::InvalidInput(format!(
-            "initial state has {} and {} entries; the system has {} variables",
+            "initial state has {} and {} entries; the system has {}",
             q0.len(),
             dq0.len(),
-            n
+            tree_model::Counted(n, "variable")
         )));
     }
     Ok(())

@@ -110,9 +110,10 @@ where
         let n = self.sys.dof();
         if q0.len() != n || dq0.len() != n {
             return Err(SimError::InvalidInput(format!(
-                "the start has {} and {} entries; the system has {n} variables",
+                "the start has {} and {} entries; the system has {}",
                 q0.len(),
-                dq0.len()
+                dq0.len(),
+                tree_model::Counted(n, "variable")
             )));
         }
         self.failed = Some("the start was refused".into());
