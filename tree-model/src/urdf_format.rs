@@ -450,13 +450,24 @@ fn joint_frames(
         let name = if i == last {
             robot.links[child_link].name.clone()
         } else {
-            format!("{}_{}", joint.name, i + 1)
+            joint_piece_name(&joint.name, i + 1, tree)
         };
         out.push(name.clone(), parent, motion, line);
         parent = Some(name);
     }
     out.link_frame[child_link] = Some(out.spec.frames.len() - 1);
     Ok(())
+}
+
+/// The name of piece `k` of a joint's chain before its child link: `joint#k`, the `#` marking
+/// a frame the loader made (no link of the file is named so; another `#` in the rare file
+/// whose link takes that name).
+fn joint_piece_name(joint: &str, k: usize, tree: &Tree) -> String {
+    let mut name = format!("{joint}#{k}");
+    while tree.links.contains_key(name.as_str()) {
+        name.push('#');
+    }
+    name
 }
 
 /// `<origin xyz rpy>`: `tx ty tz` (the non-zero ones), then `rz(yaw) ry(pitch) rx(roll)`.

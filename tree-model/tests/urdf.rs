@@ -339,3 +339,28 @@ fn an_effort_limits_its_input_to_what_the_file_says_or_is_refused_with_its_line(
         );
     }
 }
+
+#[test]
+fn the_loaders_frames_are_marked_and_never_take_a_links_name() {
+    // joint1's chain: tz(0.1) as `joint1#1`, then rz(joint1) as link `upper`.
+    let m = from_urdf_str(&arm(GOOD_JOINT2), Some("r.urdf"), FIXED).unwrap();
+    let names: Vec<&str> = m.frames.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(&names[..3], ["base", "joint1#1", "upper"]);
+    let made: Vec<&&str> = names.iter().filter(|n| n.contains('#')).collect();
+    assert!(made
+        .iter()
+        .all(|n| n.starts_with("joint1#") || n.starts_with("joint2#")));
+    // iCub's clash: joint `l_elbow` and a link `l_elbow_1` (the old `JOINT_k` names took it),
+    // and a file whose link is literally named `joint1#1`.
+    let clash = arm(GOOD_JOINT2)
+        .replace("\"lower\"", "\"joint1_1\"")
+        .replace("<link name=\"base\"/>", "<link name=\"base\"/><link name=\"joint1#1\"/>")
+        .replace(
+            "</robot>",
+            "<joint name=\"j3\" type=\"fixed\"><parent link=\"base\"/><child link=\"joint1#1\"/></joint></robot>",
+        );
+    let m = from_urdf_str(&clash, Some("r.urdf"), FIXED).unwrap();
+    for name in ["joint1_1", "joint1#1", "joint1#1#"] {
+        assert!(m.frame_index(name).is_some(), "{name}");
+    }
+}
