@@ -6,11 +6,12 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::output::{drawing_error, OutputFile, Sentence};
 use plotters::style::{register_font, FontStyle};
-use tree_mech::model::{ConstraintKind, Joint, Model, SpringKind};
+use tree_mech::model::{ConstraintKind, Joint, Model, Rounded, SpringKind};
 use tree_mech::runtime::{Pose, Seconds};
 
+use super::bodies::{BodyBox, Rail};
+use super::output::{drawing_error, OutputFile, Sentence};
 use super::plot::FONT;
 
 /// Picture size in pixels.
@@ -33,6 +34,8 @@ struct Figure {
     links: Vec<([usize; 2], RGBColor)>,
     /// Frames that an element attaches to and that carry no mass below them: control points.
     anchors: Vec<usize>,
+    /// The bodies with a size, drawn as their equivalent boxes (the others as dots).
+    boxes: Vec<BodyBox>,
 }
 
 const STRING: RGBColor = RGBColor(30, 30, 30);
@@ -42,6 +45,8 @@ const BONE: RGBColor = RGBColor(90, 90, 100);
 const WOOD: RGBColor = RGBColor(170, 110, 50);
 const ANCHOR: RGBColor = RGBColor(200, 40, 40);
 const GRID: RGBColor = RGBColor(215, 215, 220);
+const RAIL: RGBColor = RGBColor(150, 150, 160);
+const TARGET: RGBColor = RGBColor(220, 0, 120);
 
 impl Figure {
     fn of(model: &Model) -> Figure {
@@ -94,11 +99,15 @@ impl Figure {
             .collect();
         anchors.sort_unstable();
         anchors.dedup();
+        let boxes = (0..n)
+            .filter_map(|k| BodyBox::of(k, model.frames[k].mass.as_ref()?))
+            .collect();
         Figure {
             bones,
             masses,
             links,
             anchors,
+            boxes,
         }
     }
 }
@@ -131,12 +140,16 @@ fn unit(a: [f64; 3]) -> [f64; 3] {
 }
 
 impl Camera {
-    /// Frames the box `lo..hi` so that it fills about two thirds of the picture.
+    /// Frames the box `lo..hi` so that it fills most of the picture: its width (the box's
+    /// diagonal across) against the picture's width, its height (with the depth seen from
+    /// above) against the picture's height, whichever is tighter.
     fn framing(lo: [f64; 3], hi: [f64; 3]) -> Camera {
         let centre = [0, 1, 2].map(|i| 0.5 * (lo[i] + hi[i]));
         let extent = (0..3).map(|i| hi[i] - lo[i]).fold(1e-3, f64::max);
         let (azimuth, elevation) = (50f64.to_radians(), 20f64.to_radians());
         let distance = 2.5 * extent;
+        let across = (hi[0] - lo[0]).hypot(hi[1] - lo[1]).max(1e-3);
+        let tall = (hi[2] - lo[2] + elevation.sin() * across).max(1e-3);
         let eye = [
             centre[0] + distance * elevation.cos() * azimuth.cos(),
             centre[1] + distance * elevation.cos() * azimuth.sin(),
@@ -150,7 +163,7 @@ impl Camera {
             right,
             up,
             forward,
-            focal: 0.65 * SIZE.1 as f64 * distance / extent,
+            focal: distance * f64::min(0.85 * SIZE.0 as f64 / across, 0.8 * SIZE.1 as f64 / tall),
         }
     }
 
@@ -171,11 +184,13 @@ impl Camera {
 /// Where the camera looks.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum CameraMode {
-    /// Fixed on the start's workspace: everything at the start, and the ball around the root
-    /// its masses can swing through (a swinging arm stays in view; a falling body leaves it).
+    /// Fixed on the whole run: every body, control point and target at every picture is in
+    /// view, on a floor under the lowest point the run reaches.
     #[default]
     Fixed,
-    /// The same scale, following the root (the first rotating frame: a free body's torso).
+    /// Following the root (the first rotating frame: a free body's torso), at the scale that
+    /// keeps the bodies around it in view; the floor grid slides by under the view and the
+    /// caption gives the root's height.
     Track,
 }
 
@@ -187,6 +202,80 @@ fn root_frame(model: &Model) -> usize {
         .iter()
         .position(|f| f.primitive.is_rotation())
         .unwrap_or(0)
+}
+
+/// What the camera frames over a run: a box fixed in the world around everything the run
+/// shows, or, tracking, a box around the root holding everything the run shows about it.
+struct View {
+    lo: [f64; 3],
+    hi: [f64; 3],
+    mode: CameraMode,
+    root: usize,
+}
+
+impl View {
+    /// The box around what is drawn — the bodies (their boxes), the bones, the control points —
+    /// and the targets (fixed) over all of `frames`, or around the root (tracking); non-finite
+    /// positions are left out (a floating base's massless translation frames are not drawn,
+    /// and stay at the ground while the body falls).
+    fn of(
+        figure: &Figure,
+        model: &Model,
+        frames: &[Vec<Pose>],
+        targets: &[[f64; 3]],
+        mode: CameraMode,
+    ) -> View {
+        let root = root_frame(model);
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let mut take = |p: [f64; 3], shift: [f64; 3]| {
+            if p.iter().chain(&shift).all(|x| x.is_finite()) {
+                for i in 0..3 {
+                    lo[i] = lo[i].min(p[i] - shift[i]);
+                    hi[i] = hi[i].max(p[i] - shift[i]);
+                }
+            }
+        };
+        for poses in frames {
+            let shift = match mode {
+                CameraMode::Fixed => [0.0; 3],
+                CameraMode::Track => poses[root].p,
+            };
+            let bones = figure
+                .bones
+                .iter()
+                .flat_map(|&(a, b)| a.into_iter().chain([b]));
+            let masses = figure.masses.iter().map(|m| m.0);
+            for k in bones.chain(masses).chain(figure.anchors.iter().copied()) {
+                take(poses[k].p, shift);
+            }
+            for body in &figure.boxes {
+                body.corners(&poses[body.frame])
+                    .into_iter()
+                    .for_each(|p| take(p, shift));
+            }
+        }
+        if mode == CameraMode::Fixed {
+            targets.iter().for_each(|&p| take(p, [0.0; 3]));
+        }
+        if lo[0] > hi[0] {
+            (lo, hi) = ([0.0; 3], [0.0; 3]);
+        }
+        View { lo, hi, mode, root }
+    }
+
+    /// The box the picture of `poses` frames.
+    fn at(&self, poses: &[Pose]) -> ([f64; 3], [f64; 3]) {
+        let shift = match self.mode {
+            CameraMode::Track if poses[self.root].p.iter().all(|x| x.is_finite()) => {
+                poses[self.root].p
+            }
+            _ => [0.0; 3],
+        };
+        (
+            [0, 1, 2].map(|i| self.lo[i] + shift[i]),
+            [0, 1, 2].map(|i| self.hi[i] + shift[i]),
+        )
+    }
 }
 
 /// Writes the animation of the frame poses `frames` (one `Vec<Pose>` per picture, taken at
@@ -201,6 +290,7 @@ pub fn write_gif(
     frames: &[Vec<Pose>],
     out: &OutputFile,
     mode: CameraMode,
+    targets: &[[f64; 3]],
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(), String> {
     let spacing = match times {
@@ -212,29 +302,11 @@ pub fn write_gif(
         |e: &dyn Sentence| format!("cannot write `{}`: {}", out.path().display(), e.sentence());
     let _ = register_font("sans-serif", FontStyle::Normal, FONT);
     let figure = Figure::of(model);
-    let Some(start) = frames.first() else {
+    if frames.is_empty() {
         return Ok(());
-    };
-    // The start's workspace: every frame at the start, and the ball around the root with
-    // its farthest mass on the rim.
-    let root = root_frame(model);
-    let centre = start[root].p;
-    let finite = |p: &&Pose| p.p.iter().all(|x| x.is_finite());
-    let reach = figure
-        .masses
-        .iter()
-        .map(|&(k, _)| &start[k])
-        .filter(finite)
-        .map(|p| dot(sub(p.p, centre), sub(p.p, centre)).sqrt())
-        .fold(1e-3, f64::max);
-    let (mut lo0, mut hi0) = (centre.map(|x| x - reach), centre.map(|x| x + reach));
-    for p in start.iter().filter(finite) {
-        for i in 0..3 {
-            lo0[i] = lo0[i].min(p.p[i]);
-            hi0[i] = hi0[i].max(p.p[i]);
-        }
     }
-    let floor = lo0[2];
+    let view = View::of(&figure, model, frames, targets, mode);
+    let rails = Rail::of(model, frames);
     let file = std::fs::File::create(out.temp()).map_err(|e| err(&e.to_string()))?;
     let mut encoder = gif::Encoder::new(
         std::io::BufWriter::new(file),
@@ -250,14 +322,7 @@ pub fn write_gif(
         .map_or(1, |n| n.get())
         .clamp(1, 8);
     let picture = |k: usize| -> Result<gif::Frame<'static>, String> {
-        let shift = match mode {
-            CameraMode::Fixed => [0.0; 3],
-            CameraMode::Track => sub(frames[k][root].p, centre),
-        };
-        let (lo, hi) = (
-            [0, 1, 2].map(|i| lo0[i] + shift[i]),
-            [0, 1, 2].map(|i| hi0[i] + shift[i]),
-        );
+        let (lo, hi) = view.at(&frames[k]);
         let camera = Camera::framing(lo, hi);
         let mut rgb = vec![255u8; 3 * (SIZE.0 * SIZE.1) as usize];
         {
@@ -267,7 +332,9 @@ pub fn write_gif(
                 camera: &camera,
                 lo,
                 hi,
-                floor,
+                rails: &rails,
+                targets,
+                root: (mode == CameraMode::Track).then_some(view.root),
                 model,
             };
             draw_frame(&area, &scene, times[k], &frames[k])?;
@@ -317,8 +384,8 @@ pub fn write_gif(
 
 /// The GIF's one palette: the figure's own colours exactly, then a 6×6×6 colour cube and a
 /// ramp of greys for everything between (anti-aliased text).
-const NAMED: [RGBColor; 9] = [
-    WHITE, BLACK, STRING, SPRING, DAMPER, BONE, WOOD, ANCHOR, GRID,
+const NAMED: [RGBColor; 11] = [
+    WHITE, BLACK, STRING, SPRING, DAMPER, BONE, WOOD, ANCHOR, GRID, RAIL, TARGET,
 ];
 const GREYS: usize = 256 - NAMED.len() - 216;
 
@@ -359,47 +426,36 @@ fn palette_index(c: [u8; 3]) -> u8 {
 struct Scene<'a> {
     figure: &'a Figure,
     camera: &'a Camera,
+    /// The box in view (its bottom is the floor's height).
     lo: [f64; 3],
     hi: [f64; 3],
-    /// The floor's height (world-fixed: the start's lowest point).
-    floor: f64,
+    rails: &'a [Rail],
+    /// Points the run aims for (a task's frame targets), marked.
+    targets: &'a [[f64; 3]],
+    /// The frame a tracking camera follows (its height is captioned).
+    root: Option<usize>,
     model: &'a Model,
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
+/// One picture: the floor, the rails, the bones and the elements' lines, the control points,
+/// the bodies (boxes where they have a size, dots where not), the targets and the caption.
 fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), String> {
-    let Scene {
-        figure,
-        camera,
-        lo,
-        hi,
-        floor,
-        model,
-    } = *scene;
     let e = drawing_error;
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let line = |a: [f64; 3], b: [f64; 3], style: ShapeStyle| -> Result<(), String> {
-        if let (Some((pa, _)), Some((pb, _))) = (camera.project(a), camera.project(b)) {
+        if let (Some((pa, _)), Some((pb, _))) = (scene.camera.project(a), scene.camera.project(b)) {
             root.draw(&PathElement::new(vec![pa, pb], style))
                 .map_err(|x| e(&x))?;
         }
         Ok(())
     };
-    // A floor grid fixed in the world under the start's lowest point, its lines on
-    // multiples of a tenth of the view (so a tracking camera sees it slide by).
-    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(1e-3, f64::max);
-    let cell = extent / 10.0;
-    let z = floor - 0.02 * extent;
-    let (x0, x1) = (lo[0] - 0.25 * extent, hi[0] + 0.25 * extent);
-    let (y0, y1) = (lo[1] - 0.25 * extent, hi[1] + 0.25 * extent);
-    for i in (x0 / cell).ceil() as i64..=(x1 / cell).floor() as i64 {
-        let x = i as f64 * cell;
-        line([x, y0, z], [x, y1, z], GRID.stroke_width(1))?;
-    }
-    for i in (y0 / cell).ceil() as i64..=(y1 / cell).floor() as i64 {
-        let y = i as f64 * cell;
-        line([x0, y, z], [x1, y, z], GRID.stroke_width(1))?;
+    draw_floor(scene, &line)?;
+    let figure = scene.figure;
+    for rail in scene.rails {
+        let [a, b] = rail.ends(poses);
+        line(a, b, RAIL.stroke_width(4))?;
     }
     let origin = |k: Option<usize>| k.map_or([0.0; 3], |k| poses[k].p);
     for &(parent, child) in &figure.bones {
@@ -413,7 +469,7 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
         )?;
     }
     for &k in &figure.anchors {
-        if let Some(((x, y), _)) = camera.project(poses[k].p) {
+        if let Some(((x, y), _)) = scene.camera.project(poses[k].p) {
             root.draw(&Rectangle::new(
                 [(x - 3, y - 3), (x + 3, y + 3)],
                 ANCHOR.filled(),
@@ -421,13 +477,78 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
             .map_err(|x| e(&x))?;
         }
     }
-    // Masses far to near, so nearer dots cover farther ones.
+    for body in &figure.boxes {
+        let corners = body.corners(&poses[body.frame]);
+        for (a, b) in BodyBox::EDGES {
+            line(corners[a], corners[b], WOOD.stroke_width(2))?;
+        }
+    }
+    draw_dots(root, scene, poses)?;
+    let extent = (0..3)
+        .map(|i| scene.hi[i] - scene.lo[i])
+        .fold(1e-3, f64::max);
+    for &p in scene.targets {
+        let arm = 0.04 * extent;
+        for i in 0..3 {
+            let (mut a, mut b) = (p, p);
+            a[i] -= arm;
+            b[i] += arm;
+            line(a, b, TARGET.stroke_width(2))?;
+        }
+    }
+    let mut caption = format!("{}   t = {} s", scene.model.name, caption_time(t));
+    if let Some(k) = scene.root {
+        let z = poses[k].p[2];
+        caption += &format!(
+            "   {} at z = {} m",
+            scene.model.frames[k].name,
+            Rounded(z, 3)
+        );
+    }
+    root.draw(&Text::new(
+        caption,
+        (12, 12),
+        ("sans-serif", 18).into_font(),
+    ))
+    .map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// A floor grid at the bottom of the view, fixed in the world: its lines on multiples of a
+/// tenth of the view, so a tracking camera sees it slide by.
+fn draw_floor(
+    scene: &Scene,
+    line: &dyn Fn([f64; 3], [f64; 3], ShapeStyle) -> Result<(), String>,
+) -> Result<(), String> {
+    let (lo, hi) = (scene.lo, scene.hi);
+    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(1e-3, f64::max);
+    let cell = extent / 10.0;
+    let z = lo[2] - 0.02 * extent;
+    let (x0, x1) = (lo[0] - 0.25 * extent, hi[0] + 0.25 * extent);
+    let (y0, y1) = (lo[1] - 0.25 * extent, hi[1] + 0.25 * extent);
+    for i in (x0 / cell).ceil() as i64..=(x1 / cell).floor() as i64 {
+        let x = i as f64 * cell;
+        line([x, y0, z], [x, y1, z], GRID.stroke_width(1))?;
+    }
+    for i in (y0 / cell).ceil() as i64..=(y1 / cell).floor() as i64 {
+        let y = i as f64 * cell;
+        line([x0, y, z], [x1, y, z], GRID.stroke_width(1))?;
+    }
+    Ok(())
+}
+
+/// The point masses (bodies without a size) as dots sized by mass, far to near so nearer
+/// dots cover farther ones.
+fn draw_dots(root: &Area, scene: &Scene, poses: &[Pose]) -> Result<(), String> {
+    let figure = scene.figure;
+    let sized: Vec<usize> = figure.boxes.iter().map(|b| b.frame).collect();
     let heaviest = figure.masses.iter().map(|m| m.1).fold(0.0, f64::max);
     let mut dots: Vec<((i32, i32), f64, i32)> = figure
         .masses
         .iter()
+        .filter(|(k, _)| !sized.contains(k))
         .filter_map(|&(k, m)| {
-            let (at, depth) = camera.project(poses[k].p)?;
+            let (at, depth) = scene.camera.project(poses[k].p)?;
             let radius = 2.0 + 6.0 * (m / heaviest).cbrt();
             Some((at, depth, radius.round() as i32))
         })
@@ -435,16 +556,10 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
     dots.sort_by(|a, b| b.1.total_cmp(&a.1));
     for (at, _, r) in dots {
         root.draw(&Circle::new(at, r, WOOD.filled()))
-            .map_err(|x| e(&x))?;
+            .map_err(|x| drawing_error(&x))?;
         root.draw(&Circle::new(at, r, BLACK.stroke_width(1)))
-            .map_err(|x| e(&x))?;
+            .map_err(|x| drawing_error(&x))?;
     }
-    root.draw(&Text::new(
-        format!("{}   t = {} s", model.name, caption_time(t)),
-        (12, 12),
-        ("sans-serif", 18).into_font(),
-    ))
-    .map_err(|x| e(&x))?;
     Ok(())
 }
 
@@ -460,7 +575,66 @@ fn caption_time(t: f64) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::caption_time;
+    use super::*;
+    use tree_mech::integrate::{simulate, Method, SimOptions, ViSettings};
+    use tree_mech::nalgebra::Dyn;
+    use tree_mech::runtime::Vector;
+    use tree_mech::{NoForce, System, TreeSystem};
+
+    /// The humanoid's poses over a 2 s fall (19 m: no floor stops it), 21 pictures.
+    fn falling_humanoid() -> (Model, Vec<Vec<Pose>>) {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.toml");
+        let model = tree_mech::model::from_toml_file(path).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let (q0, dq0) = sys.initial_state();
+        let options = SimOptions::new(Method::Vi(ViSettings::default()), 0.01, 2.0);
+        let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap();
+        let pictures = (0..traj.len())
+            .step_by(10)
+            .map(|k| {
+                let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
+                sys.poses(&Vector::<Dyn>::from_column_slice(traj.q(k)), &mut poses);
+                poses
+            })
+            .collect();
+        (model, pictures)
+    }
+
+    #[test]
+    fn every_body_stays_in_the_picture_with_either_camera() {
+        let (model, pictures) = falling_humanoid();
+        let figure = Figure::of(&model);
+        assert!(figure.boxes.len() > 5, "the humanoid's links have sizes");
+        let target = [[0.5, 0.0, 2.0]];
+        for mode in [CameraMode::Fixed, CameraMode::Track] {
+            let view = View::of(&figure, &model, &pictures, &target, mode);
+            let mut filled = 0.0f64;
+            for poses in &pictures {
+                let (lo, hi) = view.at(poses);
+                let camera = Camera::framing(lo, hi);
+                let mut points: Vec<[f64; 3]> =
+                    figure.masses.iter().map(|m| poses[m.0].p).collect();
+                for body in &figure.boxes {
+                    points.extend(body.corners(&poses[body.frame]));
+                }
+                if mode == CameraMode::Fixed {
+                    points.extend(target);
+                }
+                let (mut top, mut bottom) = (f64::MAX, f64::MIN);
+                for p in points {
+                    let ((x, y), _) = camera.project(p).unwrap();
+                    assert!((0..SIZE.0 as i32).contains(&x), "{mode:?}: x = {x}");
+                    assert!((0..SIZE.1 as i32).contains(&y), "{mode:?}: y = {y}");
+                    (top, bottom) = (top.min(y as f64), bottom.max(y as f64));
+                }
+                filled = filled.max((bottom - top) / SIZE.1 as f64);
+            }
+            if mode == CameraMode::Track {
+                // Following it, the camera keeps the body large: most of the picture's height.
+                assert!(filled > 0.5, "the body fills {filled} of the height");
+            }
+        }
+    }
 
     #[test]
     fn the_caption_time_is_short_at_any_size() {

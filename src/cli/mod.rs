@@ -10,6 +10,7 @@ macro_rules! say {
 }
 
 mod animate;
+mod bodies;
 mod check;
 mod eval;
 pub mod interrupt;

@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use serde_json::json;
 use tree_mech::control::{
-    solve_task_until, BoxPhase, Iteration, Solver, Stop, TaskOptions, TaskResult, TaskSolver,
-    MAX_MU,
+    solve_task_until, BoxPhase, Control, Iteration, Solver, Stop, TaskOptions, TaskResult,
+    TaskSolver, MAX_MU,
 };
-use tree_mech::model::{self, Model, Task};
+use tree_mech::model::{self, CostTerm, Model, Target, Task};
 use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::trajectory::{CsvStream, Sample};
 use tree_mech::runtime::{Pose, Seconds, Vector};
@@ -294,15 +294,31 @@ fn write_plot(plan: &Knots, model: &Model, file: &OutputFile) -> Result<(), Stri
     for k in 0..=n {
         traj.push(&plan.sample(k));
     }
+    // The inputs held over each knot, in their units; kinematic controls are the prescribed
+    // variables' values, drawn in their panel already.
+    let inputs = plan
+        .task
+        .controls
+        .iter()
+        .enumerate()
+        .filter_map(|(c, control)| match control {
+            Control::Input(j) => Some((c, model.inputs[*j].variable)),
+            Control::Kinematic(_) => None,
+        });
     let control_panel = Panel {
-        caption: "controls (inputs in N or N·m; kinematic controls in m or rad)".into(),
-        y_desc: "u",
-        series: (plan.controls.iter().enumerate())
-            .map(|(c, name)| {
+        caption: "inputs (held over each knot)".into(),
+        y_desc: "u [N or N·m]",
+        series: inputs
+            .map(|(c, variable)| {
                 let points = (0..n)
                     .flat_map(|k| [(res.t[k], sol.u[k][c]), (res.t[k + 1], sol.u[k][c])])
                     .collect();
-                (name.clone(), points)
+                let unit = if model.is_angle(variable) {
+                    "N·m"
+                } else {
+                    "N"
+                };
+                (format!("{} [{unit}]", plan.controls[c]), points)
             })
             .collect(),
         x: Some(("t [s]", res.t[n])),
@@ -345,7 +361,26 @@ fn write_animation(
     }
     let times: Vec<f64> = knots.iter().map(|&k| res.t[k]).collect();
     let fixed = animate::CameraMode::Fixed;
-    animate::write_gif(model, &times, &poses, file, fixed, &mut |_, _| {})
+    let targets = frame_targets(plan.task, &poses[0]);
+    animate::write_gif(model, &times, &poses, file, fixed, &targets, &mut |_, _| {})
+}
+
+/// Where the task's frame terms aim, in the world (an offset target from its frame's start
+/// pose `start`), each once.
+fn frame_targets(task: &Task, start: &[Pose]) -> Vec<[f64; 3]> {
+    let mut targets: Vec<[f64; 3]> = Vec::new();
+    for term in task.running.iter().chain(&task.terminal) {
+        if let CostTerm::Frame { frame, target, .. } = term {
+            let p = match target {
+                Target::World(p) => *p,
+                Target::Offset(d) => std::array::from_fn(|i| start[*frame].p[i] + d[i]),
+            };
+            if !targets.contains(&p) {
+                targets.push(p);
+            }
+        }
+    }
+    targets
 }
 
 /// Where every frame a cost term names ends.

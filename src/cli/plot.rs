@@ -5,7 +5,7 @@
 
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
-use tree_mech::model::Model;
+use tree_mech::model::{ConstraintKind, Model};
 use tree_mech::Trajectory;
 
 use super::output::{drawing_error, OutputFile, Sentence};
@@ -113,6 +113,62 @@ fn draw_panel(area: &Area, panel: &Panel, t_end: f64) -> Result<(), String> {
     Ok(())
 }
 
+/// The most curves a panel of the variables shows: past it, curves of different size
+/// flatten each other against one scale, and the legend's colours repeat.
+const CROWDED: usize = 8;
+
+/// `panel` as panels of at most [`CROWDED`] curves each, in order (a model's variables come
+/// limb by limb), each on its own scale: "angles (1 of 3)" ….
+fn split_crowded(panel: Panel) -> Vec<Panel> {
+    if panel.series.len() <= CROWDED || panel.x.is_some() {
+        return vec![panel];
+    }
+    let parts = panel.series.len().div_ceil(CROWDED);
+    let size = panel.series.len().div_ceil(parts);
+    let mut series = panel.series.into_iter().peekable();
+    (1..=parts)
+        .map(|k| Panel {
+            caption: format!("{} ({k} of {parts})", panel.caption),
+            y_desc: panel.y_desc,
+            series: series.by_ref().take(size).collect(),
+            x: None,
+        })
+        .collect()
+}
+
+/// The constraints' multipliers λ in their units: a distance constraint `‖d‖² − ℓ² = 0`
+/// has λ in N/m (its tension is `−2ℓλ` N: a taut string has λ < 0); a plane or point
+/// constraint, a length, has λ in N.
+fn constraint_panel(traj: &Trajectory, model: &Model) -> Panel {
+    let mut units = Vec::new();
+    for c in &model.constraints {
+        let unit = match c.kind {
+            ConstraintKind::Distance { .. } => "N/m",
+            _ => "N",
+        };
+        units.extend(std::iter::repeat_n(unit, c.rows()));
+    }
+    let same = units.windows(2).all(|w| w[0] == w[1]);
+    Panel {
+        caption: "constraint multipliers λ (a string's tension is −2ℓλ: taut, λ < 0)".into(),
+        y_desc: match (same, units.first()) {
+            (true, Some(&"N/m")) => "λ [N/m]",
+            (true, _) => "λ [N]",
+            (false, _) => "λ [N/m or N]",
+        },
+        series: (0..traj.constraints.len())
+            .map(|r| {
+                let points = (0..traj.len())
+                    .map(|k| (traj.t[k], traj.lambda(k)[r]))
+                    .collect();
+                let unit = units.get(r).copied().unwrap_or("");
+                (format!("{} [{unit}]", traj.constraints[r]), points)
+            })
+            .collect(),
+        x: None,
+    }
+}
+
 /// Writes a PNG of `traj` (a run of `model`) to `out`.
 pub fn plot(traj: &Trajectory, model: &Model, out: &OutputFile) -> Result<(), String> {
     plot_with(traj, model, out, Vec::new())
@@ -171,22 +227,11 @@ pub fn plot_with(
         },
     ];
     if !traj.constraints.is_empty() {
-        panels.push(Panel {
-            caption: "constraint forces (λ; a taut string has λ < 0)".into(),
-            y_desc: "λ",
-            series: (0..traj.constraints.len())
-                .map(|r| {
-                    let points = (0..traj.len())
-                        .map(|k| (traj.t[k], traj.lambda(k)[r]))
-                        .collect();
-                    (traj.constraints[r].clone(), points)
-                })
-                .collect(),
-            x: None,
-        });
+        panels.push(constraint_panel(traj, model));
     }
     panels.extend(extra);
     panels.retain(|p| !p.series.is_empty());
+    let panels: Vec<Panel> = panels.into_iter().flat_map(split_crowded).collect();
     let height: u32 = panels.iter().map(Panel::height).sum();
     let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
     let (w, h) = (WIDTH * SCALE, height * SCALE);
@@ -227,4 +272,45 @@ pub fn plot_with(
         .and_then(|mut writer| writer.write_image_data(&small))
         .map_err(|e| err(&e.to_string()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_crowded_panel_is_split_in_order_and_a_short_one_kept() {
+        let series = |n: usize| -> Vec<Series> {
+            (0..n)
+                .map(|i| (format!("q{i}"), vec![(0.0, i as f64)]))
+                .collect()
+        };
+        let panel = |n: usize| Panel {
+            caption: "angles".into(),
+            y_desc: "q [rad]",
+            series: series(n),
+            x: None,
+        };
+        let parts = split_crowded(panel(21));
+        let sizes: Vec<usize> = parts.iter().map(|p| p.series.len()).collect();
+        assert_eq!(sizes, [7, 7, 7]);
+        assert_eq!(parts[2].caption, "angles (3 of 3)");
+        assert_eq!(parts[1].series[0].0, "q7");
+        assert_eq!(split_crowded(panel(CROWDED)).len(), 1);
+    }
+
+    #[test]
+    fn constraint_multipliers_carry_their_units() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/models/marionette.toml");
+        let model = tree_mech::model::from_toml_file(path).unwrap();
+        let rows = model.constraint_row_names();
+        let traj = Trajectory::new(Vec::new(), rows, 1);
+        let panel = constraint_panel(&traj, &model);
+        assert_eq!(panel.y_desc, "λ [N/m]");
+        assert!(
+            panel.series[0].0.ends_with(" [N/m]"),
+            "{}",
+            panel.series[0].0
+        );
+    }
 }

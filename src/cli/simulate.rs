@@ -516,11 +516,19 @@ fn draw<S: System<N = Dyn>>(
     );
     let encoding = Instant::now();
     let camera = outputs.camera;
-    animate::write_gif(model, frame_times, &poses, path, camera, &mut |k, _| {
-        if encoding.elapsed().as_millis() > 300 {
-            bar.set_position(k as u64);
-        }
-    })?;
+    animate::write_gif(
+        model,
+        frame_times,
+        &poses,
+        path,
+        camera,
+        &[],
+        &mut |k, _| {
+            if encoding.elapsed().as_millis() > 300 {
+                bar.set_position(k as u64);
+            }
+        },
+    )?;
     bar.finish_and_clear();
     Ok(())
 }
