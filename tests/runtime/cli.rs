@@ -303,12 +303,13 @@ fn simulate_animates_the_marionette_and_plots_its_constraint_forces() {
         frames += 1;
     }
     assert_eq!(frames, 11, "GIF frames");
-    // Five panels: angles (with 24 legend rows), lengths, kinematic, energy, forces.
+    // Nine panels of 280 pixels: the 21 angles as three of 7 curves, the lengths, the 18
+    // kinematic variables as three of 6, the energy, the multipliers.
     let png = std::fs::read(&png).unwrap();
     let width = u32::from_be_bytes(png[16..20].try_into().unwrap());
     let height = u32::from_be_bytes(png[20..24].try_into().unwrap());
     assert_eq!(width, 1200);
-    assert_eq!(height, (21 * 17 + 70) + 280 + (18 * 17 + 70) + 280 + 280);
+    assert_eq!(height, 9 * 280);
 }
 
 #[test]
@@ -654,9 +655,10 @@ fn wood_pixels(gif_bytes: &[u8]) -> Vec<usize> {
 }
 
 #[test]
-fn the_camera_stays_on_the_start_or_tracks_the_root_at_a_fixed_scale() {
-    // The humanoid's free torso falls 20 m in two seconds: a fixed camera sees it dwindle
-    // towards the vertical's vanishing point, a tracking one keeps it the same size.
+fn the_camera_holds_the_whole_run_or_tracks_the_root_at_a_fixed_scale() {
+    // The humanoid's free torso falls 20 m in two seconds: a fixed camera frames the whole
+    // fall (the figure small, never out of view), a tracking one keeps it large and the
+    // same size.
     let dir = scratch("camera");
     let gif = dir.join("h.gif");
     let mut pixels = Vec::new();
@@ -677,13 +679,12 @@ fn the_camera_stays_on_the_start_or_tracks_the_root_at_a_fixed_scale() {
     let (fixed, track) = (&pixels[0], &pixels[1]);
     assert_eq!(fixed.len(), 51);
     assert!(
-        fixed[0] > 200,
-        "the figure is in view at the start: {fixed:?}"
+        fixed.iter().all(|&n| n > 100),
+        "the figure is in view throughout: {fixed:?}"
     );
-    assert_eq!(fixed[0], track[0]);
     assert!(
-        *fixed.last().unwrap() < fixed[0] / 4,
-        "fallen far away: {fixed:?}"
+        track[0] > 4 * fixed[0],
+        "followed, it is drawn larger: {track:?} {fixed:?}"
     );
     let last = *track.last().unwrap() as f64;
     assert!(
