@@ -84,6 +84,25 @@ def test_midpoint_vi_steps_match_trep(recorded):
             close(a[key], b[key], 1e-10, f"{name} step {k} {key}")
 
 
+def test_the_system_is_left_where_treps_integrator_leaves_it(recorded):
+    # trep leaves the System at each step's midpoint (q, the discrete velocity, t, the step's
+    # inputs): scripts that read system.q or total_energy() in their loop see that state.
+    name, ours, theirs = recorded
+    for key in ("q", "dq", "u"):
+        close(ours["vi_start_system"][key], theirs["vi_start_system"][key], 1e-12,
+              f"{name} system.{key} after initialize_from_configs")
+    assert ours["vi_start_system"]["t"] == pytest.approx(theirs["vi_start_system"]["t"])
+    for k, (a, b) in enumerate(zip(ours["vi"], theirs["vi"])):
+        for key in ("q", "dq", "u", "E"):
+            close(a["system"][key], b["system"][key], 1e-9, f"{name} step {k} system {key}")
+        assert a["system"]["t"] == pytest.approx(b["system"]["t"], abs=1e-15)
+
+
+def test_f_leaves_the_accelerations_in_ddq(recorded):
+    name, ours, theirs = recorded
+    close(ours["ddq_after_f"], theirs["ddq_after_f"], 1e-12, f"{name} ddq after f()")
+
+
 def test_midpoint_vi_derivatives_match_trep(recorded):
     name, ours, theirs = recorded
     for key, value in theirs["vi_derivatives"].items():
@@ -292,3 +311,13 @@ def test_point_to_point_constraints_are_treps_rows():
                                          "must not be zero"):
         trep.constraints.PointOnPlane(s, "tip", [0.0, 0.0, 0.0], "ball")
     assert len(s.constraints) == 6
+
+
+def test_a_loop_that_reads_the_system_pumps_as_treps_does():
+    # u = k (E* − E) q̇ from system.total_energy() and system.dq inside the loop: with the
+    # System left at the start, the pendulum barely moves (the silent wrong answer);
+    # left where trep leaves it, it swings up as trep's does.
+    angles = trep_scripts.energy_pump(trep)
+    theirs = FIXTURE["energy_pump"]
+    assert max(abs(a) for a in theirs) > 2.5, "trep's pendulum swings up"
+    close(angles, theirs, 1e-8, "the pumped pendulum's angles")

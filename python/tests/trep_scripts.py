@@ -160,6 +160,7 @@ def record(trep, build):
     out["L_ddqdq"] = [[s.L_ddqdq(a, b) for b in cs] for a in cs]
     out["L_ddqddq"] = [[s.L_ddqddq(a, b) for b in cs] for a in cs]
     out["f"] = _list(s.f())
+    out["ddq_after_f"] = _list(s.ddq)  # f() leaves the accelerations in ddq
     out["f_dq"], out["f_ddq"] = _list(s.f_dq()), _list(s.f_ddq())
     if s.nu:
         out["f_du"] = _list(s.f_du())
@@ -190,6 +191,8 @@ def record(trep, build):
     mvi = trep.MidpointVI(s, tolerance=1e-13)  # both solvers to rounding
     q0 = s.q
     mvi.initialize_from_configs(0.0, q0, dt, q0)
+    # The System as the integrator leaves it: scripts read system.q or the energy in loops.
+    out["vi_start_system"] = {"q": _list(s.q), "dq": _list(s.dq), "t": s.t, "u": _list(s.u)}
     steps = []
     u1 = [0.4 + 0.2 * i for i in range(s.nu)]
     for k in range(20):
@@ -197,7 +200,9 @@ def record(trep, build):
         k2 = [q0[s.nQd + j] + 0.05 * math.sin(3.0 * t2) for j in range(s.nQk)]
         mvi.step(t2, u1, k2)
         steps.append({"t2": mvi.t2, "q2": _list(mvi.q2), "p2": _list(mvi.p2),
-                      "lambda1": _list(mvi.lambda1)})
+                      "lambda1": _list(mvi.lambda1),
+                      "system": {"q": _list(s.q), "dq": _list(s.dq), "t": s.t, "u": _list(s.u),
+                                 "E": s.total_energy()}})
     out["vi"] = steps
     d = {}
     inputs = ["q1", "p1", "u1", "k2"]
@@ -299,3 +304,24 @@ def time_puppet(trep, spec, runs=3, steps=1000, dt=0.01):
         step_puppet(trep, s, steps, dt)
         best = min(best, time.time() - start)
     return best
+
+
+def energy_pump(trep, steps=400, dt=0.01):
+    """A closed loop as trep scripts write them: a damped-free pendulum with a torque input,
+    pumped towards the upright energy by ``u = k (E* − E) dq`` where ``E`` and ``dq`` are
+    read from the System inside the loop (the state the integrator leaves there). Returns
+    the angle after each step."""
+    s = trep.System()
+    s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
+    trep.potentials.Gravity(s, (0.0, 0.0, -9.8))
+    trep.forces.ConfigForce(s, "theta", "torque")
+    s.q = [0.1]
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, s.q, dt, s.q)
+    target, gain = 9.8, 0.4
+    angles = []
+    for _ in range(steps):
+        u = gain * (target - s.total_energy()) * s.dq[0]
+        mvi.step(mvi.t2 + dt, [u])
+        angles.append(float(mvi.q2[0]))
+    return angles

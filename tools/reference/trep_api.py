@@ -44,6 +44,7 @@ out = dict((name, trep_scripts.record(trep, build)) for name, build in trep_scri
 s = trep_scripts.puppet_from_frames(trep, spec)
 out['puppet'] = {'configs': [c.name for c in s.configs],
                  'q100': [float(x) for x in trep_scripts.step_puppet(trep, s, 100, 0.01)]}
+out['energy_pump'] = trep_scripts.energy_pump(trep)
 path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-api.json')
 with open(path, 'w') as f:
     json.dump(out, f, indent=1, sort_keys=True)

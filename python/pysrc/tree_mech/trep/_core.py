@@ -918,13 +918,23 @@ class System:
             return obj.k_index
         return obj.index  # an input or a constraint
 
-    def f(self, q: Optional[Config] = None) -> Any:
-        """The dynamic configs' accelerations at the current state (one, given a config)."""
+    def _dynamics(self) -> Dict[str, Any]:
+        """The evaluation at the current state, its dynamic accelerations left in ``ddq`` as
+        trep's dynamics calls leave them (until the next such call: a state set afterwards
+        does not clear them)."""
         self._native_model()
-        ddq = self._state()["qdd"][self._dperm]
+        state = self._state()
+        self._ddq[: self.nQd] = np.asarray(state["qdd"])[self._dperm]
+        return state
+
+    def f(self, q: Optional[Config] = None) -> Any:
+        """The dynamic configs' accelerations at the current state (one, given a config);
+        like every dynamics call, leaves them in ``ddq``."""
+        ddq = np.asarray(self._dynamics()["qdd"])[self._dperm]
         return ddq[self._index("d", q)].copy() if q is None else float(ddq[self._index("d", q)])
 
     def _block(self, key: str, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        self._dynamics()
         return np.asarray(self._linear()[key])[np.ix_(rows, cols)]
 
     def _rows_d(self) -> np.ndarray:
@@ -954,7 +964,7 @@ class System:
         ``M q̈ = … + Dhᵀλ`` and ``Dh q̈ = …`` the kinematic accelerations enter only through
         ``M_dk q̈_k`` and ``Dh_k q̈_k``, so ``[[M_dd, −Dh_dᵀ], [Dh_d, 0]] X = −[M_dk; Dh_k]``."""
         if "dddk" not in self._cache:
-            state = self._state()
+            state = self._dynamics()
             d, k = self._perm[: self.nQd], self._perm[self.nQd:]
             mass = np.asarray(state["M"], dtype=float)
             dh = np.asarray(state["dh_dq"], dtype=float).reshape(self.nc, self.nQ)
@@ -986,10 +996,11 @@ class System:
 
     def lambda_(self, constraint: Any = None) -> Any:
         """The constraint forces at the current state, for trep's rows."""
-        lam = np.asarray(self._state()["lambda"]) * self._signs()
+        lam = np.asarray(self._dynamics()["lambda"]) * self._signs()
         return lam.copy() if constraint is None else float(lam[self._index("c", constraint)])
 
     def _lambda_derivative(self, key: str, cols: np.ndarray) -> np.ndarray:
+        self._dynamics()
         return np.asarray(self._linear()[key])[:, cols] * self._signs()[:, None]
 
     def lambda_dq(self, constraint: Any = None, q1: Optional[Config] = None) -> Any:
@@ -1363,6 +1374,19 @@ class MidpointVI:
         self.lambda1 = np.zeros(self.nc) if lambda1 is None else lambda1
         self._lam = np.zeros(self.nc)
         self._derivs, self._k2 = None, None
+        self._leave_system_at_midpoint()
+
+    def _leave_system_at_midpoint(self) -> None:
+        """Leaves the System where trep's integrator leaves it after a step (or
+        ``initialize_from_configs``): at the step's midpoint — ``q = (q1 + q2)/2``, ``dq =
+        (q2 − q1)/(t2 − t1)``, ``t = (t1 + t2)/2`` — with ``u`` the step's inputs, so a
+        script that reads ``system.q`` or calls ``total_energy()`` in its loop sees the
+        state trep shows it (``ddq`` untouched)."""
+        dt = self.t2 - self.t1
+        if dt == 0.0:
+            return
+        self._system.set_state(q=0.5 * (self._q1 + self._q2), dq=(self._q2 - self._q1) / dt,
+                               u=self._u1, t=0.5 * (self.t1 + self.t2))
 
     def step(self, t2: float, u1: Any = (), k2: Any = (), max_iterations: int = 200,
              q2_hint: Any = None, lambda1_hint: Any = None) -> int:
@@ -1413,6 +1437,7 @@ class MidpointVI:
         if order:
             self._derivs = {k: np.asarray(v) for k, v in derivs.items()}
             self._order = order
+        self._leave_system_at_midpoint()
 
     # Derivatives ----------------------------------------------------------------------
     def _need(self, order: int) -> Dict[str, np.ndarray]:
