@@ -321,3 +321,23 @@ def test_a_loop_that_reads_the_system_pumps_as_treps_does():
     theirs = FIXTURE["energy_pump"]
     assert max(abs(a) for a in theirs) > 2.5, "trep's pendulum swings up"
     close(angles, theirs, 1e-8, "the pumped pendulum's angles")
+
+
+@pytest.mark.parametrize("base", ["Potential", "Force", "Constraint"])
+def test_an_element_written_in_python_is_refused_not_left_out(base):
+    # A script's own potential, force or constraint (V, f or h in Python) would be left out
+    # of the Rust model: until the runtime can call back into Python, it is an error.
+    s = trep.System()
+    s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
+    parent = getattr(trep, base)
+
+    class Mine(parent):
+        def __init__(self, system):
+            parent.__init__(self, system)
+
+        def V(self):
+            return 0.5 * s.q[0] ** 2
+
+    with pytest.raises(NotImplementedError, match=f"Mine: a {base.lower()} written in Python"):
+        Mine(s)
+    assert len(s.potentials) == len(s.forces) == len(s.constraints) == 0

@@ -1182,6 +1182,18 @@ class System:
         return self.q
 
 
+def _refuse_python_defined(part: Any, kind: str) -> None:
+    """A potential, force or constraint subclassed in a script (its ``V``/``f``/``h`` and
+    their derivatives written in Python) is refused rather than silently left out: the
+    model is evaluated and integrated in Rust, which does not call back into Python yet."""
+    if type(part).__module__.startswith("tree_mech."):
+        return
+    raise NotImplementedError(
+        f"{type(part).__name__}: a {kind} written in Python (subclassing trep's {kind.title()}) "
+        f"is not supported by tree_mech.trep yet: the model is evaluated in Rust, which would "
+        f"leave it out; build it from the built-in {kind}s, or run this script on trep itself")
+
+
 # The bases of potentials, forces and constraints (each kind lives in trep's module of its
 # name: potentials.py, forces.py, constraints.py, and writes its own model text) ----------
 class _Part:
@@ -1191,6 +1203,7 @@ class _Part:
     _list = ""
 
     def __init__(self, system: System, name: Optional[str] = None):
+        _refuse_python_defined(self, self._list.strip("_")[:-1])
         self._system = system
         self.name = name
         getattr(system, self._list).append(self)
@@ -1251,7 +1264,8 @@ class Constraint:
     #: trep's row over tree-mech's (see ``System._signs``).
     _sign = 1.0
 
-    def __init__(self, system: System, name: Optional[str]):
+    def __init__(self, system: System, name: Optional[str] = None):
+        _refuse_python_defined(self, "constraint")
         self._system = system
         self.name = name if name is not None else f"constraint{len(system._constraints) + 1}"
         self.index = len(system._constraints)
