@@ -146,8 +146,9 @@ impl Reader {
         }
         check_numbers(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
         check_required(root, &line_at).map_err(|(message, line)| fail(message, Some(line)))?;
+        let modelled = modelled_text(text, root);
         let robot =
-            urdf_rs::read_from_string(text).map_err(|e| fail(format!("URDF: {e}"), None))?;
+            urdf_rs::read_from_string(&modelled).map_err(|e| fail(format!("URDF: {e}"), None))?;
         let efforts = root
             .children()
             .filter(|j| j.has_tag_name("joint"))
@@ -645,6 +646,49 @@ const NUMERIC: [(&str, usize); 15] = [
     ("friction", 1),
 ];
 
+/// Whether an element is one the dynamics does not use, with all it holds: a child of
+/// `<robot>` other than `<link>` and `<joint>` (`<gazebo>`, `<transmission>`, `<material>`,
+/// `<ros2_control>`, …; urdfdom and Pinocchio ignore `<gazebo>` too) or a link's `<visual>`
+/// and `<collision>` (shapes, which the dynamics never reads). A Gazebo block's nameless
+/// `<material>` or a visual's empty `<texture/>` is then not the robot's problem.
+fn unmodelled(node: &roxmltree::Node) -> bool {
+    let tag = node.tag_name().name();
+    match node.parent_element().map(|p| p.tag_name().name()) {
+        Some("robot") => !matches!(tag, "link" | "joint"),
+        Some("link") => matches!(tag, "visual" | "collision"),
+        _ => false,
+    }
+}
+
+/// Whether `node` lies in an [`unmodelled`] element.
+fn set_aside(node: &roxmltree::Node) -> bool {
+    node.ancestors().any(|a| a.is_element() && unmodelled(&a))
+}
+
+/// `text` with the [`unmodelled`] elements blanked out (every character but line breaks a
+/// space, so lines keep their numbers): what urdf-rs reads.
+fn modelled_text(text: &str, root: roxmltree::Node) -> String {
+    let blanked: Vec<std::ops::Range<usize>> = root
+        .descendants()
+        .filter(|n| n.is_element() && unmodelled(n))
+        .map(|n| n.range())
+        .collect();
+    let mut ranges = blanked.iter().peekable();
+    text.char_indices()
+        .map(|(i, c)| {
+            while ranges.peek().is_some_and(|r| r.end <= i) {
+                ranges.next();
+            }
+            let inside = ranges.peek().is_some_and(|r| r.contains(&i));
+            if inside && c != '\n' {
+                ' '
+            } else {
+                c
+            }
+        })
+        .collect()
+}
+
 /// Checks every numeric attribute of the `<link>` and `<joint>` elements before urdf-rs reads
 /// them (its own errors name neither element nor line): `(message, line)` of the first bad
 /// one. Visuals and collisions are skipped; their numbers do not enter the dynamics.
@@ -661,10 +705,7 @@ fn check_numbers(
             part.tag_name().name(),
             part.attribute("name").unwrap_or_default()
         );
-        let skipped = |n: &roxmltree::Node| {
-            n.ancestors()
-                .any(|a| matches!(a.tag_name().name(), "visual" | "collision"))
-        };
+        let skipped = set_aside;
         for node in part.descendants().filter(|n| n.is_element() && !skipped(n)) {
             for (attribute, count) in NUMERIC {
                 let Some(text) = node.attribute(attribute) else {
@@ -716,10 +757,9 @@ fn bound_problem(attribute: &str, numbers: &[Option<f64>]) -> Option<&'static st
 /// What urdf-rs requires of an element, by tag and parent tag (`""`: any parent): its
 /// attributes, and the children it must have. urdf-rs says only "missing field `mass`" when
 /// one is absent; checked first, the message names the link or joint and the line.
-const REQUIRED: [(&str, &str, &[&str], &[&str]); 13] = [
+const REQUIRED: [(&str, &str, &[&str], &[&str]); 10] = [
     ("link", "robot", &["name"], &[]),
     ("joint", "robot", &["name", "type"], &["parent", "child"]),
-    ("material", "", &["name"], &[]),
     ("inertial", "link", &[], &["mass", "inertia"]),
     ("mass", "inertial", &["value"], &[]),
     (
@@ -728,8 +768,6 @@ const REQUIRED: [(&str, &str, &[&str], &[&str]); 13] = [
         &["ixx", "ixy", "ixz", "iyy", "iyz", "izz"],
         &[],
     ),
-    ("visual", "link", &[], &["geometry"]),
-    ("collision", "link", &[], &["geometry"]),
     ("parent", "joint", &["link"], &[]),
     ("child", "joint", &["link"], &[]),
     ("limit", "joint", &["velocity"], &[]),
@@ -743,7 +781,10 @@ fn check_required(
     root: roxmltree::Node,
     line_at: &dyn Fn(usize) -> usize,
 ) -> Result<(), (String, usize)> {
-    for node in root.descendants().filter(|n| n.is_element()) {
+    for node in root
+        .descendants()
+        .filter(|n| n.is_element() && !set_aside(n))
+    {
         let tag = node.tag_name().name();
         let parent = node.parent_element().map(|p| p.tag_name().name());
         let Some((_, _, attributes, children)) = REQUIRED
@@ -770,23 +811,6 @@ fn check_required(
         let has = |c: &str| node.children().any(|n| n.tag_name().name() == c);
         if let Some(c) = children.iter().find(|c| !has(c)) {
             return Err((format!("URDF: {owner}<{tag}> has no <{c}>"), line));
-        }
-    }
-    // A shape the reader does not use, but urdf-rs fails on without one (and without a line).
-    for node in root.descendants().filter(|n| n.has_tag_name("geometry")) {
-        if !node.children().any(|n| n.is_element()) {
-            let owner = node
-                .ancestors()
-                .find(|a| a.has_tag_name("link"))
-                .and_then(|a| a.attribute("name"))
-                .unwrap_or_default();
-            return Err((
-                format!(
-                    "URDF: link `{owner}`: <geometry> has no shape (<box>, <cylinder>, \
-                     <sphere> or <mesh>)"
-                ),
-                line_at(node.range().start),
-            ));
         }
     }
     Ok(())

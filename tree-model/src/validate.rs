@@ -622,7 +622,7 @@ fn mass_of(k: usize, f: &FrameSpec, errs: &mut Problems) -> Option<Mass> {
             FrameField::Inertia,
             format!("frame `{name}`: inertia [{shown}] must be finite"),
         );
-    } else if let Err(why) = physical_inertia(&body.inertia) {
+    } else if let Err(why) = physical_inertia(&body.inertia, m) {
         errs.frame(
             k,
             FrameField::Inertia,
@@ -632,12 +632,15 @@ fn mass_of(k: usize, f: &FrameSpec, errs: &mut Problems) -> Option<Mass> {
     Some(body)
 }
 
-/// Whether a symmetric tensor is one a rigid body can have: its principal moments (the
-/// eigenvalues) are not negative and each is at most the sum of the other two.
-fn physical_inertia(i: &[[f64; 3]; 3]) -> Result<(), String> {
+/// Whether a symmetric tensor is one a rigid body of `mass` can have: its principal moments
+/// (the eigenvalues) are not negative and each is at most the sum of the other two — within
+/// rounding of the tensor's own scale, and within `mass·(1 µm)²`, what the mass has a
+/// micrometre from its centre: a tensor written as zeros with noise (iCub's `±1.4e-20`) is
+/// a point mass, not an error.
+fn physical_inertia(i: &[[f64; 3]; 3], mass: f64) -> Result<(), String> {
     let moments = symmetric_eigenvalues(i);
     let scale = moments.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    let slack = 1e-9 * scale;
+    let slack = 1e-9 * scale + MICROMETRE * MICROMETRE * mass.abs();
     if moments.iter().any(|&x| x < -slack) {
         return Err(format!(
             "is not positive semi-definite (principal moments {}, {}, {})",
@@ -657,6 +660,9 @@ fn physical_inertia(i: &[[f64; 3]; 3]) -> Result<(), String> {
     }
     Ok(())
 }
+
+/// The radius below which a body's extent is rounding, m.
+const MICROMETRE: f64 = 1e-6;
 
 /// A computed number to six significant digits, for messages.
 fn short(x: f64) -> String {

@@ -254,12 +254,6 @@ fn what_urdf_rs_requires_is_named_with_its_element_and_line() {
         msg.contains(":19: URDF: joint `joint2`: <limit> has no `velocity` attribute"),
         "{msg}"
     );
-    // An empty <geometry>: urdf-rs's own error named no line and showed its parser's insides.
-    let shapeless = "<robot name=\"r\">\n<link name=\"base\">\n<visual>\n<geometry>\n</geometry>\n</visual>\n</link>\n</robot>";
-    assert_eq!(
-        error_of(shapeless),
-        "r.urdf:4: URDF: link `base`: <geometry> has no shape (<box>, <cylinder>, <sphere> or <mesh>)"
-    );
     assert_eq!(
         error_of("<robot name=\"empty\">\n</robot>"),
         "r.urdf:1: URDF: <robot> has no <link>: a robot needs at least one"
@@ -363,4 +357,31 @@ fn the_loaders_frames_are_marked_and_never_take_a_links_name() {
     for name in ["joint1_1", "joint1#1", "joint1#1#"] {
         assert!(m.frame_index(name).is_some(), "{name}");
     }
+}
+
+#[test]
+fn what_the_dynamics_does_not_read_is_set_aside() {
+    // A Gazebo block's nameless <material> (Talos, Tiago, HyQ, PR2), a visual's empty
+    // <texture/> (iCub), an empty <geometry>, a <transmission>: none is the dynamics', and
+    // urdfdom and Pinocchio load such files. The lines of what is read stay where they were.
+    let extras = arm(GOOD_JOINT2).replace(
+        "</robot>",
+        "<gazebo reference=\"upper\"><material>Gazebo/Grey</material></gazebo>\n\
+         <material name=\"skin\"><texture/></material>\n\
+         <transmission name=\"t\"><type>x</type></transmission></robot>",
+    );
+    let extras = extras.replace(
+        "<link name=\"base\"/>",
+        "<link name=\"base\"><visual><geometry></geometry><material><texture/></material></visual>\
+         <collision><geometry/></collision></link>",
+    );
+    let m = from_urdf_str(&extras, Some("r.urdf"), FIXED).unwrap();
+    let plain = from_urdf_str(&arm(GOOD_JOINT2), Some("r.urdf"), FIXED).unwrap();
+    assert_eq!(m.frames, plain.frames);
+    // What is read is still checked, with its line.
+    let bad = extras.replace("<mass value=\"1.0\"/>", "<mass value=\"x\"/>");
+    assert_eq!(
+        error_of(&bad),
+        "r.urdf:10: URDF: link `lower`: <mass value=\"x\"> must be a number"
+    );
 }

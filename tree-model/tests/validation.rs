@@ -137,6 +137,15 @@ fn full_rigid_bodies_parse_and_bad_ones_are_named() {
     assert_eq!(b.inertia[1][0], 0.1, "symmetric");
     assert_eq!(b.diagonal(), None);
 
+    // Zeros with rounding noise (iCub's ankle: ixz = 1.35525e-20 on 0.27 kg) are a point mass,
+    // within what the mass has a micrometre from its centre; a tensor negative beyond that
+    // is not.
+    let noisy = |ixz: &str| {
+        format!("{GOOD_HEAD}[[frame]]\nname = \"b\"\nparent = \"a\"\ntz = 1\nmass = 0.2675\ninertia = [0, 0, 0, 0, {ixz}, 0]\n")
+    };
+    assert!(from_toml_str(&noisy("1.35525e-20"), None).is_ok());
+    let e = from_toml_str(&noisy("1e-9"), None).unwrap_err().to_string();
+    assert!(e.contains("is not positive semi-definite"), "{e}");
     let e = body_error("inertia = [1, 1, 1, 2, 0, 0]");
     assert!(
         e.contains("m.toml:10:")
