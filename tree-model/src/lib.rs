@@ -44,6 +44,7 @@ mod model;
 mod motion;
 mod number;
 mod primitive;
+mod rigid;
 mod source;
 mod spec;
 mod suggest;

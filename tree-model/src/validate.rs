@@ -89,6 +89,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         inputs,
     };
     check_directions(&model, &mut errs);
+    check_rigid_bodies(&model, spec, &mut errs);
     check_moves_mass(&model, &mut errs);
     check_totals(&model, &mut errs);
     match errs.0.is_empty() {
@@ -622,14 +623,52 @@ fn mass_of(k: usize, f: &FrameSpec, errs: &mut Problems) -> Option<Mass> {
             FrameField::Inertia,
             format!("frame `{name}`: inertia [{shown}] must be finite"),
         );
-    } else if let Err(why) = physical_inertia(&body.inertia, m) {
-        errs.frame(
-            k,
-            FrameField::Inertia,
-            format!("frame `{name}`: inertia [{shown}] {why}"),
-        );
     }
+    // Whether it is a body a rigid body can have is judged with the bodies it is welded to
+    // ([`check_rigid_bodies`]).
     Some(body)
+}
+
+/// Every rigid body the dynamics sees — the bodies of frames joined by constant transforms,
+/// fused ([`crate::rigid`]) — is one a rigid body can have. A piece that is not physical
+/// alone (a placeholder link's made-up tensor) passes when its fused body is; else the error
+/// names the piece, as written, and the fused body.
+fn check_rigid_bodies(model: &Model, spec: &ModelSpec, errs: &mut Problems) {
+    let fused = crate::rigid::fused_bodies(model);
+    for (k, f) in model.frames.iter().enumerate() {
+        let Some(body) = f.mass else { continue };
+        let Err(why) = physical_inertia(&body.inertia, body.mass) else {
+            continue;
+        };
+        let shown = spec.frames[k].inertia.as_ref().map_or_else(
+            || "0, 0, 0".to_string(),
+            |w| {
+                w.iter()
+                    .map(|x| x.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            },
+        );
+        let mut message = format!("frame `{}`: inertia [{shown}] {why}", f.name);
+        if let Some((whole, members)) = &fused[k] {
+            if members.len() > 1 {
+                let Err(whole_why) = physical_inertia(&whole.inertia, whole.mass) else {
+                    continue;
+                };
+                let names: Vec<&str> = members
+                    .iter()
+                    .map(|&m| model.frames[m].name.as_str())
+                    .collect();
+                message += &format!(
+                    "; and the rigid body it is welded into (frames {}, fused across constant \
+                     transforms, {} kg) {whole_why}",
+                    names.join(", "),
+                    crate::Rounded(whole.mass, 6)
+                );
+            }
+        }
+        errs.frame(k, FrameField::Inertia, message);
+    }
 }
 
 /// Whether a symmetric tensor is one a rigid body of `mass` can have: its principal moments

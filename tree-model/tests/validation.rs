@@ -646,3 +646,34 @@ fn locking_renumbers_variables_and_turns_lengths_and_springs_into_constants() {
         .iter()
         .all(|s| !matches!(s.kind, SpringKind::Variable(j) if held.variables[j].name == "bend")));
 }
+
+#[test]
+fn a_body_is_judged_with_the_bodies_welded_to_it() {
+    // A 1 µg placeholder with a made-up tensor welded (by constant transforms) to a real
+    // body: the rigid body the dynamics sees is their sum, which is physical.
+    let welded = |piece: &str| {
+        format!(
+            "{GOOD_HEAD}mass = 2\ninertia = [0.02, 0.02, 0.01]\n\
+             [[frame]]\nname = \"offset\"\nparent = \"a\"\ntz = 0.1\n\
+             [[frame]]\nname = \"placeholder\"\nparent = \"offset\"\nrz = 0.3\n{piece}\n"
+        )
+    };
+    let m = from_toml_str(
+        &welded("mass = 1e-9\ninertia = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6]"),
+        None,
+    );
+    assert!(m.is_ok(), "{:?}", m.err().map(|e| e.to_string()));
+    // A piece bad enough to spoil the sum is named, with the sum.
+    let e = error_of(&welded("mass = 1\ninertia = [1, 1, 3]"));
+    assert!(
+        e.contains("frame `placeholder`: inertia [1, 1, 3] breaks the triangle inequality")
+            && e.contains("and the rigid body it is welded into (frames a, placeholder, fused across constant transforms, 3 kg) breaks the triangle inequality"),
+        "{e}"
+    );
+    // Alone (no body to weld to), a bad tensor is refused as before.
+    let e = body_error("inertia = [1, 1, 3]");
+    assert!(
+        e.contains("breaks the triangle inequality") && !e.contains("welded"),
+        "{e}"
+    );
+}
