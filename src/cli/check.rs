@@ -109,21 +109,7 @@ fn print_constraints(model: &model::Model) -> Result<(), String> {
         say!("{}:", counted(model.constraints.len(), "constraint"));
         for c in &model.constraints {
             let [a, b] = c.frames.map(|f| model.frames[f].name.as_str());
-            let what = match &c.kind {
-                model::ConstraintKind::Distance { length } => match length {
-                    model::Parameter::Constant(l) => format!("distance {}", Given(*l)),
-                    model::Parameter::Variable(i) => {
-                        format!("distance `{}`", model.variables[*i].name)
-                    }
-                },
-                model::ConstraintKind::Plane { normal } => {
-                    format!("plane, normal {normal:?} in `{a}`")
-                }
-                model::ConstraintKind::Point { axes } => format!(
-                    "point, axes {}",
-                    axes.iter().map(|&k| ["x", "y", "z"][k]).collect::<String>()
-                ),
-            };
+            let what = c.describe(model);
             say!("  {:<20} {what} between `{a}` and `{b}`", c.name);
         }
     }

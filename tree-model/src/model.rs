@@ -187,6 +187,24 @@ impl Constraint {
             _ => vec![self.name.clone()],
         }
     }
+
+    /// What it holds, in words (`tree-mech check` prints it): `distance 0.5`, `distance
+    /// \`len\``, `plane, normal [0, 0, 1] in \`a\``, `point, axes xz`; `model` names its
+    /// frames and variables.
+    pub fn describe(&self, model: &Model) -> String {
+        let a = &model.frames[self.frames[0]].name;
+        match &self.kind {
+            ConstraintKind::Distance { length } => match length {
+                Parameter::Constant(l) => format!("distance {}", crate::Given(*l)),
+                Parameter::Variable(i) => format!("distance `{}`", model.variables[*i].name),
+            },
+            ConstraintKind::Plane { normal } => format!("plane, normal {normal:?} in `{a}`"),
+            ConstraintKind::Point { axes } => format!(
+                "point, axes {}",
+                axes.iter().map(|&k| ["x", "y", "z"][k]).collect::<String>()
+            ),
+        }
+    }
 }
 
 /// What a spring stretches.
