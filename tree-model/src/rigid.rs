@@ -1,9 +1,9 @@
 //! Rigid bodies as the dynamics sees them: the bodies of frames joined by constant transforms
-//! move as one, so it is their sum — fused about its centre of mass, as Pinocchio fuses links
-//! across fixed joints — that must be a body a rigid body can have, not each piece (a 1 µg
-//! placeholder link with a made-up tensor on a fixed joint is not the robot's problem).
+//! move as one, fused about their centre of mass as Pinocchio fuses links across fixed
+//! joints — so a 1 µg placeholder link with a made-up tensor on a fixed joint is not the
+//! robot's problem when the body it is welded into is physical.
 
-use crate::model::{Joint, Mass, Model};
+use crate::model::{Frame, Joint, Mass};
 use crate::primitive::PrimitiveKind;
 
 type Rotation = [[f64; 3]; 3];
@@ -68,9 +68,9 @@ impl Pose {
 
 /// Each frame's rigid group: the nearest frame at or above it driven by a variable (`None`:
 /// welded to the world), and its constant pose in that frame.
-fn groups(model: &Model) -> Vec<(Option<usize>, Pose)> {
-    let mut out: Vec<(Option<usize>, Pose)> = Vec::with_capacity(model.frames.len());
-    for f in &model.frames {
+fn groups(frames: &[Frame]) -> Vec<(Option<usize>, Pose)> {
+    let mut out: Vec<(Option<usize>, Pose)> = Vec::with_capacity(frames.len());
+    for f in frames {
         out.push(match f.joint {
             Joint::Variable(_) => (None, IDENTITY), // its own root, set below
             Joint::Constant(x) => {
@@ -88,17 +88,17 @@ fn groups(model: &Model) -> Vec<(Option<usize>, Pose)> {
 
 /// The body of every frame's rigid group, fused about its centre of mass in the group root's
 /// axes, with the frames it fuses — for the frames that carry a body.
-pub(crate) fn fused_bodies(model: &Model) -> Vec<Option<(Mass, Vec<usize>)>> {
-    let groups = groups(model);
+pub(crate) fn fused_bodies(frames: &[Frame]) -> Vec<Option<(Mass, Vec<usize>)>> {
+    let groups = groups(frames);
     let mut sums: std::collections::HashMap<Option<usize>, Vec<(usize, Mass, Pose)>> =
         Default::default();
-    for (k, f) in model.frames.iter().enumerate() {
+    for (k, f) in frames.iter().enumerate() {
         if let Some(body) = f.mass {
             let (root, pose) = groups[k];
             sums.entry(root).or_default().push((k, body, pose));
         }
     }
-    let mut out = vec![None; model.frames.len()];
+    let mut out = vec![None; frames.len()];
     for parts in sums.values() {
         let fused = fuse(parts);
         let members: Vec<usize> = parts.iter().map(|p| p.0).collect();

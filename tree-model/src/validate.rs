@@ -52,7 +52,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     }
     let index_of = frame_names(spec, &mut errs);
     let mut vars = Variables::default();
-    let frames = (0..spec.frames.len())
+    let frames: Vec<Frame> = (0..spec.frames.len())
         .map(|k| {
             let f = &spec.frames[k];
             let parent = parent_of(k, f, &index_of, &mut errs);
@@ -67,6 +67,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             }
         })
         .collect();
+    check_rigid_bodies(&frames, spec, &mut errs);
     constraint_length_variables(spec, &mut vars, &mut errs);
     for v in &spec.variables {
         apply_settings(v, &mut vars, &mut errs);
@@ -89,7 +90,6 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         inputs,
     };
     check_directions(&model, &mut errs);
-    check_rigid_bodies(&model, spec, &mut errs);
     check_moves_mass(&model, &mut errs);
     check_totals(&model, &mut errs);
     match errs.0.is_empty() {
@@ -631,11 +631,11 @@ fn mass_of(k: usize, f: &FrameSpec, errs: &mut Problems) -> Option<Mass> {
 
 /// Every rigid body the dynamics sees — the bodies of frames joined by constant transforms,
 /// fused ([`crate::rigid`]) — is one a rigid body can have. A piece that is not physical
-/// alone (a placeholder link's made-up tensor) passes when its fused body is; else the error
-/// names the piece, as written, and the fused body.
-fn check_rigid_bodies(model: &Model, spec: &ModelSpec, errs: &mut Problems) {
-    let fused = crate::rigid::fused_bodies(model);
-    for (k, f) in model.frames.iter().enumerate() {
+/// alone (a placeholder link's made-up tensor) passes when its fused body is: the dynamics
+/// only ever sees the sum. The error names the piece as written, and the fused body.
+fn check_rigid_bodies(frames: &[Frame], spec: &ModelSpec, errs: &mut Problems) {
+    let fused = crate::rigid::fused_bodies(frames);
+    for (k, f) in frames.iter().enumerate() {
         let Some(body) = f.mass else { continue };
         let Err(why) = physical_inertia(&body.inertia, body.mass) else {
             continue;
@@ -655,10 +655,7 @@ fn check_rigid_bodies(model: &Model, spec: &ModelSpec, errs: &mut Problems) {
                 let Err(whole_why) = physical_inertia(&whole.inertia, whole.mass) else {
                     continue;
                 };
-                let names: Vec<&str> = members
-                    .iter()
-                    .map(|&m| model.frames[m].name.as_str())
-                    .collect();
+                let names: Vec<&str> = members.iter().map(|&m| frames[m].name.as_str()).collect();
                 message += &format!(
                     "; and the rigid body it is welded into (frames {}, fused across constant \
                      transforms, {} kg) {whole_why}",

@@ -664,10 +664,10 @@ fn a_body_is_judged_with_the_bodies_welded_to_it() {
     );
     assert!(m.is_ok(), "{:?}", m.err().map(|e| e.to_string()));
     // A piece bad enough to spoil the sum is named, with the sum.
-    let e = error_of(&welded("mass = 1\ninertia = [1, 1, 3]"));
+    let e = error_of(&welded("mass = 1e-3\ninertia = [1, 1, 30]"));
     assert!(
-        e.contains("frame `placeholder`: inertia [1, 1, 3] breaks the triangle inequality")
-            && e.contains("and the rigid body it is welded into (frames a, placeholder, fused across constant transforms, 3 kg) breaks the triangle inequality"),
+        e.contains("frame `placeholder`: inertia [1, 1, 30] breaks the triangle inequality")
+            && e.contains("and the rigid body it is welded into (frames a, placeholder, fused across constant transforms, 2.001 kg) breaks the triangle inequality"),
         "{e}"
     );
     // Alone (no body to weld to), a bad tensor is refused as before.
