@@ -27,6 +27,41 @@ fn cart() -> Model {
     .unwrap()
 }
 
+/// A recorded sample: `(t, q, q̇, E)`.
+type Recorded = (f64, Vec<f64>, Vec<f64>, f64);
+
+/// Every sample of a run of `sys` from its start at Δt = 0.01 with `inputs`.
+fn run<S: System>(
+    sys: &mut S,
+    method: Method,
+    duration: f64,
+    inputs: &InputSchedule,
+) -> Vec<Recorded>
+where
+    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
+        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
+{
+    let (q0, dq0) = sys.initial_state();
+    let options = SimOptions::new(method, 0.01, duration);
+    let mut motion = ModelMotions::of(sys);
+    let mut out = Vec::new();
+    run_with_inputs(
+        sys,
+        &q0,
+        &dq0,
+        &options,
+        &mut NoForce,
+        &mut motion,
+        inputs,
+        &mut |s| {
+            out.push((s.t, s.q.to_vec(), s.dq.to_vec(), s.energy));
+            Ok(())
+        },
+    )
+    .unwrap();
+    out
+}
+
 /// The final q of a run with `inputs`.
 fn final_q<S: System>(
     sys: &mut S,
@@ -38,25 +73,7 @@ where
     tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
 {
-    let (q0, dq0) = sys.initial_state();
-    let options = SimOptions::new(method, 0.01, duration);
-    let mut motion = ModelMotions::of(sys);
-    let mut last = Vec::new();
-    run_with_inputs(
-        sys,
-        &q0,
-        &dq0,
-        &options,
-        &mut NoForce,
-        &mut motion,
-        inputs,
-        &mut |s| {
-            last = s.q.to_vec();
-            Ok(())
-        },
-    )
-    .unwrap();
-    last
+    run(sys, method, duration, inputs).pop().unwrap().1
 }
 
 #[test]
@@ -204,36 +221,16 @@ fn input_errors_name_the_entry_and_its_line() {
 
 tree_model!(struct TrepVi from "tests/models/trep-vi.toml");
 
-/// Every sample `(t, q, q̇, E)` of a run of `sys` from its start under `u_k` at step k.
-fn samples<S: System>(sys: &mut S, method: Method, u: &[f64]) -> Vec<(f64, Vec<f64>, Vec<f64>, f64)>
+/// Every sample of a run of `sys` from its start under `u_k` at step k.
+fn samples<S: System>(sys: &mut S, method: Method, u: &[f64]) -> Vec<Recorded>
 where
     tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
         + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>,
 {
-    let (q0, dq0) = sys.initial_state();
-    let rows = u
-        .iter()
-        .enumerate()
-        .map(|(k, &x)| (k as f64 * 0.01, vec![x]));
-    let schedule = InputSchedule::from_rows(rows.collect()).unwrap();
-    let options = SimOptions::new(method, 0.01, 0.01 * u.len() as f64);
-    let mut motion = ModelMotions::of(sys);
-    let mut out = Vec::new();
-    run_with_inputs(
-        sys,
-        &q0,
-        &dq0,
-        &options,
-        &mut NoForce,
-        &mut motion,
-        &schedule,
-        &mut |s| {
-            out.push((s.t, s.q.to_vec(), s.dq.to_vec(), s.energy));
-            Ok(())
-        },
-    )
-    .unwrap();
-    out
+    let rows = u.iter().enumerate();
+    let rows = rows.map(|(k, &x)| (k as f64 * 0.01, vec![x])).collect();
+    let schedule = InputSchedule::from_rows(rows).unwrap();
+    run(sys, method, 0.01 * u.len() as f64, &schedule)
 }
 
 /// A stepper under `u_k` at step k hands out what a run under the same schedule records.
@@ -319,7 +316,7 @@ fn a_stepper_refuses_what_it_cannot_step_and_stops_after_a_failure() {
     let mut s = Stepper::new(Slider, vi, 0.01, &q0, &dq0).unwrap();
     assert_eq!(
         err(s.step(&[1.0, 2.0])),
-        "2 input values given; the system has 1 (push)"
+        "2 input values given a step; the system has 1 input (push)"
     );
     assert_eq!(
         err(s.step(&[f64::NAN])),
@@ -345,7 +342,13 @@ fn a_stepper_refuses_what_it_cannot_step_and_stops_after_a_failure() {
         "{e}"
     );
     assert!(e.ends_with("; start it again with reset"), "{e}");
-    assert!(err(s.reset(&[0.0, 1.0], &dq0)).contains("the start has 2 and 1 entries"));
+    assert!(s
+        .stopped()
+        .is_some_and(|why| why.starts_with(&format!("step {k} failed: "))));
+    assert_eq!(
+        err(s.reset(&[0.0, 1.0], &dq0)),
+        "initial state has 2 and 1 entries; the system has 1 variable"
+    );
     s.reset(&q0, &dq0).unwrap();
     s.step(&[3.0]).unwrap();
     assert_eq!((s.steps(), s.q()[0]), (1, 0.75 * 0.01 * 0.01));

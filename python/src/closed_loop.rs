@@ -8,7 +8,7 @@ use tree_mech::integrate::{Method, Stepper as CoreStepper};
 use tree_mech::{SimError, TreeSystem};
 
 use crate::arrays::vector;
-use crate::errors::{bad, sim_error};
+use crate::errors::{bad, in_python_words, sim_error, SimulationError};
 use crate::model::Model;
 use crate::numbers::{Numbers, PerVariable};
 use crate::simulate::method;
@@ -53,19 +53,6 @@ impl Model {
     }
 }
 
-impl Model {
-    /// `(q0, dq0)` given or the model's, checked.
-    fn start(
-        &self,
-        q0: Option<PerVariable<'_>>,
-        dq0: Option<PerVariable<'_>>,
-    ) -> PyResult<(Vec<f64>, Vec<f64>)> {
-        let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
-        let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
-        Ok((q0.as_slice().to_vec(), dq0.as_slice().to_vec()))
-    }
-}
-
 /// A caller's bad option is a `ValueError`; the runtime refusing a start a `SimulationError`.
 fn refused(py: Python<'_>, e: &SimError) -> PyErr {
     match e {
@@ -80,6 +67,12 @@ impl Stepper {
     /// GIL is released while it runs.
     #[pyo3(signature = (u=None))]
     fn step(&mut self, py: Python<'_>, u: Option<Numbers<'_, Ix1>>) -> PyResult<()> {
+        if let Some(why) = self.stepper.stopped() {
+            return Err(SimulationError::new_err(format!(
+                "the stepper stopped ({}); start it again with reset",
+                in_python_words(why)
+            )));
+        }
         match u {
             None => self.u.fill(0.0),
             Some(u) => {
@@ -96,10 +89,7 @@ impl Stepper {
             }
         }
         let (stepper, u) = (&mut self.stepper, &self.u);
-        py.detach(|| stepper.step(u)).map_err(|e| match e {
-            SimError::InvalidInput(m) if !m.starts_with("the stepper stopped") => bad(m),
-            e => sim_error(py, &e),
-        })
+        py.detach(|| stepper.step(u)).map_err(|e| refused(py, &e))
     }
 
     /// Starts again from `(q0, dq0)` (default the model's start) at `t = 0`.

@@ -33,6 +33,11 @@ pub(crate) fn model_error(py: Python<'_>, e: &CoreModelError) -> PyErr {
 /// A run's error message with the command line's options named as this package's keyword
 /// arguments (`lower --dt` reads `lower dt`).
 pub(crate) fn in_python_terms(e: &SimError) -> String {
+    in_python_words(&e.to_string())
+}
+
+/// A message with the command line's options named as keyword arguments.
+pub(crate) fn in_python_words(message: &str) -> String {
     [
         ("--integrator vi", "integrator=\"vi\""),
         ("--max-steps", "max_steps"),
@@ -40,7 +45,7 @@ pub(crate) fn in_python_terms(e: &SimError) -> String {
         ("--dt", "dt"),
     ]
     .iter()
-    .fold(e.to_string(), |m, (flag, argument)| {
+    .fold(message.to_string(), |m, (flag, argument)| {
         m.replace(flag, argument)
     })
 }

@@ -132,6 +132,17 @@ impl Model {
         }
     }
 
+    /// A run's start `(q0, dq0)`: given (an array or a dict by name) or the model's, checked.
+    pub(crate) fn start(
+        &self,
+        q0: Option<PerVariable<'_>>,
+        dq0: Option<PerVariable<'_>>,
+    ) -> PyResult<(Vec<f64>, Vec<f64>)> {
+        let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
+        let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
+        Ok((q0.as_slice().to_vec(), dq0.as_slice().to_vec()))
+    }
+
     /// One number per variable, as a numpy array.
     pub(crate) fn per_variable(
         &self,

@@ -102,8 +102,7 @@ impl Model {
     ) -> PyResult<Trajectory> {
         let every = count("every", every, 1)?;
         let max_steps = count("max_steps", max_steps, 1)?;
-        let q0 = self.vector("q0", q0, |i| self.model.variables[i].q0)?;
-        let dq0 = self.vector("dq0", dq0, |i| self.model.variables[i].dq0)?;
+        let (q0, dq0) = self.start(q0, dq0)?;
         let inputs = self.schedule(u, duration, dt)?;
         let options = SimOptions {
             every,
@@ -114,11 +113,7 @@ impl Model {
                 duration,
             )
         };
-        let start = Rollout {
-            q0: q0.as_slice().to_vec(),
-            dq0: dq0.as_slice().to_vec(),
-            inputs,
-        };
+        let start = Rollout { q0, dq0, inputs };
         let traj = run_watched(py, self.system(), &start, &options, progress)?;
         Ok(Trajectory::of(py, &traj, self.model.inputs.len()))
     }

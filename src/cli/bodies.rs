@@ -101,7 +101,8 @@ pub struct Rail {
     pub parent: Option<usize>,
     /// The axis, in the parent's axes.
     pub axis: [f64; 3],
-    /// The travel along it, from the parent's origin, m (with a margin either side).
+    /// The travel along it, from the parent's origin, m (with a margin either side: 15% of
+    /// the travel and the body's largest side).
     pub from: f64,
     /// …to here.
     pub to: f64,
@@ -134,7 +135,13 @@ impl Rail {
             if lo > hi {
                 continue;
             }
-            let margin = 0.15 * (hi - lo) + 0.25;
+            // Beyond the travel by a little of it and the body's own size: a cart at rest
+            // still sits on a rail as long as itself either side.
+            let size = frame.mass.as_ref().and_then(|m| BodyBox::of(k, m));
+            let side = size.map_or(0.0, |b| {
+                2.0 * b.half.iter().fold(0.0, |a: f64, &h| a.max(h))
+            });
+            let margin = 0.15 * (hi - lo) + side;
             rails.push(Rail {
                 parent: frame.parent,
                 axis,
@@ -187,5 +194,32 @@ mod tests {
         for (i, want) in [a, b, c].into_iter().enumerate() {
             assert!((span(i) - want).abs() < 1e-12, "axis {i}: {}", span(i));
         }
+    }
+
+    #[test]
+    fn a_cart_rides_a_rail_over_its_travel_and_its_length_either_side() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/models/cartpole.toml");
+        let model = tree_mech::model::from_toml_file(path).unwrap();
+        let at = |x: f64| {
+            let mut poses = vec![Pose::IDENTITY; model.frames.len()];
+            poses[0].p = [x, 0.0, 0.0];
+            poses
+        };
+        let rails = Rail::of(&model, &[at(-0.1), at(0.3)]);
+        assert_eq!(rails.len(), 1, "the cart's slide; the pole turns");
+        // The cart: 1 kg, inertia 0.01 about each axis → a cube of side √0.06.
+        let (travel, side) = (0.4, 0.06f64.sqrt());
+        let margin = 0.15 * travel + side;
+        assert_eq!(rails[0].axis, [1.0, 0.0, 0.0]);
+        assert!(
+            (rails[0].from - (-0.1 - margin)).abs() < 1e-12,
+            "{:?}",
+            rails[0]
+        );
+        assert!(
+            (rails[0].to - (0.3 + margin)).abs() < 1e-12,
+            "{:?}",
+            rails[0]
+        );
     }
 }

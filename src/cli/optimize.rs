@@ -485,3 +485,28 @@ fn write_text(file: &OutputFile, text: &str) -> Result<(), String> {
     std::fs::write(file.temp(), text)
         .map_err(|e| format!("cannot write `{}`: {e}", file.path().display()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_offset_target_is_marked_from_its_frame_at_the_start() {
+        // The UR5 reach aims `ee_link` 0.1 m along x and 0.2 m up from where it starts.
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tasks/ur5-reach.toml");
+        let (task, model) = model::read_task(path).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let mut start = vec![Pose::IDENTITY; sys.frame_count()];
+        sys.poses(&Vector::<Dyn>::from_column_slice(&task.q0), &mut start);
+        let ee = start[model.frame_index("ee_link").unwrap()].p;
+        let targets = frame_targets(&task, &start);
+        assert_eq!(targets.len(), 1);
+        let want = [ee[0] + 0.1, ee[1], ee[2] + 0.2];
+        for i in 0..3 {
+            assert!(
+                (targets[0][i] - want[i]).abs() < 1e-15,
+                "{targets:?} vs {want:?}"
+            );
+        }
+    }
+}

@@ -188,9 +188,9 @@ impl Constraint {
         }
     }
 
-    /// What it holds, in words (`tree-mech check` prints it): `distance 0.5`, `distance
-    /// \`len\``, `plane, normal [0, 0, 1] in \`a\``, `point, axes xz`; `model` names its
-    /// frames and variables.
+    /// What it holds, in words (`tree-mech check` prints it): "distance 0.5", "distance
+    /// \`len\`" (a variable's length), "plane, normal [0, 0, 1] in \`a\`", "point, axes xz";
+    /// `model` names its frames and variables.
     pub fn describe(&self, model: &Model) -> String {
         let a = &model.frames[self.frames[0]].name;
         match &self.kind {

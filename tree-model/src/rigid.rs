@@ -3,6 +3,8 @@
 //! joints — so a 1 µg placeholder link with a made-up tensor on a fixed joint is not the
 //! robot's problem when the body it is welded into is physical.
 
+use std::collections::HashMap;
+
 use crate::model::{Frame, Joint, Mass};
 use crate::primitive::PrimitiveKind;
 
@@ -86,27 +88,27 @@ fn groups(frames: &[Frame]) -> Vec<(Option<usize>, Pose)> {
     out
 }
 
-/// The body of every frame's rigid group, fused about its centre of mass in the group root's
-/// axes, with the frames it fuses — for the frames that carry a body.
-pub(crate) fn fused_bodies(frames: &[Frame]) -> Vec<Option<(Mass, Vec<usize>)>> {
+/// For each frame of `pieces` (each carrying a body), the rigid body it belongs to, fused
+/// about its centre of mass in its group root's axes, and the frames with a body it fuses
+/// (in order, the piece among them). One pass over the tree, whatever the pieces.
+pub(crate) fn fused_bodies(frames: &[Frame], pieces: &[usize]) -> Vec<(Mass, Vec<usize>)> {
     let groups = groups(frames);
-    let mut sums: std::collections::HashMap<Option<usize>, Vec<(usize, Mass, Pose)>> =
-        Default::default();
+    let mut parts: HashMap<Option<usize>, Vec<(usize, Mass, Pose)>> = HashMap::new();
     for (k, f) in frames.iter().enumerate() {
         if let Some(body) = f.mass {
-            let (root, pose) = groups[k];
-            sums.entry(root).or_default().push((k, body, pose));
+            parts
+                .entry(groups[k].0)
+                .or_default()
+                .push((k, body, groups[k].1));
         }
     }
-    let mut out = vec![None; frames.len()];
-    for parts in sums.values() {
-        let fused = fuse(parts);
-        let members: Vec<usize> = parts.iter().map(|p| p.0).collect();
-        for &k in &members {
-            out[k] = Some((fused, members.clone()));
-        }
-    }
-    out
+    pieces
+        .iter()
+        .map(|&k| {
+            let group = &parts[&groups[k].0];
+            (fuse(group), group.iter().map(|p| p.0).collect())
+        })
+        .collect()
 }
 
 /// `Σ` of bodies at constant poses: total mass, centre of mass, and

@@ -634,12 +634,24 @@ fn mass_of(k: usize, f: &FrameSpec, errs: &mut Problems) -> Option<Mass> {
 /// alone (a placeholder link's made-up tensor) passes when its fused body is: the dynamics
 /// only ever sees the sum. The error names the piece as written, and the fused body.
 fn check_rigid_bodies(frames: &[Frame], spec: &ModelSpec, errs: &mut Problems) {
-    let fused = crate::rigid::fused_bodies(frames);
-    for (k, f) in frames.iter().enumerate() {
-        let Some(body) = f.mass else { continue };
-        let Err(why) = physical_inertia(&body.inertia, body.mass) else {
-            continue;
-        };
+    let pieces: Vec<(usize, String)> = (frames.iter().enumerate())
+        .filter_map(|(k, f)| {
+            let body = f.mass?;
+            physical_inertia(&body.inertia, body.mass)
+                .err()
+                .map(|why| (k, why))
+        })
+        .collect();
+    if pieces.is_empty() {
+        return;
+    }
+    let ks: Vec<usize> = pieces.iter().map(|p| p.0).collect();
+    let fused = crate::rigid::fused_bodies(frames, &ks);
+    for ((k, why), (whole, members)) in pieces.into_iter().zip(fused) {
+        let whole_why = physical_inertia(&whole.inertia, whole.mass).err();
+        if members.len() > 1 && whole_why.is_none() {
+            continue; // the dynamics sees only the sum, and it is physical
+        }
         let shown = spec.frames[k].inertia.as_ref().map_or_else(
             || "0, 0, 0".to_string(),
             |w| {
@@ -649,20 +661,15 @@ fn check_rigid_bodies(frames: &[Frame], spec: &ModelSpec, errs: &mut Problems) {
                     .join(", ")
             },
         );
-        let mut message = format!("frame `{}`: inertia [{shown}] {why}", f.name);
-        if let Some((whole, members)) = &fused[k] {
-            if members.len() > 1 {
-                let Err(whole_why) = physical_inertia(&whole.inertia, whole.mass) else {
-                    continue;
-                };
-                let names: Vec<&str> = members.iter().map(|&m| frames[m].name.as_str()).collect();
-                message += &format!(
-                    "; and the rigid body it is welded into (frames {}, fused across constant \
-                     transforms, {} kg) {whole_why}",
-                    names.join(", "),
-                    crate::Rounded(whole.mass, 6)
-                );
-            }
+        let mut message = format!("frame `{}`: inertia [{shown}] {why}", frames[k].name);
+        if let (true, Some(whole_why)) = (members.len() > 1, whole_why) {
+            let names: Vec<&str> = members.iter().map(|&m| frames[m].name.as_str()).collect();
+            message += &format!(
+                "; and the rigid body it is welded into (frames {}, fused across constant \
+                 transforms, {} kg) {whole_why}",
+                names.join(", "),
+                crate::Rounded(whole.mass, 6)
+            );
         }
         errs.frame(k, FrameField::Inertia, message);
     }

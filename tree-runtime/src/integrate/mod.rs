@@ -315,30 +315,30 @@ where
     run_with_inputs(sys, q0, dq0, options, force, motion, &none, observe)
 }
 
-/// The inputs one value each a step, the start one entry per variable.
-fn check_sizes<S: System>(
-    sys: &S,
-    q0: &Vector<S::N>,
-    dq0: &Vector<S::N>,
-    inputs: &InputSchedule,
-) -> Result<(), SimError>
+/// `width` input values a step (0: none, all zero) for `sys`'s inputs.
+fn check_input_width<S: System>(sys: &S, width: usize) -> Result<(), SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    if !inputs.is_empty() && inputs.width() != sys.input_count() {
+    if width != 0 && width != sys.input_count() {
         return Err(SimError::InvalidInput(format!(
-            "{} input values given a step; the system has {} ({})",
-            inputs.width(),
+            "{width} input values given a step; the system has {} ({})",
             tree_model::Counted(sys.input_count(), "input"),
             sys.input_names().join(", ")
         )));
     }
+    Ok(())
+}
+
+/// A start `(q0, q̇0)` of `q0` and `dq0` entries: one a variable each.
+fn check_start<S: System>(sys: &S, q0: usize, dq0: usize) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let n = sys.dof();
-    if q0.len() != n || dq0.len() != n {
+    if q0 != n || dq0 != n {
         return Err(SimError::InvalidInput(format!(
-            "initial state has {} and {} entries; the system has {}",
-            q0.len(),
-            dq0.len(),
+            "initial state has {q0} and {dq0} entries; the system has {}",
             tree_model::Counted(n, "variable")
         )));
     }
@@ -365,7 +365,8 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let steps = check_options(options)?;
-    check_sizes(sys, q0, dq0, inputs)?;
+    check_input_width(sys, if inputs.is_empty() { 0 } else { inputs.width() })?;
+    check_start(sys, q0.len(), dq0.len())?;
     let n = sys.dim();
     let mut q = q0.clone();
     let mut dq = dq0.clone();

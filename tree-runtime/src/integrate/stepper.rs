@@ -5,7 +5,10 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator};
 
-use super::{check_finite, check_options, start_state, Method, MidpointVi, Rk4, SimOptions};
+use super::{
+    check_finite, check_input_width, check_options, check_start, start_state, Method, MidpointVi,
+    Rk4, SimOptions,
+};
 use crate::context::StepContext;
 use crate::dynamics::{Dynamics, ModelMotions, NoForce};
 use crate::error::SimError;
@@ -107,15 +110,7 @@ where
     /// Starts again from `(q0, q̇0)` at `t = 0` (kinematic entries from their prescription,
     /// the rest projected onto the constraints), forgetting the steps taken.
     pub fn reset(&mut self, q0: &[f64], dq0: &[f64]) -> Result<(), SimError> {
-        let n = self.sys.dof();
-        if q0.len() != n || dq0.len() != n {
-            return Err(SimError::InvalidInput(format!(
-                "the start has {} and {} entries; the system has {}",
-                q0.len(),
-                dq0.len(),
-                tree_model::Counted(n, "variable")
-            )));
-        }
+        check_start(&self.sys, q0.len(), dq0.len())?;
         self.failed = Some("the start was refused".into());
         self.q.copy_from_slice(q0);
         self.dq.copy_from_slice(dq0);
@@ -143,6 +138,11 @@ where
         Ok(())
     }
 
+    /// Why the stepper stopped (a step failed; [`Stepper::reset`] starts it again), if it did.
+    pub fn stopped(&self) -> Option<&str> {
+        self.failed.as_deref()
+    }
+
     /// Advances one step of `dt` with the inputs `u` held over it (one a
     /// [`System::input_count`]; empty: all zero).
     pub fn step(&mut self, u: &[f64]) -> Result<(), SimError> {
@@ -151,14 +151,7 @@ where
                 "the stepper stopped ({why}); start it again with reset"
             )));
         }
-        let inputs = self.sys.input_count();
-        if !u.is_empty() && u.len() != inputs {
-            return Err(SimError::InvalidInput(format!(
-                "{} input values given; the system has {inputs} ({})",
-                u.len(),
-                self.sys.input_names().join(", ")
-            )));
-        }
+        check_input_width(&self.sys, u.len())?;
         if let Some(k) = u.iter().position(|x| !x.is_finite()) {
             return Err(SimError::InvalidInput(format!(
                 "input `{}` is {}, not a finite number",
