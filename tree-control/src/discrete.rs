@@ -348,7 +348,7 @@ where
     }
 
     /// Whether the state remembers each input's previous value (as built: yes).
-    pub fn has_input_memory(&self) -> bool {
+    pub(crate) fn has_input_memory(&self) -> bool {
         self.layout.input_memory
     }
 
@@ -374,7 +374,7 @@ where
     }
 
     /// Whether this is the VI (otherwise RK4).
-    pub fn is_vi(&self) -> bool {
+    pub(crate) fn is_vi(&self) -> bool {
         matches!(self.method, Stepper::Vi(_))
     }
 
@@ -419,7 +419,7 @@ where
     /// The inputs that hold configuration `q` at rest against gravity and springs, per
     /// control (`u = −∂L/∂q` at `q̇ = 0` on each input's variable; zero for kinematic
     /// controls).
-    pub fn gravity_compensation(&mut self, q: &Vector<S::N>) -> DVector<f64> {
+    pub(crate) fn gravity_compensation(&mut self, q: &Vector<S::N>) -> DVector<f64> {
         let zero = self.sys.zero_vector();
         let terms = &mut self.buf.terms;
         self.sys.lagrangian(q, &zero, Order::First, terms);

@@ -5,7 +5,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 /// `log(R)`: the rotation vector `φ` with `R = exp([φ]×)`, `|φ| ≤ π`.
-pub fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {
+pub(crate) fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {
     let cos = ((r.trace() - 1.0) * 0.5).clamp(-1.0, 1.0);
     let theta = cos.acos();
     let skew = Vector3::new(
@@ -33,7 +33,7 @@ pub fn log_so3(r: &Matrix3<f64>) -> Vector3<f64> {
 }
 
 /// The inverse right Jacobian of SO(3) at `φ`: `d log(R exp([δ]×)) = J_r⁻¹(φ) δ`.
-pub fn right_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
+pub(crate) fn right_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
     let theta = phi.norm();
     let k = phi.cross_matrix();
     let c = if theta < 1e-6 {

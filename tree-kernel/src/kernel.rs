@@ -20,7 +20,7 @@ pub struct Kernel<S: Scalar> {
     /// Per-variable scratch of the elements.
     pub elements: Scratch<S>,
     /// The inverse dynamics' per-frame values.
-    pub newton_euler: NewtonEuler<S>,
+    pub(crate) newton_euler: NewtonEuler<S>,
 }
 
 impl<S: Scalar> Kernel<S> {

@@ -26,7 +26,7 @@ use tree_model::Joint;
 
 /// Per-frame storage of the algorithm (allocated once, reused), over any [`Scalar`].
 #[derive(Clone, Debug)]
-pub struct NewtonEuler<S: Scalar = f64> {
+pub(crate) struct NewtonEuler<S: Scalar = f64> {
     /// Each frame's acceleration `a_k`.
     acceleration: Vec<Twist<S>>,
     /// The wrench on each subtree at its root.
@@ -50,7 +50,7 @@ impl<S: Scalar> NewtonEuler<S> {
 /// `τ` into `ne.tau` (every variable; zero for one that moves no massive frame) for the
 /// accelerations `qdd` (every variable) on the outward sweep `ws` at `(q, q̇)`: the bodies'
 /// `M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q`. No branch on a value, so `tree_model!` unrolls it.
-pub fn generalized_forces<S: Scalar>(
+pub(crate) fn generalized_forces<S: Scalar>(
     plan: &TreePlan,
     ws: &Workspace<S>,
     ne: &mut NewtonEuler<S>,

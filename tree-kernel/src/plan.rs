@@ -106,7 +106,7 @@ pub struct FramePlan {
     /// Index of the parent frame (`None`: the world).
     pub parent: Option<usize>,
     /// A constant transform applied before the primitive (folded constant frames).
-    pub pre: Option<ConstantTransform>,
+    pub(crate) pre: Option<ConstantTransform>,
     /// Its primitive.
     pub kind: PrimitiveKind,
     /// Its parameter.

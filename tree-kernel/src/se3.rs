@@ -14,7 +14,7 @@ use crate::scalar::Scalar;
 pub type Twist<S = f64> = [S; 6];
 
 /// A wrench `(f, τ)` (force and torque), dual to a twist.
-pub type Wrench<S = f64> = [S; 6];
+pub(crate) type Wrench<S = f64> = [S; 6];
 
 /// The zero twist.
 pub const ZERO: Twist = [0.0; 6];
@@ -262,7 +262,7 @@ impl<S: Scalar> LocalTransform<S> {
     /// [`Self::ad_inverse`] of every twist of `columns`, in place (a frame's Jacobian
     /// columns, eqs. (7), (10)), the primitive matched once for all of them.
     #[inline(always)]
-    pub fn ad_inverse_each(&self, columns: &mut [Twist<S>]) {
+    pub(crate) fn ad_inverse_each(&self, columns: &mut [Twist<S>]) {
         macro_rules! each {
             ($x:ident => $e:expr) => {
                 for out in columns.iter_mut() {
@@ -369,7 +369,7 @@ impl<S: Scalar> LocalTransform<S> {
     /// `Ad_{g(x)⁻¹}ᵀ w`: a child-frame wrench seen from the parent, `(R f, R τ + p × R f)`.
     /// Dual to [`LocalTransform::ad_inverse`]: `(Ad_{g⁻¹}ᵀ w)·X = w·(Ad_{g⁻¹} X)`.
     #[inline(always)]
-    pub fn wrench_to_parent(&self, w: &Wrench<S>) -> Wrench<S> {
+    pub(crate) fn wrench_to_parent(&self, w: &Wrench<S>) -> Wrench<S> {
         let (c, s, d) = (self.a, self.b, self.a);
         match self.kind {
             // p × f with p = d e_axis
@@ -406,7 +406,7 @@ impl<S: Scalar> LocalTransform<S> {
     /// `R h + m p`: the first mass moment `h` (about the child origin) of a body of mass `m`,
     /// taken about the parent origin in parent coordinates.
     #[inline(always)]
-    pub fn moment_to_parent(&self, h: &[S; 3], m: f64) -> [S; 3] {
+    pub(crate) fn moment_to_parent(&self, h: &[S; 3], m: f64) -> [S; 3] {
         if self.kind.is_rotation() {
             return self.point_to_parent(h);
         }
@@ -419,7 +419,7 @@ impl<S: Scalar> LocalTransform<S> {
 
     /// `R a + p`: a point of the child frame in parent coordinates.
     #[inline(always)]
-    pub fn point_to_parent(&self, a: &[S; 3]) -> [S; 3] {
+    pub(crate) fn point_to_parent(&self, a: &[S; 3]) -> [S; 3] {
         let (c, s, d) = (self.a, self.b, self.a);
         match self.kind {
             PrimitiveKind::Tx => [a[0] + d, a[1], a[2]],
@@ -435,7 +435,7 @@ impl<S: Scalar> LocalTransform<S> {
     /// composite-body step). Each primitive's case has its axes as constants, so the
     /// interpreted system runs straight-line code as the compiled one does.
     #[inline(always)]
-    pub fn inertia_to_parent(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
+    pub(crate) fn inertia_to_parent(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         match self.kind {
             PrimitiveKind::Rx => self.inertia_rotated::<0, 1, 2>(i),
             PrimitiveKind::Ry => self.inertia_rotated::<1, 2, 0>(i),
@@ -667,7 +667,7 @@ impl<S: Scalar> SpatialInertia<S> {
     /// `self −= s u uᵀ` (the articulated-body step's rank-one update); the symmetric blocks
     /// from their upper triangles, so they stay exactly symmetric.
     #[inline(always)]
-    pub fn sub_outer(&mut self, u: &Wrench<S>, s: S) {
+    pub(crate) fn sub_outer(&mut self, u: &Wrench<S>, s: S) {
         for i in 0..3 {
             let (a, b) = (s * u[i], s * u[i + 3]);
             for j in 0..3 {
@@ -731,7 +731,7 @@ impl<S: Scalar> SpatialInertia<S> {
 
 /// The entry of a twist or wrench `(v, ω)` along a primitive's unit twist ξ.
 #[inline(always)]
-pub fn twist_index(kind: PrimitiveKind) -> usize {
+pub(crate) fn twist_index(kind: PrimitiveKind) -> usize {
     kind.axis() + if kind.is_rotation() { 3 } else { 0 }
 }
 
@@ -829,7 +829,7 @@ impl Pose {
 
     /// [`Self::ad_inverse`] of every twist of `src` into `dst`, this pose's form (a pure
     /// rotation, a pure translation) found once for all of them.
-    pub fn ad_inverse_each<S: Scalar>(&self, src: &[Twist<S>], dst: &mut [Twist<S>]) {
+    pub(crate) fn ad_inverse_each<S: Scalar>(&self, src: &[Twist<S>], dst: &mut [Twist<S>]) {
         let (rotation_free, translation_free) =
             (self.is_rotation_free(), self.is_translation_free());
         let p = self.p.map(c::<S>);
@@ -897,7 +897,7 @@ impl Pose {
 
     /// `Ad_{g⁻¹}ᵀ w = (R f, R τ + p × R f)`.
     #[inline(always)]
-    pub fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
+    pub(crate) fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
         let f = self.rotate_const(&[w[0], w[1], w[2]]);
         let mut t = self.rotate_const(&[w[3], w[4], w[5]]);
         if !self.is_translation_free() {
@@ -909,7 +909,7 @@ impl Pose {
 
     /// `R h + m p`: a first mass moment about the child origin, taken about the parent's.
     #[inline(always)]
-    pub fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
+    pub(crate) fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
         let r = self.rotate_const(h);
         if self.is_translation_free() {
             return r;
@@ -924,7 +924,7 @@ impl Pose {
     /// `Ad_{g⁻¹}ᵀ I Ad_{g⁻¹}`: rotate the blocks (`R B Rᵀ`), then shift by `p` as
     /// [`LocalTransform::inertia_to_parent`] does for one axis.
     #[inline(always)]
-    pub fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
+    pub(crate) fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         let mut out = *i;
         if !self.is_rotation_free() {
             let rt = transpose3(&self.r);
@@ -960,7 +960,7 @@ impl Pose {
 /// offsets are — acts by that primitive's few multiplications; any other pose by the general
 /// rotation and shift.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ConstantTransform {
+pub(crate) struct ConstantTransform {
     pose: Pose,
     primitive: Option<LocalTransform>,
 }
@@ -1014,7 +1014,7 @@ impl ConstantTransform {
     }
 
     /// [`Self::ad_inverse`] of every twist of `src` into `dst`.
-    pub fn ad_inverse_each<S: Scalar>(&self, src: &[Twist<S>], dst: &mut [Twist<S>]) {
+    pub(crate) fn ad_inverse_each<S: Scalar>(&self, src: &[Twist<S>], dst: &mut [Twist<S>]) {
         match &self.primitive {
             Some(t) => {
                 dst.copy_from_slice(src);
@@ -1026,7 +1026,7 @@ impl ConstantTransform {
 
     /// `Ad_{C⁻¹}ᵀ w`: a wrench after `C` seen before it.
     #[inline(always)]
-    pub fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
+    pub(crate) fn wrench_to_parent<S: Scalar>(&self, w: &Wrench<S>) -> Wrench<S> {
         match &self.primitive {
             Some(t) => Self::lifted::<S>(t).wrench_to_parent(w),
             None => self.pose.wrench_to_parent(w),
@@ -1035,7 +1035,7 @@ impl ConstantTransform {
 
     /// `R h + m p`: a first mass moment of a subtree of mass `m` taken before `C`.
     #[inline(always)]
-    pub fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
+    pub(crate) fn moment_to_parent<S: Scalar>(&self, h: &[S; 3], m: f64) -> [S; 3] {
         match &self.primitive {
             Some(t) => Self::lifted::<S>(t).moment_to_parent(h, m),
             None => self.pose.moment_to_parent(h, m),
@@ -1044,7 +1044,7 @@ impl ConstantTransform {
 
     /// `Ad_{C⁻¹}ᵀ I Ad_{C⁻¹}`: a spatial inertia after `C` seen before it.
     #[inline(always)]
-    pub fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
+    pub(crate) fn inertia_to_parent<S: Scalar>(&self, i: &SpatialInertia<S>) -> SpatialInertia<S> {
         match &self.primitive {
             Some(t) => Self::lifted::<S>(t).inertia_to_parent(i),
             None => self.pose.inertia_to_parent(i),

@@ -42,7 +42,7 @@ pub struct Workspace<S: Scalar> {
     /// `∂v_k/∂q_a`.
     pub dv_dq: Vec<Twist<S>>,
     /// Each subtree's composite spatial inertia at its root.
-    pub inertia: Vec<SpatialInertia<S>>,
+    pub(crate) inertia: Vec<SpatialInertia<S>>,
     /// Each subtree's momentum wrench at its root.
     pub wrench: Vec<Wrench<S>>,
     /// Each subtree's first mass moment at its root.
@@ -140,7 +140,7 @@ pub fn forward<S: Scalar>(plan: &TreePlan, ws: &mut Workspace<S>, q: &[S], dq: &
 /// [`forward`], inlined into its caller (a caller compiled for wider registers takes the
 /// sweep with it).
 #[inline(always)]
-pub fn forward_inline<S: Scalar>(
+pub(crate) fn forward_inline<S: Scalar>(
     plan: &TreePlan,
     ws: &mut Workspace<S>,
     q: &[S],
@@ -415,7 +415,7 @@ fn add6<S: Scalar>(a: &[S; 6], b: &[S; 6]) -> [S; 6] {
 
 /// The tree's own Lagrangian terms up to `order` at `(q, q̇)` by the two sweeps (the
 /// elements' follow in [`crate::kernel::evaluate`]). Inlined into its caller, as
-/// [`forward_inline`].
+/// `forward_inline`.
 #[inline(always)]
 pub fn evaluate<S: Scalar>(
     plan: &TreePlan,

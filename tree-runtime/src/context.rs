@@ -28,7 +28,7 @@ where
 {
     /// Adds the inputs' generalized force `B u` into `f`.
     #[inline]
-    pub fn add_inputs(&self, f: &mut crate::Vector<S::N>) {
+    pub(crate) fn add_inputs(&self, f: &mut crate::Vector<S::N>) {
         for (k, &x) in self.u.iter().enumerate() {
             f[self.sys.input_variable(k)] += x;
         }

@@ -124,7 +124,7 @@ impl Split {
     }
 
     /// Nothing prescribed and nothing constrained: the plain `M q̈ = rhs` path.
-    pub fn is_plain(&self) -> bool {
+    pub(crate) fn is_plain(&self) -> bool {
         self.kinematic.is_empty() && self.rows == 0
     }
 }

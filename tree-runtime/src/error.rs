@@ -74,7 +74,7 @@ pub enum SimError {
         /// The largest `|h(q₂)|` at the end.
         violation: f64,
     },
-    /// A VI step turned a joint by more than a quarter turn ([`crate::integrate::MAX_TURN`]):
+    /// A VI step turned a joint by more than a quarter turn:
     /// the step is too long for the motion.
     StepTooCoarse {
         /// The step that failed.
@@ -154,7 +154,7 @@ impl SimError {
     /// A state or residual that stopped being finite while inputs `u` (named `names`) were in
     /// force names them: an input too large for the model (a push of 1e308 N) overflows the
     /// first step, and the message should point at it rather than at the residual alone.
-    pub fn under_inputs(self, names: &[String], u: &[f64]) -> SimError {
+    pub(crate) fn under_inputs(self, names: &[String], u: &[f64]) -> SimError {
         match self {
             SimError::NonFinite { step, t, what } if u.iter().any(|&x| x != 0.0) => {
                 let list = names
@@ -175,7 +175,7 @@ impl SimError {
 
     /// The message as an evaluation at one given state reports it: without the step a run
     /// would name (`at this state, the mass matrix is not positive definite …`).
-    pub fn at_this_state(&self) -> String {
+    pub(crate) fn at_this_state(&self) -> String {
         format!("at this state, {}", Detail(self))
     }
 }

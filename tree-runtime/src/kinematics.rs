@@ -77,7 +77,7 @@ impl Reference {
     }
 
     /// `x`, a twist in the axes of the frame at `pose`, in this reference.
-    pub fn express(self, pose: &Pose, x: &Twist) -> Twist {
+    pub(crate) fn express(self, pose: &Pose, x: &Twist) -> Twist {
         if self == Reference::Local {
             return *x;
         }
@@ -319,7 +319,7 @@ impl Kinematics {
 
     /// The centre of mass's Jacobian `∂c/∂q` (3 × variables; `ċ = J q̇`): the mass-weighted
     /// mean of each body's centre-of-mass point Jacobian `R(J_v + J_ω × c)`. Allocates the
-    /// result; see [`Self::com_jacobian_into`].
+    /// result.
     pub fn com_jacobian(&self) -> DMatrix<f64> {
         let mut out = DMatrix::zeros(3, self.dof());
         self.com_jacobian_into(&mut out);
@@ -327,7 +327,7 @@ impl Kinematics {
     }
 
     /// [`Self::com_jacobian`] into `out` (3 × variables).
-    pub fn com_jacobian_into(&self, out: &mut DMatrix<f64>) {
+    pub(crate) fn com_jacobian_into(&self, out: &mut DMatrix<f64>) {
         out.as_mut_slice().fill(0.0);
         let mut total = 0.0;
         for (k, f) in self.plan.frames.iter().enumerate() {

@@ -9,7 +9,9 @@ use crate::system::{Matrix, Vector};
 mod compact;
 mod products;
 
-pub use compact::{combine_compact_rows, lu_solve_compact_rows, CompactCombination, CompactFactor};
+pub(crate) use compact::{
+    combine_compact_rows, lu_solve_compact_rows, CompactCombination, CompactFactor,
+};
 pub use products::{
     mul_into, mul_into_pair, tr_mul_into, tr_mul_into_pair, tr_mul_into_symmetric, Packing,
 };
@@ -68,7 +70,7 @@ pub fn cholesky_factor_packed(a: &mut [f64], n: usize) -> Result<(), (usize, f64
 }
 
 /// Solves `L Lᵀ x = b` with the factor from [`cholesky_factor`]; `b` becomes `x`.
-pub fn cholesky_substitute<N: Dim>(a: &Matrix<N>, b: &mut Vector<N>)
+pub(crate) fn cholesky_substitute<N: Dim>(a: &Matrix<N>, b: &mut Vector<N>)
 where
     DefaultAllocator: Allocator<N> + Allocator<N, N>,
 {
@@ -153,7 +155,7 @@ where
 }
 
 /// Row interchanges of an LU factorisation.
-pub type Pivots<N> = nalgebra::OVector<usize, N>;
+pub(crate) type Pivots<N> = nalgebra::OVector<usize, N>;
 
 /// Factors the `n × n` column-major matrix in `a[..n²]` in place (`P A = L U`, partial
 /// pivoting), recording the interchanges in `pivots[..n]`. The caller may pack a smaller
@@ -170,7 +172,7 @@ pub fn lu_factor_packed(a: &mut [f64], n: usize, pivots: &mut [usize]) -> Result
 /// variables, leaves first) keeps its zeros in the factor, where partial pivoting would
 /// swap a heavier row up and fill it (the sparse solvers' rule, with 0.1 their usual
 /// threshold).
-pub fn lu_factor_packed_threshold(
+pub(crate) fn lu_factor_packed_threshold(
     a: &mut [f64],
     n: usize,
     pivots: &mut [usize],
@@ -204,7 +206,7 @@ pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// `Aᵀ = Uᵀ Lᵀ P`): `Uᵀ w = b` forward, `Lᵀ y = w` backward — both reading U's and L's
 /// columns, contiguous in the column-major factor, as dot products — then `x = Pᵀ y`, the
 /// interchanges undone in reverse order. `b` becomes `x`. No factor of `Aᵀ` is needed.
-pub fn lu_solve_transposed_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
+pub(crate) fn lu_solve_transposed_packed(a: &[f64], n: usize, pivots: &[usize], b: &mut [f64]) {
     let (a, b) = (&a[..n * n], &mut b[..n]);
     for i in 0..n {
         let s = dot(&a[i * n..i * n + i], &b[..i]);

@@ -28,7 +28,7 @@ pub enum Entry {
 }
 
 /// Named entries, in order.
-pub type Entries = Vec<(String, Entry)>;
+pub(crate) type Entries = Vec<(String, Entry)>;
 
 /// An explicit step to linearise instead of the VI's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -21,7 +21,7 @@ use tree_kernel::scalar::Scalar;
 
 /// Which second slot derivative of `L_d`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Slots {
+pub(crate) enum Slots {
     /// `D₁D₁L_d`.
     D1D1,
     /// `D₂D₁L_d` (eq. (26)); `D₁D₂L_d` is its transpose.
@@ -33,7 +33,7 @@ pub enum Slots {
 /// A second slot derivative of `L_d` with its coefficients `[k_qq, k_t, k_vq, k_m]` on `L_qq`,
 /// `L_q̇q` transposed, `L_q̇q` and `M` (from [`DiscreteLagrangian::slot`]).
 #[derive(Clone, Copy, Debug)]
-pub struct SecondSlot<T>([T; 4]);
+pub(crate) struct SecondSlot<T>([T; 4]);
 
 impl<T: Scalar> SecondSlot<T> {
     /// Entry `(i, j)` from `L_qq[i][j]`, `L_q̇q[i][j]`, `L_q̇q[j][i]`, `M[i][j]`.
@@ -45,7 +45,13 @@ impl<T: Scalar> SecondSlot<T> {
     /// [`Self::at`], each product after the first added by a multiply-add (fused where
     /// `FUSED`: [`Scalar::multiply_add`]; unfused, the same sum in the same order).
     #[inline(always)]
-    pub fn at_fused<const FUSED: bool>(&self, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
+    pub(crate) fn at_fused<const FUSED: bool>(
+        &self,
+        lqq_ij: T,
+        lvq_ij: T,
+        lvq_ji: T,
+        m_ij: T,
+    ) -> T {
         let [k_qq, k_t, k_vq, k_m] = self.0;
         let sum = k_t.multiply_add::<FUSED>(lvq_ji, k_qq * lqq_ij);
         let sum = k_vq.multiply_add::<FUSED>(lvq_ij, sum);
@@ -92,7 +98,7 @@ impl DiscreteLagrangian {
     /// `(1−α)Δt |∂L/∂qᵢ| + |∂L/∂q̇ᵢ|`: the size of `(D₁L_d)ᵢ`'s two terms before they
     /// cancel (a residual row's momentum scale, docs/derivations.md §7).
     #[inline]
-    pub fn d1_scale<N: Dim>(&self, t: &Terms<N>, i: usize) -> f64
+    pub(crate) fn d1_scale<N: Dim>(&self, t: &Terms<N>, i: usize) -> f64
     where
         DefaultAllocator: Allocator<N> + Allocator<N, N>,
     {
@@ -121,17 +127,10 @@ impl DiscreteLagrangian {
         }
     }
 
-    /// Entry `(i, j)` of a second slot derivative from the continuous terms' entries
-    /// `L_qq[i][j]`, `L_q̇q[i][j]`, `L_q̇q[j][i]`, `M[i][j]`, over any scalar (the step's
-    /// second derivatives differentiate it over dual numbers).
-    #[inline]
-    pub fn second<T: Scalar>(&self, slots: Slots, lqq_ij: T, lvq_ij: T, lvq_ji: T, m_ij: T) -> T {
-        self.slot(slots).at(lqq_ij, lvq_ij, lvq_ji, m_ij)
-    }
-
     /// The second slot derivative `slots` with its coefficients worked out once, for filling
-    /// many entries ([`Self::second`] entry by entry).
-    pub fn slot<T: Scalar>(&self, slots: Slots) -> SecondSlot<T> {
+    /// many entries: entry `(i, j)` from the continuous terms' entries `L_qq[i][j]`,
+    /// `L_q̇q[i][j]`, `L_q̇q[j][i]`, `M[i][j]` ([`SecondSlot::at`]), over any scalar.
+    pub(crate) fn slot<T: Scalar>(&self, slots: Slots) -> SecondSlot<T> {
         SecondSlot(self.coefficients(slots).map(T::constant))
     }
 

@@ -19,7 +19,7 @@ pub use rk45::{Rk45, Tolerance};
 pub use stepper::Stepper;
 pub use vi::{
     Forcing, JacobianUpdate, MidpointVi, StepCovector, StepDerivatives, StepInput, StepOutput,
-    StepSecondDerivatives, ViSettings, MAX_TURN,
+    StepSecondDerivatives, ViSettings,
 };
 
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
@@ -32,7 +32,7 @@ use crate::system::{System, Terms, Vector};
 use crate::trajectory::{Sample, Trajectory};
 
 /// The most steps a fixed-step run may take.
-pub const MAX_STEPS: f64 = 1e9;
+pub(crate) const MAX_STEPS: f64 = 1e9;
 
 /// The default step budget of an adaptive run ([`SimOptions::max_steps`]).
 pub const DEFAULT_MAX_ADAPTIVE_STEPS: usize = 1_000_000;
@@ -63,7 +63,7 @@ pub struct SimOptions {
     pub baumgarte: Baumgarte,
     /// The most steps an adaptive (rk45) run may take: it stops with
     /// [`SimError::StepBudget`] when it has taken them, or as soon as the step size it has
-    /// reached would need more (a stiff model). Fixed-step runs are bounded by [`MAX_STEPS`].
+    /// reached would need more (a stiff model). Fixed-step runs are bounded by 10⁹ steps.
     pub max_steps: usize,
 }
 

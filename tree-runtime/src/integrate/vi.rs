@@ -43,7 +43,7 @@ const FLOOR: f64 = 1e-3;
 const CHECK_FIRST_BELOW: f64 = 1e-3;
 
 /// The largest turn of an angle a step may take (rad): a quarter turn.
-pub const MAX_TURN: f64 = std::f64::consts::FRAC_PI_2;
+pub(crate) const MAX_TURN: f64 = std::f64::consts::FRAC_PI_2;
 
 /// When the VI's Newton iteration re-evaluates its exact Jacobian (eq. (26)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -127,12 +127,11 @@ pub struct ViSettings {
     /// Quadrature point `α ∈ [0, 1]`; `½` is the second-order midpoint rule.
     pub alpha: f64,
     /// Newton stops when every dynamic row of the residual is below `tolerance` relative to
-    /// that row's momentum scale (the sum of its terms' magnitudes, see
-    /// [`MidpointVi::relative_residual`]) and every `|h_r(q₂)|` is below
-    /// `constraint_tolerance`, or when the residual sits at its rounding floor: an update below
-    /// the rounding of q, or an exact Newton update that fails to halve a residual already
-    /// within `√tolerance` (docs/derivations.md §7, "The rounding floor"). Relative, so a model
-    /// in grams or in tonnes converges alike.
+    /// that row's momentum scale (the sum of its terms' magnitudes) and every `|h_r(q₂)|` is
+    /// below `constraint_tolerance`, or when the residual sits at its rounding floor: an
+    /// update below the rounding of q, or an exact Newton update that fails to halve a
+    /// residual already within `√tolerance` (docs/derivations.md §7, "The rounding floor").
+    /// Relative, so a model in grams or in tonnes converges alike.
     pub tolerance: f64,
     /// Newton's tolerance on `max |h(q₂)|`.
     pub constraint_tolerance: f64,
@@ -1025,7 +1024,7 @@ where
     /// masses, so this ratio does not (a row whose terms all vanish has `r_i = 0`: ratio 0). It
     /// lies in `[0, 1]`; Newton stops below [`ViSettings::tolerance`]. (Each `s_i` counts as
     /// at least a thousandth of the largest.)
-    pub fn relative_residual(&self) -> f64 {
+    pub(crate) fn relative_residual(&self) -> f64 {
         // Plain comparisons (`if x > m`), which skip a NaN as `f64::max` does but take one
         // instruction where its NaN test made each row wait on the last longer.
         let largest = |m: f64, x: f64| if x > m { x } else { m };

@@ -16,7 +16,7 @@ use tree_kernel::se3::{Pose, Twist};
 use tree_kernel::sweeps::{self, Reach, Workspace};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
-pub type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
+pub(crate) type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
 
 /// The interpreted system.
 #[derive(Clone, Debug)]

@@ -68,7 +68,7 @@ impl Pairs {
 /// union of non-zeros is little more than each row's. Buffers grow to the largest factor
 /// gathered and are reused.
 #[derive(Clone, Debug, Default)]
-pub struct CompactFactor {
+pub(crate) struct CompactFactor {
     n: usize,
     pairs: Pairs,
 }
@@ -109,7 +109,7 @@ impl CompactFactor {
 /// the same result to the bit, without testing each entry for zero. `b` holds the
 /// right-hand sides row-major (`n × k`) and becomes the solutions.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-pub fn lu_solve_compact_rows(
+pub(crate) fn lu_solve_compact_rows(
     a: &[f64],
     n: usize,
     pivots: &[usize],
@@ -175,7 +175,7 @@ impl<'a, I: Iterator<Item = &'a [Term]>> RowTerms for Gathered<'a, I> {
 /// odd last row paired with itself), each over the rows of `D` in order, gathered once per
 /// `A`.
 #[derive(Clone, Debug, Default)]
-pub struct CompactCombination {
+pub(crate) struct CompactCombination {
     rows: usize,
     pairs: Pairs,
 }
@@ -201,7 +201,12 @@ impl CompactCombination {
 /// combination of `D`'s rows in registers (one load of `D` for both), `D`'s rows in order.
 /// Compiled also for AVX2 with fused multiply-adds and for AVX, chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-pub fn combine_compact_rows(c: &mut [f64], k: usize, compact: &CompactCombination, d: &[f64]) {
+pub(crate) fn combine_compact_rows(
+    c: &mut [f64],
+    k: usize,
+    compact: &CompactCombination,
+    d: &[f64],
+) {
     if multiversion::target::target_cfg_f!(target_feature = "fma") {
         combine_compact::<true>(c, k, compact, d);
     } else {
