@@ -78,7 +78,7 @@ pub mod __private {
     pub use tree_kernel::{__unless_fused_only, Order, Pose};
     pub use tree_model as model;
     pub use tree_runtime::nalgebra::Const;
-    pub use tree_runtime::system::Sparsity;
+    pub use tree_runtime::Sparsity;
     pub use tree_runtime::{ConstraintTerms, System, Terms, Vector};
 }
 

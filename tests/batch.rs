@@ -298,7 +298,7 @@ fn trajectories_linearise_step_by_step_whatever_the_thread_count() {
         .collect();
     let mut bare = Trajectory::new(names, Vec::new(), 2);
     for k in 0..2 {
-        bare.push(&tree_mech::runtime::trajectory::Sample {
+        bare.push(&tree_mech::runtime::Sample {
             step: k,
             t: 0.01 * k as f64,
             q: sparse.q(k),

@@ -10,7 +10,7 @@ use pyo3::types::PyDict;
 use tree_mech::integrate::{Method, StepInput, StepOutput};
 use tree_mech::runtime::batch::{StepLinearizer, Watch};
 use tree_mech::runtime::report::{self, Explicit, Request as ReportRequest};
-use tree_mech::runtime::trajectory::Sample;
+use tree_mech::runtime::Sample;
 use tree_mech::{Trajectory as CoreTrajectory, TreeSystem};
 
 use crate::arrays::{count, entry};

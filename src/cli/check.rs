@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use tree_mech::model::{self, Given, Rounded};
-use tree_mech::runtime::interpreted::columns_fit;
+use tree_mech::runtime::columns_fit;
 
 use super::{counted, Source};
 

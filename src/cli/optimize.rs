@@ -12,7 +12,7 @@ use tree_mech::control::{
 };
 use tree_mech::model::{self, CostTerm, Model, Target, Task};
 use tree_mech::nalgebra::Dyn;
-use tree_mech::runtime::trajectory::{CsvStream, Sample};
+use tree_mech::runtime::{CsvStream, Sample};
 use tree_mech::runtime::{Pose, Seconds, Vector};
 use tree_mech::{System, Terms, Trajectory, TreeSystem};
 

@@ -14,9 +14,7 @@ use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 
 use crate::knot::{Knot, Needs};
 use tree_model::Control;
-use tree_runtime::context::StepContext;
 use tree_runtime::dynamics::{ModelMotions, NoForce, Prescription};
-use tree_runtime::error::SimError;
 use tree_runtime::integrate::{
     MidpointVi, Rk4, StepCovector, StepDerivatives, StepInput, StepOutput, ViSettings,
 };
@@ -24,7 +22,9 @@ use tree_runtime::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_ro
 use tree_runtime::linearize::{
     explicit_step_derivatives_into, ExplicitStepDerivatives, ExplicitStepWorkspace, RK4,
 };
-use tree_runtime::system::{Order, System, Terms, Vector};
+use tree_runtime::SimError;
+use tree_runtime::StepContext;
+use tree_runtime::{Order, System, Terms, Vector};
 
 /// The discretisation.
 enum Stepper<N: nalgebra::Dim>

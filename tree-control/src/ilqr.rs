@@ -18,11 +18,11 @@ use crate::discrete::DiscreteSystem;
 use crate::knot::Knot;
 use crate::knot::Needs;
 use crate::qp::{ControlQp, Limits};
-use tree_runtime::error::SimError;
 use tree_runtime::linalg::{
     mul_into, mul_into_pair, tr_mul_into, tr_mul_into_pair, tr_mul_into_symmetric, Packing,
 };
-use tree_runtime::system::System;
+use tree_runtime::SimError;
+use tree_runtime::System;
 
 /// How many iterations' records a solve reserves before it starts (more grow the list).
 const HISTORY_RESERVE: usize = 4096;

@@ -5,7 +5,7 @@
 
 use nalgebra::DMatrix;
 
-use tree_runtime::error::SimError;
+use tree_runtime::SimError;
 
 /// A feedback `u = −K x` and the cost-to-go `½ xᵀ P x`.
 #[derive(Clone, Debug, PartialEq)]

@@ -17,9 +17,9 @@ use crate::frames::{log_so3, right_jacobian_inverse};
 use crate::knot::Knot;
 use crate::knot::Needs;
 use tree_kernel::se3::Pose;
-use tree_runtime::error::SimError;
 use tree_runtime::kinematics::{Kinematics, Reference};
 use tree_runtime::linalg::{mul_into, tr_mul_into, tr_mul_into_symmetric, Packing};
+use tree_runtime::SimError;
 
 /// A term with its targets placed in the world.
 #[derive(Clone, Debug, PartialEq)]

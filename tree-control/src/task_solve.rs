@@ -15,9 +15,9 @@ use crate::knot::Knot;
 use crate::knot::Needs;
 use crate::task_cost::TaskCost;
 use tree_runtime::dynamics::{ModelMotions, Prescription};
-use tree_runtime::error::SimError;
 use tree_runtime::integrate::ViSettings;
-use tree_runtime::system::{ConstraintTerms, Order, System};
+use tree_runtime::SimError;
+use tree_runtime::{ConstraintTerms, Order, System};
 
 /// A solved task: the solver's result and the trajectory at every knot.
 #[derive(Clone, Debug, PartialEq)]

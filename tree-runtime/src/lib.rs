@@ -22,31 +22,32 @@
 #![warn(missing_docs)]
 
 pub mod batch;
-pub mod context;
+mod context;
 pub mod dynamics;
-pub mod error;
+mod error;
 pub mod evaluation;
 pub mod integrate;
-pub mod interpreted;
+mod interpreted;
 pub mod kinematics;
 #[doc(hidden)]
 pub mod linalg;
 pub mod linearize;
 pub mod memory;
-pub mod reference;
+mod reference;
 pub mod report;
-pub mod system;
-pub mod trajectory;
+mod system;
+mod trajectory;
 
 pub use tree_kernel::{Order, Pose, Twist};
 pub use tree_model;
 
 pub use {
+    context::StepContext,
     dynamics::{Baumgarte, Dynamics, GeneralizedForce, ModelMotions, NoForce, Prescription},
     error::{Seconds, SimError},
-    interpreted::TreeSystem,
+    interpreted::{columns_fit, TreeSystem},
     reference::{PaperEvaluation, PaperSystem},
-    system::{ConstraintTerms, Matrix, System, Terms, Vector},
+    system::{ConstraintTerms, Matrix, Sparsity, System, Terms, Vector},
     trajectory::{CsvStream, Sample, Trajectory},
 };
 
