@@ -72,10 +72,10 @@ struct LibraryExamples;
 pub mod __private {
     pub use tree_kernel::articulated::{pivots_hold, ArticulatedIo};
     pub use tree_kernel::cpu::fused;
-    pub use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
-    pub use tree_kernel::outputs::{Output, Sink};
-    pub use tree_kernel::scalar::Scalar;
+    pub use tree_kernel::Scalar;
     pub use tree_kernel::{__unless_fused_only, Order, Pose};
+    pub use tree_kernel::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+    pub use tree_kernel::{Output, Sink};
     pub use tree_model as model;
     pub use tree_runtime::nalgebra::Const;
     pub use tree_runtime::Sparsity;

@@ -222,7 +222,7 @@ where
         // The inverse dynamics and the constraints over jets (the continuous linearisation's
         // sweep): values and derivatives along random directions alike.
         {
-            use tree_mech::kernel::dual::{Jet, JetOutputs, LANES};
+            use tree_mech::kernel::{Jet, JetOutputs, LANES};
             let mut seed = |x: &[f64]| -> Vec<Jet<LANES>> {
                 x.iter()
                     .map(|&v| Jet {

@@ -174,10 +174,10 @@ macro_rules! delegate_description {
         }
         fn evaluate_dual(
             &mut self,
-            q: &[tree_mech::kernel::dual::Dual],
-            dq: &[tree_mech::kernel::dual::Dual],
+            q: &[tree_mech::kernel::Dual],
+            dq: &[tree_mech::kernel::Dual],
             order: tree_mech::Order,
-            out: &mut tree_mech::kernel::dual::DualOutputs,
+            out: &mut tree_mech::kernel::DualOutputs,
         ) {
             self.$inner.evaluate_dual(q, dq, order, out)
         }
@@ -260,8 +260,8 @@ where
     // Over dual numbers, q and the weights both moving: the value and the derivative of
     // Σ_r w_r D²h_r (product rule) against the rows' dual Hessians, and `h`, `Dh` as the
     // dual constraints give them; an earlier call's sum overwritten.
-    use tree_mech::kernel::dual::{Dual, DualOutputs};
-    use tree_mech::kernel::outputs::{Field, Output};
+    use tree_mech::kernel::{Dual, DualOutputs};
+    use tree_mech::kernel::{Field, Output};
     let seeded = |x: f64, rng: &mut Rng| Dual::new(x, rng.uniform());
     let qd: Vec<Dual> = (0..n).map(|i| seeded(q[i], &mut rng)).collect();
     let wd: Vec<Dual> = weights.iter().map(|&w| seeded(w, &mut rng)).collect();

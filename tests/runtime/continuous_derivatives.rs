@@ -223,7 +223,7 @@ fn explicit_step_map_derivatives_match_finite_differences() {
 /// derivative is the central difference of those values along its direction.
 #[test]
 fn newton_euler_is_the_lagrangians_inverse_dynamics() {
-    use tree_mech::kernel::dual::{Jet, JetOutputs, LANES};
+    use tree_mech::kernel::{Jet, JetOutputs, LANES};
     use tree_mech::runtime::dynamics::inverse_dynamics;
     use tree_mech::runtime::Terms;
     let root = env!("CARGO_MANIFEST_DIR");

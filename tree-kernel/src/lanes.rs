@@ -7,8 +7,8 @@
 //! bits of that evaluation: batching changes the speed, never the numbers.
 //!
 //! ```
-//! use tree_kernel::lanes::Lanes;
-//! use tree_kernel::scalar::Scalar;
+//! use tree_kernel::Lanes;
+//! use tree_kernel::Scalar;
 //! let x = Lanes([0.1, 0.7, -2.0, 1e3]);
 //! let (s, c) = (x * x + Lanes::splat(0.5)).sin_cos();
 //! for (k, &v) in x.0.iter().enumerate() {

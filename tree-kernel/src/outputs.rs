@@ -41,7 +41,7 @@ pub enum Output {
     /// the dynamic variables' columns `j` ([`Weighted`]).
     WeightedD2h(usize, usize),
     /// The bodies' inverse dynamics `τ_i = [M q̈ + (∂²L/∂q̇∂q) q̇ − ∂L/∂q]_i` at given
-    /// accelerations (recursive Newton–Euler, [`crate::newton_euler`]; springs and forces not
+    /// accelerations (recursive Newton–Euler, [`crate::kernel::inverse_dynamics`]; springs and forces not
     /// included).
     Tau(usize),
 }

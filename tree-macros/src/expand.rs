@@ -7,11 +7,11 @@ use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote};
 use tree_kernel::articulated::{self, Articulated};
 use tree_kernel::kernel::{self, Kernel};
-use tree_kernel::outputs::{Index, Output, Sink};
-use tree_kernel::plan::TreePlan;
 use tree_kernel::se3::Pose;
 use tree_kernel::sweeps;
 use tree_kernel::Order;
+use tree_kernel::TreePlan;
+use tree_kernel::{Index, Output, Sink};
 use tree_model::{Model, ModelSpec, ParameterSpec, Value};
 
 use crate::ast::{Input, Source};

@@ -24,14 +24,14 @@ pub struct Program {
 pub enum Flavour<'a> {
     /// `f64` throughout; outputs assigned to their targets (`out.mass[(0, 1)] = …`) in a
     /// storage of type `out_ty`, which keeps the scratch (`out.scratch`, a
-    /// `tree_kernel::outputs::Scratch`) if `scratch`, else the scratch is a local array.
+    /// `tree_kernel::Scratch`) if `scratch`, else the scratch is a local array.
     F64 {
         out_ty: &'a TokenStream,
         scratch: bool,
     },
     /// Helpers generic over `S: Scalar`, outputs handed to a `Sink<S>`
     /// (`out.add(Output::Mass(0, 1), …)`; the targets are `Output` expressions), called
-    /// from a body whose outputs (`tree_kernel::dual::DualOutputs`) instantiate `S` and keep
+    /// from a body whose outputs (`tree_kernel::DualOutputs`) instantiate `S` and keep
     /// the scratch.
     Generic,
 }

@@ -4,7 +4,7 @@
 
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
-use tree_kernel::plan::TreePlan;
+use tree_kernel::TreePlan;
 use tree_model::Model;
 
 use crate::program::Programs;

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::fmt;
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
-use tree_kernel::scalar::Scalar;
+use tree_kernel::Scalar;
 
 /// A traced value: a constant known now, or the result of statement `n` of the tape.
 #[derive(Clone, Copy, PartialEq)]

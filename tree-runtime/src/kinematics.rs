@@ -48,9 +48,9 @@ use tree_model::Model;
 
 use crate::error::SimError;
 use tree_kernel::articulated::outward_acceleration;
-use tree_kernel::plan::{Body, TreePlan};
 use tree_kernel::se3::{cross, zero6, Pose, Twist};
 use tree_kernel::sweeps::{forward, Reach, Workspace};
+use tree_kernel::{Body, TreePlan};
 
 /// The axes and the point a frame's twist, Jacobian or acceleration is reported in (as
 /// Pinocchio's `ReferenceFrame`; see the module documentation).

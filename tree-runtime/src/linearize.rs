@@ -22,8 +22,8 @@ use crate::dynamics::{Dynamics, GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::linalg::{lu_factor_packed, lu_solve_packed, lu_solve_packed_rows, mul_into, Packing};
 use crate::system::{Order, Sparsity, System, Terms, Vector};
-use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
-use tree_kernel::outputs::Output;
+use tree_kernel::Output;
+use tree_kernel::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 
 /// The accelerations and constraint forces at a state and their first derivatives. Rows: the
 /// dynamic variables (`q̈`) or the constraint equations (`λ`); columns: all variables (`q`,

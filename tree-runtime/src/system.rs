@@ -6,11 +6,11 @@ use nalgebra::{
 };
 use tree_model::Motion;
 
-use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
-use tree_kernel::lanes::{ElementForces, Lanes, WIDTH};
-pub use tree_kernel::order::Order;
-use tree_kernel::outputs::{clear_among, Field, Index, Output, Scratch, Sink};
 use tree_kernel::se3::Pose;
+pub use tree_kernel::Order;
+use tree_kernel::{clear_among, Field, Index, Output, Scratch, Sink};
+use tree_kernel::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+use tree_kernel::{ElementForces, Lanes, WIDTH};
 
 /// A vector over the system's configuration variables.
 pub type Vector<N> = OVector<f64, N>;
@@ -566,7 +566,7 @@ where
     /// step's first derivatives (docs/derivations.md §9), without forming each row's
     /// Hessian. `out.dh_dot` and `out.d2h` are not outputs of it (what they hold after is
     /// unspecified). The default makes the whole evaluation at `Order::Full` and sums; the
-    /// interpreted and generated systems sum as they go ([`tree_kernel::outputs::Weighted`]).
+    /// interpreted and generated systems sum as they go ([`tree_kernel::Weighted`]).
     fn weighted_constraint_hessian(
         &mut self,
         q: &Vector<Self::N>,

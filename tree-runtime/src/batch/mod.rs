@@ -36,7 +36,7 @@ use crate::integrate::{
 };
 use crate::system::System;
 use crate::trajectory::{Sample, Trajectory};
-use tree_kernel::lanes::WIDTH;
+use tree_kernel::WIDTH;
 
 mod steps;
 

@@ -17,7 +17,7 @@
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
 
 use crate::system::{Terms, Vector};
-use tree_kernel::scalar::Scalar;
+use tree_kernel::Scalar;
 
 /// Which second slot derivative of `L_d`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -16,7 +16,7 @@ use crate::context::StepContext;
 use crate::dynamics::{prescribe, Dynamics, ModelMotions, NoForce};
 use crate::error::SimError;
 use crate::system::{System, Terms, Vector};
-use tree_kernel::lanes::{ElementForces, Lanes, WIDTH};
+use tree_kernel::{ElementForces, Lanes, WIDTH};
 
 /// One lane's start.
 #[derive(Clone, Copy, Debug)]

@@ -8,12 +8,12 @@ use tree_model::{Model, Motion};
 use crate::error::SimError;
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
 use tree_kernel::articulated::{self, Articulated};
-use tree_kernel::dual::{Dual, DualOutputs, Jet, JetOutputs, LANES};
 use tree_kernel::kernel::{self, Kernel};
-use tree_kernel::lanes::{ElementForces, EnergySink, Lanes, WIDTH};
-use tree_kernel::plan::TreePlan;
 use tree_kernel::se3::{Pose, Twist};
 use tree_kernel::sweeps::{self, Reach, Workspace};
+use tree_kernel::TreePlan;
+use tree_kernel::{Dual, DualOutputs, Jet, JetOutputs, LANES};
+use tree_kernel::{ElementForces, EnergySink, Lanes, WIDTH};
 
 /// A frame's body velocity and, for each variable i that moves it, `(i, ∂v/∂q̇_i, ∂v/∂q_i)`.
 pub(crate) type FrameVelocity = (Twist, Vec<(usize, Twist, Twist)>);
@@ -58,13 +58,13 @@ struct Laned {
 /// An error when `model` would need more Jacobian columns than the runtime allocates (each
 /// frame keeps one for every variable at or above it).
 pub fn columns_fit(model: &Model) -> Result<(), SimError> {
-    let (columns, deepest) = tree_kernel::plan::column_count(model);
-    if columns > tree_kernel::plan::MAX_COLUMNS {
+    let (columns, deepest) = tree_kernel::column_count(model);
+    if columns > tree_kernel::MAX_COLUMNS {
         return Err(SimError::InvalidInput(format!(
             "model `{}` would need {columns} Jacobian columns (each of its {} frames keeps one for every variable at or above it; its deepest frame has {deepest} variables above it); the interpreted system allocates at most {}",
             model.name,
             model.frames.len(),
-            tree_kernel::plan::MAX_COLUMNS
+            tree_kernel::MAX_COLUMNS
         )));
     }
     Ok(())
@@ -72,7 +72,7 @@ pub fn columns_fit(model: &Model) -> Result<(), SimError> {
 
 /// An error when `model`'s evaluation would not fit in memory.
 fn memory_fits(model: &Model) -> Result<(), SimError> {
-    let (columns, _) = tree_kernel::plan::column_count(model);
+    let (columns, _) = tree_kernel::column_count(model);
     // Its dense matrices (M, ∂²L/∂q̇∂q, ∂²L/∂q², their factorisations and the integrators'
     // Newton matrices: about sixteen n × n) and the Jacobian columns' twists and their
     // derivatives (about a dozen numbers a column).

@@ -7,8 +7,8 @@ use nalgebra::Dyn;
 use super::accumulate::{add_mass_terms, FrameQuantities};
 use super::{tri, PaperSystem};
 use crate::system::{Order, Terms};
-use tree_kernel::plan::Body;
 use tree_kernel::se3::{bracket_with_axis, Pose, Twist};
+use tree_kernel::Body;
 
 impl PaperSystem {
     /// `∂²v/∂q̇∂q` and `∂²v/∂q∂q` of every needed frame, from the outward sweep's columns.

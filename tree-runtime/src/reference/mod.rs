@@ -15,12 +15,12 @@ use tree_model::{Model, Motion};
 
 use crate::error::SimError;
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
-use tree_kernel::dual::{Dual, DualOutputs};
 use tree_kernel::kernel::{self, Kernel};
-use tree_kernel::outputs::{Output, Sink};
-use tree_kernel::plan::TreePlan;
 use tree_kernel::se3::{Pose, Twist};
 use tree_kernel::sweeps::{self, Workspace};
+use tree_kernel::TreePlan;
+use tree_kernel::{Dual, DualOutputs};
+use tree_kernel::{Output, Sink};
 
 /// How the reference system evaluates the paper's sums.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -7,8 +7,8 @@ use tree_model::Joint;
 use super::accumulate::{add_mass_terms, FrameQuantities};
 use super::PaperSystem;
 use crate::system::{Order, Terms};
-use tree_kernel::plan::{Body, FramePlan};
 use tree_kernel::se3::{bracket_with_axis, LocalTransform, Pose, Twist, ZERO};
+use tree_kernel::{Body, FramePlan};
 
 impl PaperSystem {
     pub(crate) fn accumulate_uncached(

@@ -5,7 +5,7 @@
 use super::StepInput;
 use crate::integrate::discrete::{DiscreteLagrangian, SecondSlot, Slots};
 use crate::system::Sparsity;
-use tree_kernel::scalar::Scalar;
+use tree_kernel::Scalar;
 
 /// Sizes of one step and where each block sits in `w = (q₁, q₂, p₁, u₁, λ)` and in `x`.
 #[derive(Clone, Debug, PartialEq)]

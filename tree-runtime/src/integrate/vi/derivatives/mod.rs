@@ -19,12 +19,12 @@
 //!   `Σ w ∂²/∂x_i∂x_j = (μᵀ D_j J + w_pᵀ D_j P) Δ_i` with
 //!   `μ = −R_z⁻ᵀ (w_z + P_zᵀ w_p)`: one transposed solve, no tensor.
 //!
-//! The Jacobians are written once, over any [`Scalar`](tree_kernel::scalar::Scalar), into a sink
+//! The Jacobians are written once, over any [`Scalar`](tree_kernel::Scalar), into a sink
 //! ([`jacobians`]): at the solution, straight into the pieces the first-order solve reads
 //! (`R_z` into its factor's storage, `R_x` into the right-hand sides, which the solve turns
 //! into `−dz/dx`); for the second
 //! derivatives, whole, from the derivative parts of the terms evaluated over
-//! [`Dual`](tree_kernel::dual::Dual) numbers. Forces the caller
+//! [`Dual`](tree_kernel::Dual) numbers. Forces the caller
 //! adds (a [`GeneralizedForce`]) are held fixed; the model's own (damping, dampers) and the
 //! inputs are differentiated.
 //!

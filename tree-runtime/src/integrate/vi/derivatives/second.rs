@@ -9,8 +9,8 @@ use super::first::Linearization;
 use super::jacobians::{jacobians_f64, row_major_into, Shape, StepTerms};
 use crate::linalg::dot;
 use crate::system::{row_variables, Order, Sparsity, System};
-use tree_kernel::dual::{Dual, DualOutputs};
-use tree_kernel::outputs::Field;
+use tree_kernel::Field;
+use tree_kernel::{Dual, DualOutputs};
 
 /// Scratch for the Jacobians over dual numbers along one tangent direction.
 #[derive(Clone, Debug)]
