@@ -235,29 +235,27 @@ fn the_cartpole_swings_up_and_lqr_holds_it_there() {
     assert!(x[1].abs() < 1e-3 && x[0].abs() < 1e-2, "held at {x}");
 }
 
-#[test]
-fn the_ur5_reaches_within_a_millimetre() {
-    let (task, m) = read("tasks/ur5-reach.toml");
-    let sys = TreeSystem::new(&m).unwrap();
-    let res = solve_task(sys, &task, &m, &TaskOptions::default(), &mut |_| {}).unwrap();
+/// Solves a shipped reach interpreted and holds it to its task and to Crocoddyl 3.2.1's
+/// solution of the same problem (symplectic Euler instead of the VI; `fixture` written by
+/// tools/reference/crocoddyl_reach.py): the tool within 1 mm of its target and at rest, the
+/// same optimum within 1%, the tool at the same place within 0.1 mm. Returns the solve.
+fn reach_agrees_with_crocoddyl(task_file: &str, fixture: &str) -> (model::Task, TaskResult) {
+    let (task, m) = read(task_file);
+    let res = interpreted(&task, &m, &TaskOptions::default());
     let f = m.frame_index("ee_link").unwrap();
     let start = m.origins(&task.q0)[f];
     let end = m.origins(res.q[task.knots].as_slice())[f];
     let target = [start[0] + 0.1, start[1], start[2] + 0.2];
-    let miss = (0..3)
-        .map(|i| (end[i] - target[i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let distance =
+        |a: [f64; 3], b: &[f64]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let miss = distance(end, &target);
     assert!(miss < 1e-3, "the tool misses its target by {miss} m");
-    // The limits bind far from the optimum only: clamped in the forward pass until the steps
-    // shorten, the solve takes a handful of iterations (63 with the box QP from the start,
-    // Crocoddyl's box-FDDP 27; docs/derivations.md §10, "Limits in two phases").
-    let iterations = res.solution.history.len();
-    assert!(iterations <= 12, "{iterations} iterations");
-    // Crocoddyl 3.2.1's box-FDDP on the same problem (symplectic Euler instead of the VI,
-    // tools/reference/crocoddyl_reach.py): the same optimum within 1%, the tool at the same
-    // place within 0.1 mm.
-    let path = Path::new(ROOT).join("tests/fixtures/crocoddyl-reach.json");
+    assert!(
+        res.dq[task.knots].amax() < 0.05,
+        "not at rest: {}",
+        res.dq[task.knots]
+    );
+    let path = Path::new(ROOT).join("tests/fixtures").join(fixture);
     let croc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     let theirs = croc["cost"].as_f64().unwrap();
@@ -272,22 +270,51 @@ fn the_ur5_reaches_within_a_millimetre() {
         .iter()
         .map(|v| v.as_f64().unwrap())
         .collect();
-    let apart = (0..3)
-        .map(|i| (end[i] - their_end[i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let apart = distance(end, &their_end);
     assert!(apart < 1e-4, "the tools end {apart} m apart");
-    assert!(
-        res.dq[task.knots].amax() < 0.05,
-        "not at rest: {}",
-        res.dq[task.knots]
-    );
+    (task, res)
+}
+
+/// The UR5 within its effort limits, against Crocoddyl's box-FDDP.
+#[test]
+fn the_ur5_reaches_within_a_millimetre() {
+    let (task, res) = reach_agrees_with_crocoddyl("tasks/ur5-reach.toml", "crocoddyl-reach.json");
+    // The limits bind far from the optimum only: clamped in the forward pass until the steps
+    // shorten, the solve takes a handful of iterations (63 with the box QP from the start,
+    // Crocoddyl's box-FDDP 27; docs/derivations.md §10, "Limits in two phases").
+    let iterations = res.solution.history.len();
+    assert!(iterations <= 12, "{iterations} iterations");
     for u in &res.solution.u {
         for (c, v) in u.iter().enumerate() {
             let [lo, hi] = task.limits[c].unwrap();
             assert!((lo..=hi).contains(v), "torque {v} beyond [{lo}, {hi}]");
         }
     }
+}
+
+/// The UR10 without limits (`model_limits = false` drops its URDF's effort limits), against
+/// Crocoddyl's plain FDDP, where Crocoddyl is at its best.
+#[test]
+fn the_ur10_reaches_without_limits_as_crocoddyl_does() {
+    let (task, res) =
+        reach_agrees_with_crocoddyl("tasks/ur10-reach.toml", "crocoddyl-reach-ur10.json");
+    assert!(task.limits.iter().all(Option::is_none), "{:?}", task.limits);
+    // Without the flag the limits are the URDF's; a limit the file gives still holds.
+    let text = std::fs::read_to_string(Path::new(ROOT).join("tasks/ur10-reach.toml")).unwrap();
+    let base = Path::new(ROOT).join("tasks");
+    let (limited, _) =
+        model::task_from_str(&text.replace("model_limits = false", ""), None, &base).unwrap();
+    assert_eq!(limited.limits[0], Some([-330.0, 330.0]));
+    let (one, _) = model::task_from_str(
+        &format!("{text}\n[limits]\nelbow_joint = [-90.0, 90.0]\n"),
+        None,
+        &base,
+    )
+    .unwrap();
+    assert_eq!(one.limits[0], None);
+    assert_eq!(one.limits[2], Some([-90.0, 90.0]));
+    let iterations = res.solution.history.len();
+    assert!(iterations <= 8, "{iterations} iterations");
 }
 
 /// DDP on the shipped reach converges to iLQR's optimum in a handful of iterations: where its

@@ -182,6 +182,7 @@ struct RawTask {
     cost: Vec<Spanned<RawCost>>,
     #[serde(default)]
     terminal: Vec<Spanned<RawCost>>,
+    model_limits: Option<bool>,
     limits: Option<BTreeMap<String, Spanned<Vec<f64>>>>,
 }
 
@@ -636,7 +637,8 @@ fn start_of(
     (q0, dq0)
 }
 
-/// The limits: the model's input limits, then the file's, with the line each came from.
+/// The limits: the model's input limits (unless `model_limits = false`), then the file's,
+/// with the line each came from.
 fn limits_of(
     p: &mut Problems,
     raw: &RawTask,
@@ -648,8 +650,8 @@ fn limits_of(
     let mut limits: Vec<Option<[f64; 2]>> = controls
         .iter()
         .map(|c| match c {
-            Control::Input(k) => model.inputs[*k].limits,
-            Control::Kinematic(_) => None,
+            Control::Input(k) if raw.model_limits != Some(false) => model.inputs[*k].limits,
+            _ => None,
         })
         .collect();
     let mut limit_lines = control_lines;
