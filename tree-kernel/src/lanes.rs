@@ -33,7 +33,7 @@ pub struct Lanes(pub [f64; WIDTH]);
 impl Lanes {
     /// Every lane `x`.
     #[inline(always)]
-    pub(crate) fn splat(x: f64) -> Self {
+    pub fn splat(x: f64) -> Self {
         Lanes([x; WIDTH])
     }
 
