@@ -1,5 +1,6 @@
 //! One module per topic (each was a test binary of its own).
 
+mod added;
 #[cfg(feature = "cli")]
 mod cli;
 #[cfg(all(feature = "cli", unix))]

@@ -45,7 +45,7 @@ pub use {
     context::StepContext,
     dynamics::{Baumgarte, Dynamics, GeneralizedForce, ModelMotions, NoForce, Prescription},
     error::{Seconds, SimError},
-    interpreted::{columns_fit, TreeSystem},
+    interpreted::{columns_fit, AddedTerms, Ask, TreeSystem},
     reference::{PaperEvaluation, PaperSystem},
     system::{ConstraintTerms, Matrix, Sparsity, System, Terms, Vector},
     trajectory::{CsvStream, Sample, Trajectory},

@@ -2,8 +2,15 @@
 //! sweeps of [`tree_kernel::sweeps`] and the elements of [`tree_kernel::elements`] — the same code
 //! `tree_model!` compiles.
 
+mod added;
+
+use std::sync::Arc;
+
 use nalgebra::Dyn;
 use tree_model::{Model, Motion};
+
+use added::Added;
+pub use added::{AddedTerms, Ask};
 
 use crate::error::SimError;
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
@@ -45,6 +52,8 @@ pub struct TreeSystem {
     /// The kernel and articulated-body storage over [`Lanes`], for the laned evaluations
     /// (made on first use).
     laned: Option<Box<Laned>>,
+    /// A caller's terms added to the model's ([`TreeSystem::with_added`]).
+    added: Option<Added>,
 }
 
 /// What the laned evaluations work in.
@@ -184,8 +193,21 @@ impl TreeSystem {
             jet_kernel: None,
             qdd_jet: vec![Jet::default(); model.variables.len()],
             laned: None,
+            added: None,
             plan,
         })
+    }
+
+    /// This system with `terms` added to the model's own on every evaluation (their
+    /// constraint rows after the model's). Its fast paths that only know the model's terms
+    /// (the articulated-body algorithm, lanes, jets) step aside, so every caller takes the
+    /// general one, which asks for the added terms.
+    pub fn with_added(mut self, terms: Arc<dyn AddedTerms>) -> Self {
+        self.constraint_names = self.model.constraint_row_names();
+        let first_row = self.constraint_names.len();
+        self.constraint_names.extend(terms.constraint_names());
+        self.added = Some(Added { terms, first_row });
+        self
     }
 
     /// The model this system was built from.
@@ -272,6 +294,9 @@ impl System for TreeSystem {
             order,
             out,
         );
+        if let Some(added) = &self.added {
+            added.add(Ask::Constraints(order), q.as_slice(), dq.as_slice(), out);
+        }
     }
 
     fn weighted_constraint_hessian(
@@ -291,6 +316,13 @@ impl System for TreeSystem {
             &self.dynamic,
             out,
         );
+        if let Some(added) = &self.added {
+            let ask = Ask::Constraints(Order::Full);
+            let run = |f: &mut dyn FnMut(tree_kernel::Output, f64, f64)| {
+                added.terms.add(ask, q, q, None, f)
+            };
+            added.add_weighted(weights, &self.dynamic, |v, _| v, run, out);
+        }
     }
 
     fn lagrangian(
@@ -309,16 +341,35 @@ impl System for TreeSystem {
             order,
             out,
         );
+        if let Some(added) = &self.added {
+            added.add(Ask::Terms(order), q.as_slice(), dq.as_slice(), out);
+        }
     }
 
     fn mass_matrix(&mut self, q: &Vector<Dyn>, out: &mut Terms<Dyn>) {
         out.clear(Order::Dynamics);
         kernel::mass(&self.plan, &mut self.kernel, q.as_slice(), out);
+        if let Some(added) = &self.added {
+            let rest = vec![0.0; q.len()];
+            added.add(Ask::Lagrangian, q.as_slice(), &rest, out);
+        }
     }
 
     fn energy(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>, out: &mut Terms<Dyn>) -> f64 {
         let (q, dq) = (q.as_slice(), dq.as_slice());
         kernel::energy(&self.plan, &mut self.kernel, q, dq, out);
+        if let Some(added) = &self.added {
+            // The added terms are potentials: `E = T + V` gains `V = −L_added`.
+            let mut l = 0.0;
+            added
+                .terms
+                .add(Ask::Lagrangian, q, dq, None, &mut |at, v, _| {
+                    if at == tree_kernel::Output::L {
+                        l += v;
+                    }
+                });
+            out.total_energy -= l;
+        }
         out.total_energy
     }
 
@@ -330,7 +381,7 @@ impl System for TreeSystem {
         qdd: &mut Vector<Dyn>,
         own: &mut Terms<Dyn>,
     ) -> bool {
-        if self.plan.rows > 0 {
+        if self.plan.rows > 0 || self.added.is_some() {
             return false;
         }
         own.clear(Order::First);
@@ -351,7 +402,9 @@ impl System for TreeSystem {
     }
 
     fn has_lanes(&self) -> bool {
-        self.plan.rows == 0 && articulated::resolvable(&self.plan, &self.kinematic)
+        self.plan.rows == 0
+            && self.added.is_none()
+            && articulated::resolvable(&self.plan, &self.kinematic)
     }
 
     fn articulated_acceleration_lanes(
@@ -397,6 +450,10 @@ impl System for TreeSystem {
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::evaluate(plan, kernel, q, dq, order, out);
         kernel::constraints(plan, kernel, q, dq, order, out);
+        if let Some(added) = &self.added {
+            added.add_dual(Ask::Terms(order), q, dq, out);
+            added.add_dual(Ask::Constraints(order), q, dq, out);
+        }
     }
 
     fn constraints_dual(&mut self, q: &[Dual], dq: &[Dual], order: Order, out: &mut DualOutputs) {
@@ -404,6 +461,9 @@ impl System for TreeSystem {
         let plan = &self.plan;
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::constraints(plan, kernel, q, dq, order, out);
+        if let Some(added) = &self.added {
+            added.add_dual(Ask::Constraints(order), q, dq, out);
+        }
     }
 
     fn weighted_constraint_hessian_dual(
@@ -416,6 +476,17 @@ impl System for TreeSystem {
         let plan = &self.plan;
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::weighted_constraint_hessian(plan, kernel, q, q, weights, &self.dynamic, out);
+        if let Some(added) = &self.added {
+            let (x, dir) = (
+                q.iter().map(|d| d.v).collect::<Vec<_>>(),
+                q.iter().map(|d| d.d).collect::<Vec<_>>(),
+            );
+            let ask = Ask::Constraints(Order::Full);
+            let run = |f: &mut dyn FnMut(tree_kernel::Output, f64, f64)| {
+                added.terms.add(ask, &x, &x, Some((&dir, &dir)), f)
+            };
+            added.add_weighted(weights, &self.dynamic, Dual::new, run, out);
+        }
     }
 
     fn inverse_dynamics_jet(
@@ -425,6 +496,9 @@ impl System for TreeSystem {
         qdd: &[f64],
         out: &mut JetOutputs<LANES>,
     ) -> bool {
+        if self.added.is_some() {
+            return false;
+        }
         out.clear();
         let plan = &self.plan;
         let kernel = self
