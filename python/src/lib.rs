@@ -6,10 +6,11 @@
 //! arrays out), `progress` (Ctrl-C and progress while the GIL is released), `model` (a model
 //! and what it is made of), then what a model computes — `evaluation`, `frames`, `simulate`
 //! with `trajectory`, `linearize`, `rollouts`, `closed_loop` (a model stepped under inputs
-//! given a step at a time) — and `stepper` (trep's VI a step at a time) and `optimize` (a
-//! task file solved). `Model`'s Python methods sit in the topic's module, each
+//! given a step at a time) — and `stepper` (trep's VI a step at a time), `optimize` (a
+//! task file solved) and `added` (terms written in Python, for the trep layer's elements). `Model`'s Python methods sit in the topic's module, each
 //! a `#[pymethods]` block of its own.
 
+mod added;
 mod arrays;
 mod closed_loop;
 mod errors;

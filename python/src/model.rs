@@ -13,7 +13,7 @@ use tree_mech::nalgebra::Dyn;
 use tree_mech::runtime::kinematics::Kinematics as FrameKinematics;
 use tree_mech::runtime::Vector;
 use tree_mech::runtime::{ModelMotions, Prescription};
-use tree_mech::TreeSystem;
+use tree_mech::{System, TreeSystem};
 
 use crate::arrays::{check_finite, vector};
 use crate::errors::{bad, model_error, system_error, ModelError};
@@ -271,7 +271,10 @@ impl Model {
     /// The constraint equations' names (λ's order).
     #[getter]
     fn constraints(&self) -> Vec<String> {
-        self.model.constraint_row_names()
+        let sys = self.sys.lock().expect("no panic holds the lock");
+        (0..sys.constraint_count())
+            .map(|r| sys.constraint_name(r).to_string())
+            .collect()
     }
 
     /// The frames' names.

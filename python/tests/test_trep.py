@@ -76,12 +76,23 @@ def test_frames_match_trep(recorded):
             close(ours["frames"][frame][key], values[key], 1e-12, f"{name} {frame}.{key}")
 
 
+# trep's Newton stops on an absolute residual, which on the point held to a circle by a
+# constraint written in Python lets h(q₂) drift to 1e-10 (9.8e-11 at step 14, measured) before
+# an extra iteration brings it back; ours holds h at rounding. The steps differ by that drift.
+STEP_TOLERANCE = {"python_elements": 5e-9}
+
+
 def test_midpoint_vi_steps_match_trep(recorded):
     name, ours, theirs = recorded
     assert len(ours["vi"]) == len(theirs["vi"])
+    tol = STEP_TOLERANCE.get(name, 1e-10)
     for k, (a, b) in enumerate(zip(ours["vi"], theirs["vi"])):
         for key in ("t2", "q2", "p2", "lambda1"):
-            close(a[key], b[key], 1e-10, f"{name} step {k} {key}")
+            close(a[key], b[key], tol, f"{name} step {k} {key}")
+    if name == "python_elements":
+        for step in ours["vi"]:
+            _, x, z = step["q2"]
+            assert abs(x * x + z * z - 1.44) < 1e-13, "ours holds the circle to rounding"
 
 
 def test_the_system_is_left_where_treps_integrator_leaves_it(recorded):
@@ -94,7 +105,8 @@ def test_the_system_is_left_where_treps_integrator_leaves_it(recorded):
     assert ours["vi_start_system"]["t"] == pytest.approx(theirs["vi_start_system"]["t"])
     for k, (a, b) in enumerate(zip(ours["vi"], theirs["vi"])):
         for key in ("q", "dq", "u", "E"):
-            close(a["system"][key], b["system"][key], 1e-9, f"{name} step {k} system {key}")
+            close(a["system"][key], b["system"][key], max(1e-9, 2 * STEP_TOLERANCE.get(name, 0)),
+                  f"{name} step {k} system {key}")
         assert a["system"]["t"] == pytest.approx(b["system"]["t"], abs=1e-15)
 
 
@@ -323,21 +335,83 @@ def test_a_loop_that_reads_the_system_pumps_as_treps_does():
     close(angles, theirs, 1e-8, "the pumped pendulum's angles")
 
 
-@pytest.mark.parametrize("base", ["Potential", "Force", "Constraint"])
-def test_an_element_written_in_python_is_refused_not_left_out(base):
-    # A script's own potential, force or constraint (V, f or h in Python) would be left out
-    # of the Rust model: until the runtime can call back into Python, it is an error.
+def _pendulum_with(potential_methods):
+    """A pendulum with a potential written in Python from ``potential_methods``."""
     s = trep.System()
     s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
-    parent = getattr(trep, base)
+    trep.potentials.Gravity(s)
+    mine = type("Mine", (trep.Potential,), dict(potential_methods))
+    mine(s)
+    s.q = [0.3]
+    return s
 
-    class Mine(parent):
-        def __init__(self, system):
-            parent.__init__(self, system)
 
-        def V(self):
-            return 0.5 * s.q[0] ** 2
+def _spring_methods(k=20.0):
+    """V = ½k(θ − 0.7)², to its third derivative."""
+    return {
+        "V": lambda self: 0.5 * k * (self.system.q[0] - 0.7) ** 2,
+        "V_dq": lambda self, q1: k * (self.system.q[0] - 0.7),
+        "V_dqdq": lambda self, q1, q2: k,
+        "V_dqdqdq": lambda self, q1, q2, q3: 0.0,
+    }
 
-    with pytest.raises(NotImplementedError, match=f"Mine: a {base.lower()} written in Python"):
-        Mine(s)
-    assert len(s.potentials) == len(s.forces) == len(s.constraints) == 0
+
+def test_a_potential_written_in_python_moves_the_pendulum_as_its_model_twin():
+    # A script's own spring pulls the pendulum as the built-in ConfigSpring of the same
+    # stiffness does (both integrated by the same runtime: the callback adds the same terms).
+    ours = _pendulum_with(_spring_methods())
+    twin = trep.System()
+    twin.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
+    trep.potentials.Gravity(twin)
+    trep.potentials.ConfigSpring(twin, "theta", 20.0, q0=0.7)
+    twin.q = [0.3]
+    runs = []
+    for s in (ours, twin):
+        mvi = trep.MidpointVI(s)
+        mvi.initialize_from_configs(0.0, s.q, 0.01, s.q)
+        for _ in range(200):
+            mvi.step(mvi.t2 + 0.01)
+        runs.append((mvi.q2, mvi.p2, s.total_energy(), mvi.q2_dq1(), mvi.q2_dq1dq1()))
+    for a, b in zip(*runs):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    assert abs(runs[0][0][0] - 0.3) > 0.1  # it moved: the spring is not left out
+
+
+def test_an_error_in_a_python_element_is_raised_not_swallowed():
+    def broken(self, q1, q2):
+        raise ValueError("V_dqdq broke")
+
+    s = _pendulum_with({**_spring_methods(), "V_dqdq": broken})
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, s.q, 0.01, s.q)
+    with pytest.raises(ValueError, match="V_dqdq broke"):
+        mvi.step(0.02)
+    # A derivative the script does not write is trep's NotImplementedError when needed.
+    methods = _spring_methods()
+    del methods["V_dqdqdq"]
+    s = _pendulum_with(methods)
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, s.q, 0.01, s.q)
+    mvi.step(0.02)  # the step needs no third derivative…
+    with pytest.raises(NotImplementedError, match="V_dqdqdq"):
+        mvi.q2_dq1dq1()  # …its second derivatives do
+
+
+def test_a_built_in_constraint_after_one_written_in_python_is_refused():
+    s = trep.System()
+    s.import_frames([trep.tx("x", name="slider", mass=1.0), trep.ty("y", name="other", mass=1.0)])
+
+    class Fixed(trep.Constraint):
+        def h(self):
+            return self.system.q[0] - 0.1
+
+        def h_dq(self, q1):
+            return 1.0 if q1.name == "x" else 0.0
+
+        def h_dqdq(self, q1, q2):
+            return 0.0
+
+    Fixed(s)
+    trep.constraints.PointOnPlane(s, "World", [0.0, 1.0, 0.0], "other")
+    with pytest.raises(NotImplementedError, match="create them last"):
+        s.lambda_()

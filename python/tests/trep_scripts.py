@@ -129,9 +129,152 @@ def pinned_masses(trep):
     return s
 
 
+def python_elements(trep):
+    """A pendulum (theta) beside a point (x, z) held on a circle, with a potential, a force and
+    the constraint all written in Python, as trep lets a script subclass its bases: a
+    twisting spring on theta coupled to x, a drag on both that depends on the configuration,
+    and ``x² + z² = R²``; gravity."""
+
+    class TwistSpring(trep.Potential):
+        """V = k(1 − cos(θ − a)) + c·x·sin θ."""
+
+        def __init__(self, system, k, a, c):
+            trep.Potential.__init__(self, system, name="twist")
+            self.th, self.x = system.get_config("theta"), system.get_config("x")
+            self.k, self.a, self.c = k, a, c
+
+        def V(self):
+            th, x = self.th.q, self.x.q
+            return self.k * (1.0 - math.cos(th - self.a)) + self.c * x * math.sin(th)
+
+        def V_dq(self, q1):
+            th, x = self.th.q, self.x.q
+            if q1 == self.th:
+                return self.k * math.sin(th - self.a) + self.c * x * math.cos(th)
+            if q1 == self.x:
+                return self.c * math.sin(th)
+            return 0.0
+
+        def V_dqdq(self, q1, q2):
+            th, x = self.th.q, self.x.q
+            pair = set([q1.name, q2.name])
+            if pair == set(["theta"]):
+                return self.k * math.cos(th - self.a) - self.c * x * math.sin(th)
+            if pair == set(["theta", "x"]):
+                return self.c * math.cos(th)
+            return 0.0
+
+        def V_dqdqdq(self, q1, q2, q3):
+            th, x = self.th.q, self.x.q
+            names = sorted([q1.name, q2.name, q3.name])
+            if names == ["theta"] * 3:
+                return -self.k * math.sin(th - self.a) - self.c * x * math.cos(th)
+            if names == ["theta", "theta", "x"]:
+                return -self.c * math.sin(th)
+            return 0.0
+
+    class Drag(trep.Force):
+        """F_θ = −b·θ̇·(1 + ½cos θ), F_x = −d·ẋ − e·θ̇·x."""
+
+        def __init__(self, system, b, d, e):
+            trep.Force.__init__(self, system, name="drag")
+            self.th, self.x = system.get_config("theta"), system.get_config("x")
+            self.b, self.d, self.e = b, d, e
+
+        def f(self, q):
+            th, x = self.th, self.x
+            if q == th:
+                return -self.b * th.dq * (1.0 + 0.5 * math.cos(th.q))
+            if q == x:
+                return -self.d * x.dq - self.e * th.dq * x.q
+            return 0.0
+
+        def f_dq(self, q, q1):
+            th, x = self.th, self.x
+            if q == th and q1 == th:
+                return 0.5 * self.b * th.dq * math.sin(th.q)
+            if q == x and q1 == x:
+                return -self.e * th.dq
+            return 0.0
+
+        def f_ddq(self, q, dq1):
+            th, x = self.th, self.x
+            if q == th and dq1 == th:
+                return -self.b * (1.0 + 0.5 * math.cos(th.q))
+            if q == x and dq1 == x:
+                return -self.d
+            if q == x and dq1 == th:
+                return -self.e * x.q
+            return 0.0
+
+        def f_dqdq(self, q, q1, q2):
+            th = self.th
+            if q == th and q1 == th and q2 == th:
+                return 0.5 * self.b * th.dq * math.cos(th.q)
+            return 0.0
+
+        def f_ddqdq(self, q, dq1, q2):
+            th, x = self.th, self.x
+            if q == th and dq1 == th and q2 == th:
+                return 0.5 * self.b * math.sin(th.q)
+            if q == x and dq1 == th and q2 == x:
+                return -self.e
+            return 0.0
+
+        def f_ddqddq(self, q, dq1, dq2):
+            return 0.0
+
+        def f_du(self, q, u1):
+            return 0.0
+
+        def f_dudq(self, q, u1, q2):
+            return 0.0
+
+        def f_duddq(self, q, u1, dq2):
+            return 0.0
+
+        def f_dudu(self, q, u1, u2):
+            return 0.0
+
+    class OnCircle(trep.Constraint):
+        """h = x² + z² − R²."""
+
+        def __init__(self, system, radius):
+            trep.Constraint.__init__(self, system, name="circle")
+            self.x, self.z = system.get_config("x"), system.get_config("z")
+            self.r = radius
+
+        def h(self):
+            return self.x.q ** 2 + self.z.q ** 2 - self.r ** 2
+
+        def h_dq(self, q1):
+            return 2.0 * q1.q if q1 in (self.x, self.z) else 0.0
+
+        def h_dqdq(self, q1, q2):
+            return 2.0 if q1 == q2 and q1 in (self.x, self.z) else 0.0
+
+        def h_dqdqdq(self, q1, q2, q3):
+            return 0.0
+
+        def h_dqdqdqdq(self, q1, q2, q3, q4):
+            return 0.0
+
+    s = trep.System()
+    theta = trep.Frame(s.world_frame, trep.RX, "theta", name="theta")
+    trep.Frame(theta, trep.TZ, -1.0, name="bob", mass=1.0)
+    x = trep.Frame(s.world_frame, trep.TX, "x", name="x")
+    trep.Frame(x, trep.TZ, "z", name="point", mass=0.5)
+    trep.potentials.Gravity(s)
+    TwistSpring(s, 3.0, 0.2, 0.8)
+    Drag(s, 0.3, 0.2, 0.1)
+    OnCircle(s, 1.2)
+    s.q = {"theta": 0.4, "x": 1.2 * math.sin(0.3), "z": -1.2 * math.cos(0.3)}
+    return s
+
+
 SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline),
            ("imported_tree", imported_tree), ("coupled_pendulums", coupled_pendulums),
-           ("pinned_masses", pinned_masses)]
+           ("pinned_masses", pinned_masses), ("python_elements", python_elements)]
 
 
 def _list(x):

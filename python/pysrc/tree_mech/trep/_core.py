@@ -18,6 +18,7 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 import numpy as np
 
 from .. import _native
+from ._python_terms import PythonTerms, defined_in_python
 
 WORLD = "world"
 TX, TY, TZ, RX, RY, RZ = "tx", "ty", "tz", "rx", "ry", "rz"
@@ -808,7 +809,8 @@ class System:
                 out.append(f"damping = {damping!r}")
             out.append("")
         for part in [*parts, *self._constraints]:
-            out += part._toml()
+            if not defined_in_python(part):  # a script's own element is called back instead
+                out += part._toml()
         return "\n".join(out)
 
     def _frame_toml(self, f: Frame) -> List[str]:
@@ -838,7 +840,32 @@ class System:
             self._perm = np.array([index[c.name] for c in self._configs], dtype=int)
             self._dperm = np.array([dynamic[c.name] for c in self.dyn_configs], dtype=int)
             self._kperm = np.array([kinematic[c.name] for c in self.kin_configs], dtype=int)
+            self._add_python_terms()
         return self._model
+
+    def _add_python_terms(self) -> None:
+        """The script's own potentials, forces and constraints (written in Python), added to
+        the native model's terms: the runtime calls them back on every evaluation."""
+        terms = PythonTerms(self)
+        potentials, forces, constraints = terms.parts()
+        self._terms = terms if potentials or forces or constraints else None
+        if self._terms is None:
+            return
+        built_in = [c for c in self._constraints if not defined_in_python(c)]
+        if constraints and built_in and self._constraints.index(constraints[0]) < \
+                self._constraints.index(built_in[-1]):
+            raise NotImplementedError(
+                f"the constraint {built_in[-1].name!r} is built in but comes after "
+                f"{constraints[0].name!r}, written in Python: tree_mech.trep numbers a script's "
+                f"own constraints after the built-in ones; create them last")
+        self._model.add_python_terms(terms, [c.name for c in constraints])
+
+    def _raise_python_error(self) -> None:
+        """Raises what a script's own element raised while the runtime called it back."""
+        terms = getattr(self, "_terms", None)
+        if terms is not None and terms.error is not None:
+            error, terms.error = terms.error, None
+            raise error
 
     def _to_model(self, v: np.ndarray) -> np.ndarray:
         out = np.zeros(len(v))
@@ -854,7 +881,9 @@ class System:
                     self._to_model(self._q), self._to_model(self._dq), self.t,
                     self._u if self.nu else None, ddq=self._to_model(self._ddq))
             except _native.SimulationError as e:
+                self._raise_python_error()
                 raise ValueError(str(e)) from None
+            self._raise_python_error()
         return self._cache["state"]
 
     def _linear(self) -> Dict[str, Any]:
@@ -865,7 +894,9 @@ class System:
                     self._to_model(self._q), self._to_model(self._dq),
                     self._u if self.nu else None, self.t, ddq=self._to_model(self._ddq))
             except _native.SimulationError as e:
+                self._raise_python_error()
                 raise ValueError(str(e)) from None
+            self._raise_python_error()
         return self._cache["linear"]
 
     # The Lagrangian ------------------------------------------------------------------
@@ -1182,18 +1213,6 @@ class System:
         return self.q
 
 
-def _refuse_python_defined(part: Any, kind: str) -> None:
-    """A potential, force or constraint subclassed in a script (its ``V``/``f``/``h`` and
-    their derivatives written in Python) is refused rather than silently left out: the
-    model is evaluated and integrated in Rust, which does not call back into Python yet."""
-    if type(part).__module__.startswith("tree_mech."):
-        return
-    raise NotImplementedError(
-        f"{type(part).__name__}: a {kind} written in Python (subclassing trep's {kind.title()}) "
-        f"is not supported by tree_mech.trep yet: the model is evaluated in Rust, which would "
-        f"leave it out; build it from the built-in {kind}s, or run this script on trep itself")
-
-
 # The bases of potentials, forces and constraints (each kind lives in trep's module of its
 # name: potentials.py, forces.py, constraints.py, and writes its own model text) ----------
 class _Part:
@@ -1203,7 +1222,6 @@ class _Part:
     _list = ""
 
     def __init__(self, system: System, name: Optional[str] = None):
-        _refuse_python_defined(self, self._list.strip("_")[:-1])
         self._system = system
         self.name = name
         getattr(system, self._list).append(self)
@@ -1231,10 +1249,28 @@ class _Part:
         return ()
 
 
+def _undefined(name: str, kind: str, what: str):
+    """A derivative a script's element does not write: trep's error when it is needed."""
+    def method(self, *args):
+        raise NotImplementedError(f"{name}() is undefined for this {kind} "
+                                  f"({type(self).__name__})")
+    method.__name__ = name
+    method.__doc__ = (f"{what} at the current state: a script's own {kind} writes it "
+                      f"(NotImplementedError otherwise, as trep's).")
+    return method
+
+
 class Potential(_Part):
-    """A potential energy term of the system."""
+    """A potential energy term of the system. A script's own subclass writes ``V`` and the
+    derivatives its use needs (``V_dq``, ``V_dqdq`` for steps, ``V_dqdqdq`` for second
+    derivatives); the runtime calls them back."""
 
     _list = "_potentials"
+
+    V = _undefined("V", "potential", "The potential energy")
+    V_dq = _undefined("V_dq", "potential", "∂V/∂q1")
+    V_dqdq = _undefined("V_dqdq", "potential", "∂²V/∂q1∂q2")
+    V_dqdqdq = _undefined("V_dqdqdq", "potential", "∂³V/∂q1∂q2∂q3")
 
 
 class _BetweenFrames:
@@ -1253,9 +1289,24 @@ class _BetweenFrames:
 
 
 class Force(_Part):
-    """A generalized force of the system."""
+    """A generalized force of the system. A script's own subclass writes ``f(q)`` (the force
+    on config ``q``) and the derivatives its use needs (``f_dq``, ``f_ddq``; for second
+    derivatives ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``); the runtime calls them back."""
 
     _list = "_forces"
+
+    f = _undefined("f", "force", "The force on config q")
+    f_dq = _undefined("f_dq", "force", "∂f_q/∂q1")
+    f_ddq = _undefined("f_ddq", "force", "∂f_q/∂q̇1")
+    f_dqdq = _undefined("f_dqdq", "force", "∂²f_q/∂q1∂q2")
+    f_ddqdq = _undefined("f_ddqdq", "force", "∂²f_q/∂q̇1∂q2")
+    f_ddqddq = _undefined("f_ddqddq", "force", "∂²f_q/∂q̇1∂q̇2")
+
+    def _create_input(self, name: Optional[str] = None) -> Any:
+        raise NotImplementedError(
+            f"{type(self).__name__}: a force written in Python that reads inputs is not "
+            f"supported by tree_mech.trep (an input enters its integrator linearly, as "
+            f"forces.ConfigForce's does); give the input to a ConfigForce")
 
 
 class Constraint:
@@ -1265,11 +1316,12 @@ class Constraint:
     _sign = 1.0
 
     def __init__(self, system: System, name: Optional[str] = None):
-        _refuse_python_defined(self, "constraint")
         self._system = system
         self.name = name if name is not None else f"constraint{len(system._constraints) + 1}"
         self.index = len(system._constraints)
         system._constraints.append(self)
+        if defined_in_python(self):
+            system._structure_changed()
 
     @property
     def system(self) -> System:
@@ -1292,6 +1344,9 @@ class Constraint:
         """``∂h/∂q1`` at the current state (trep's form)."""
         s = self._system
         return self._sign * float(np.asarray(s._state()["dh_dq"])[self.index][s._i(q1)])
+
+    h_dqdq = _undefined("h_dqdq", "constraint", "∂²h/∂q1∂q2")
+    h_dqdqdq = _undefined("h_dqdqdq", "constraint", "∂³h/∂q1∂q2∂q3")
 
 
 class MidpointVI:
@@ -1381,7 +1436,9 @@ class MidpointVI:
         try:
             p = self._stepper.momentum(float(t0), s._to_model(q0), float(t1), s._to_model(q1))
         except _native.SimulationError as e:
+            s._raise_python_error()
             raise ValueError(str(e)) from None
+        s._raise_python_error()
         self.t1, self.t2 = float(t0), float(t1)
         self._q1, self._q2 = q0, q1
         self._p1 = self._p2 = np.asarray(p)[s._dperm]
@@ -1440,7 +1497,9 @@ class MidpointVI:
                 self.t1, s._to_model(self._q1), p1, self.t2, self._u1, kin_model, self._lam,
                 order)
         except _native.SimulationError as e:
+            s._raise_python_error()
             raise ConvergenceError(f"the step to t = {self.t2}: {e}") from None
+        s._raise_python_error()
         self._q2 = np.asarray(q2)[s._perm]
         self._p2 = np.asarray(p2)[s._dperm]
         self._lam = np.asarray(lam)

@@ -1,0 +1,123 @@
+//! Terms written in Python, added to a model's interpreted system (`Model.add_python_terms`):
+//! what the trep layer's potentials, forces and constraints defined by subclassing become.
+//! The runtime asks for them on every evaluation (`tree_mech::runtime::AddedTerms`); the GIL is
+//! taken for the call alone.
+
+use std::sync::Arc;
+
+use pyo3::prelude::*;
+use tree_mech::kernel::Output;
+use tree_mech::runtime::{AddedTerms, Ask};
+use tree_mech::Order;
+
+use crate::arrays::vector;
+use crate::model::Model;
+
+/// A Python callable `terms(kind, order, q, dq, along)` with the rows it adds. `kind` is
+/// `"lagrangian"`, `"terms"` or `"constraints"`, `order` 0, 1 or 2 (first, dynamics, full),
+/// `along` `None` or `(δq, δq̇)`; it returns `[(key, values, derivatives or None), …]` with
+/// `key` one of `L`, `dL_dq`, `F`, `d2L_dqdq`, `dF_dq`, `dF_ddq`, `h`, `Dh`, `dh_dot`, `D2h`
+/// and the values flattened row-major (model order). `None` (the callable failed, keeping its
+/// own account of why) hands NaN, which the runtime refuses.
+#[derive(Debug)]
+struct PythonTerms {
+    callback: Py<PyAny>,
+    names: Vec<String>,
+}
+
+/// The output of entry `k` of a flattened `key` over `n` variables.
+fn output(key: &str, k: usize, n: usize) -> Option<Output> {
+    let (a, b, c) = (k / (n * n), (k / n) % n, k % n);
+    Some(match key {
+        "L" => Output::L,
+        "dL_dq" => Output::DlDq(k),
+        "F" => Output::Force(k),
+        "d2L_dqdq" => Output::D2lDqDq(k / n, k % n),
+        "dF_dq" => Output::DforceDq(k / n, k % n),
+        "dF_ddq" => Output::DforceDdq(k / n, k % n),
+        "h" => Output::H(k),
+        "Dh" => Output::Dh(k / n, k % n),
+        "dh_dot" => Output::DhDot(k),
+        "D2h" => Output::D2h(a, b, c),
+        _ => return None,
+    })
+}
+
+/// What a failed call hands: NaN where the runtime reads first.
+fn failed(ask: Ask, out: &mut dyn FnMut(Output, f64, f64)) {
+    match ask {
+        Ask::Constraints(_) => out(Output::H(0), f64::NAN, f64::NAN),
+        _ => {
+            out(Output::L, f64::NAN, f64::NAN);
+            out(Output::DlDq(0), f64::NAN, f64::NAN);
+        }
+    }
+}
+
+impl AddedTerms for PythonTerms {
+    fn constraint_names(&self) -> Vec<String> {
+        self.names.clone()
+    }
+
+    fn add(
+        &self,
+        ask: Ask,
+        q: &[f64],
+        dq: &[f64],
+        along: Option<(&[f64], &[f64])>,
+        out: &mut dyn FnMut(Output, f64, f64),
+    ) {
+        let level = |o: Order| match o {
+            Order::First => 0,
+            Order::Dynamics => 1,
+            Order::Full => 2,
+        };
+        let (kind, order) = match ask {
+            Ask::Lagrangian => ("lagrangian", 0),
+            Ask::Terms(o) => ("terms", level(o)),
+            Ask::Constraints(o) => ("constraints", level(o)),
+        };
+        type Entries = Option<Vec<(String, Vec<f64>, Option<Vec<f64>>)>>;
+        let result: Entries = Python::attach(|py| {
+            let along = along.map(|(a, b)| (vector(py, a), vector(py, b)));
+            let args = (kind, order, vector(py, q), vector(py, dq), along);
+            self.callback
+                .call1(py, args)
+                .and_then(|r| r.extract::<Entries>(py))
+                .unwrap_or_else(|e| {
+                    e.print(py);
+                    None
+                })
+        });
+        let n = q.len();
+        let Some(entries) = result else {
+            return failed(ask, out);
+        };
+        for (key, values, derivatives) in entries {
+            for (k, &v) in values.iter().enumerate() {
+                let d = derivatives.as_ref().map_or(0.0, |d| d[k]);
+                if let Some(at) = output(&key, k, n) {
+                    out(at, v, d);
+                }
+            }
+        }
+    }
+}
+
+#[pymethods]
+impl Model {
+    /// Adds terms computed in Python to this model's interpreted system (every evaluation,
+    /// step and derivative after this call asks for them): `terms(kind, order, q, dq, along)`
+    /// as described in `python/src/added.rs`, adding the constraint rows `constraints` after
+    /// the model's. What the trep layer's Python-defined potentials, forces and constraints
+    /// use; replaces terms added before.
+    #[pyo3(signature = (terms, constraints=Vec::new()))]
+    fn add_python_terms(&self, terms: Py<PyAny>, constraints: Vec<String>) {
+        let added = PythonTerms {
+            callback: terms,
+            names: constraints,
+        };
+        let bare = tree_mech::TreeSystem::new(&self.model).expect("the model made a system");
+        *self.sys.lock().expect("no panic holds the lock") = bare.with_added(Arc::new(added));
+    }
+}
