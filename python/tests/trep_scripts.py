@@ -449,6 +449,22 @@ def time_puppet(trep, spec, runs=3, steps=1000, dt=0.01):
     return best
 
 
+def time_python_elements(trep, runs=3, steps=1000, dt=0.01):
+    """The best of `runs` wall times (s) of `steps` VI steps of `python_elements` (its
+    potential, force and constraint written in Python, called back on every evaluation)."""
+    import time
+    best = float("inf")
+    for _ in range(runs):
+        s = python_elements(trep)
+        mvi = trep.MidpointVI(s)
+        mvi.initialize_from_configs(0.0, s.q, dt, s.q)
+        start = time.time()
+        for _ in range(steps):
+            mvi.step(mvi.t2 + dt)
+        best = min(best, time.time() - start)
+    return best
+
+
 def energy_pump(trep, steps=400, dt=0.01):
     """A closed loop as trep scripts write them: a damped-free pendulum with a torque input,
     pumped towards the upright energy by ``u = k (E* − E) dq`` where ``E`` and ``dq`` are

@@ -2,7 +2,8 @@
 saves what the scripts record as python/tests/fixtures/trep-api.json and trep-discopt.json
 (read by python/tests/test_trep.py and test_trep_discopt.py, which run the same scripts on
 tree_mech.trep); with --time, times trep's Puppet built by the same script
-(1000 VI steps at dt = 0.01) instead; with --time-discopt, the pieces of one trajectory-
+(1000 VI steps at dt = 0.01) instead; with --time-python, 1000 steps of the system whose
+potential, force and constraint are written in Python (trep_scripts.python_elements); with --time-discopt, the pieces of one trajectory-
 optimisation iteration on it (trep_discopt_scripts.time_discopt). trep is called, never copied.
 
 Run with trep's Python 2.7 (README, "Checked against trep"):
@@ -34,6 +35,10 @@ with open(os.path.join(root, 'tools', 'reference', 'trep-puppet.json')) as f:
 
 if '--time-discopt' in sys.argv:
     print('trep_seconds %.4f %.4f %.4f' % tuple(trep_discopt_scripts.time_discopt(trep, spec)))
+    sys.exit(0)
+
+if '--time-python' in sys.argv:
+    print('trep_seconds %.4f' % trep_scripts.time_python_elements(trep))
     sys.exit(0)
 
 if '--time' in sys.argv:

@@ -32,10 +32,13 @@ def defined_in_python(part: Any) -> bool:
 
 def _tensor(n: int, rank: int, entry) -> np.ndarray:
     """The n × … × n array of ``entry(i, j, …)``."""
-    out = np.zeros((n,) * rank)
-    for index in np.ndindex(*out.shape):
-        out[index] = entry(*index)
-    return out
+    r = range(n)
+    if rank == 1:
+        return np.array([entry(i) for i in r], dtype=float)
+    if rank == 2:
+        return np.array([[entry(i, j) for j in r] for i in r], dtype=float).reshape(n, n)
+    return np.array([[[entry(i, j, k) for k in r] for j in r] for i in r],
+                    dtype=float).reshape(n, n, n)
 
 
 class PythonTerms:
@@ -46,6 +49,10 @@ class PythonTerms:
     def __init__(self, system: Any) -> None:
         self.system = system
         self.error: Optional[BaseException] = None
+        perm = system._perm
+        #: Whether trep's config order is the model's (then nothing is moved).
+        self.identity = bool(np.all(perm == np.arange(len(perm))))
+        self._parts = self.parts()
 
     def parts(self) -> Tuple[List[Any], List[Any], List[Any]]:
         """The script's own potentials, forces and constraints."""
@@ -86,28 +93,32 @@ class PythonTerms:
         """An output's entries moved from trep's config order to the model's, flattened."""
         perm = self.system._perm
 
-        def move(x: np.ndarray) -> list:
+        def move(x: Any) -> list:
+            if isinstance(x, list) and self.identity and not (x and isinstance(x[0], list)):
+                return x  # flat already, and in the model's order
             x = np.asarray(x, dtype=float)
+            if self.identity or key in ("L", "h", "dh_dot"):
+                return x.ravel().tolist()
             out = np.zeros_like(x)
-            if key in ("h", "dh_dot") or x.ndim == 0:
-                out = x
-            elif key in ("Dh", "D2h"):  # rows stay; config axes move
-                index = (slice(None),) + tuple(np.ix_(*[perm] * (x.ndim - 1)))
-                out[index] = x
+            if key in ("Dh", "D2h"):  # rows stay; config axes move
+                out[(slice(None),) + tuple(np.ix_(*[perm] * (x.ndim - 1)))] = x
             else:
                 out[np.ix_(*[perm] * x.ndim)] = x
-            return np.atleast_1d(out).ravel().tolist()
+            return out.ravel().tolist()
 
         return (key, move(value), None if tangent is None else move(tangent))
 
     def _potentials(self, energy_only: bool, order: int, along) -> list:
         """``L = −ΣV`` and its derivatives (trep's ``V``, ``V_dq``, ``V_dqdq``, ``V_dqdqdq``)."""
-        potentials = self.parts()[0]
+        potentials = self._parts[0]
         configs = self.system._configs
         n = len(configs)
         v = sum(p.V() for p in potentials)
         if energy_only and along is None:
-            return [("L", -np.float64(v), None)]
+            return [("L", [-v], None)]
+        if along is None and order != ORDER_FULL:
+            return [("L", [-v], None),
+                    ("dL_dq", [-sum(p.V_dq(c) for p in potentials) for c in configs], None)]
         dv = _tensor(n, 1, lambda i: sum(p.V_dq(configs[i]) for p in potentials))
         if energy_only:
             return [("L", -np.float64(v), -np.float64(dv @ along[0]))]
@@ -129,7 +140,7 @@ class PythonTerms:
     def _forces(self, order: int, along) -> list:
         """``F`` on the dynamic configs and its derivatives (trep's ``f``, ``f_dq``,
         ``f_ddq``, and for a direction ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``)."""
-        forces = self.parts()[1]
+        forces = self._parts[1]
         if not forces:
             return []
         s = self.system
@@ -138,8 +149,11 @@ class PythonTerms:
         def on(i: int, call) -> float:
             return sum(call(f) for f in forces) if i < nd else 0.0
 
-        f = _tensor(n, 1, lambda i: on(i, lambda x: x.f(configs[i])))
         full = order == ORDER_FULL
+        if along is None and not full:
+            return [("F", [sum(x.f(configs[i]) for x in forces) if i < nd else 0.0
+                           for i in range(n)], None)]
+        f = _tensor(n, 1, lambda i: on(i, lambda x: x.f(configs[i])))
         first = full or along is not None
         if first:
             f_dq = _tensor(n, 2, lambda i, j: on(i, lambda x: x.f_dq(configs[i], configs[j])))
@@ -160,9 +174,12 @@ class PythonTerms:
 
     def _constraints(self, order: int, along) -> list:
         """The script's constraint rows (trep's ``h``, ``h_dq``, ``h_dqdq``, ``h_dqdqdq``)."""
-        rows = self.parts()[2]
+        rows = self._parts[2]
         s = self.system
         configs, n = s._configs, len(s._configs)
+        if along is None and order < ORDER_DYNAMICS:
+            return [("h", [c.h() for c in rows], None),
+                    ("Dh", [[c.h_dq(a) for a in configs] for c in rows], None)]
         dq = s._dq.copy()
         h = np.array([c.h() for c in rows], dtype=float)
         dh = np.array([_tensor(n, 1, lambda i: c.h_dq(configs[i])) for c in rows]).reshape(
