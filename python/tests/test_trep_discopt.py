@@ -200,6 +200,28 @@ def test_bad_arguments_are_plain_errors():
         opt.calc_descent_direction(X, U, "sideways")
 
 
+def test_parts_are_taken_as_trep_assigns_them():
+    # trep assigns each part into its slice, so what numpy broadcasts there is accepted: rho
+    # of shape (N − 1, 1) on a system without kinematic configs (its slice is (N − 1, 0)),
+    # and a z longer than the state (trep reads the rows it needs).
+    s = trep.System()
+    s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
+    trep.potentials.Gravity(s)
+    trep.forces.ConfigForce(s, "theta", "torque")
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, [0.2], 0.01, [0.2])
+    d = discopt.DSystem(mvi, np.arange(5) * 0.01)
+    X, U = d.build_trajectory(u=np.ones((4, 1)), rho=np.zeros((4, 1)))
+    assert U.shape == (4, 1) and np.all(U == 1.0)
+    with pytest.raises(ValueError, match="rho has shape"):
+        d.build_trajectory(rho=np.zeros((4, 2)))
+    d.set(X[0], U[0], 0)
+    z = np.array([0.3, -0.7])
+    np.testing.assert_array_equal(d.fdxdx(np.concatenate([z, [5.0]])), d.fdxdx(z))
+    with pytest.raises(ValueError, match="at least"):
+        d.fdxdx(z[:1])
+
+
 def test_solve_tv_lqr_is_the_riccati_recursion():
     """On a fixed system over a long horizon the gains settle to the DARE's: the cost-to-go
     P satisfies P = Q + AᵀPA − AᵀPB(R + BᵀPB)⁻¹BᵀPA."""

@@ -72,7 +72,12 @@ class DSystem:
         if v.shape != want and v.ndim < len(want) and v.size == int(np.prod(want)):
             v = v.reshape(want)
         if v.shape != want:
-            raise ValueError(f"{what} has shape {v.shape}; this system needs {want}")
+            # What numpy broadcasts into the part, as trep assigns it (a system without
+            # kinematic configs takes rho of shape (N − 1, 1) into its (N − 1, 0) part).
+            try:
+                v = np.broadcast_to(v, want).copy()
+            except ValueError:
+                raise ValueError(f"{what} has shape {v.shape}; this system needs {want}") from None
         return v
 
     def build_state(self, Q: Any = None, p: Any = None, v: Any = None) -> np.ndarray:
@@ -234,7 +239,10 @@ class DSystem:
     def _contract(self, z: Any, a: str, b: str) -> np.ndarray:
         """``Σ_i z_i ∂²f_i/∂a∂b`` over the rows with second derivatives (``q2_d``, ``p2``)
         for the integrator's inputs ``a``, ``b`` (``q1``, ``p1``, ``u1``, ``k2``)."""
-        z = self._part(z, self._nX, "z")
+        z = np.asarray(z, dtype=float)
+        if z.ndim != 1 or len(z) < self._nX:
+            raise ValueError(f"z has shape {z.shape}; this system needs at least ({self._nX},)")
+        z = z[: self._nX]  # trep reads the rows it needs and leaves the rest
         qd, _, p, _ = self._slices()
         vi = self.varint
         # trep's layout is (input₁, input₂, output).
