@@ -142,6 +142,61 @@ impl VariationalStepper {
     }
 }
 
+#[pymethods]
+impl VariationalStepper {
+    /// The discrete Euler–Lagrange residual at a given step (trep's `calc_f`): from `(t1, q1,
+    /// p1)` to `(t2, q2)` with inputs `u1` and this integrator's multipliers `lam` (model
+    /// order; `p1` the dynamic momenta), the dynamic rows `p₁ + D₁L_d + f⁻ + Δt Dh(q₁)ᵀλ`
+    /// (eqs. (23), (25)) in the model's dynamic order, then `h(q₂)`. Zero for a step the
+    /// integrator took; otherwise what is left over (inverse dynamics reads the inputs off it).
+    #[pyo3(signature = (t1, q1, p1, t2, q2, u1, lam))]
+    #[allow(clippy::too_many_arguments)]
+    fn residual<'py>(
+        &mut self,
+        py: Python<'py>,
+        t1: f64,
+        q1: Numbers<'_, Ix1>,
+        p1: Numbers<'_, Ix1>,
+        t2: f64,
+        q2: Numbers<'_, Ix1>,
+        u1: Numbers<'_, Ix1>,
+        lam: Numbers<'_, Ix1>,
+    ) -> PyResult<Py<PyAny>> {
+        let q2 = q2.as_array().to_vec();
+        if q2.len() != self.sys.dof() {
+            return Err(bad(format!(
+                "q2 has {} entries; the step needs {}",
+                q2.len(),
+                self.sys.dof()
+            )));
+        }
+        let k2: Vec<f64> = self.kinematic.iter().map(|&i| q2[i]).collect();
+        let given = [q1, p1, u1, lam].map(|a| a.as_array().to_vec());
+        let [q1, p1, u1, lam] = given;
+        let step = self.request_of(t1, t2, [q1, p1, u1, k2, lam], 0)?;
+        let q2 = Vector::<Dyn>::from_vec(q2);
+        let (mut force, mut motion) = (tree_mech::NoForce, |_: usize, _: f64| [0.0; 3]);
+        let mut cx = StepContext::new(&mut self.sys, &mut force, &mut motion, step.dt);
+        cx.u = &step.u1;
+        self.vi.lambda.copy_from_slice(&step.lambda);
+        self.vi.prepare(cx.sys, &step.q1);
+        self.vi
+            .residual(cx.at(0, t1), &step.q1, &step.p1, &q2, false);
+        let r = self.vi.residual_vector();
+        if let Some(x) = r.iter().find(|x| !x.is_finite()) {
+            return Err(sim_error(
+                py,
+                &SimError::NonFinite {
+                    step: 0,
+                    t: t1,
+                    what: format!("the step's residual ({x})"),
+                },
+            ));
+        }
+        Ok(vector(py, r.as_slice()))
+    }
+}
+
 /// One step's arguments, checked, in model order (`p1` and `k2` spread over every variable).
 struct StepRequest {
     t1: f64,
@@ -176,7 +231,18 @@ impl VariationalStepper {
         given: [Numbers<'_, Ix1>; 5],
         order: u8,
     ) -> PyResult<StepRequest> {
-        let [q1, p1, u1, k2, lam] = given.map(|a| a.as_array().to_vec());
+        self.request_of(t1, t2, given.map(|a| a.as_array().to_vec()), order)
+    }
+
+    /// [`Self::request`] of arguments already read.
+    fn request_of(
+        &self,
+        t1: f64,
+        t2: f64,
+        given: [Vec<f64>; 5],
+        order: u8,
+    ) -> PyResult<StepRequest> {
+        let [q1, p1, u1, k2, lam] = given;
         let n = self.sys.dof();
         let sizes = [
             ("q1", q1.len(), n),

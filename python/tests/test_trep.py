@@ -95,6 +95,45 @@ def test_midpoint_vi_steps_match_trep(recorded):
             assert abs(x * x + z * z - 1.44) < 1e-13, "ours holds the circle to rounding"
 
 
+def test_calc_f_and_calc_p2_match_trep(recorded):
+    # The DEL residual and the end momentum at a q2 moved off the step, as trep computes them.
+    name, ours, theirs = recorded
+    close(ours["calc_f"], theirs["calc_f"], 1e-9, f"{name} calc_f")
+    close(ours["calc_p2"], theirs["calc_p2"], 1e-9, f"{name} calc_p2")
+
+
+def test_inverse_dynamics_by_calc_f_recovers_the_inputs():
+    # Drive a pendulum with known torques, then read them back off each step's residual as
+    # trep's inverse-dynamics example does (u = −f/Δt with the inputs set to zero).
+    def system():
+        s = trep.System()
+        s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
+        trep.potentials.Gravity(s)
+        trep.forces.Damping(s, 0.2)
+        trep.forces.ConfigForce(s, "theta", "torque")
+        return s
+
+    s, dt = system(), 0.01
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, [0.1], dt, [0.1])
+    torques = [0.5 * np.sin(3.0 * k * dt) for k in range(50)]
+    qs = [mvi.q1, mvi.q2]
+    for u in torques:
+        mvi.step(mvi.t2 + dt, [u])
+        qs.append(mvi.q2)
+    mvi = trep.MidpointVI(system())
+    mvi.initialize_from_configs(0.0, qs[0], dt, qs[1])
+    found = []
+    for k in range(2, len(qs)):
+        mvi.t1, mvi.q1, mvi.p1 = mvi.t2, mvi.q2, mvi.p2
+        mvi.t2, mvi.q2 = mvi.t1 + dt, qs[k]
+        mvi.u1 = [0.0]
+        found.append(-mvi.calc_f()[0] / dt)
+        mvi.u1 = [found[-1]]
+        mvi.calc_p2()
+    np.testing.assert_allclose(found, torques, rtol=0, atol=1e-9)
+
+
 def test_the_system_is_left_where_treps_integrator_leaves_it(recorded):
     # trep leaves the System at each step's midpoint (q, the discrete velocity, t, the step's
     # inputs): scripts that read system.q or total_energy() in their loop see that state.

@@ -359,6 +359,13 @@ def record(trep, build):
                 except NotImplementedError:
                     pass  # trep 1.0.2's LinearSpring has no third derivative: nothing to hold
     out["vi_derivatives"] = d
+    # The DEL residual at a q2 moved off the step (trep's calc_f: what inverse dynamics
+    # reads), and the end momentum there (calc_p2).
+    kept = mvi.q2
+    mvi.q2 = [x + 0.01 * (i + 1) for i, x in enumerate(kept)]
+    out["calc_f"] = _list(mvi.calc_f())
+    mvi.calc_p2()
+    out["calc_p2"] = _list(mvi.p2)
     # satisfy_constraints from a configuration moved off the constraints and a moving state,
     # each way trep's documentation gives of holding configs still (both at once differ:
     # trep 1.0.2 then holds only the list).

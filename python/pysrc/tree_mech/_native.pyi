@@ -222,6 +222,10 @@ class VariationalStepper:
         order: int = 0,
     ) -> tuple: ...
     def momentum(self, t1: float, q1: ArrayLike, t2: float, q2: ArrayLike) -> np.ndarray: ...
+    def residual(
+        self, t1: float, q1: ArrayLike, p1: ArrayLike, t2: float, q2: ArrayLike, u1: ArrayLike,
+        lam: ArrayLike,
+    ) -> np.ndarray: ...
 
 def load(
     path: Union[str, PathLike],

@@ -1512,6 +1512,41 @@ class MidpointVI:
             self._order = order
         self._leave_system_at_midpoint()
 
+    def calc_f(self) -> np.ndarray:
+        """The discrete Euler–Lagrange equations at the integrator's current values (``t1``,
+        ``q1``, ``p1``, ``t2``, ``q2``, ``u1``, ``lambda1``), as trep computes them: the
+        dynamic configs' rows ``p1 + D₁L_d + f⁻ − Dh(q1)ᵀλ₁``, then each constraint's
+        ``h(q2)``. Zero for a step the integrator took; for a ``q2`` set by hand, what the
+        inputs would have to supply (inverse dynamics)."""
+        s = self._system
+        dt = self.t2 - self.t1
+        p1 = np.zeros(self.nd)
+        p1[s._dperm] = self._p1
+        # trep's λ₁ over ours: λ₁ = −Δt·sign·λ (see _solve).
+        lam = -self._lambda1 / (dt * s._signs()) if self.nc else np.zeros(0)
+        try:
+            r = np.asarray(self._stepper.residual(
+                self.t1, s._to_model(self._q1), p1, self.t2, s._to_model(self._q2),
+                self._u1, lam))
+        except _native.SimulationError as e:
+            s._raise_python_error()
+            raise ValueError(str(e)) from None
+        s._raise_python_error()
+        return np.concatenate([r[: self.nd][s._dperm], s._signs() * r[self.nd:]])
+
+    def calc_p2(self) -> None:
+        """Sets ``p2`` to the momentum at the end of the step from ``(t1, q1)`` to
+        ``(t2, q2)``, ``D₂L_d(q1, q2)`` (trep's forcing puts no force on this end)."""
+        s = self._system
+        try:
+            p = self._stepper.momentum(self.t1, s._to_model(self._q1), self.t2,
+                                       s._to_model(self._q2))
+        except _native.SimulationError as e:
+            s._raise_python_error()
+            raise ValueError(str(e)) from None
+        s._raise_python_error()
+        self._p2 = np.asarray(p)[s._dperm]
+
     # Derivatives ----------------------------------------------------------------------
     def _need(self, order: int) -> Dict[str, np.ndarray]:
         """The last step's derivatives up to `order` (the step solved again with them)."""
