@@ -454,3 +454,21 @@ def test_a_built_in_constraint_after_one_written_in_python_is_refused():
     trep.constraints.PointOnPlane(s, "World", [0.0, 1.0, 0.0], "other")
     with pytest.raises(NotImplementedError, match="create them last"):
         s.lambda_()
+
+
+def test_a_spring_whose_frames_coincide_only_where_the_script_never_goes_runs():
+    # The frames of this spring coincide at x = 0, where its direction is undefined; the
+    # script starts at 0.8 and the motion stays within [0.2, 0.8], so, as on trep, it runs
+    # (the model is judged where the system is when it is built).
+    s = trep.System()
+    s.import_frames([trep.tx("x", name="slider", mass=1.0)])
+    trep.potentials.LinearSpring(s, "World", "slider", 10.0, x0=0.5)
+    s.q = [0.8]
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, s.q, 0.01, s.q)
+    low = 1.0
+    for _ in range(100):
+        mvi.step(mvi.t2 + 0.01)
+        low = min(low, float(mvi.q2[0]))
+    assert abs(low - 0.2) < 1e-3  # the oscillation about 0.5 with amplitude 0.3
+    assert abs(s.total_energy() - 0.45) < 1e-3

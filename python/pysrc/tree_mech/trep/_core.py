@@ -803,6 +803,11 @@ class System:
         for c in self._configs:
             damping = sum(p._damping_on(c) for p in parts) if not c.kinematic else 0.0
             out.append(f"[variables.{_toml_string(c.name)}]")
+            # The model starts where the system is when it is built: what validation judges
+            # (a spring's frames may coincide only at a configuration the script never
+            # takes; the runtime refuses them where they do, as trep fails where it does).
+            if 0 <= c.index < len(self._q) and self._q[c.index] != 0.0:
+                out.append(f"q0 = {float(self._q[c.index])!r}")
             if c.kinematic:
                 out.append("kinematic = true")
             if damping:
