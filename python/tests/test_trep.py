@@ -274,7 +274,7 @@ def test_errors_are_plain():
     s = trep.System()
     with pytest.raises(KeyError, match="no frame"):
         s.get_frame("nowhere")
-    with pytest.raises(NotImplementedError, match="CONST_SE3"):
+    with pytest.raises(ValueError, match="four columns of three"):
         trep.Frame(s.world_frame, trep.CONST_SE3, 0.0)
     trep.Frame(s.world_frame, trep.TX, "a", name="slider", mass=1.0)
     with pytest.raises(ValueError, match="expected 1 values"):
@@ -472,3 +472,45 @@ def test_a_spring_whose_frames_coincide_only_where_the_script_never_goes_runs():
         low = min(low, float(mvi.q2[0]))
     assert abs(low - 0.2) < 1e-3  # the oscillation about 0.5 with amplitude 0.3
     assert abs(s.total_energy() - 0.45) < 1e-3
+
+
+def test_treps_puppet_module_builds_treps_marionette():
+    # trep.puppets.Puppet with its strings as constraints, posed, its string controls
+    # projected, 30 VI steps: the same configs, frames, motion and string forces as trep's.
+    theirs = FIXTURE["puppet_module"]
+    ours = trep_scripts.puppet_module(trep)
+    assert ours["configs"] == theirs["configs"] and ours["dyn"] == theirs["dyn"]
+    assert set(ours["frames"]) == set(theirs["frames"])
+    for name, p in theirs["frames"].items():
+        close(ours["frames"][name], p, 1e-12, f"puppet frame {name}")
+    for what in ("q0", "q", "lambda1"):
+        names = sorted(theirs[what])
+        close([ours[what][k] for k in names], [theirs[what][k] for k in names], 1e-10,
+              f"puppet {what}")
+    with pytest.raises(NotImplementedError, match="HybridWrench"):
+        trep.puppets.Puppet(string_forces=True)
+
+
+def test_a_constant_se3_frame_is_its_matrix():
+    # A CONST_SE3 frame (trep's four columns: rotation, then translation) under a moving
+    # frame sits at the parent's pose times its matrix; const_txyz is its translation alone.
+    a, b, c = 0.3, -1.1, 2.0
+    rz_ = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    ry_ = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    rx_ = np.array([[1, 0, 0], [0, np.cos(c), -np.sin(c)], [0, np.sin(c), np.cos(c)]])
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = rz_ @ ry_ @ rx_, [0.1, -0.2, 0.3]
+    columns = [list(m[:3, j]) for j in range(4)]
+    s = trep.System()
+    s.import_frames([trep.ry("q", name="arm"), [
+        trep.const_se3(columns, name="tool", mass=1.0), [trep.const_txyz((0.0, 0.5, 0.0),
+                                                                         name="tip")]]])
+    s.q = [0.7]
+    arm = s.get_frame("arm").g()
+    np.testing.assert_allclose(s.get_frame("tool").g(), arm @ m, atol=1e-14)
+    shift = np.eye(4)
+    shift[1, 3] = 0.5
+    np.testing.assert_allclose(s.get_frame("tip").g(), arm @ m @ shift, atol=1e-14)
+    assert s.get_frame("tool").transform_type == trep.CONST_SE3
+    with pytest.raises(ValueError, match="not a rigid motion"):
+        trep.Frame(s.world_frame, trep.CONST_SE3, [[2, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]])

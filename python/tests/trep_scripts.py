@@ -456,6 +456,33 @@ def time_puppet(trep, spec, runs=3, steps=1000, dt=0.01):
     return best
 
 
+def puppet_module(trep, steps=30, dt=0.01):
+    """trep's own marionette from `trep.puppets` (strings as constraints): its configs, its
+    frames' positions in a pose, the control points projected above their hooks, then
+    `steps` VI steps with the string controls held — all by name (trep lists the strings in
+    its dict's order)."""
+    import importlib
+    puppets = importlib.import_module(trep.__name__ + ".puppets")
+    p = puppets.Puppet(joint_forces=False, string_constraints=True)
+    pose = {"torso_tz": 1.1, "torso_rz": 0.2, "lhip_rx": -0.4, "rhip_rx": 0.3,
+            "lknee_rx": 0.5, "rknee_rx": 0.2, "lshoulder_rx": 0.6, "relbow_rx": 0.4}
+    for name, value in pose.items():
+        p.get_config(name).q = value
+    p.project_string_controls()
+    out = {"configs": sorted(c.name for c in p.configs),
+           "dyn": sorted(c.name for c in p.dyn_configs),
+           "frames": dict((f.name, _list(f.p())) for f in p.frames if f.name is not None),
+           "q0": dict((c.name, c.q) for c in p.configs)}
+    mvi = trep.MidpointVI(p)
+    mvi.initialize_from_configs(0.0, p.q, dt, p.q)
+    k2 = [c.q for c in p.kin_configs]
+    for _ in range(steps):
+        mvi.step(mvi.t2 + dt, (), k2)
+    out["q"] = dict((c.name, float(mvi.q2[i])) for i, c in enumerate(p.configs))
+    out["lambda1"] = dict((c.name, float(mvi.lambda1[i])) for i, c in enumerate(p.constraints))
+    return out
+
+
 def time_python_elements(trep, runs=3, steps=1000, dt=0.01):
     """The best of `runs` wall times (s) of `steps` VI steps of `python_elements` (its
     potential, force and constraint written in Python, called back on every evaluation)."""

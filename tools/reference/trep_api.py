@@ -21,6 +21,9 @@ visual = types.ModuleType('trep.visual')
 visual.VisualItem3D = type('VisualItem3D', (object,), {})
 visual.__all__ = ['VisualItem3D']
 sys.modules['trep.visual'] = visual
+for _gl in ('OpenGL', 'OpenGL.GL', 'OpenGL.GLU', 'OpenGL.GLUT'):
+    sys.modules[_gl] = types.ModuleType(_gl)
+    sys.modules[_gl].__all__ = []
 
 import trep  # noqa: E402
 import trep.discopt  # noqa: E402,F401 (the scripts reach it as trep.discopt)
@@ -50,6 +53,7 @@ s = trep_scripts.puppet_from_frames(trep, spec)
 out['puppet'] = {'configs': [c.name for c in s.configs],
                  'q100': [float(x) for x in trep_scripts.step_puppet(trep, s, 100, 0.01)]}
 out['energy_pump'] = trep_scripts.energy_pump(trep)
+out['puppet_module'] = trep_scripts.puppet_module(trep)
 path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-api.json')
 with open(path, 'w') as f:
     json.dump(out, f, indent=1, sort_keys=True)

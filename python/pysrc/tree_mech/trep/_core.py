@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -141,9 +141,44 @@ tx, ty, tz, rx, ry, rz = (_definition(kind) for kind in _PRIMITIVES)
 
 def const_se3(se3: Any, name: Optional[str] = None, kinematic: bool = False,
               mass: Any = 0.0) -> _FrameDef:
-    """trep's constant SE(3) frame: not supported (``Frame`` refuses ``CONST_SE3`` with a
-    message when the definition is imported)."""
+    """trep's constant SE(3) frame for ``import_frames``: ``se3`` is the four columns of its
+    local transform (the rotation's three, then the translation), or a 4×4 matrix."""
     return _FrameDef(CONST_SE3, se3, name, kinematic, mass)
+
+
+def const_txyz(xyz: Any, name: Optional[str] = None, kinematic: bool = False,
+               mass: Any = 0.0) -> _FrameDef:
+    """trep's constant translation by ``(x, y, z)`` for ``import_frames``."""
+    return _FrameDef(CONST_SE3, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
+                                 list(xyz)], name, kinematic, mass)
+
+
+def _se3(param: Any, name: str) -> np.ndarray:
+    """A CONST_SE3 frame's local transform (4×4) from trep's four columns or a 4×4 matrix;
+    a ValueError unless its rotation is one."""
+    m = np.asarray(param, dtype=float)
+    if m.shape == (4, 3):
+        g = np.eye(4)
+        g[:3, :] = m.T
+    elif m.shape == (4, 4):
+        g = m.copy()
+    else:
+        raise ValueError(f"frame {name}: a CONST_SE3 transform is four columns of three "
+                         f"(rotation, then translation) or a 4×4 matrix, got shape {m.shape}")
+    r = g[:3, :3]
+    if not (np.all(np.isfinite(g)) and np.allclose(r.T @ r, np.eye(3), atol=1e-9)
+            and np.linalg.det(r) > 0 and np.allclose(g[3], [0, 0, 0, 1])):
+        raise ValueError(f"frame {name}: the CONST_SE3 transform is not a rigid motion "
+                         f"(its rotation must be orthonormal with determinant 1)")
+    return g
+
+
+def _zyx(r: np.ndarray) -> Tuple[float, float, float]:
+    """Angles ``(a, b, c)`` with ``r = Rz(a) Ry(b) Rx(c)``."""
+    b = math.asin(max(-1.0, min(1.0, -r[2, 0])))
+    if abs(math.cos(b)) > 1e-12:
+        return math.atan2(r[1, 0], r[0, 0]), b, math.atan2(r[2, 1], r[2, 2])
+    return math.atan2(-r[0, 1], r[1, 1]), b, 0.0  # gimbal lock: all turn about one axis
 
 
 class Frame:
@@ -155,12 +190,9 @@ class Frame:
                  name: Optional[str] = None, kinematic: bool = False, mass: Any = 0.0):
         if transform == WORLD:
             raise ValueError("the world frame is made by System; give frames a parent")
-        if transform == CONST_SE3:
-            raise NotImplementedError(
-                "trep.CONST_SE3 frames are not supported by tree_mech.trep; "
-                "compose TX…RZ frames with constant values instead")
-        if transform not in _PRIMITIVES:
-            raise ValueError(f"transform must be one of trep.TX … trep.RZ, got {transform!r}")
+        if transform not in _PRIMITIVES + (CONST_SE3,):
+            raise ValueError(f"transform must be one of trep.TX … trep.RZ or trep.CONST_SE3, "
+                             f"got {transform!r}")
         if isinstance(parent, str):
             raise TypeError("a Frame's parent is a Frame (use system.get_frame(name))")
         if not isinstance(parent, Frame):
@@ -178,7 +210,12 @@ class Frame:
         if name is not None and system._frame_named(name) is not None:
             raise ValueError(f"a frame named `{name}` already exists")
         number = isinstance(param, (int, float)) and not isinstance(param, bool)
-        if not (isinstance(param, str) or number and np.isfinite(param)):
+        if transform == CONST_SE3:
+            if isinstance(param, str):
+                raise ValueError(f"frame {name or '(unnamed)'}: a CONST_SE3 frame is constant; "
+                                 f"it cannot be driven by a config")
+            se3 = _se3(param, name or "(unnamed)")
+        elif not (isinstance(param, str) or number and np.isfinite(param)):
             raise ValueError(f"frame {name or '(unnamed)'}: the {transform} parameter must be a "
                              f"finite number or a config name, got {param!r}")
         masses = tuple(mass) if isinstance(mass, (tuple, list)) else (mass,)
@@ -187,7 +224,9 @@ class Frame:
         system._hold()
         try:
             system._frames_created.append(self)
-            if isinstance(param, str):
+            if transform == CONST_SE3:
+                self._value = se3
+            elif isinstance(param, str):
                 self._config = Config(system, param, kinematic, frame=self)
             else:
                 self._value = float(param)
@@ -286,7 +325,8 @@ class Frame:
         if self._config:
             self._config.q = value
         else:
-            self._value = float(value)
+            self._value = (_se3(value, self.name or "(unnamed)") if self._transform == CONST_SE3
+                           else float(value))
             self._system._structure_changed()
 
     @property
@@ -358,7 +398,7 @@ class Frame:
         """``ξ̂``: this frame's primitive as a 4×4 generator, ``d(local)/dq = local · ξ̂``
         (zero for the world, which has none)."""
         out = np.zeros((4, 4))
-        if self._transform == WORLD:
+        if self._transform not in _PRIMITIVES:  # the world, a constant SE(3): no config
             return out
         axis = "xyz".index(self._transform[1])
         if self._transform[0] == "t":
@@ -820,11 +860,30 @@ class System:
 
     def _frame_toml(self, f: Frame) -> List[str]:
         """Frame ``f``'s ``[[frame]]`` table."""
-        out = ["[[frame]]", f"name = {_toml_string(self._frame_key(f))}"]
-        if f.parent is not self._world:
-            out.append(f"parent = {_toml_string(self._frame_key(f.parent))}")
-        value = _toml_string(f.config.name) if f.config else repr(f._value)
-        out.append(f"{f.transform_type} = {value}")
+        key = self._frame_key(f)
+        parent = None if f.parent is self._world else self._frame_key(f.parent)
+        out = []
+        if f.transform_type == CONST_SE3:
+            # Its translations then its ZYX rotation as constant primitives, each but the
+            # last a frame of its own (`KEY#1` …, never a trep frame's name).
+            g = f._value
+            steps = [(k, x) for k, x in zip(("tx", "ty", "tz"), g[:3, 3]) if x != 0.0]
+            steps += [(k, x) for k, x in zip(("rz", "ry", "rx"), _zyx(g[:3, :3])) if x != 0.0]
+            steps = steps or [("tx", 0.0)]
+            for k, (kind, x) in enumerate(steps[:-1]):
+                out += ["[[frame]]", f"name = {_toml_string(f'{key}#{k + 1}')}"]
+                if parent is not None:
+                    out.append(f"parent = {_toml_string(parent)}")
+                out += [f"{kind} = {float(x)!r}", ""]
+                parent = f"{key}#{k + 1}"
+            kind, value = steps[-1][0], repr(float(steps[-1][1]))
+        else:
+            kind = f.transform_type
+            value = _toml_string(f.config.name) if f.config else repr(f._value)
+        out += ["[[frame]]", f"name = {_toml_string(key)}"]
+        if parent is not None:
+            out.append(f"parent = {_toml_string(parent)}")
+        out.append(f"{kind} = {value}")
         if f.mass or any(f._inertia):
             out.append(f"mass = {f.mass!r}")
             out.append(f"inertia = {json.dumps(list(f._inertia))}")

@@ -40,6 +40,10 @@ class Distance(_BetweenFrames, Constraint):
         """The distance held: its kinematic config's ``q``, or the constant."""
         return self.config.q if self.config else self._distance
 
+    def get_actual_distance(self) -> float:
+        """``|p₁ − p₂|`` at the current configuration (what ``distance`` should be)."""
+        return _actual_distance(self.frame1, self.frame2)
+
     def _toml(self) -> List[str]:
         length = _toml_string(self.config.name) if self.config else repr(self._distance)
         return ["[[constraint]]", f"name = {_toml_string(self.name)}", 'kind = "distance"',
