@@ -57,7 +57,7 @@ def solve_tv_lqr(A: Sequence[np.ndarray], B: Sequence[np.ndarray], Q, R) -> LqrS
         # KᵀΓK = (BᵀP'A)ᵀK, since ΓK = BᵀP'A.
         P = at_step(Q, k) + a.T @ pa - bpa.T @ K[k]
         P = 0.5 * (P + P.T)
-    return LqrSolution(np.array(K), P)
+    return LqrSolution(K, P)  # a list of gains, as trep returns them
 
 
 def solve_tv_lq(A, B, q, r, Q, S, R) -> LqSolution:
@@ -81,4 +81,4 @@ def solve_tv_lq(A, B, q, r, Q, S, R) -> LqSolution:
         b_next = (a.T - K[k].T @ bk.T) @ b_next + np.asarray(q[k], dtype=float) - K[k].T @ rk
         P = at_step(Q, k) + a.T @ pa - K[k].T @ gamma @ K[k]
         P = 0.5 * (P + P.T)
-    return LqSolution(np.array(K), np.array(C), P, b_next)
+    return LqSolution(K, C, P, b_next)  # lists, as trep returns them
