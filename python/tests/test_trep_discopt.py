@@ -358,3 +358,18 @@ def test_compressed_and_small_elements_read_as_matlab_writes_them(tmp_path):
     for name in ("packed.mat", "small.mat"):
         got = _matfile.read(str(tmp_path / name))
         assert got["Q_index"] == want["Q_index"] and np.array_equal(got["time"], want["time"])
+
+
+def test_the_default_monitor_gives_the_costs_in_step_order(capsys):
+    # trep's monitors hand their histories back as lists (get_costs, get_dcosts), and
+    # trep.system is a module scripts reach the trajectory files through.
+    d, X, U = system_and_trajectory()
+    monitor = discopt.DOptimizerDefaultMonitor()
+    opt = discopt.DOptimizer(d, discopt.DCost(X, U, np.eye(d.nX), np.eye(d.nU)),
+                             monitor=monitor)
+    opt.optimize(X + 0.01, U, max_steps=3)
+    costs, dcosts = monitor.get_costs(), monitor.get_dcosts()
+    assert len(costs) == len(dcosts) >= 1
+    assert costs == [monitor.cost_history[k] for k in sorted(monitor.cost_history)]
+    assert trep.system.save_trajectory is trep.save_trajectory
+    assert trep.system.System is trep.System

@@ -35,7 +35,7 @@ from ._core import (
 )
 from ._trajectory import load_trajectory, save_trajectory
 from . import discopt  # noqa: E402 (needs the core above)
-from . import puppets  # noqa: E402 (needs the core above)
+from . import puppets, system  # noqa: E402 (need the core above)
 
 #: The trep release whose API this matches.
 __version__ = "v1.0.2"
@@ -44,5 +44,5 @@ __all__ = [
     "CONST_SE3", "RX", "RY", "RZ", "TX", "TY", "TZ", "WORLD", "Config", "Constraint",
     "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "System",
     "constraints", "discopt", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
-    "const_se3", "const_txyz", "load_trajectory", "puppets", "save_trajectory",
+    "const_se3", "const_txyz", "load_trajectory", "puppets", "save_trajectory", "system",
 ]

@@ -365,6 +365,14 @@ class DOptimizerDefaultMonitor(DOptimizerMonitor):
         print(f"  the Armijo search found no decrease from cost {cost0:.10g} "
               f"(dcost {dcost0:.3e})")
 
+    def get_costs(self):
+        """The cost at each step, in the order of the steps."""
+        return [self.cost_history[k] for k in sorted(self.cost_history)]
+
+    def get_dcosts(self):
+        """The cost's directional derivative at each step, in the order of the steps."""
+        return [self.dcost_history[k] for k in sorted(self.dcost_history)]
+
 
 class DOptimizerVerboseMonitor(DOptimizerDefaultMonitor):
     """The default monitor, and every Armijo evaluation and simulation failure too."""
