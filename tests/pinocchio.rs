@@ -1,5 +1,5 @@
 //! Every shipped URDF against Pinocchio 4.1 (tests/fixtures/pinocchio-*.json, written by
-//! tools/reference/pinocchio_fixtures.py), compiled and interpreted: computeABADerivatives'
+//! tools/reference/pinocchio_fixtures.py), compiled and interpreted (the UR10 interpreted): computeABADerivatives'
 //! ∂q̈/∂q, ∂q̈/∂v, M⁻¹; mass matrix, generalized gravity, nonlinear
 //! effects, forward dynamics (ABA), inverse dynamics (RNEA; also through
 //! `dynamics::inverse_dynamics`), every link's pose, kinetic and
@@ -421,6 +421,15 @@ fn ur5_matches_pinocchio() {
     compare(interpreted(&fx), &fx, "ur5 interpreted");
     compare(Ur5, &fx, "ur5 compiled");
     compare_kinematics(&fx, "ur5");
+}
+
+/// The UR10 of the reach without limits (tasks/ur10-reach.toml), interpreted (its compiled
+/// form is the UR5's code with other numbers; benches/reach.rs compiles it).
+#[test]
+fn ur10_matches_pinocchio() {
+    let fx = fixture("ur10");
+    compare(interpreted(&fx), &fx, "ur10 interpreted");
+    compare_kinematics(&fx, "ur10");
 }
 
 #[test]

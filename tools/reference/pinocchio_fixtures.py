@@ -35,6 +35,7 @@ MODELS = [
     ("ur5", "models/ur5.urdf", False),
     ("panda", "models/panda.urdf", False),
     ("solo12", "models/solo12.urdf", True),
+    ("ur10", "models/ur10.urdf", False),  # last: the others keep their seeded states
 ]
 STATES = 5
 # The states that also carry the kinematics (every link in three references: large).
