@@ -1,6 +1,6 @@
 //! Every shipped URDF against Pinocchio 4.1 (tests/fixtures/pinocchio-*.json, written by
-//! tools/reference/pinocchio_fixtures.py), compiled and interpreted (the UR10 interpreted): computeABADerivatives'
-//! ∂q̈/∂q, ∂q̈/∂v, M⁻¹; mass matrix, generalized gravity, nonlinear
+//! tools/reference/pinocchio_fixtures.py), compiled and interpreted (the UR10 interpreted):
+//! computeABADerivatives' ∂q̈/∂q, ∂q̈/∂v, M⁻¹; mass matrix, generalized gravity, nonlinear
 //! effects, forward dynamics (ABA), inverse dynamics (RNEA; also through
 //! `dynamics::inverse_dynamics`), every link's pose, kinetic and
 //! potential energy, at seeded random states — interpreted and compiled, to 1e-9 relative;
