@@ -514,3 +514,17 @@ def test_a_constant_se3_frame_is_its_matrix():
     assert s.get_frame("tool").transform_type == trep.CONST_SE3
     with pytest.raises(ValueError, match="not a rigid motion"):
         trep.Frame(s.world_frame, trep.CONST_SE3, [[2, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]])
+
+
+def test_a_system_with_python_elements_is_collected():
+    # Its native model calls the elements back; the reference from there to the system is
+    # weak, so a dropped system is not kept alive by a cycle through Rust.
+    import gc
+    import weakref
+
+    s = trep_scripts.python_elements(trep)
+    s.L()
+    ref = weakref.ref(s)
+    del s
+    gc.collect()
+    assert ref() is None

@@ -17,6 +17,7 @@ What each ask needs, as trep needs it (a derivative a script does not write rais
 """
 from __future__ import annotations
 
+import weakref
 from typing import Any, List, Optional, Tuple
 
 import numpy as np
@@ -47,12 +48,18 @@ class PythonTerms:
     runtime turns into NaN and refuses; the system then raises the kept error itself."""
 
     def __init__(self, system: Any) -> None:
-        self.system = system
+        # Held weakly: the system holds its native model, which holds this (a strong
+        # reference back would be a cycle through Rust that Python's collector cannot see).
+        self._system = weakref.ref(system)
         self.error: Optional[BaseException] = None
         perm = system._perm
         #: Whether trep's config order is the model's (then nothing is moved).
         self.identity = bool(np.all(perm == np.arange(len(perm))))
-        self._parts = self.parts()
+
+    @property
+    def system(self) -> Any:
+        """The system whose elements these are."""
+        return self._system()
 
     def parts(self) -> Tuple[List[Any], List[Any], List[Any]]:
         """The script's own potentials, forces and constraints."""
@@ -110,7 +117,7 @@ class PythonTerms:
 
     def _potentials(self, energy_only: bool, order: int, along) -> list:
         """``L = −ΣV`` and its derivatives (trep's ``V``, ``V_dq``, ``V_dqdq``, ``V_dqdqdq``)."""
-        potentials = self._parts[0]
+        potentials = self.parts()[0]
         configs = self.system._configs
         n = len(configs)
         v = sum(p.V() for p in potentials)
@@ -140,7 +147,7 @@ class PythonTerms:
     def _forces(self, order: int, along) -> list:
         """``F`` on the dynamic configs and its derivatives (trep's ``f``, ``f_dq``,
         ``f_ddq``, and for a direction ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``)."""
-        forces = self._parts[1]
+        forces = self.parts()[1]
         if not forces:
             return []
         s = self.system
@@ -174,7 +181,7 @@ class PythonTerms:
 
     def _constraints(self, order: int, along) -> list:
         """The script's constraint rows (trep's ``h``, ``h_dq``, ``h_dqdq``, ``h_dqdqdq``)."""
-        rows = self._parts[2]
+        rows = self.parts()[2]
         s = self.system
         configs, n = s._configs, len(s._configs)
         if along is None and order < ORDER_DYNAMICS:
