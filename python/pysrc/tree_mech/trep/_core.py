@@ -84,15 +84,14 @@ class Config:
         """The frame whose transform the config drives (None until one does)."""
         return self._frame
 
-    q = property(lambda self: self._get("_q"), lambda self, v: self._put("_q", v),
-                 doc="The config's value.")
-    dq = property(lambda self: self._get("_dq"), lambda self, v: self._put("_dq", v),
-                  doc="Its velocity.")
-    ddq = property(lambda self: self._get("_ddq"), lambda self, v: self._put("_ddq", v),
+    # Read directly (a script's own elements read them many times an evaluation).
+    q = property(lambda self: self._system._q.item(self.index),
+                 lambda self, v: self._put("_q", v), doc="The config's value.")
+    dq = property(lambda self: self._system._dq.item(self.index),
+                  lambda self, v: self._put("_dq", v), doc="Its velocity.")
+    ddq = property(lambda self: self._system._ddq.item(self.index),
+                   lambda self, v: self._put("_ddq", v),
                    doc="Its acceleration (given for a kinematic config; see System.f).")
-
-    def _get(self, array: str) -> float:
-        return float(getattr(self._system, array)[self.index])
 
     def _put(self, array: str, value: float) -> None:
         getattr(self._system, array)[self.index] = value
@@ -910,6 +909,7 @@ class System:
     def _add_python_terms(self) -> None:
         """The script's own potentials, forces and constraints (written in Python), added to
         the native model's terms: the runtime calls them back on every evaluation."""
+        self._python_parts = None  # found again for this model
         terms = PythonTerms(self)
         potentials, forces, constraints = terms.parts()
         self._terms = terms if potentials or forces or constraints else None

@@ -62,11 +62,16 @@ class PythonTerms:
         return self._system()
 
     def parts(self) -> Tuple[List[Any], List[Any], List[Any]]:
-        """The script's own potentials, forces and constraints."""
+        """The script's own potentials, forces and constraints (kept on the system, which a
+        structure change rebuilds with its model)."""
         s = self.system
-        return ([p for p in s._potentials if defined_in_python(p)],
-                [f for f in s._forces if defined_in_python(f)],
-                [c for c in s._constraints if defined_in_python(c)])
+        parts = getattr(s, "_python_parts", None)
+        if parts is None:
+            parts = ([p for p in s._potentials if defined_in_python(p)],
+                     [f for f in s._forces if defined_in_python(f)],
+                     [c for c in s._constraints if defined_in_python(c)])
+            s._python_parts = parts
+        return parts
 
     def __call__(self, kind: str, order: int, q: np.ndarray, dq: np.ndarray,
                  along: Optional[Tuple[np.ndarray, np.ndarray]]) -> Optional[list]:
@@ -82,7 +87,10 @@ class PythonTerms:
         s = self.system
         perm = s._perm
         kept = (s._q.copy(), s._dq.copy())
-        s._q[:], s._dq[:] = np.asarray(q)[perm], np.asarray(dq)[perm]
+        if self.identity:
+            s._q[:], s._dq[:] = q, dq
+        else:
+            s._q[:], s._dq[:] = np.asarray(q)[perm], np.asarray(dq)[perm]
         try:
             if along is not None:
                 along = (np.asarray(along[0])[perm], np.asarray(along[1])[perm])
@@ -94,6 +102,9 @@ class PythonTerms:
                     entries += self._forces(order, along)
         finally:
             s._q[:], s._dq[:] = kept
+        if self.identity and along is None:  # the stepping path's lists, as they are
+            return [e if isinstance(e[1], list) and not (e[1] and isinstance(e[1][0], list))
+                    else self._model_order(*e) for e in entries]
         return [self._model_order(key, value, tangent) for key, value, tangent in entries]
 
     def _model_order(self, key: str, value: np.ndarray, tangent: Optional[np.ndarray]):
@@ -123,9 +134,13 @@ class PythonTerms:
         v = sum(p.V() for p in potentials)
         if energy_only and along is None:
             return [("L", [-v], None)]
-        if along is None and order != ORDER_FULL:
-            return [("L", [-v], None),
-                    ("dL_dq", [-sum(p.V_dq(c) for p in potentials) for c in configs], None)]
+        if along is None:  # plain lists: the stepping path
+            out = [("L", [-v], None),
+                   ("dL_dq", [-sum(p.V_dq(c) for p in potentials) for c in configs], None)]
+            if order == ORDER_FULL:
+                out.append(("d2L_dqdq", [-sum(p.V_dqdq(a, b) for p in potentials)
+                                         for a in configs for b in configs], None))
+            return out
         dv = _tensor(n, 1, lambda i: sum(p.V_dq(configs[i]) for p in potentials))
         if energy_only:
             return [("L", -np.float64(v), -np.float64(dv @ along[0]))]
@@ -157,9 +172,16 @@ class PythonTerms:
             return sum(call(f) for f in forces) if i < nd else 0.0
 
         full = order == ORDER_FULL
-        if along is None and not full:
-            return [("F", [sum(x.f(configs[i]) for x in forces) if i < nd else 0.0
-                           for i in range(n)], None)]
+        if along is None:  # plain lists: the stepping path
+            dynamic = configs[:nd]
+            rows = [0.0] * (n - nd)
+            out = [("F", [sum(x.f(a) for x in forces) for a in dynamic] + rows, None)]
+            if full:
+                zeros = [0.0] * (n * (n - nd))
+                out += [(key, [sum(getattr(x, name)(a, b) for x in forces)
+                               for a in dynamic for b in configs] + zeros, None)
+                        for key, name in (("dF_dq", "f_dq"), ("dF_ddq", "f_ddq"))]
+            return out
         f = _tensor(n, 1, lambda i: on(i, lambda x: x.f(configs[i])))
         first = full or along is not None
         if first:
