@@ -90,9 +90,14 @@ impl VariationalStepper {
         let step = self.request(t1, t2, [q1, p1, u1, k2, lam], order)?;
         let dt = step.dt;
         let (sys, vi) = (&mut self.sys, &mut self.vi);
-        let (q2, p2, lambda, iterations, derivatives) = py
-            .detach(|| step.solve(sys, vi))
-            .map_err(|e| sim_error(py, &e))?;
+        // Terms written in Python are called back with the GIL: kept for the step (taking
+        // it back for every call costs more than the step), released otherwise.
+        let solved = if sys.has_added() {
+            step.solve(sys, vi)
+        } else {
+            py.detach(|| step.solve(sys, vi))
+        };
+        let (q2, p2, lambda, iterations, derivatives) = solved.map_err(|e| sim_error(py, &e))?;
         self.last = q2.as_slice().to_vec();
         let p2: Vec<f64> = self.dynamic.iter().map(|&i| p2[i]).collect();
         let out = step_derivatives(py, derivatives, dt)?;

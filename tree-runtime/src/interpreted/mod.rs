@@ -210,6 +210,12 @@ impl TreeSystem {
         self
     }
 
+    /// Whether terms from outside the model were added ([`Self::with_added`]): a caller
+    /// whose added terms call back into an interpreter may keep its lock for a short call.
+    pub fn has_added(&self) -> bool {
+        self.added.is_some()
+    }
+
     /// The model this system was built from.
     pub fn model(&self) -> &Model {
         &self.model
