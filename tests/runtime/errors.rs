@@ -418,7 +418,8 @@ fn errors_print_as_sentences_also_through_debug() {
     };
     assert_eq!(
         format!("{err:?}"),
-        "step 3 (t = 0.03): the energy E = T + V (inf) is not finite (the run diverged: lower --dt)"
+        "step 3 (t = 0.03): the energy E = T + V (inf) is not finite (the run diverged, the state \
+         running away: lower --dt, or take rk45, which chooses a step the motion allows, or the VI)"
     );
 }
 

@@ -227,9 +227,14 @@ impl fmt::Display for Detail<'_> {
             ),
             SimError::NonFinite { step, what, .. } => {
                 write!(f, "{what} is not finite")?;
-                // Finite at the start and not after: the run diverged.
+                // Finite at the start and not after: the run diverged (the state ran away
+                // within a step: on a stiff model, strong damping on light links, an explicit
+                // step longer than its fastest time constant grows without bound).
                 if *step > 0 {
-                    f.write_str(" (the run diverged: lower --dt)")?;
+                    f.write_str(
+                        " (the run diverged, the state running away: lower --dt, or take \
+                         rk45, which chooses a step the motion allows, or the VI)",
+                    )?;
                 } else {
                     f.write_str(
                         " at the start: the start state, or the model's masses, inertias or \
