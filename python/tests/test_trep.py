@@ -416,6 +416,68 @@ def test_a_potential_written_in_python_moves_the_pendulum_as_its_model_twin():
     assert abs(runs[0][0][0] - 0.3) > 0.1  # it moved: the spring is not left out
 
 
+def test_python_elements_in_another_config_order_than_the_models():
+    # A kinematic config whose frame comes first: trep lists the dynamic configs first, the
+    # model lists them as the frames meet them, so every output moves between the orders.
+    # A spring and a drag written in Python against ConfigSpring and Damping, over steps
+    # with the kinematic config moving, with first and second derivatives.
+    k = 3.0
+
+    class Spring(trep.Potential):
+        def V(self):
+            return 0.5 * k * (self.system.get_config("b").q - 0.2) ** 2
+
+        def V_dq(self, q1):
+            return k * (q1.q - 0.2) if q1.name == "b" else 0.0
+
+        def V_dqdq(self, q1, q2):
+            return k if q1.name == q2.name == "b" else 0.0
+
+        def V_dqdqdq(self, q1, q2, q3):
+            return 0.0
+
+    class Drag(trep.Force):
+        def f(self, q):
+            return -0.4 * q.dq if q.name == "a" else 0.0
+
+        def f_dq(self, q, q1):
+            return 0.0
+
+        def f_ddq(self, q, dq1):
+            return -0.4 if q.name == dq1.name == "a" else 0.0
+
+        f_dqdq = f_ddqdq = f_ddqddq = lambda self, q, a, b: 0.0
+
+    def system(python):
+        s = trep.System()
+        s.import_frames([trep.tx("k", kinematic=True, name="cart"), [
+            trep.rx("a", name="upper"), [trep.tz(-1.0, mass=1.0), [
+                trep.rx("b", name="lower"), [trep.tz(-0.8, mass=0.5)]]]]])
+        trep.potentials.Gravity(s)
+        if python:
+            Spring(s)
+            Drag(s)
+        else:
+            trep.potentials.ConfigSpring(s, "b", k, q0=0.2)
+            trep.forces.Damping(s, 0.0, {"a": 0.4})
+        s.q = {"a": 0.4, "b": -0.3, "k": 0.1}
+        return s
+
+    runs = []
+    for python in (True, False):
+        s = system(python)
+        assert [c.name for c in s.configs] == ["a", "b", "k"]
+        mvi = trep.MidpointVI(s)
+        mvi.initialize_from_configs(0.0, s.q, 0.01, s.q)
+        for i in range(50):
+            mvi.step(mvi.t2 + 0.01, (), [0.1 + 0.2 * np.sin(0.1 * i)])
+        runs.append((mvi.q2, mvi.p2, s.f(), mvi.q2_dq1(), mvi.p2_dk2(), mvi.q2_dq1dq1(),
+                     mvi.p2_dk2dk2()))
+    assert list(system(True)._native_model().variables) == ["k", "a", "b"]
+    for a, b in zip(*runs):
+        np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-12)
+
+
 def test_an_error_in_a_python_element_is_raised_not_swallowed():
     def broken(self, q1, q2):
         raise ValueError("V_dqdq broke")

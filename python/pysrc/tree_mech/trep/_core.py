@@ -566,6 +566,9 @@ class System:
         self._dyn: tuple = ()
         self._kin: tuple = ()
         self._model: Optional[_native.Model] = None
+        # The script's own elements, called back by the native model (_add_python_terms).
+        self._terms: Optional[PythonTerms] = None
+        self._python_parts: Optional[tuple] = None
         self._cache: Dict[str, Any] = {}
         self._world = _World(self)
 
@@ -926,10 +929,22 @@ class System:
 
     def _raise_python_error(self) -> None:
         """Raises what a script's own element raised while the runtime called it back."""
-        terms = getattr(self, "_terms", None)
+        terms = self._terms
         if terms is not None and terms.error is not None:
             error, terms.error = terms.error, None
             raise error
+
+    def _native_call(self, call: Any, error: type = ValueError, context: str = "") -> Any:
+        """``call()`` into the native model: what a script's own element raised while called
+        back is raised as itself; otherwise a simulation error is raised as ``error`` (its
+        message after ``context``)."""
+        try:
+            result = call()
+        except _native.SimulationError as e:
+            self._raise_python_error()
+            raise error(f"{context}{e}") from None
+        self._raise_python_error()
+        return result
 
     def _to_model(self, v: np.ndarray) -> np.ndarray:
         out = np.zeros(len(v))
@@ -940,27 +955,17 @@ class System:
         """The model evaluated at the current state (cached until the state changes)."""
         if "state" not in self._cache:
             m = self._native_model()
-            try:
-                self._cache["state"] = m.evaluate(
-                    self._to_model(self._q), self._to_model(self._dq), self.t,
-                    self._u if self.nu else None, ddq=self._to_model(self._ddq))
-            except _native.SimulationError as e:
-                self._raise_python_error()
-                raise ValueError(str(e)) from None
-            self._raise_python_error()
+            self._cache["state"] = self._native_call(lambda: m.evaluate(
+                self._to_model(self._q), self._to_model(self._dq), self.t,
+                self._u if self.nu else None, ddq=self._to_model(self._ddq)))
         return self._cache["state"]
 
     def _linear(self) -> Dict[str, Any]:
         if "linear" not in self._cache:
             m = self._native_model()
-            try:
-                self._cache["linear"] = m.linearize(
-                    self._to_model(self._q), self._to_model(self._dq),
-                    self._u if self.nu else None, self.t, ddq=self._to_model(self._ddq))
-            except _native.SimulationError as e:
-                self._raise_python_error()
-                raise ValueError(str(e)) from None
-            self._raise_python_error()
+            self._cache["linear"] = self._native_call(lambda: m.linearize(
+                self._to_model(self._q), self._to_model(self._dq),
+                self._u if self.nu else None, self.t, ddq=self._to_model(self._ddq)))
         return self._cache["linear"]
 
     # The Lagrangian ------------------------------------------------------------------
@@ -1149,7 +1154,8 @@ class System:
         scale = 1.0 + float(np.max(np.abs(q0)))
         worst = math.inf
         for k in range(100):
-            c = self._native_model().constraints_at(self._to_model(self._q))
+            model = self._native_model()
+            c = self._native_call(lambda: model.constraints_at(self._to_model(self._q)))
             h = np.asarray(c["h"], dtype=float)
             jac = np.asarray(c["dh_dq"], dtype=float)[:, self._perm][:, free]
             worst = float(np.max(np.abs(h)))
@@ -1196,7 +1202,7 @@ class System:
             """``q`` moved onto the constraints by minimum-norm corrections, or None."""
             q = q.copy()
             for _ in range(50):
-                c = model.constraints_at(self._to_model(q))
+                c = self._native_call(lambda: model.constraints_at(self._to_model(q)))
                 h = np.asarray(c["h"], dtype=float)
                 if not h.size or float(np.max(np.abs(h))) < tolerance:
                     return q
@@ -1207,10 +1213,8 @@ class System:
             return None
 
         def at(q: np.ndarray) -> Dict[str, Any]:
-            try:
-                return model.evaluate(self._to_model(q), rest)
-            except _native.SimulationError as e:
-                raise RuntimeError(f"minimize_potential_energy: {e}") from None
+            return self._native_call(lambda: model.evaluate(self._to_model(q), rest),
+                                     RuntimeError, "minimize_potential_energy: ")
 
         q = onto(self._q)
         if q is None:
@@ -1221,7 +1225,7 @@ class System:
             g = -np.asarray(e["dL_dq"])[perm][free]
             hess = -np.asarray(e["d2L_dqdq"])[np.ix_(perm, perm)][np.ix_(free, free)]
             if self.nc:
-                c = model.constraints_at(self._to_model(q))
+                c = self._native_call(lambda: model.constraints_at(self._to_model(q)))
                 jac = np.asarray(c["dh_dq"], dtype=float)[:, perm][:, free]
                 _, sv, vt = np.linalg.svd(jac)
                 rank = int(np.sum(sv > 1e-12 * max(float(sv[0]) if sv.size else 0.0, 1e-300)))
@@ -1497,12 +1501,8 @@ class MidpointVI:
         """Starts from two consecutive configurations: ``p1 = D₂L_d(q0, q1)``."""
         s = self._system
         q0, q1 = self._vec(q0, self.nq, "q0"), self._vec(q1, self.nq, "q1")
-        try:
-            p = self._stepper.momentum(float(t0), s._to_model(q0), float(t1), s._to_model(q1))
-        except _native.SimulationError as e:
-            s._raise_python_error()
-            raise ValueError(str(e)) from None
-        s._raise_python_error()
+        p = s._native_call(lambda: self._stepper.momentum(
+            float(t0), s._to_model(q0), float(t1), s._to_model(q1)))
         self.t1, self.t2 = float(t0), float(t1)
         self._q1, self._q2 = q0, q1
         self._p1 = self._p2 = np.asarray(p)[s._dperm]
@@ -1556,14 +1556,10 @@ class MidpointVI:
         kin_model[s._kperm] = self._k2
         p1 = np.zeros(self.nd)
         p1[s._dperm] = self._p1
-        try:
-            q2, p2, lam, iterations, derivs = self._stepper.step(
-                self.t1, s._to_model(self._q1), p1, self.t2, self._u1, kin_model, self._lam,
-                order)
-        except _native.SimulationError as e:
-            s._raise_python_error()
-            raise ConvergenceError(f"the step to t = {self.t2}: {e}") from None
-        s._raise_python_error()
+        q2, p2, lam, iterations, derivs = s._native_call(
+            lambda: self._stepper.step(self.t1, s._to_model(self._q1), p1, self.t2, self._u1,
+                                       kin_model, self._lam, order),
+            ConvergenceError, f"the step to t = {self.t2}: ")
         self._q2 = np.asarray(q2)[s._perm]
         self._p2 = np.asarray(p2)[s._dperm]
         self._lam = np.asarray(lam)
@@ -1588,27 +1584,16 @@ class MidpointVI:
         p1[s._dperm] = self._p1
         # trep's λ₁ over ours: λ₁ = −Δt·sign·λ (see _solve).
         lam = -self._lambda1 / (dt * s._signs()) if self.nc else np.zeros(0)
-        try:
-            r = np.asarray(self._stepper.residual(
-                self.t1, s._to_model(self._q1), p1, self.t2, s._to_model(self._q2),
-                self._u1, lam))
-        except _native.SimulationError as e:
-            s._raise_python_error()
-            raise ValueError(str(e)) from None
-        s._raise_python_error()
+        r = np.asarray(s._native_call(lambda: self._stepper.residual(
+            self.t1, s._to_model(self._q1), p1, self.t2, s._to_model(self._q2), self._u1, lam)))
         return np.concatenate([r[: self.nd][s._dperm], s._signs() * r[self.nd:]])
 
     def calc_p2(self) -> None:
         """Sets ``p2`` to the momentum at the end of the step from ``(t1, q1)`` to
         ``(t2, q2)``, ``D₂L_d(q1, q2)`` (trep's forcing puts no force on this end)."""
         s = self._system
-        try:
-            p = self._stepper.momentum(self.t1, s._to_model(self._q1), self.t2,
-                                       s._to_model(self._q2))
-        except _native.SimulationError as e:
-            s._raise_python_error()
-            raise ValueError(str(e)) from None
-        s._raise_python_error()
+        p = s._native_call(lambda: self._stepper.momentum(
+            self.t1, s._to_model(self._q1), self.t2, s._to_model(self._q2)))
         self._p2 = np.asarray(p)[s._dperm]
 
     # Derivatives ----------------------------------------------------------------------

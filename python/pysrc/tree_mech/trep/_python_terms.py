@@ -31,15 +31,19 @@ def defined_in_python(part: Any) -> bool:
     return not type(part).__module__.startswith("tree_mech.")
 
 
-def _tensor(n: int, rank: int, entry) -> np.ndarray:
-    """The n × … × n array of ``entry(i, j, …)``."""
-    r = range(n)
+def _grid(configs: Any, rank: int, entry) -> List[float]:
+    """``entry(a, b, …)`` over every ``rank``-tuple of configs, flattened row-major (the
+    values a callback hands back, in trep's order)."""
     if rank == 1:
-        return np.array([entry(i) for i in r], dtype=float)
+        return [entry(a) for a in configs]
     if rank == 2:
-        return np.array([[entry(i, j) for j in r] for i in r], dtype=float).reshape(n, n)
-    return np.array([[[entry(i, j, k) for k in r] for j in r] for i in r],
-                    dtype=float).reshape(n, n, n)
+        return [entry(a, b) for a in configs for b in configs]
+    return [entry(a, b, c) for a in configs for b in configs for c in configs]
+
+
+def _array(values: List[float], n: int, rank: int) -> np.ndarray:
+    """Flat values as an n × … × n array (for the derivatives along a direction)."""
+    return np.asarray(values, dtype=float).reshape((n,) * rank)
 
 
 class PythonTerms:
@@ -102,133 +106,113 @@ class PythonTerms:
                     entries += self._forces(order, along)
         finally:
             s._q[:], s._dq[:] = kept
-        if self.identity and along is None:  # the stepping path's lists, as they are
-            return [e if isinstance(e[1], list) and not (e[1] and isinstance(e[1][0], list))
-                    else self._model_order(*e) for e in entries]
-        return [self._model_order(key, value, tangent) for key, value, tangent in entries]
+        return [(key, self._model_order(key, value),
+                 None if tangent is None else self._model_order(key, tangent))
+                for key, value, tangent in entries]
 
-    def _model_order(self, key: str, value: np.ndarray, tangent: Optional[np.ndarray]):
-        """An output's entries moved from trep's config order to the model's, flattened."""
+    #: Each output's config axes (moved into the model's order), after its constraint row
+    #: axis if it has one.
+    _CONFIG_AXES = {"L": 0, "dL_dq": 1, "F": 1, "d2L_dqdq": 2, "dF_dq": 2, "dF_ddq": 2,
+                    "h": 0, "dh_dot": 0, "Dh": 1, "D2h": 2}
+
+    def _model_order(self, key: str, x: Any) -> List[float]:
+        """An output's entries (flat values or an array of derivatives, trep's config order)
+        in the model's order, flattened."""
+        axes = self._CONFIG_AXES[key]
+        if self.identity or axes == 0:
+            return x if isinstance(x, list) else np.ravel(x).tolist()
         perm = self.system._perm
-
-        def move(x: Any) -> list:
-            if isinstance(x, list) and self.identity and not (x and isinstance(x[0], list)):
-                return x  # flat already, and in the model's order
-            x = np.asarray(x, dtype=float)
-            if self.identity or key in ("L", "h", "dh_dot"):
-                return x.ravel().tolist()
-            out = np.zeros_like(x)
-            if key in ("Dh", "D2h"):  # rows stay; config axes move
-                out[(slice(None),) + tuple(np.ix_(*[perm] * (x.ndim - 1)))] = x
-            else:
-                out[np.ix_(*[perm] * x.ndim)] = x
-            return out.ravel().tolist()
-
-        return (key, move(value), None if tangent is None else move(tangent))
+        x = np.asarray(x, dtype=float).reshape((-1,) + (len(perm),) * axes)
+        out = np.zeros_like(x)
+        out[(slice(None),) + np.ix_(*[perm] * axes)] = x
+        return out.ravel().tolist()
 
     def _potentials(self, energy_only: bool, order: int, along) -> list:
         """``L = −ΣV`` and its derivatives (trep's ``V``, ``V_dq``, ``V_dqdq``, ``V_dqdqdq``)."""
-        potentials = self.parts()[0]
+        ps = self.parts()[0]
         configs = self.system._configs
         n = len(configs)
-        v = sum(p.V() for p in potentials)
+        lagrangian = -sum(p.V() for p in ps)
         if energy_only and along is None:
-            return [("L", [-v], None)]
-        if along is None:  # plain lists: the stepping path
-            out = [("L", [-v], None),
-                   ("dL_dq", [-sum(p.V_dq(c) for p in potentials) for c in configs], None)]
-            if order == ORDER_FULL:
-                out.append(("d2L_dqdq", [-sum(p.V_dqdq(a, b) for p in potentials)
-                                         for a in configs for b in configs], None))
-            return out
-        dv = _tensor(n, 1, lambda i: sum(p.V_dq(configs[i]) for p in potentials))
+            return [("L", [lagrangian], None)]
+        dl = _grid(configs, 1, lambda a: -sum(p.V_dq(a) for p in ps))
+        if along is None and order != ORDER_FULL:
+            return [("L", [lagrangian], None), ("dL_dq", dl, None)]
+        dq_along = along[0] if along is not None else None
         if energy_only:
-            return [("L", -np.float64(v), -np.float64(dv @ along[0]))]
-        full = order == ORDER_FULL
-        second = full or along is not None
-        d2v = (_tensor(n, 2, lambda i, j: sum(p.V_dqdq(configs[i], configs[j])
-                                              for p in potentials)) if second else None)
-        out = [("L", -np.float64(v), None if along is None else -np.float64(dv @ along[0])),
-               ("dL_dq", -dv, None if along is None else -(d2v @ along[0]))]
-        if full:
-            tangent = None
-            if along is not None:
-                d3v = _tensor(n, 3, lambda i, j, k: sum(
-                    p.V_dqdqdq(configs[i], configs[j], configs[k]) for p in potentials))
-                tangent = -(d3v @ along[0])
-            out.append(("d2L_dqdq", -d2v, tangent))
+            return [("L", [lagrangian], [float(np.dot(dl, dq_along))])]
+        d2l = _grid(configs, 2, lambda a, b: -sum(p.V_dqdq(a, b) for p in ps))
+        if along is None:
+            return [("L", [lagrangian], None), ("dL_dq", dl, None), ("d2L_dqdq", d2l, None)]
+        out = [("L", [lagrangian], [float(np.dot(dl, dq_along))]),
+               ("dL_dq", dl, _array(d2l, n, 2) @ dq_along)]
+        if order == ORDER_FULL:
+            d3l = _grid(configs, 3, lambda a, b, c: -sum(p.V_dqdqdq(a, b, c) for p in ps))
+            out.append(("d2L_dqdq", d2l, _array(d3l, n, 3) @ dq_along))
         return out
 
     def _forces(self, order: int, along) -> list:
         """``F`` on the dynamic configs and its derivatives (trep's ``f``, ``f_dq``,
-        ``f_ddq``, and for a direction ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``)."""
-        forces = self.parts()[1]
-        if not forces:
+        ``f_ddq``, and for a direction ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``); zero on the
+        kinematic ones."""
+        fs = self.parts()[1]
+        if not fs:
             return []
         s = self.system
         configs, n, nd = s._configs, len(s._configs), s.nQd
 
-        def on(i: int, call) -> float:
-            return sum(call(f) for f in forces) if i < nd else 0.0
+        def each(name: str, rank: int) -> List[float]:
+            """The forces' ``name`` method summed, rows on the dynamic configs only."""
+            zeros = [0.0] * ((n - nd) * n ** (rank - 1))
+            if rank == 1:
+                return [sum(getattr(x, name)(a) for x in fs) for a in configs[:nd]] + zeros
+            rest = _grid(configs, rank - 1, lambda *b: b)
+            return [sum(getattr(x, name)(a, *b) for x in fs)
+                    for a in configs[:nd] for b in rest] + zeros
 
+        f = each("f", 1)
         full = order == ORDER_FULL
-        if along is None:  # plain lists: the stepping path
-            dynamic = configs[:nd]
-            rows = [0.0] * (n - nd)
-            out = [("F", [sum(x.f(a) for x in forces) for a in dynamic] + rows, None)]
-            if full:
-                zeros = [0.0] * (n * (n - nd))
-                out += [(key, [sum(getattr(x, name)(a, b) for x in forces)
-                               for a in dynamic for b in configs] + zeros, None)
-                        for key, name in (("dF_dq", "f_dq"), ("dF_ddq", "f_ddq"))]
-            return out
-        f = _tensor(n, 1, lambda i: on(i, lambda x: x.f(configs[i])))
-        first = full or along is not None
-        if first:
-            f_dq = _tensor(n, 2, lambda i, j: on(i, lambda x: x.f_dq(configs[i], configs[j])))
-            f_ddq = _tensor(n, 2, lambda i, j: on(i, lambda x: x.f_ddq(configs[i], configs[j])))
-        out = [("F", f, None if along is None else f_dq @ along[0] + f_ddq @ along[1])]
+        if along is None and not full:
+            return [("F", f, None)]
+        f_dq, f_ddq = each("f_dq", 2), each("f_ddq", 2)
+        if along is None:
+            return [("F", f, None), ("dF_dq", f_dq, None), ("dF_ddq", f_ddq, None)]
+        dq_along, ddq_along = along
+        m_dq, m_ddq = _array(f_dq, n, 2), _array(f_ddq, n, 2)
+        out = [("F", f, m_dq @ dq_along + m_ddq @ ddq_along)]
         if full:
-            t_dq = t_ddq = None
-            if along is not None:
-                c = configs
-                qq = _tensor(n, 3, lambda i, j, k: on(i, lambda x: x.f_dqdq(c[i], c[j], c[k])))
-                vq = _tensor(n, 3, lambda i, j, k: on(i, lambda x: x.f_ddqdq(c[i], c[j], c[k])))
-                vv = _tensor(n, 3, lambda i, j, k: on(i, lambda x: x.f_ddqddq(c[i], c[j], c[k])))
-                # vq[i, j, k] = ∂²F_i/∂q̇_j∂q_k.
-                t_dq = qq @ along[0] + np.einsum("ikj,k->ij", vq, along[1])
-                t_ddq = vq @ along[0] + vv @ along[1]
-            out += [("dF_dq", f_dq, t_dq), ("dF_ddq", f_ddq, t_ddq)]
+            qq = _array(each("f_dqdq", 3), n, 3)
+            vq = _array(each("f_ddqdq", 3), n, 3)  # vq[i, j, k] = ∂²F_i/∂q̇_j∂q_k
+            vv = _array(each("f_ddqddq", 3), n, 3)
+            out += [("dF_dq", f_dq, qq @ dq_along + np.einsum("ikj,k->ij", vq, ddq_along)),
+                    ("dF_ddq", f_ddq, vq @ dq_along + vv @ ddq_along)]
         return out
 
     def _constraints(self, order: int, along) -> list:
         """The script's constraint rows (trep's ``h``, ``h_dq``, ``h_dqdq``, ``h_dqdqdq``)."""
         rows = self.parts()[2]
         s = self.system
-        configs, n = s._configs, len(s._configs)
+        configs, n, m = s._configs, len(s._configs), len(rows)
+
+        def each(name: str, rank: int) -> List[float]:
+            return [x for c in rows for x in _grid(configs, rank, getattr(c, name))]
+
+        h, dh = [c.h() for c in rows], each("h_dq", 1)
         if along is None and order < ORDER_DYNAMICS:
-            return [("h", [c.h() for c in rows], None),
-                    ("Dh", [[c.h_dq(a) for a in configs] for c in rows], None)]
+            return [("h", h, None), ("Dh", dh, None)]
+        d2h = np.asarray(each("h_dqdq", 2), dtype=float).reshape(m, n, n)
         dq = s._dq.copy()
-        h = np.array([c.h() for c in rows], dtype=float)
-        dh = np.array([_tensor(n, 1, lambda i: c.h_dq(configs[i])) for c in rows]).reshape(
-            len(rows), n)
-        second = order >= ORDER_DYNAMICS or along is not None
-        d2h = (np.array([_tensor(n, 2, lambda i, j: c.h_dqdq(configs[i], configs[j]))
-                         for c in rows]).reshape(len(rows), n, n) if second else None)
+        out = [("h", h, None if along is None else np.asarray(dh).reshape(m, n) @ along[0]),
+               ("Dh", dh, None if along is None else d2h @ along[0])]
         d3h = None
         if along is not None and order >= ORDER_DYNAMICS:
-            d3h = np.array([_tensor(n, 3, lambda i, j, k: c.h_dqdqdq(
-                configs[i], configs[j], configs[k])) for c in rows]).reshape(len(rows), n, n, n)
-        out = [("h", h, None if along is None else dh @ along[0]),
-               ("Dh", dh, None if along is None else d2h @ along[0])]
+            d3h = np.asarray(each("h_dqdqdq", 3), dtype=float).reshape(m, n, n, n)
         if order >= ORDER_DYNAMICS:
-            dot = np.einsum("rij,i,j->r", d2h, dq, dq)
             tangent = None
             if along is not None:
                 tangent = (np.einsum("rijk,i,j,k->r", d3h, dq, dq, along[0])
                            + 2.0 * np.einsum("rij,i,j->r", d2h, dq, along[1]))
-            out.append(("dh_dot", dot, tangent))
+            out.append(("dh_dot", np.einsum("rij,i,j->r", d2h, dq, dq), tangent))
         if order == ORDER_FULL:
             out.append(("D2h", d2h, None if along is None else d3h @ along[0]))
         return out
