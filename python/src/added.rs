@@ -1,8 +1,9 @@
 //! Terms written in Python, added to a model's interpreted system (`Model.add_python_terms`):
 //! what the trep layer's potentials, forces and constraints defined by subclassing become.
-//! The runtime asks for them on every evaluation (`tree_mech::runtime::AddedTerms`); the GIL is
-//! taken for the call alone.
+//! The runtime asks for them on every evaluation (`tree_mech::runtime::AddedTerms`), taking
+//! the GIL for the call (a VI step of such a model keeps it: `stepper.rs`).
 
+use std::cell::RefCell;
 use std::sync::Arc;
 
 use pyo3::prelude::*;
@@ -11,6 +12,7 @@ use tree_mech::runtime::{AddedTerms, Ask};
 use tree_mech::Order;
 
 use crate::arrays::vector;
+use crate::errors::bad;
 use crate::model::Model;
 
 /// A Python callable `terms(kind, order, q, dq, along)` with the rows it adds. `kind` is
@@ -18,7 +20,8 @@ use crate::model::Model;
 /// `along` `None` or `(δq, δq̇)`; it returns `[(key, values, derivatives or None), …]` with
 /// `key` one of `L`, `dL_dq`, `F`, `d2L_dqdq`, `dF_dq`, `dF_ddq`, `h`, `Dh`, `dh_dot`, `D2h`
 /// and the values flattened row-major (model order). `None` (the callable failed, keeping its
-/// own account of why) hands NaN, which the runtime refuses.
+/// own account of why), an exception, an unknown key or a wrong length hands NaN, which the
+/// runtime refuses; the last three are then raised in place of its "not finite".
 #[derive(Debug)]
 struct PythonTerms {
     callback: Py<PyAny>,
@@ -41,6 +44,55 @@ fn output(key: &str, k: usize, n: usize) -> Option<Output> {
         "D2h" => Output::D2h(a, b, c),
         _ => return None,
     })
+}
+
+/// How many entries output `key` has over `n` variables and `rows` added rows; `None` for
+/// a key it does not know.
+fn length(key: &str, n: usize, rows: usize) -> Option<usize> {
+    Some(match key {
+        "L" => 1,
+        "dL_dq" | "F" => n,
+        "d2L_dqdq" | "dF_dq" | "dF_ddq" => n * n,
+        "h" | "dh_dot" => rows,
+        "Dh" => rows * n,
+        "D2h" => rows * n * n,
+        _ => return None,
+    })
+}
+
+/// Entries the callable handed back: (key, values, derivatives or none).
+type Entries = Vec<(String, Vec<f64>, Option<Vec<f64>>)>;
+
+/// `entries` checked against their keys' lengths, or a sentence naming the first wrong one.
+fn checked(entries: Entries, n: usize, rows: usize) -> PyResult<Entries> {
+    for (key, values, derivatives) in &entries {
+        let Some(want) = length(key, n, rows) else {
+            return Err(bad(format!(
+                "add_python_terms: the callable handed back `{key}`, which is none of L, \
+                 dL_dq, F, d2L_dqdq, dF_dq, dF_ddq, h, Dh, dh_dot, D2h"
+            )));
+        };
+        let lengths = [Some(values.len()), derivatives.as_ref().map(Vec::len)];
+        if let Some(got) = lengths.into_iter().flatten().find(|&got| got != want) {
+            return Err(bad(format!(
+                "add_python_terms: `{key}` has {got} entries; over {n} variables and {rows} \
+                 added rows it has {want}"
+            )));
+        }
+    }
+    Ok(entries)
+}
+
+thread_local! {
+    /// Why the last call back into Python failed, for the error the failed evaluation raises
+    /// ([`take_failure`]): the callable's own exception, or the shape it handed back.
+    static FAILURE: RefCell<Option<PyErr>> = const { RefCell::new(None) };
+}
+
+/// The reason a call back into Python failed since the last one taken, if any: raised in
+/// place of the runtime's "not finite", which only sees the NaN it handed over.
+pub(crate) fn take_failure() -> Option<PyErr> {
+    FAILURE.with(|f| f.borrow_mut().take())
 }
 
 /// What a failed call hands: NaN where the runtime reads first.
@@ -77,19 +129,30 @@ impl AddedTerms for PythonTerms {
             Ask::Terms(o) => ("terms", level(o)),
             Ask::Constraints(o) => ("constraints", level(o)),
         };
-        type Entries = Option<Vec<(String, Vec<f64>, Option<Vec<f64>>)>>;
-        let result: Entries = Python::attach(|py| {
+        let (n, rows) = (q.len(), self.names.len());
+        let result: Option<Entries> = Python::attach(|py| {
             let along = along.map(|(a, b)| (vector(py, a), vector(py, b)));
             let args = (kind, order, vector(py, q), vector(py, dq), along);
             self.callback
                 .call1(py, args)
-                .and_then(|r| r.extract::<Entries>(py))
+                .and_then(|r| {
+                    r.extract::<Option<Entries>>(py).map_err(|_| {
+                        bad(format!(
+                            "add_python_terms: the callable must hand back None or a list of \
+                             (key, values, derivatives or None), got {}",
+                            r.bind(py).repr().map_or("?".into(), |s| s.to_string())
+                        ))
+                    })
+                })
+                .and_then(|r| r.map(|e| checked(e, n, rows)).transpose())
                 .unwrap_or_else(|e| {
-                    e.print(py);
+                    // The first reason is kept: what follows from its NaN is no news.
+                    FAILURE.with(|f| {
+                        f.borrow_mut().get_or_insert(e);
+                    });
                     None
                 })
         });
-        let n = q.len();
         let Some(entries) = result else {
             return failed(ask, out);
         };
@@ -117,7 +180,8 @@ impl Model {
             callback: terms,
             names: constraints,
         };
-        let bare = tree_mech::TreeSystem::new(&self.model).expect("the model made a system");
-        *self.sys.lock().expect("no panic holds the lock") = bare.with_added(Arc::new(added));
+        take_failure(); // a stale reason belongs to terms no longer called
+        let mut sys = self.sys.lock().expect("no panic holds the lock");
+        *sys = sys.clone().with_added(Arc::new(added));
     }
 }

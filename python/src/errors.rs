@@ -53,6 +53,10 @@ pub(crate) fn in_python_words(message: &str) -> String {
 /// A `SimulationError` with `step` set (a request too large for memory: Python's
 /// `MemoryError`, checked before anything was taken).
 pub(crate) fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
+    // Terms written in Python that failed are the cause of what the runtime then refused.
+    if let Some(failure) = crate::added::take_failure() {
+        return failure;
+    }
     if let SimError::OutOfMemory { .. } = e {
         return PyMemoryError::new_err(in_python_terms(e));
     }

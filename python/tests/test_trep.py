@@ -590,3 +590,21 @@ def test_a_system_with_python_elements_is_collected():
     del s
     gc.collect()
     assert ref() is None
+
+
+@pytest.mark.parametrize("handed, message", [
+    ([("dL_dq", [1.0, 2.0], None)], "`dL_dq` has 2 entries; over 1 variables"),
+    ([("dL_dq", [1.0], [1.0, 2.0])], "`dL_dq` has 2 entries"),
+    ([("nope", [1.0], None)], "handed back `nope`, which is none of"),
+    ("garbage", "must hand back None or a list"),
+])
+def test_added_python_terms_of_the_wrong_shape_are_refused_by_name(handed, message):
+    # Model.add_python_terms (the hook the trep layer's elements use) refuses what its
+    # callable hands back when it does not fit the model, naming it, never a crash.
+    m = tm.load(str(HERE.parents[1] / "models" / "pendulum.toml"))
+    m.add_python_terms(lambda *args: handed)
+    with pytest.raises(ValueError, match=message):
+        m.evaluate([0.3], [0.0])
+    m.add_python_terms(lambda *args: [("dL_dq", [2.0], None)])  # and a right one is added
+    base = tm.load(str(HERE.parents[1] / "models" / "pendulum.toml")).evaluate([0.3], [0.0])
+    assert m.evaluate([0.3], [0.0])["dL_dq"][0] == pytest.approx(base["dL_dq"][0] + 2.0)

@@ -5,7 +5,9 @@
 //! derivatives and a linearisation see one system. The compiled systems have no such hook: a
 //! term of Rust is a model element, written once over `Scalar`.
 
+use std::borrow::Cow;
 use std::fmt::Debug;
+use std::ops::Mul;
 use std::sync::Arc;
 
 use tree_kernel::{Dual, Order, Output, Sink};
@@ -51,6 +53,38 @@ pub(crate) struct Added {
     pub(crate) terms: Arc<dyn AddedTerms>,
     /// The model's constraint rows: the added ones are numbered after them.
     pub(crate) first_row: usize,
+    /// How many rows the terms add (none: constraints are never asked of them).
+    pub(crate) rows: usize,
+}
+
+/// A scalar the added terms are evaluated over: `f64`, or a dual number (its value and its
+/// direction handed to the terms, the derivatives they return put back).
+pub(crate) trait Point: Copy + Mul<Output = Self> {
+    /// The values of `x`, and their directions for dual numbers.
+    fn split(x: &[Self]) -> (Cow<'_, [f64]>, Option<Vec<f64>>);
+    /// The scalar of a value and its derivative.
+    fn make(v: f64, d: f64) -> Self;
+}
+
+impl Point for f64 {
+    fn split(x: &[f64]) -> (Cow<'_, [f64]>, Option<Vec<f64>>) {
+        (Cow::Borrowed(x), None)
+    }
+    fn make(v: f64, _: f64) -> f64 {
+        v
+    }
+}
+
+impl Point for Dual {
+    fn split(x: &[Dual]) -> (Cow<'_, [f64]>, Option<Vec<f64>>) {
+        (
+            Cow::Owned(x.iter().map(|d| d.v).collect()),
+            Some(x.iter().map(|d| d.d).collect()),
+        )
+    }
+    fn make(v: f64, d: f64) -> Dual {
+        Dual::new(v, d)
+    }
 }
 
 impl Added {
@@ -66,49 +100,52 @@ impl Added {
         }
     }
 
-    /// Adds what `ask` names at `(q, q̇)` into `out`.
-    pub(crate) fn add(&self, ask: Ask, q: &[f64], dq: &[f64], out: &mut impl Sink<f64>) {
-        self.terms.add(ask, q, dq, None, &mut |at, v, _| {
-            out.add(self.shifted(at), v)
+    /// Asks the terms for `ask` at `(q, q̇)` (with their directions, over dual numbers) and
+    /// hands each output, its rows numbered after the model's, to `out`.
+    fn each<S: Point>(&self, ask: Ask, q: &[S], dq: &[S], out: &mut dyn FnMut(Output, S)) {
+        if matches!(ask, Ask::Constraints(_)) && self.rows == 0 {
+            return;
+        }
+        let ((q, dir_q), (dq, dir_dq)) = (S::split(q), S::split(dq));
+        let along = dir_q.as_deref().zip(dir_dq.as_deref());
+        self.terms.add(ask, &q, &dq, along, &mut |at, v, d| {
+            out(self.shifted(at), S::make(v, d))
         });
     }
 
-    /// Adds what `ask` names at the dual point `(q, q̇)` into `out`, each output with its
-    /// derivative along the point's direction.
-    pub(crate) fn add_dual(&self, ask: Ask, q: &[Dual], dq: &[Dual], out: &mut impl Sink<Dual>) {
-        let (q, dir_q) = split(q);
-        let (dq, dir_dq) = split(dq);
-        self.terms
-            .add(ask, &q, &dq, Some((&dir_q, &dir_dq)), &mut |at, v, d| {
-                out.add(self.shifted(at), Dual::new(v, d))
-            });
+    /// Adds what `ask` names at `(q, q̇)` into `out`.
+    pub(crate) fn add<S: Point>(&self, ask: Ask, q: &[S], dq: &[S], out: &mut impl Sink<S>) {
+        self.each(ask, q, dq, &mut |at, x| out.add(at, x));
     }
 
-    /// Adds its rows' `h`, `Dh` and `Σ_r w_r D²h_r` on the `dynamic` columns (weights of
-    /// every row, the model's first) into `out`, over any scalar — what a weighted
-    /// constraint Hessian adds for them.
-    pub(crate) fn add_weighted<S: Copy + std::ops::Mul<Output = S>>(
+    /// The added `L` at `(q, q̇)`: its potentials' `−V`.
+    pub(crate) fn lagrangian(&self, q: &[f64], dq: &[f64]) -> f64 {
+        let mut l = 0.0;
+        self.each(Ask::Lagrangian, q, dq, &mut |at, x| {
+            if at == Output::L {
+                l += x;
+            }
+        });
+        l
+    }
+
+    /// Adds its rows' `h`, `Dh` and `Σ_r w_r D²h_r` on the `dynamic` columns at `q` (the
+    /// weights of every row, the model's first) into `out` — what a weighted constraint
+    /// Hessian adds for them.
+    pub(crate) fn add_weighted<S: Point>(
         &self,
+        q: &[S],
         weights: &[S],
         dynamic: &[bool],
-        value: impl Fn(f64, f64) -> S,
-        run: impl FnOnce(&mut dyn FnMut(Output, f64, f64)),
         out: &mut impl Sink<S>,
     ) {
-        run(&mut |at, v, d| match self.shifted(at) {
+        // `q̇ᵀD²h q̇` is not an output here: any velocity will do.
+        self.each(Ask::Constraints(Order::Full), q, q, &mut |at, x| match at {
             Output::D2h(r, i, j) if dynamic[j] => {
-                out.add(Output::WeightedD2h(i, j), weights[r] * value(v, d))
+                out.add(Output::WeightedD2h(i, j), weights[r] * x)
             }
-            at @ (Output::H(_) | Output::Dh(..)) => out.add(at, value(v, d)),
+            Output::H(_) | Output::Dh(..) => out.add(at, x),
             _ => {}
         });
     }
-}
-
-/// The values and the directions of dual numbers.
-fn split(x: &[Dual]) -> (Vec<f64>, Vec<f64>) {
-    (
-        x.iter().map(|d| d.v).collect(),
-        x.iter().map(|d| d.d).collect(),
-    )
 }

@@ -206,7 +206,12 @@ impl TreeSystem {
         self.constraint_names = self.model.constraint_row_names();
         let first_row = self.constraint_names.len();
         self.constraint_names.extend(terms.constraint_names());
-        self.added = Some(Added { terms, first_row });
+        let rows = self.constraint_names.len() - first_row;
+        self.added = Some(Added {
+            terms,
+            first_row,
+            rows,
+        });
         self
     }
 
@@ -323,11 +328,7 @@ impl System for TreeSystem {
             out,
         );
         if let Some(added) = &self.added {
-            let ask = Ask::Constraints(Order::Full);
-            let run = |f: &mut dyn FnMut(tree_kernel::Output, f64, f64)| {
-                added.terms.add(ask, q, q, None, f)
-            };
-            added.add_weighted(weights, &self.dynamic, |v, _| v, run, out);
+            added.add_weighted(q, weights, &self.dynamic, out);
         }
     }
 
@@ -366,15 +367,7 @@ impl System for TreeSystem {
         kernel::energy(&self.plan, &mut self.kernel, q, dq, out);
         if let Some(added) = &self.added {
             // The added terms are potentials: `E = T + V` gains `V = −L_added`.
-            let mut l = 0.0;
-            added
-                .terms
-                .add(Ask::Lagrangian, q, dq, None, &mut |at, v, _| {
-                    if at == tree_kernel::Output::L {
-                        l += v;
-                    }
-                });
-            out.total_energy -= l;
+            out.total_energy -= added.lagrangian(q, dq);
         }
         out.total_energy
     }
@@ -457,8 +450,8 @@ impl System for TreeSystem {
         kernel::evaluate(plan, kernel, q, dq, order, out);
         kernel::constraints(plan, kernel, q, dq, order, out);
         if let Some(added) = &self.added {
-            added.add_dual(Ask::Terms(order), q, dq, out);
-            added.add_dual(Ask::Constraints(order), q, dq, out);
+            added.add(Ask::Terms(order), q, dq, out);
+            added.add(Ask::Constraints(order), q, dq, out);
         }
     }
 
@@ -468,7 +461,7 @@ impl System for TreeSystem {
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::constraints(plan, kernel, q, dq, order, out);
         if let Some(added) = &self.added {
-            added.add_dual(Ask::Constraints(order), q, dq, out);
+            added.add(Ask::Constraints(order), q, dq, out);
         }
     }
 
@@ -483,15 +476,7 @@ impl System for TreeSystem {
         let kernel = self.dual_kernel.get_or_insert_with(|| Kernel::new(plan));
         kernel::weighted_constraint_hessian(plan, kernel, q, q, weights, &self.dynamic, out);
         if let Some(added) = &self.added {
-            let (x, dir) = (
-                q.iter().map(|d| d.v).collect::<Vec<_>>(),
-                q.iter().map(|d| d.d).collect::<Vec<_>>(),
-            );
-            let ask = Ask::Constraints(Order::Full);
-            let run = |f: &mut dyn FnMut(tree_kernel::Output, f64, f64)| {
-                added.terms.add(ask, &x, &x, Some((&dir, &dir)), f)
-            };
-            added.add_weighted(weights, &self.dynamic, Dual::new, run, out);
+            added.add_weighted(q, weights, &self.dynamic, out);
         }
     }
 
