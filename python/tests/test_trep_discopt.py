@@ -367,9 +367,15 @@ def test_the_default_monitor_gives_the_costs_in_step_order(capsys):
     monitor = discopt.DOptimizerDefaultMonitor()
     opt = discopt.DOptimizer(d, discopt.DCost(X, U, np.eye(d.nX), np.eye(d.nU)),
                              monitor=monitor)
-    opt.optimize(X + 0.01, U, max_steps=3)
+    U1 = U + 0.1  # a trajectory of the system away from the cost's target
+    X1 = trep_discopt_scripts.rollout(d, X[0], U1)
+    result = opt.optimize(X1, U1, max_steps=4)
     costs, dcosts = monitor.get_costs(), monitor.get_dcosts()
-    assert len(costs) == len(dcosts) >= 1
-    assert costs == [monitor.cost_history[k] for k in sorted(monitor.cost_history)]
+    # Step by step, a descent: each step starts below the last, along a descent direction,
+    # and the result is below the last step's start.
+    assert len(costs) == len(dcosts) >= 2
+    assert all(b < a for a, b in zip(costs, costs[1:])), costs
+    assert all(g < 0 for g in dcosts), dcosts
+    assert opt.calc_cost(result.X, result.U) <= costs[-1]
     assert trep.system.save_trajectory is trep.save_trajectory
     assert trep.system.System is trep.System
