@@ -576,6 +576,8 @@ def test_a_constant_se3_frame_is_its_matrix():
     assert s.get_frame("tool").transform_type == trep.CONST_SE3
     with pytest.raises(ValueError, match="not a rigid motion"):
         trep.Frame(s.world_frame, trep.CONST_SE3, [[2, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 0]])
+    with pytest.raises(ValueError, match="const_txyz hook must be three finite numbers"):
+        trep.const_txyz((0.0, 0.5), name="hook")
 
 
 def test_a_system_with_python_elements_is_collected():

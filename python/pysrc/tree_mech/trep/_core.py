@@ -148,8 +148,9 @@ def const_se3(se3: Any, name: Optional[str] = None, kinematic: bool = False,
 def const_txyz(xyz: Any, name: Optional[str] = None, kinematic: bool = False,
                mass: Any = 0.0) -> _FrameDef:
     """trep's constant translation by ``(x, y, z)`` for ``import_frames``."""
-    return _FrameDef(CONST_SE3, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
-                                 list(xyz)], name, kinematic, mass)
+    xyz = _vector3(xyz, f"const_txyz {name or '(unnamed)'}")
+    return _FrameDef(CONST_SE3, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], xyz],
+                     name, kinematic, mass)
 
 
 def _se3(param: Any, name: str) -> np.ndarray:
