@@ -140,6 +140,7 @@ fn reference_poses(model: &Model, q: &[f64]) -> Vec<nalgebra::Matrix4<f64>> {
         let x = match f.joint {
             Joint::Constant(x) => x,
             Joint::Variable(i) => q[i],
+            Joint::Mimic(m) => m.multiplier * q[m.variable] + m.offset,
         };
         let axis = [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()][f.primitive.axis()];
         let local = if f.primitive.is_rotation() {

@@ -13,5 +13,6 @@ mod errors;
 mod forcing;
 mod fuzz;
 mod kinematics;
+mod mimic;
 mod units;
 mod vi;

@@ -166,11 +166,13 @@ fn lost(d: f64, scale: f64) -> bool {
 }
 
 /// Whether every dynamic variable moves a frame the sweeps visit (else it has no inertia and
-/// the algorithm cannot resolve it): known from the plan alone.
+/// the algorithm cannot resolve it), and no frame follows another's variable (a mimic
+/// couples two joints, which the algorithm's one-joint-at-a-time recursion cannot): known
+/// from the plan alone.
 pub fn resolvable(plan: &TreePlan, kinematic: &[bool]) -> bool {
     let unresolved =
         |(f, &k): (&Option<usize>, &bool)| !k && f.is_none_or(|f| !plan.frames[f].needed);
-    !plan.variable_frames.iter().zip(kinematic).any(unresolved)
+    plan.followers.is_empty() && !plan.variable_frames.iter().zip(kinematic).any(unresolved)
 }
 
 /// `q̈` into `qdd` for every dynamic variable, by the articulated-body algorithm on the
@@ -257,7 +259,8 @@ pub fn accelerations<S: Scalar>(
                 a[twist_index(f.kind)] += qdd[i];
                 add6(&mut bias, &inertia.times(&a));
             }
-            (None, Joint::Constant(_)) => {}
+            // (A plan's mimic frames are variables of their own, in full coordinates.)
+            (None, Joint::Constant(_) | Joint::Mimic(_)) => {}
         }
         let local = &ws.local[k];
         let (mut i_up, mut p_up) = (

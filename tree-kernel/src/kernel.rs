@@ -6,7 +6,7 @@
 use crate::elements::{self, Scratch};
 use crate::newton_euler::{self, NewtonEuler};
 use crate::order::Order;
-use crate::outputs::{Output, Sink, Weighted};
+use crate::outputs::{Contract, Output, Sink, Weighted};
 use crate::plan::TreePlan;
 use crate::scalar::Scalar;
 use crate::sweeps::{self, Workspace};
@@ -21,6 +21,62 @@ pub struct Kernel<S: Scalar> {
     pub elements: Scratch<S>,
     /// The inverse dynamics' per-frame values.
     pub(crate) newton_euler: NewtonEuler<S>,
+    /// The state in full coordinates, where the tree has mimic frames.
+    full: FullState<S>,
+}
+
+/// The state in full coordinates — the model's variables, then each mimic frame's
+/// ([`crate::Follower`], docs/derivations.md §12) — that the sweeps run in; empty for a
+/// tree without mimic frames, whose full coordinates are its own.
+#[derive(Clone, Debug)]
+struct FullState<S> {
+    q: Vec<S>,
+    dq: Vec<S>,
+    qdd: Vec<S>,
+}
+
+impl<S: Scalar> FullState<S> {
+    fn new(plan: &TreePlan) -> Self {
+        let n = if plan.followers.is_empty() {
+            0
+        } else {
+            plan.full_dof()
+        };
+        let zeros = || vec![S::zero(); n];
+        FullState {
+            q: zeros(),
+            dq: zeros(),
+            qdd: zeros(),
+        }
+    }
+
+    /// `(q, q̇)` in full coordinates: as given, without followers.
+    #[inline(always)]
+    fn state<'a>(&'a mut self, plan: &TreePlan, q: &'a [S], dq: &'a [S]) -> (&'a [S], &'a [S]) {
+        if plan.followers.is_empty() {
+            return (q, dq);
+        }
+        plan.extend(q, true, &mut self.q);
+        plan.extend(dq, false, &mut self.dq);
+        (&self.q, &self.dq)
+    }
+
+    /// `(q, q̇, q̈)` in full coordinates.
+    fn motion<'a>(
+        &'a mut self,
+        plan: &TreePlan,
+        q: &'a [S],
+        dq: &'a [S],
+        qdd: &'a [S],
+    ) -> (&'a [S], &'a [S], &'a [S]) {
+        if plan.followers.is_empty() {
+            return (q, dq, qdd);
+        }
+        plan.extend(q, true, &mut self.q);
+        plan.extend(dq, false, &mut self.dq);
+        plan.extend(qdd, false, &mut self.qdd);
+        (&self.q, &self.dq, &self.qdd)
+    }
 }
 
 impl<S: Scalar> Kernel<S> {
@@ -30,8 +86,13 @@ impl<S: Scalar> Kernel<S> {
             tree: Workspace::new(plan),
             // The elements' scratch is n × n: none without elements (a 40 000-joint robot
             // would otherwise ask for 12.8 GB it never uses).
-            elements: Scratch::new(if plan.has_elements() { plan.dof() } else { 0 }),
+            elements: Scratch::new(if plan.has_elements() {
+                plan.full_dof()
+            } else {
+                0
+            }),
             newton_euler: NewtonEuler::new(plan),
+            full: FullState::new(plan),
         }
     }
 }
@@ -48,6 +109,8 @@ pub fn evaluate<S: Scalar>(
     order: Order,
     out: &mut impl Sink<S>,
 ) {
+    let (q, dq) = k.full.state(plan, q, dq);
+    let out = &mut Contract::new(plan, out);
     sweeps::evaluate(plan, &mut k.tree, q, dq, order, out);
     elements::springs(plan, &k.tree, &mut k.elements, q, order, out);
     elements::forces(plan, &k.tree, &mut k.elements, dq, order, out);
@@ -66,6 +129,7 @@ pub fn energy<S: Scalar>(
     dq: &[S],
     out: &mut impl Sink<S>,
 ) {
+    let (q, dq) = k.full.state(plan, q, dq);
     let tree = sweeps::energy(plan, &mut k.tree, q, dq);
     out.set(Output::Energy, tree + elements::potential(plan, &k.tree, q));
 }
@@ -74,6 +138,8 @@ pub fn energy<S: Scalar>(
 /// model at rest: [`sweeps::mass`], then the springs at [`Order::First`] (which also add
 /// their `∂L/∂q`).
 pub fn mass<S: Scalar>(plan: &TreePlan, k: &mut Kernel<S>, q: &[S], out: &mut impl Sink<S>) {
+    let (q, _) = k.full.state(plan, q, q);
+    let out = &mut Contract::new(plan, out);
     sweeps::mass(plan, &mut k.tree, q, out);
     elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
 }
@@ -89,6 +155,8 @@ pub fn elements_at<S: Scalar>(
     dq: &[S],
     out: &mut impl Sink<S>,
 ) {
+    let (q, dq) = k.full.state(plan, q, dq);
+    let out = &mut Contract::new(plan, out);
     sweeps::forward_inline(plan, &mut k.tree, q, dq, sweeps::Reach::Motion);
     elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
     elements::forces(plan, &k.tree, &mut k.elements, dq, Order::First, out);
@@ -107,7 +175,11 @@ pub fn inverse_dynamics<S: Scalar>(
     qdd: &[S],
     out: &mut impl Sink<S>,
 ) {
-    elements_at(plan, k, q, dq, out);
+    let (q, dq, qdd) = k.full.motion(plan, q, dq, qdd);
+    let out = &mut Contract::new(plan, out);
+    sweeps::forward_inline(plan, &mut k.tree, q, dq, sweeps::Reach::Motion);
+    elements::springs(plan, &k.tree, &mut k.elements, q, Order::First, out);
+    elements::forces(plan, &k.tree, &mut k.elements, dq, Order::First, out);
     let ne = &mut k.newton_euler;
     newton_euler::generalized_forces(plan, &k.tree, ne, dq, qdd);
     for (i, &t) in ne.tau.iter().enumerate() {
@@ -125,6 +197,8 @@ pub fn constraints<S: Scalar>(
     order: Order,
     out: &mut impl Sink<S>,
 ) {
+    let (q, dq) = k.full.state(plan, q, dq);
+    let out = &mut Contract::new(plan, out);
     sweeps::forward(plan, &mut k.tree, q, dq, sweeps::Reach::Attachments);
     elements::constraints(plan, &k.tree, &mut k.elements, q, dq, order, out);
 }

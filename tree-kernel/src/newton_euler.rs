@@ -42,7 +42,7 @@ impl<S: Scalar> NewtonEuler<S> {
         NewtonEuler {
             acceleration: vec![zero6(); nf],
             wrench: vec![zero6(); nf],
-            tau: vec![S::zero(); plan.dof()],
+            tau: vec![S::zero(); plan.full_dof()],
         }
     }
 }

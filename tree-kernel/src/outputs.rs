@@ -2,6 +2,7 @@
 //! one table the runtime's storage and the compiler's emission both read), and where an
 //! evaluation puts it ([`Sink`]).
 
+use crate::plan::{Follower, TreePlan};
 use crate::scalar::Scalar;
 
 /// One scalar that an evaluation produces. Every evaluation adds its contributions into a
@@ -205,6 +206,108 @@ impl<S: Scalar, K: Sink<S>> Sink<S> for Weighted<'_, S, K> {
             Output::DhDot(_) => {}
             _ => self.inner.add(at, x),
         }
+    }
+}
+
+/// A sink in front of another that takes what the sweeps produce in full coordinates — the
+/// model's variables, then one per mimic frame ([`Follower`]) — to the model's variables.
+/// With `q_full = A q + b` (a follower's row of `A` its multiplier in its leader's column),
+/// `L(q, q̇) = L_full(A q + b, A q̇)`, so every first derivative is `Aᵀ` times the full one and
+/// every second derivative `Aᵀ (·) A`: an output at full indices adds, times the product of
+/// their multipliers, into the output at their model variables (docs/derivations.md §12).
+/// Outputs with no variable index pass on as they are; with followers every indexed `set`
+/// becomes an `add` (several full entries land in one), so the storage is cleared first, as
+/// every evaluation's is. Without followers, everything passes on.
+pub struct Contract<'a, K> {
+    /// The mimic frames' variables.
+    pub followers: &'a [Follower],
+    /// The model's number of variables.
+    pub dof: usize,
+    /// Where everything goes.
+    pub inner: &'a mut K,
+}
+
+impl<'a, K> Contract<'a, K> {
+    /// In front of `inner`, for `plan`'s followers.
+    #[inline(always)]
+    pub fn new(plan: &'a TreePlan, inner: &'a mut K) -> Self {
+        Contract {
+            followers: &plan.followers,
+            dof: plan.dof(),
+            inner,
+        }
+    }
+
+    /// Full variable `i` as the model's variable and the factor `∂q_full,i/∂q` (`None`: 1).
+    #[inline(always)]
+    fn reduce(&self, i: usize, factor: &mut f64) -> usize {
+        match i.checked_sub(self.dof) {
+            None => i,
+            Some(k) => {
+                *factor *= self.followers[k].multiplier;
+                self.followers[k].leader
+            }
+        }
+    }
+
+    /// `at` at the model's variables, and the product of the multipliers.
+    #[inline(always)]
+    fn reduced(&self, at: Output) -> (Output, f64) {
+        use Output::*;
+        let mut f = 1.0;
+        let at = match at {
+            L | Energy | H(_) | DhDot(_) => at,
+            DlDq(i) => DlDq(self.reduce(i, &mut f)),
+            DlDdq(i) => DlDdq(self.reduce(i, &mut f)),
+            Force(i) => Force(self.reduce(i, &mut f)),
+            Tau(i) => Tau(self.reduce(i, &mut f)),
+            Mass(i, j) => Mass(self.reduce(i, &mut f), self.reduce(j, &mut f)),
+            D2lDdqDq(i, j) => D2lDdqDq(self.reduce(i, &mut f), self.reduce(j, &mut f)),
+            D2lDqDq(i, j) => D2lDqDq(self.reduce(i, &mut f), self.reduce(j, &mut f)),
+            DforceDq(i, j) => DforceDq(self.reduce(i, &mut f), self.reduce(j, &mut f)),
+            DforceDdq(i, j) => DforceDdq(self.reduce(i, &mut f), self.reduce(j, &mut f)),
+            Dh(r, i) => Dh(r, self.reduce(i, &mut f)),
+            D2h(r, i, j) => D2h(r, self.reduce(i, &mut f), self.reduce(j, &mut f)),
+            WeightedD2h(i, j) => WeightedD2h(self.reduce(i, &mut f), self.reduce(j, &mut f)),
+        };
+        (at, f)
+    }
+}
+
+impl<S: Scalar, K: Sink<S>> Sink<S> for Contract<'_, K> {
+    #[inline(always)]
+    fn add(&mut self, at: Output, x: S) {
+        if self.followers.is_empty() {
+            return self.inner.add(at, x);
+        }
+        match self.reduced(at) {
+            (at, 1.0) => self.inner.add(at, x),
+            (at, f) => self.inner.add(at, x * S::constant(f)),
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, at: Output, x: S) {
+        let unindexed = matches!(
+            at,
+            Output::L | Output::Energy | Output::H(_) | Output::DhDot(_)
+        );
+        if self.followers.is_empty() || unindexed {
+            self.inner.set(at, x)
+        } else {
+            self.add(at, x)
+        }
+    }
+
+    fn acceleration(&self, i: usize) -> f64 {
+        self.inner.acceleration(i)
+    }
+
+    fn weight(&self, r: usize) -> S
+    where
+        S: Scalar,
+    {
+        self.inner.weight(r)
     }
 }
 

@@ -13,6 +13,7 @@ use tree_model::{
     SpringKind,
 };
 
+use crate::scalar::Scalar;
 use crate::se3::{ConstantTransform, LocalTransform, Pose, SpatialInertia};
 
 /// A frame's rigid body as the inward sweep uses it, classified and prepared once.
@@ -155,6 +156,20 @@ pub struct PoseFrame {
     pub joint: Joint,
 }
 
+/// A variable the model does not have: a mimic frame's own parameter
+/// `x = multiplier·q_leader + offset` (docs/derivations.md §12). The sweeps treat it as a
+/// variable of its own, after the model's; [`crate::outputs::Contract`] takes what they
+/// produce back to the model's variables.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Follower {
+    /// The model variable it follows.
+    pub leader: usize,
+    /// `∂x/∂q_leader`.
+    pub multiplier: f64,
+    /// `x` at `q_leader = 0`.
+    pub offset: f64,
+}
+
 /// The plan of a whole tree.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TreePlan {
@@ -163,15 +178,19 @@ pub struct TreePlan {
     pub frames: Vec<FramePlan>,
     /// Every model frame, for [`crate::sweeps::poses`].
     pub pose_frames: Vec<PoseFrame>,
-    /// Concatenated ancestor-variable lists.
+    /// Concatenated ancestor-variable lists (in full coordinates: a mimic frame's variable
+    /// is its [`Follower`]'s, numbered after the model's).
     pub vars: Vec<usize>,
-    /// The frame each variable drives (`None`: a variable that moves no frame).
+    /// The frame each variable drives (`None`: a variable that moves no frame): the model's
+    /// variables, then the followers.
     pub variable_frames: Vec<Option<usize>>,
+    /// The mimic frames' variables, `dof() + k` in full coordinates.
+    pub followers: Vec<Follower>,
     /// Gravity in world axes.
     pub gravity: [f64; 3],
     /// Total number of columns over all frames.
     pub columns: usize,
-    /// Per-variable viscous damping `c_i`.
+    /// Per-variable viscous damping `c_i` (the followers' after the model's).
     pub damping: Vec<f64>,
     /// The model's constraints, springs and dampers, their frames as indices into `frames`.
     pub constraints: Vec<Constraint>,
@@ -242,7 +261,7 @@ impl TreePlan {
             };
             // A body on a constant frame fixed to the world (no kept ancestor) keeps its frame,
             // for its constant share of the potential; elsewhere it joins its kept ancestor's.
-            let keep = matches!(f.joint, Joint::Variable(_))
+            let keep = matches!(f.joint, Joint::Variable(_) | Joint::Mimic(_))
                 || attached[k]
                 || (body.is_some() && parent.is_none());
             if keep {
@@ -285,10 +304,11 @@ impl TreePlan {
         Self::from_drafts(model, drafts, kept)
     }
 
-    fn from_drafts(model: &Model, drafts: Vec<Draft>, kept: Vec<Option<usize>>) -> Self {
+    fn from_drafts(model: &Model, mut drafts: Vec<Draft>, kept: Vec<Option<usize>>) -> Self {
         let mut frames: Vec<FramePlan> = Vec::with_capacity(drafts.len());
         let mut vars = Vec::new();
         let mut columns = 0;
+        let (followers, follower_frames, follower_damping) = followers(model, &mut drafts);
         for d in drafts {
             let var_start = vars.len();
             if let Some(p) = d.parent {
@@ -343,10 +363,14 @@ impl TreePlan {
                     v.frame
                         .map(|f| kept[f].expect("driven frames are always kept"))
                 })
+                .chain(follower_frames.into_iter().map(Some))
                 .collect(),
+            followers,
             gravity: model.gravity,
             columns,
-            damping: model.variables.iter().map(|v| v.damping).collect(),
+            damping: (model.variables.iter().map(|v| v.damping))
+                .chain(follower_damping)
+                .collect(),
             constraints: model
                 .constraints
                 .iter()
@@ -384,16 +408,16 @@ impl TreePlan {
         &self.vars[f.var_start..f.var_start + f.n]
     }
 
-    /// Per constraint row, the variables it depends on, ascending: those above either of
-    /// its frames and a variable length's own. Its `Dh` row and `D²h` block are zero
-    /// outside them (docs/derivations.md §5).
+    /// Per constraint row, the model variables it depends on, ascending: those above either
+    /// of its frames (a follower's leader for the follower) and a variable length's own. Its
+    /// `Dh` row and `D²h` block are zero outside them (docs/derivations.md §5).
     pub fn constraint_variables(&self) -> Vec<Vec<usize>> {
         let mut rows = Vec::with_capacity(self.rows);
         for con in &self.constraints {
             let mut vars: Vec<usize> = con
                 .frames
                 .iter()
-                .flat_map(|&f| self.ancestors(f).iter().copied())
+                .flat_map(|&f| self.ancestors(f).iter().map(|&i| self.reduced(i).0))
                 .collect();
             if let ConstraintKind::Distance {
                 length: Parameter::Variable(i),
@@ -413,10 +437,62 @@ impl TreePlan {
         !(self.constraints.is_empty() && self.springs.is_empty() && self.dampers.is_empty())
     }
 
-    /// Number of configuration variables.
+    /// Number of the model's configuration variables.
     pub fn dof(&self) -> usize {
+        self.variable_frames.len() - self.followers.len()
+    }
+
+    /// Number of variables in full coordinates: the model's, then the followers.
+    pub fn full_dof(&self) -> usize {
         self.variable_frames.len()
     }
+
+    /// Full-coordinate variable `i` as the model's: its variable and `∂q_full,i/∂q` (1 for
+    /// the model's own, the multiplier for a follower).
+    #[inline(always)]
+    pub fn reduced(&self, i: usize) -> (usize, f64) {
+        match i.checked_sub(self.dof()) {
+            None => (i, 1.0),
+            Some(k) => (self.followers[k].leader, self.followers[k].multiplier),
+        }
+    }
+
+    /// `x` in full coordinates into `out` (`full_dof` long): the model's entries, then each
+    /// follower's `multiplier·x_leader`, plus its offset for a configuration (`offsets`),
+    /// not for a rate.
+    pub fn extend<S: Scalar>(&self, x: &[S], offsets: bool, out: &mut [S]) {
+        let n = self.dof();
+        out[..n].copy_from_slice(x);
+        for (k, f) in self.followers.iter().enumerate() {
+            let mut y = x[f.leader];
+            if f.multiplier != 1.0 {
+                y = y * S::constant(f.multiplier);
+            }
+            if offsets && f.offset != 0.0 {
+                y = y + S::constant(f.offset);
+            }
+            out[n + k] = y;
+        }
+    }
+}
+
+/// The mimic frames' variables: each mimic draft's joint becomes its own variable in full
+/// coordinates (`model.dof() + k`); its follower, frame (in the plan) and damping.
+fn followers(model: &Model, drafts: &mut [Draft]) -> (Vec<Follower>, Vec<usize>, Vec<f64>) {
+    let (mut followers, mut frames, mut damping) = (Vec::new(), Vec::new(), Vec::new());
+    for (k, d) in drafts.iter_mut().enumerate() {
+        if let Joint::Mimic(m) = d.joint {
+            d.joint = Joint::Variable(model.dof() + followers.len());
+            followers.push(Follower {
+                leader: m.variable,
+                multiplier: m.multiplier,
+                offset: m.offset,
+            });
+            frames.push(k);
+            damping.push(m.damping);
+        }
+    }
+    (followers, frames, damping)
 }
 
 /// The plan index of model frame `f`, which an element attaches to (so it is kept).
@@ -478,7 +554,7 @@ pub fn column_count(model: &Model) -> (usize, usize) {
     let mut above = vec![0usize; model.frames.len()];
     let (mut total, mut deepest) = (0usize, 0usize);
     for (k, f) in model.frames.iter().enumerate() {
-        let own = usize::from(matches!(f.joint, Joint::Variable(_)));
+        let own = usize::from(matches!(f.joint, Joint::Variable(_) | Joint::Mimic(_)));
         above[k] = f.parent.map_or(0, |p| above[p]) + own;
         total = total.saturating_add(above[k]);
         deepest = deepest.max(above[k]);

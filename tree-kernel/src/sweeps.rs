@@ -76,11 +76,15 @@ impl<S: Scalar> Workspace<S> {
     }
 }
 
+/// A primitive's parameter at `q`: a constant, a variable, or a mimic's `m·q_i + offset`
+/// (the model's frames as [`poses`] and [`velocities`] walk them; the plan's own frames are
+/// in full coordinates, where a mimic is a variable).
 #[inline(always)]
 fn joint_value<S: Scalar>(joint: Joint, q: &[S]) -> S {
     match joint {
         Joint::Constant(x) => S::constant(x),
         Joint::Variable(i) => q[i],
+        Joint::Mimic(m) => q[m.variable] * S::constant(m.multiplier) + S::constant(m.offset),
     }
 }
 
@@ -99,8 +103,10 @@ pub fn velocities<S: Scalar>(plan: &TreePlan, q: &[S], dq: &[S], out: &mut [Twis
     for (k, f) in plan.pose_frames.iter().enumerate() {
         let local = LocalTransform::new(f.kind, joint_value(f.joint, q));
         let mut v = f.parent.map_or_else(zero6, |p| local.ad_inverse(&out[p]));
-        if let Joint::Variable(i) = f.joint {
-            v[twist_index(f.kind)] += dq[i];
+        match f.joint {
+            Joint::Variable(i) => v[twist_index(f.kind)] += dq[i],
+            Joint::Mimic(m) => v[twist_index(f.kind)] += dq[m.variable] * S::constant(m.multiplier),
+            Joint::Constant(_) => {}
         }
         out[k] = v;
     }

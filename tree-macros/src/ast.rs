@@ -91,6 +91,8 @@ pub struct InlineFrame {
 pub enum Argument {
     Variable(Ident),
     Constant(Number),
+    /// `mimic(leader, multiplier = m, offset = o, damping = c)`, the settings optional.
+    Mimic(Ident, Vec<(Ident, Number)>),
 }
 
 /// `variable theta { q0 = 0.5; dq0 = 0.0; damping = 0.1; }`
@@ -122,6 +124,44 @@ impl Setting {
             Setting::Vector(_, s) | Setting::Pairs(_, s) | Setting::Sine(_, s) => *s,
         }
     }
+}
+
+/// `mimic(leader, multiplier = m, offset = o, damping = c)`: a transform following another
+/// frame's variable (what TOML writes `{ mimic = "leader", … }`).
+fn parse_mimic(input: ParseStream) -> syn::Result<Argument> {
+    let word: Ident = input.parse()?;
+    if word != "mimic" {
+        return Err(syn::Error::new(
+            word.span(),
+            format!("expected a variable name, a number or `mimic(variable, …)`, not `{word}(…)`"),
+        ));
+    }
+    let content;
+    parenthesized!(content in input);
+    let leader: Ident = content.parse()?;
+    let mut settings: Vec<(Ident, Number)> = Vec::new();
+    while !content.is_empty() {
+        content.parse::<Token![,]>()?;
+        if content.is_empty() {
+            break;
+        }
+        let key: Ident = content.parse()?;
+        if !["multiplier", "offset", "damping"].contains(&key.to_string().as_str()) {
+            return Err(syn::Error::new(
+                key.span(),
+                format!("unknown mimic setting `{key}`: expected multiplier, offset or damping"),
+            ));
+        }
+        if settings.iter().any(|(k, _)| *k == key) {
+            return Err(syn::Error::new(
+                key.span(),
+                format!("`{key}` is given twice"),
+            ));
+        }
+        content.parse::<Token![=]>()?;
+        settings.push((key, parse_number(&content)?));
+    }
+    Ok(Argument::Mimic(leader, settings))
 }
 
 fn parse_number(input: ParseStream) -> syn::Result<Number> {
@@ -236,7 +276,9 @@ impl Parse for InlineFrame {
         }
         let content;
         parenthesized!(content in input);
-        let argument = if content.peek(Ident) {
+        let argument = if content.peek(Ident) && content.peek2(syn::token::Paren) {
+            parse_mimic(&content)?
+        } else if content.peek(Ident) {
             Argument::Variable(content.parse()?)
         } else {
             Argument::Constant(parse_number(&content)?)

@@ -360,6 +360,17 @@ fn frame_spec(m: &TokenStream, f: &tree_model::FrameSpec) -> TokenStream {
                 let v = v.literal();
                 quote!(#m::Value::Variable(#v))
             }
+            Value::Mimic(s) => {
+                let v = s.variable.literal();
+                let (k, o, c) = (
+                    s.multiplier.literal(),
+                    s.offset.literal(),
+                    s.damping.literal(),
+                );
+                quote!(#m::Value::Mimic(#m::MimicSpec {
+                    variable: #v, multiplier: #k, offset: #o, damping: #c,
+                }))
+            }
         };
         quote!(#m::Primitive { kind: #m::PrimitiveKind::#kind, value: #value })
     });

@@ -7,8 +7,9 @@ use std::path::PathBuf;
 use proc_macro2::Span;
 use syn::LitStr;
 use tree_model::{
-    ConstraintSpec, DamperSpec, FrameField, FrameSpec, InputSpec, Model, ModelSpec, ParameterSpec,
-    Primitive, PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value, VariableSpec,
+    ConstraintSpec, DamperSpec, FrameField, FrameSpec, InputSpec, MimicSpec, Model, ModelSpec,
+    ParameterSpec, Primitive, PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value,
+    VariableSpec,
 };
 
 use crate::ast::{Argument, ElementKind, InlineElement, InlineFrame, InlineModel, Setting};
@@ -99,6 +100,17 @@ fn flatten(
     let (value, arg_span) = match &frame.argument {
         Argument::Variable(v) => (Value::Variable(v.to_string()), v.span()),
         Argument::Constant(n) => (Value::Constant(n.value), n.span),
+        Argument::Mimic(leader, settings) => {
+            let mut m = MimicSpec::new(leader.to_string());
+            for (key, x) in settings {
+                match key.to_string().as_str() {
+                    "multiplier" => m.multiplier = x.value,
+                    "offset" => m.offset = x.value,
+                    _ => m.damping = x.value,
+                }
+            }
+            (Value::Mimic(m), leader.span())
+        }
     };
     specs.push(FrameSpec {
         name: frame.name.to_string(),

@@ -163,6 +163,17 @@ impl ModelBuilder {
                 self.settings(&v);
                 ParameterSpec::Variable(v)
             }
+            crate::Value::Mimic(m) => {
+                self.pending.push(Problem {
+                    site: Site::Model,
+                    message: format!(
+                        "distance constraint `{name}`: a length is a number or a variable, not a mimic of `{}`",
+                        m.variable
+                    ),
+                    line: None,
+                });
+                ParameterSpec::Constant(1.0)
+            }
         };
         self.spec.constraints.push(ConstraintSpec {
             name: Some(name.into()),

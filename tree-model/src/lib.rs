@@ -58,12 +58,12 @@ pub use error::{FrameField, ModelError, Problem, Section, Site};
 pub use integrator::Integrator;
 pub use lock::Lock;
 pub use model::{
-    Constraint, ConstraintKind, Damper, Frame, Input, Joint, Mass, Model, Parameter, Spring,
+    Constraint, ConstraintKind, Damper, Frame, Input, Joint, Mass, Mimic, Model, Parameter, Spring,
     SpringKind, Variable, DEFAULT_GRAVITY,
 };
 pub use motion::{CubicSpline, Motion};
 pub use number::{Counted, Given, Rounded};
-pub use primitive::{Primitive, PrimitiveKind, Value};
+pub use primitive::{MimicSpec, Primitive, PrimitiveKind, Value};
 pub use source::{MAX_FILE_BYTES, MAX_XML_ATTRIBUTES, MAX_XML_DEPTH};
 pub use spec::{
     ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,

@@ -3,7 +3,7 @@
 //! drives, or a humanoid's free base.
 
 use crate::error::ModelError;
-use crate::model::{Joint, Model, Parameter, SpringKind};
+use crate::model::{Joint, Mimic, Model, Parameter, SpringKind};
 
 /// A variable to hold, and where (`None`: at its initial value `q0`).
 #[derive(Clone, Debug, PartialEq)]
@@ -86,12 +86,20 @@ impl Model {
             .map(|i| self.variables[i].clone())
             .collect();
         for f in &mut model.frames {
-            if let Joint::Variable(i) = f.joint {
-                f.joint = match index[i] {
+            f.joint = match f.joint {
+                Joint::Variable(i) => match index[i] {
                     Some(j) => Joint::Variable(j),
                     None => Joint::Constant(value[i].unwrap_or(0.0)),
-                };
-            }
+                },
+                // A follower of a locked variable is locked with it.
+                Joint::Mimic(m) => match index[m.variable] {
+                    Some(j) => Joint::Mimic(Mimic { variable: j, ..m }),
+                    None => {
+                        Joint::Constant(m.multiplier * value[m.variable].unwrap_or(0.0) + m.offset)
+                    }
+                },
+                constant => constant,
+            };
         }
         for c in &mut model.constraints {
             if let crate::model::ConstraintKind::Distance { length } = &mut c.kind {

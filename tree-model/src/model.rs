@@ -82,6 +82,59 @@ pub enum Joint {
     Constant(f64),
     /// Index into [`Model::variables`].
     Variable(usize),
+    /// Driven by another frame's variable (a URDF mimic joint): `multiplier·q_i + offset`.
+    Mimic(Mimic),
+}
+
+impl Joint {
+    /// The parameter at configuration `q`.
+    pub fn value(&self, q: &[f64]) -> f64 {
+        match *self {
+            Joint::Constant(x) => x,
+            Joint::Variable(i) => q[i],
+            Joint::Mimic(m) => m.multiplier * q[m.variable] + m.offset,
+        }
+    }
+
+    /// The variable that moves the transform and `∂x/∂q_i`, the factor its rate enters
+    /// with (1, or a mimic's multiplier); `None` for a constant.
+    pub fn driver(&self) -> Option<(usize, f64)> {
+        match *self {
+            Joint::Constant(_) => None,
+            Joint::Variable(i) => Some((i, 1.0)),
+            Joint::Mimic(m) => Some((m.variable, m.multiplier)),
+        }
+    }
+}
+
+/// A transform that follows a variable of another frame, `x = multiplier·q_i + offset`: the
+/// paper's assumption 2 (one variable, one transform) lifted to an affine function of one
+/// variable, so `∂x/∂q_i = multiplier` (docs/derivations.md §11).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mimic {
+    /// Index into [`Model::variables`] of the variable it follows.
+    pub variable: usize,
+    /// `∂x/∂q_i`.
+    pub multiplier: f64,
+    /// `x` at `q_i = 0`.
+    pub offset: f64,
+    /// Viscous damping on the follower's own motion: generalized force `−c ẋ` on it, so
+    /// `−multiplier²·c·q̇_i` on the variable it follows.
+    pub damping: f64,
+}
+
+impl Mimic {
+    /// How it reads in `check` and the tree: `"-1·finger + 0.01"`.
+    pub fn describe(&self, variable: &str) -> String {
+        let mut s = match self.multiplier {
+            1.0 => variable.to_string(),
+            m => format!("{}·{variable}", Given(m)),
+        };
+        if self.offset != 0.0 {
+            s += &format!(" + {}", Given(self.offset));
+        }
+        s
+    }
 }
 
 /// A frame of the validated tree.
@@ -346,10 +399,7 @@ impl Model {
         let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         for f in &self.frames {
             let (r, p) = f.parent.map_or((identity, [0.0; 3]), |k| poses[k]);
-            let x = match f.joint {
-                Joint::Constant(x) => x,
-                Joint::Variable(i) => q[i],
-            };
+            let x = f.joint.value(q);
             let axis = f.primitive.axis();
             let pose = if f.primitive.is_rotation() {
                 // R_child = R · rot(axis, x): columns (a, b) of the plane turned by x.
@@ -411,7 +461,7 @@ impl Model {
                 *x = value;
                 Ok(())
             }
-            Joint::Variable(i) => Err(format!(
+            Joint::Variable(i) | Joint::Mimic(Mimic { variable: i, .. }) => Err(format!(
                 "frame `{frame}` is driven by variable `{}`, not a constant",
                 self.variables[*i].name
             )),
@@ -442,6 +492,7 @@ impl Model {
             let param = match f.joint {
                 Joint::Constant(x) => Given(x).to_string(),
                 Joint::Variable(i) => self.variables[i].name.clone(),
+                Joint::Mimic(m) => m.describe(&self.variables[m.variable].name),
             };
             let mass = match f.mass {
                 Some(m) => format!("  [{}]", m.describe()),

@@ -87,6 +87,39 @@ pub enum Value {
     Constant(f64),
     /// Driven by the configuration variable of this name.
     Variable(String),
+    /// Following the variable of another frame: `multiplier·q + offset` (a mimic joint).
+    Mimic(MimicSpec),
+}
+
+/// A mimic transform as written: the variable it follows, by name, and the affine map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MimicSpec {
+    /// The variable followed.
+    pub variable: String,
+    /// `∂x/∂q` (default 1).
+    pub multiplier: f64,
+    /// `x` at `q = 0` (default 0).
+    pub offset: f64,
+    /// Viscous damping on the follower's own motion (default 0).
+    pub damping: f64,
+}
+
+impl MimicSpec {
+    /// Following `variable` one to one.
+    pub fn new(variable: impl Into<String>) -> Self {
+        MimicSpec {
+            variable: variable.into(),
+            multiplier: 1.0,
+            offset: 0.0,
+            damping: 0.0,
+        }
+    }
+}
+
+impl From<MimicSpec> for Value {
+    fn from(m: MimicSpec) -> Self {
+        Value::Mimic(m)
+    }
 }
 
 impl From<f64> for Value {

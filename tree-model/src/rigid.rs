@@ -74,13 +74,13 @@ fn groups(frames: &[Frame]) -> Vec<(Option<usize>, Pose)> {
     let mut out: Vec<(Option<usize>, Pose)> = Vec::with_capacity(frames.len());
     for f in frames {
         out.push(match f.joint {
-            Joint::Variable(_) => (None, IDENTITY), // its own root, set below
+            Joint::Variable(_) | Joint::Mimic(_) => (None, IDENTITY), // its own root, set below
             Joint::Constant(x) => {
                 let (root, above) = f.parent.map_or((None, IDENTITY), |p| out[p]);
                 (root, above.then(&Pose::primitive(f.primitive, x)))
             }
         });
-        if let Joint::Variable(_) = f.joint {
+        if let Joint::Variable(_) | Joint::Mimic(_) = f.joint {
             let k = out.len() - 1;
             out[k].0 = Some(k);
         }

@@ -9,7 +9,7 @@ use toml::Spanned;
 
 use crate::error::{FrameField, ModelError, Section, Site};
 use crate::model::Model;
-use crate::primitive::{Primitive, PrimitiveKind, Value};
+use crate::primitive::{MimicSpec, Primitive, PrimitiveKind, Value};
 use crate::source::LineIndex;
 use crate::spec::{
     ConstraintSpec, DamperSpec, FrameSpec, InputSpec, ModelSpec, ParameterSpec, SineSpec,
@@ -85,12 +85,12 @@ struct RawMotion {
 struct RawFrame {
     name: Spanned<String>,
     parent: Option<Spanned<String>>,
-    tx: Option<Spanned<RawValue>>,
-    ty: Option<Spanned<RawValue>>,
-    tz: Option<Spanned<RawValue>>,
-    rx: Option<Spanned<RawValue>>,
-    ry: Option<Spanned<RawValue>>,
-    rz: Option<Spanned<RawValue>>,
+    tx: Option<Spanned<RawPrimitive>>,
+    ty: Option<Spanned<RawPrimitive>>,
+    tz: Option<Spanned<RawPrimitive>>,
+    rx: Option<Spanned<RawPrimitive>>,
+    ry: Option<Spanned<RawPrimitive>>,
+    rz: Option<Spanned<RawPrimitive>>,
     mass: Option<Spanned<f64>>,
     com: Option<Spanned<[f64; 3]>>,
     inertia: Option<Spanned<Vec<f64>>>,
@@ -101,6 +101,57 @@ struct RawFrame {
 enum RawValue {
     Number(f64),
     Name(String),
+}
+
+/// A primitive's parameter: a number, a variable's name, or a mimic table
+/// `{ mimic = "q", multiplier = …, offset = …, damping = … }` (read by hand, so that a
+/// table's own error — an unknown key — reaches the user, which serde's untagged enums
+/// replace by "did not match any variant").
+enum RawPrimitive {
+    Number(f64),
+    Name(String),
+    Mimic(RawMimic),
+}
+
+impl<'de> Deserialize<'de> for RawPrimitive {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = RawPrimitive;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number, a variable's name or a table { mimic = \"variable\", … }")
+            }
+            fn visit_f64<E>(self, x: f64) -> Result<RawPrimitive, E> {
+                Ok(RawPrimitive::Number(x))
+            }
+            fn visit_i64<E>(self, x: i64) -> Result<RawPrimitive, E> {
+                Ok(RawPrimitive::Number(x as f64))
+            }
+            fn visit_u64<E>(self, x: u64) -> Result<RawPrimitive, E> {
+                Ok(RawPrimitive::Number(x as f64))
+            }
+            fn visit_str<E>(self, s: &str) -> Result<RawPrimitive, E> {
+                Ok(RawPrimitive::Name(s.to_string()))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> Result<RawPrimitive, A::Error> {
+                let d = serde::de::value::MapAccessDeserializer::new(map);
+                RawMimic::deserialize(d).map(RawPrimitive::Mimic)
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMimic {
+    mimic: String,
+    multiplier: Option<f64>,
+    offset: Option<f64>,
+    damping: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -298,8 +349,14 @@ fn frames_of(
             if let Some(v) = value {
                 primitive_line.get_or_insert(at(v.span()));
                 let value = match v.get_ref() {
-                    RawValue::Number(x) => Value::Constant(*x),
-                    RawValue::Name(n) => Value::Variable(n.clone()),
+                    RawPrimitive::Number(x) => Value::Constant(*x),
+                    RawPrimitive::Name(n) => Value::Variable(n.clone()),
+                    RawPrimitive::Mimic(m) => Value::Mimic(MimicSpec {
+                        variable: m.mimic.clone(),
+                        multiplier: m.multiplier.unwrap_or(1.0),
+                        offset: m.offset.unwrap_or(0.0),
+                        damping: m.damping.unwrap_or(0.0),
+                    }),
                 };
                 primitives.push(Primitive { kind, value });
             }

@@ -14,7 +14,7 @@ use std::path::Path;
 
 use crate::error::{FrameField, ModelError, Problem, Site};
 use crate::model::Model;
-use crate::primitive::{Primitive, PrimitiveKind, Value};
+use crate::primitive::{MimicSpec, Primitive, PrimitiveKind, Value};
 use crate::source::{check_xml_shape, LineIndex};
 use crate::spec::{FrameSpec, InputSpec, ModelSpec, VariableSpec};
 use crate::validate::validate;
@@ -281,7 +281,7 @@ fn joint_links(
     Ok((p, c))
 }
 
-/// Only revolute, continuous, prismatic and fixed joints, none mimicking another.
+/// Only revolute, continuous, prismatic and fixed joints.
 fn check_joint_type(joint: &urdf_rs::Joint, reader: &Reader) -> Result<(), ModelError> {
     let (line, name) = (reader.joint_line(&joint.name), &joint.name);
     use urdf_rs::JointType::*;
@@ -296,15 +296,6 @@ fn check_joint_type(joint: &urdf_rs::Joint, reader: &Reader) -> Result<(), Model
                 line,
             ));
         }
-    }
-    if let Some(m) = &joint.mimic {
-        return Err(reader.fail(
-            format!(
-                "URDF: joint `{name}` mimics joint `{}`; mimic joints are not supported",
-                m.joint
-            ),
-            line,
-        ));
     }
     Ok(())
 }
@@ -439,8 +430,14 @@ fn joint_frames(
     let child_link = tree.links[joint.child.link.as_str()];
     let mut chain = origin_chain(joint, reader)?;
     if joint.joint_type != urdf_rs::JointType::Fixed {
-        chain.extend(axis_chain(joint, reader)?);
-        actuate(&mut out.spec, joint, reader.efforts.contains(&joint.name));
+        let value = match &joint.mimic {
+            Some(_) => Value::Mimic(mimic_of(robot, joint, reader)?),
+            None => {
+                actuate(&mut out.spec, joint, reader.efforts.contains(&joint.name));
+                Value::Variable(joint.name.clone())
+            }
+        };
+        chain.extend(axis_chain(joint, value, reader)?);
     }
     if chain.is_empty() {
         chain.push((PrimitiveKind::Tx, Value::Constant(0.0)));
@@ -503,6 +500,7 @@ fn origin_chain(
 /// `rz(α) ry(β)` turning `e_z` onto the axis, `rz(q)`/`tz(q)`, and `ry(−β) rz(−α)` back.
 fn axis_chain(
     joint: &urdf_rs::Joint,
+    variable: Value,
     reader: &Reader,
 ) -> Result<Vec<(PrimitiveKind, Value)>, ModelError> {
     let a = joint.axis.xyz.0;
@@ -518,7 +516,6 @@ fn axis_chain(
     }
     let a = a.map(|x| x / norm);
     let prismatic = joint.joint_type == urdf_rs::JointType::Prismatic;
-    let variable = Value::Variable(joint.name.clone());
     let constant = |kind, x: f64| (kind, Value::Constant(x));
     let mut chain = Vec::new();
     match (0..3).find(|&k| a[k] == 1.0) {
@@ -551,6 +548,65 @@ fn axis_chain(
         }
     }
     Ok(chain)
+}
+
+/// A mimic joint's motion, `multiplier·q + offset` of the variable of the joint it follows
+/// (through a chain of mimics, the maps composed), with its own `<dynamics damping>`. The
+/// joint followed must exist and move; a cycle of mimics is refused.
+fn mimic_of(
+    robot: &urdf_rs::Robot,
+    joint: &urdf_rs::Joint,
+    reader: &Reader,
+) -> Result<MimicSpec, ModelError> {
+    let by_name = |name: &str| robot.joints.iter().find(|j| j.name == name);
+    let line = reader.joint_line(&joint.name);
+    let (mut multiplier, mut offset) = (1.0, 0.0);
+    let mut at = joint;
+    let mut seen = vec![joint.name.as_str()];
+    while let Some(m) = &at.mimic {
+        let Some(leader) = by_name(&m.joint) else {
+            return Err(reader.fail(
+                format!(
+                    "URDF: joint `{}` mimics joint `{}`, which the file does not have",
+                    at.name, m.joint
+                ),
+                reader.joint_line(&at.name).or(line),
+            ));
+        };
+        if seen.contains(&leader.name.as_str()) {
+            return Err(reader.fail(
+                format!(
+                    "URDF: the mimic joints {} follow one another in a cycle",
+                    seen.iter()
+                        .map(|n| format!("`{n}`"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                line,
+            ));
+        }
+        if leader.joint_type == urdf_rs::JointType::Fixed {
+            return Err(reader.fail(
+                format!(
+                    "URDF: joint `{}` mimics joint `{}`, which is fixed: a mimic follows a moving joint",
+                    at.name, leader.name
+                ),
+                reader.joint_line(&at.name).or(line),
+            ));
+        }
+        // x_at = m·x_leader + o, and x = multiplier·x_at + offset.
+        let (m_at, o_at) = (m.multiplier.unwrap_or(1.0), m.offset.unwrap_or(0.0));
+        offset += multiplier * o_at;
+        multiplier *= m_at;
+        seen.push(&leader.name);
+        at = leader;
+    }
+    Ok(MimicSpec {
+        variable: at.name.clone(),
+        multiplier,
+        offset,
+        damping: joint.dynamics.as_ref().map_or(0.0, |d| d.damping),
+    })
 }
 
 /// A moving joint's variable (its damping, and limits unless continuous), and an input on

@@ -4,9 +4,11 @@
 use std::collections::HashMap;
 
 use crate::error::{FrameField, Problem, Section, Site};
-use crate::model::{Frame, Input, Joint, Mass, Model, SpringKind, Variable, DEFAULT_GRAVITY};
+use crate::model::{
+    Frame, Input, Joint, Mass, Mimic, Model, SpringKind, Variable, DEFAULT_GRAVITY,
+};
 use crate::motion::{CubicSpline, Motion};
-use crate::primitive::{PrimitiveKind, Value};
+use crate::primitive::{MimicSpec, PrimitiveKind, Value};
 use crate::spec::{FrameSpec, ModelSpec, ParameterSpec, VariableSpec};
 
 /// Collects problems; `finish` fails if there are any.
@@ -67,6 +69,8 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
             }
         })
         .collect();
+    let mut frames = frames;
+    resolve_mimics(spec, &mut frames, &vars, &mut errs);
     check_rigid_bodies(&frames, spec, &mut errs);
     constraint_length_variables(spec, &mut vars, &mut errs);
     for v in &spec.variables {
@@ -212,6 +216,14 @@ fn joint_of<'a>(
                     }
                     Joint::Constant(*x)
                 }
+                // The variable it follows may drive a frame listed later: resolved after all
+                // frames ([`resolve_mimics`]).
+                Value::Mimic(m) => Joint::Mimic(Mimic {
+                    variable: usize::MAX,
+                    multiplier: m.multiplier,
+                    offset: m.offset,
+                    damping: m.damping,
+                }),
                 Value::Variable(name) if !name_ok(name) => {
                     errs.frame(
                         k,
@@ -267,6 +279,69 @@ fn joint_of<'a>(
                 ),
             );
             (several[0].kind, Joint::Constant(0.0))
+        }
+    }
+}
+
+/// Each mimic frame's variable, once every frame has made its own: a variable that drives a
+/// frame (a mimic of a mimic names the variable at the chain's head), with a finite
+/// multiplier and offset and a finite damping not negative.
+fn resolve_mimics(spec: &ModelSpec, frames: &mut [Frame], vars: &Variables, errs: &mut Problems) {
+    for (k, f) in spec.frames.iter().enumerate() {
+        let [crate::primitive::Primitive {
+            value: Value::Mimic(m),
+            ..
+        }] = f.primitives.as_slice()
+        else {
+            continue;
+        };
+        let Joint::Mimic(joint) = &mut frames[k].joint else {
+            continue;
+        };
+        let name = &f.name;
+        let MimicSpec {
+            variable,
+            multiplier,
+            offset,
+            damping,
+        } = m;
+        match vars.index.get(variable.as_str()) {
+            Some(&i) => joint.variable = i,
+            None => {
+                let known: Vec<&str> = vars.index.keys().copied().collect();
+                let hint = crate::suggest::nearest(variable, &known);
+                errs.frame(
+                    k,
+                    FrameField::Primitive,
+                    format!(
+                        "frame `{name}` mimics variable `{}`, which drives no frame: a mimic follows a variable that drives a transform of its own{hint}",
+                        variable.escape_debug()
+                    ),
+                );
+                joint.variable = 0;
+            }
+        }
+        for (what, x) in [("multiplier", multiplier), ("offset", offset)] {
+            if !x.is_finite() {
+                errs.frame(
+                    k,
+                    FrameField::Primitive,
+                    format!(
+                        "frame `{name}`: the mimic's {what} {} is not finite",
+                        crate::Given(*x)
+                    ),
+                );
+            }
+        }
+        if !(damping.is_finite() && *damping >= 0.0) {
+            errs.frame(
+                k,
+                FrameField::Primitive,
+                format!(
+                    "frame `{name}`: the mimic's damping {} must be a finite number, not negative",
+                    crate::Given(*damping)
+                ),
+            );
         }
     }
 }
@@ -749,9 +824,17 @@ fn symmetric_eigenvalues(a: &[[f64; 3]; 3]) -> [f64; 3] {
 /// moves a body with inertia, or a mass reached through some translation. (A mass exactly on
 /// the rotation axis slips through; the runtime then reports a singular mass matrix.)
 fn variable_moves_mass(model: &Model, i: usize) -> bool {
-    let Some(f) = model.variables[i].frame else {
-        return false;
-    };
+    model.frames.iter().enumerate().any(|(f, frame)| {
+        frame
+            .joint
+            .driver()
+            .is_some_and(|(j, factor)| j == i && factor != 0.0)
+            && frame_moves_mass(model, f)
+    })
+}
+
+/// Whether the transform of frame `f` moves some mass (see [`variable_moves_mass`]).
+fn frame_moves_mass(model: &Model, f: usize) -> bool {
     let rotation = model.frames[f].primitive.is_rotation();
     // offset[k]: whether the path from f down to k contains a non-trivial translation.
     let mut offset = vec![false; model.frames.len()];

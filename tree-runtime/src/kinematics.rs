@@ -120,7 +120,9 @@ pub struct Kinematics {
     ws: Workspace<f64>,
     /// Each frame's body acceleration `a_k` (in its axes).
     acceleration: Vec<Twist>,
-    /// The state's q̇ and q̈.
+    /// The state's q, q̇ and q̈ in full coordinates (a mimic frame's after the model's
+    /// variables, [`TreePlan::extend`]).
+    q: Vec<f64>,
     dq: Vec<f64>,
     ddq: Vec<f64>,
 }
@@ -138,8 +140,9 @@ impl Kinematics {
             acceleration: vec![zero6(); plan.frames.len()],
             names: model.frames.iter().map(|f| f.name.clone()).collect(),
             variables: model.variables.iter().map(|v| v.name.clone()).collect(),
-            dq: vec![0.0; n],
-            ddq: vec![0.0; n],
+            q: vec![0.0; plan.full_dof()],
+            dq: vec![0.0; plan.full_dof()],
+            ddq: vec![0.0; plan.full_dof()],
             plan,
         };
         k.update(&vec![0.0; n], None, None)?;
@@ -162,7 +165,7 @@ impl Kinematics {
 
     /// The number of variables (the Jacobians' columns).
     pub fn dof(&self) -> usize {
-        self.dq.len()
+        self.variables.len()
     }
 
     /// Sets the state: every variable's `q`, and `q̇`, `q̈` (zero when `None`), kinematic
@@ -199,15 +202,22 @@ impl Kinematics {
     /// per-knot call, whose states the solver made. Panics on a wrong length.
     #[doc(hidden)]
     pub fn set(&mut self, q: &[f64], dq: Option<&[f64]>, ddq: Option<&[f64]>) {
+        self.plan.extend(q, true, &mut self.q);
         match dq {
-            Some(x) => self.dq.copy_from_slice(x),
+            Some(x) => self.plan.extend(x, false, &mut self.dq),
             None => self.dq.as_mut_slice().fill(0.0),
         }
         match ddq {
-            Some(x) => self.ddq.copy_from_slice(x),
+            Some(x) => self.plan.extend(x, false, &mut self.ddq),
             None => self.ddq.as_mut_slice().fill(0.0),
         }
-        forward(&self.plan, &mut self.ws, q, &self.dq, Reach::Everything);
+        forward(
+            &self.plan,
+            &mut self.ws,
+            &self.q,
+            &self.dq,
+            Reach::Everything,
+        );
         if dq.is_none() && ddq.is_none() {
             // At rest every frame's acceleration is zero.
             self.acceleration.fill(zero6());
@@ -275,10 +285,10 @@ impl Kinematics {
         let frame = &self.plan.frames[f];
         let pose = &self.ws.pose[f];
         for a in 0..frame.n {
-            let i = self.plan.vars[frame.var_start + a];
+            let (i, m) = self.plan.reduced(self.plan.vars[frame.var_start + a]);
             let column = reference.express(pose, &self.ws.jac[frame.col_offset + a]);
             for (r, x) in column.iter().enumerate() {
-                out[(r, i)] += x;
+                out[(r, i)] += m * x;
             }
         }
     }
@@ -337,12 +347,12 @@ impl Kinematics {
             total += m;
             let pose = &self.ws.pose[k];
             for a in 0..f.n {
-                let i = self.plan.vars[f.var_start + a];
+                let (i, factor) = self.plan.reduced(self.plan.vars[f.var_start + a]);
                 let j = &self.ws.jac[f.col_offset + a];
                 let wc = cross(&[j[3], j[4], j[5]], &c);
                 let column = pose.rotate(&[j[0] + wc[0], j[1] + wc[1], j[2] + wc[2]]);
                 for (r, x) in column.iter().enumerate() {
-                    out[(r, i)] += m * x;
+                    out[(r, i)] += factor * m * x;
                 }
             }
         }

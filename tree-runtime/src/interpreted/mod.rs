@@ -168,7 +168,7 @@ impl Laned {
         Laned {
             kernel: Kernel::new(plan),
             articulated: Articulated::new(plan),
-            tau: vec![Lanes::default(); plan.variable_frames.len()],
+            tau: vec![Lanes::default(); plan.dof()],
         }
     }
 }
@@ -234,30 +234,35 @@ impl TreeSystem {
         out
     }
 
-    /// Every frame's body velocity `v_k` and its columns, for checking against finite
-    /// differences (allocates; not for hot paths).
+    /// Every frame's body velocity `v_k` and its columns, one per model variable above it
+    /// (a mimic frame's folded into its leader's, times the multiplier), for checking against
+    /// finite differences (allocates; not for hot paths).
     pub fn frame_velocities(&mut self, q: &Vector<Dyn>, dq: &Vector<Dyn>) -> Vec<FrameVelocity> {
         let plan = &self.full_plan;
         let mut ws = Workspace::new(plan);
-        sweeps::forward(
-            plan,
-            &mut ws,
-            q.as_slice(),
-            dq.as_slice(),
-            Reach::Everything,
-        );
+        let mut full = [vec![0.0; plan.full_dof()], vec![0.0; plan.full_dof()]];
+        plan.extend(q.as_slice(), true, &mut full[0]);
+        plan.extend(dq.as_slice(), false, &mut full[1]);
+        sweeps::forward(plan, &mut ws, &full[0], &full[1], Reach::Everything);
         (0..plan.frames.len())
             .map(|k| {
                 let f = &plan.frames[k];
-                let cols = (0..f.n)
-                    .map(|a| {
-                        (
-                            plan.vars[f.var_start + a],
-                            ws.jac[f.col_offset + a],
-                            ws.dv_dq[f.col_offset + a],
-                        )
-                    })
-                    .collect();
+                let mut cols: Vec<(usize, Twist, Twist)> = Vec::with_capacity(f.n);
+                for a in 0..f.n {
+                    let (i, m) = plan.reduced(plan.vars[f.var_start + a]);
+                    let (jac, dv) = (ws.jac[f.col_offset + a], ws.dv_dq[f.col_offset + a]);
+                    let at = match cols.iter().position(|c| c.0 == i) {
+                        Some(at) => at,
+                        None => {
+                            cols.push((i, [0.0; 6], [0.0; 6]));
+                            cols.len() - 1
+                        }
+                    };
+                    for r in 0..6 {
+                        cols[at].1[r] += m * jac[r];
+                        cols[at].2[r] += m * dv[r];
+                    }
+                }
                 (ws.velocity[k], cols)
             })
             .collect()
@@ -380,7 +385,7 @@ impl System for TreeSystem {
         qdd: &mut Vector<Dyn>,
         own: &mut Terms<Dyn>,
     ) -> bool {
-        if self.plan.rows > 0 || self.added.is_some() {
+        if self.plan.rows > 0 || self.added.is_some() || !self.plan.followers.is_empty() {
             return false;
         }
         own.clear(Order::First);

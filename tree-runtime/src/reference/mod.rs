@@ -11,7 +11,7 @@ mod cached;
 mod uncached;
 
 use nalgebra::{DVector, Dyn};
-use tree_model::{Model, Motion};
+use tree_model::{Joint, Model, Motion};
 
 use crate::error::SimError;
 use crate::system::{ConstraintTerms, Order, System, Terms, Vector};
@@ -71,6 +71,12 @@ impl PaperSystem {
         {
             return Err(SimError::Unsupported(format!(
                 "frame `{}` of model `{}` has a centre of mass off its origin or products of inertia; the paper's per-mass sums take masses at frame origins with principal axes along the frame (the default evaluation handles any body: TreeSystem, or `--evaluation sweeps`)",
+                f.name, model.name
+            )));
+        }
+        if let Some(f) = (model.frames.iter()).find(|f| matches!(f.joint, Joint::Mimic(_))) {
+            return Err(SimError::Unsupported(format!(
+                "frame `{}` of model `{}` follows another frame's variable (a mimic); the paper's per-mass sums take one variable per transform, its assumption 2 (the default evaluation handles mimics: TreeSystem, or `--evaluation sweeps`)",
                 f.name, model.name
             )));
         }

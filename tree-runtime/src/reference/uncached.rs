@@ -53,10 +53,7 @@ struct Recompute<'a> {
 impl Recompute<'_> {
     fn local(&self, k: usize) -> LocalTransform {
         let f = &self.frames[k];
-        let x = match f.joint {
-            Joint::Constant(x) => x,
-            Joint::Variable(i) => self.q[i],
-        };
+        let x = f.joint.value(self.q);
         LocalTransform::new(f.kind, x)
     }
 
