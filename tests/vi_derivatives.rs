@@ -207,6 +207,7 @@ fn cases() -> Vec<(Model, ViSettings, String)> {
         (file("cart.toml"), "cart"),
         (file("string-pendulum.toml"), "string pendulum"),
         (damped, "damped double pendulum"),
+        (file("mimic.toml"), "mimic frames"),
     ];
     let mut out = Vec::new();
     for (model, name) in models {
