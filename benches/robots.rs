@@ -147,7 +147,17 @@ where
 
 fn interpreted(file: &str, floating_base: bool) -> TreeSystem {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
-    TreeSystem::new(&model::from_file(path, UrdfOptions { floating_base }).unwrap()).unwrap()
+    TreeSystem::new(
+        &model::from_file(
+            path,
+            UrdfOptions {
+                floating_base,
+                ..Default::default()
+            },
+        )
+        .unwrap(),
+    )
+    .unwrap()
 }
 
 /// Pinocchio's `[crba, nle, aba, aba_derivatives]` for `label`, if measured.

@@ -88,8 +88,7 @@ fn check_equal_over<S: System>(
     model: &tree_mech::model::Model,
     seed: u64,
     duration: f64,
-)
-where
+) where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let mut interpreted = TreeSystem::new(model).unwrap();

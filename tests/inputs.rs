@@ -165,6 +165,7 @@ fn urdf_joints_are_inputs_with_their_effort_as_limits() {
         concat!(env!("CARGO_MANIFEST_DIR"), "/models/solo12.urdf"),
         model::UrdfOptions {
             floating_base: true,
+            ..Default::default()
         },
     )
     .unwrap();

@@ -271,6 +271,7 @@ fn robot(fx: &Fixture) -> model::Model {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(&fx.file);
     let options = UrdfOptions {
         floating_base: fx.floating_base,
+        ..Default::default()
     };
     model::from_file(path, options).unwrap()
 }
@@ -541,12 +542,22 @@ where
         }
         let kinetic: f64 = 0.5 * (0..n).map(|i| terms.dl_ddq[i] * v[i]).sum::<f64>();
         let t_pin = state["kinetic"].as_f64().unwrap();
-        close(kinetic, t_pin, t_pin.abs().max(1.0), &what("kinetic energy"));
+        close(
+            kinetic,
+            t_pin,
+            t_pin.abs().max(1.0),
+            &what("kinetic energy"),
+        );
         let zero = sys_vector::<S>(n);
         sys.lagrangian(&q, &zero, Order::First, &mut terms);
         let g_pin = numbers(&state["g"]);
         for i in 0..n {
-            close(-terms.dl_dq[perm[i]], g_pin[i], scale(&g_pin), &what("gravity"));
+            close(
+                -terms.dl_dq[perm[i]],
+                g_pin[i],
+                scale(&g_pin),
+                &what("gravity"),
+            );
         }
         let mut qdd = sys_vector::<S>(n);
         let mut force = |_t: f64, _q: &Vector<S::N>, _dq: &Vector<S::N>, u: &mut Vector<S::N>| {
@@ -568,7 +579,12 @@ where
             let (h, g) = (numbers(pin_pose), poses[k].matrix());
             for r in 0..4 {
                 for c in 0..4 {
-                    close(g[r][c], h[4 * r + c], 1.0, &what(&format!("pose of `{link}`")));
+                    close(
+                        g[r][c],
+                        h[4 * r + c],
+                        1.0,
+                        &what(&format!("pose of `{link}`")),
+                    );
                 }
             }
             compared += 1;

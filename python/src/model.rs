@@ -359,8 +359,14 @@ pub(crate) fn load(
     floating_base: bool,
     lock: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Model> {
-    let m = model::from_file(&path, model::UrdfOptions { floating_base })
-        .map_err(|e| model_error(py, &e))?;
+    let m = model::from_file(
+        &path,
+        model::UrdfOptions {
+            floating_base,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| model_error(py, &e))?;
     Model::of(locked(py, m, lock)?)
 }
 
@@ -376,7 +382,14 @@ pub(crate) fn loads(
 ) -> PyResult<Model> {
     let m = match format {
         "toml" => model::from_toml_str(text, None),
-        "urdf" => model::from_urdf_str(text, None, model::UrdfOptions { floating_base }),
+        "urdf" => model::from_urdf_str(
+            text,
+            None,
+            model::UrdfOptions {
+                floating_base,
+                ..Default::default()
+            },
+        ),
         other => return Err(bad(format!("format `{other}`: use `toml` or `urdf`"))),
     }
     .map_err(|e| model_error(py, &e))?;

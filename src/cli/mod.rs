@@ -42,6 +42,10 @@ pub struct Cli {
     /// tx ty tz rz ry rx) between the world and the root link.
     #[arg(long, global = true)]
     floating_base: bool,
+    /// URDF models: load each mimic joint as a joint of its own, its `<mimic>` ignored
+    /// (Pinocchio's default; by default a mimic joint follows the joint it names).
+    #[arg(long, global = true)]
+    independent_mimics: bool,
     /// Hold a variable still as a constant, at its q0 or at VALUE: `--lock NAME[=VALUE]`,
     /// repeated or comma-separated (as Pinocchio's reduced model locks joints).
     #[arg(
@@ -76,6 +80,7 @@ impl Cli {
         let source = Source {
             urdf: model::UrdfOptions {
                 floating_base: self.floating_base,
+                independent_mimics: self.independent_mimics,
             },
             locks: self.lock,
         };
@@ -85,8 +90,11 @@ impl Cli {
             Command::Linearize(args) => linearize::run(args, &source),
             Command::Check(args) => check::run(args, &source),
             Command::Optimize(request) => {
-                if source.urdf.floating_base || !source.locks.is_empty() {
-                    Err("--floating-base and --lock do not apply to optimize: say `floating_base = true` in the task file, and lock joints in the model".into())
+                if source.urdf.floating_base
+                    || source.urdf.independent_mimics
+                    || !source.locks.is_empty()
+                {
+                    Err("--floating-base, --independent-mimics and --lock do not apply to optimize: say `floating_base = true` in the task file, and lock joints in the model".into())
                 } else {
                     optimize::run(request)
                 }

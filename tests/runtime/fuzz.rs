@@ -122,7 +122,7 @@ proptest! {
     ) {
         let file = ["models/ur5.urdf", "models/panda.urdf", "models/solo12.urdf"][which];
         let text = mangle(&seed(file), cut, at, byte, splice, TOKENS[token]);
-        let options = UrdfOptions { floating_base: floating };
+        let options = UrdfOptions { floating_base: floating, ..Default::default() };
         exercise(model::from_urdf_str(&text, Some("fuzz.urdf"), options));
     }
 

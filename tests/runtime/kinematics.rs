@@ -158,6 +158,7 @@ fn a_floating_urdf_robot_matches_differences_of_its_poses() {
         path,
         UrdfOptions {
             floating_base: true,
+            ..Default::default()
         },
     )
     .unwrap();

@@ -5,6 +5,7 @@ mod added;
 mod cli;
 #[cfg(all(feature = "cli", unix))]
 mod cli_edges;
+mod collection;
 mod constraints;
 mod continuous_derivatives;
 mod derivatives;

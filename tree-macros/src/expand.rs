@@ -297,7 +297,7 @@ fn model_constructor(
                 ::tree_mech::__private::model::from_urdf_str(
                     include_str!(#path),
                     Some(#shown),
-                    ::tree_mech::__private::model::UrdfOptions { floating_base: #floating_base },
+                    ::tree_mech::__private::model::UrdfOptions { floating_base: #floating_base, ..::core::default::Default::default() },
                 )
                 .expect("the model was validated when it was compiled")
             };

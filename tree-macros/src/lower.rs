@@ -59,7 +59,10 @@ pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, Path
         )
     })?;
     let model = if is_urdf(&written) {
-        let options = tree_model::UrdfOptions { floating_base };
+        let options = tree_model::UrdfOptions {
+            floating_base,
+            ..Default::default()
+        };
         tree_model::from_urdf_str(&text, Some(&written), options)
     } else if floating_base {
         return Err(syn::Error::new(

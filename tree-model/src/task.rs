@@ -367,7 +367,14 @@ pub fn task_from_str(
     })?;
     let model_path = base.join(raw.model.get_ref());
     let floating_base = raw.floating_base.unwrap_or(false);
-    let model = from_file(&model_path, UrdfOptions { floating_base }).map_err(|e| {
+    let model = from_file(
+        &model_path,
+        UrdfOptions {
+            floating_base,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| {
         ModelError::single(
             src.clone(),
             format!(

@@ -25,6 +25,10 @@ pub struct UrdfOptions {
     /// Put six variables `root_x root_y root_z root_yaw root_pitch root_roll` (tx ty tz rz ry
     /// rx) between the world and the root link: a floating base.
     pub floating_base: bool,
+    /// Load each mimic joint as a joint of its own, its `<mimic>` ignored (Pinocchio's
+    /// default, `mimic=False`): for a file whose mimic joints follow joints it does not have.
+    /// By default a mimic joint follows its leader (`multiplier·q + offset`).
+    pub independent_mimics: bool,
 }
 
 /// The names of the floating base's variables, outermost first, with their primitives.
@@ -51,7 +55,7 @@ pub const FLOATING_BASE: [(&str, PrimitiveKind); 6] = [
 /// let model = from_urdf_str(urdf, Some("arm.urdf"), UrdfOptions::default())?;
 /// assert_eq!(model.variables[0].name, "shoulder");
 /// assert_eq!(model.variables[0].limits, Some([-1.0, 1.0]));
-/// let floating = from_urdf_str(urdf, None, UrdfOptions { floating_base: true })?;
+/// let floating = from_urdf_str(urdf, None, UrdfOptions { floating_base: true, ..Default::default() })?;
 /// assert_eq!(floating.dof(), 7);
 /// # Ok::<(), tree_model::ModelError>(())
 /// ```
@@ -69,12 +73,22 @@ pub fn from_urdf_str(
     } else {
         robot.name.clone()
     };
+    let moving = |j: &urdf_rs::Joint| j.joint_type != urdf_rs::JointType::Fixed;
+    if !options.floating_base && !robot.joints.iter().any(moving) {
+        return Err(reader.fail(
+            format!(
+                "URDF: robot `{}` has no moving joint: fixed to the world it has nothing to simulate; give it a floating base (--floating-base) to simulate it as a free body",
+                robot.name
+            ),
+            Some(reader.robot_line),
+        ));
+    }
     let mut out = Frames::new(ModelSpec::new(name), robot.links.len());
     root_frames(&mut out, &robot, &tree, options, &reader)?;
     // Parents before children: walk the tree with an explicit stack (no recursion depth).
     let mut stack: Vec<usize> = tree.children[tree.root].iter().rev().copied().collect();
     while let Some(j) = stack.pop() {
-        joint_frames(&mut out, &robot, &robot.joints[j], &tree, &reader)?;
+        joint_frames(&mut out, &robot, &robot.joints[j], &tree, options, &reader)?;
         let child = tree.links[robot.joints[j].child.link.as_str()];
         stack.extend(tree.children[child].iter().rev().copied());
     }
@@ -423,6 +437,7 @@ fn joint_frames(
     robot: &urdf_rs::Robot,
     joint: &urdf_rs::Joint,
     tree: &Tree,
+    options: UrdfOptions,
     reader: &Reader,
 ) -> Result<(), ModelError> {
     let line = reader.joint_line(&joint.name);
@@ -431,8 +446,8 @@ fn joint_frames(
     let mut chain = origin_chain(joint, reader)?;
     if joint.joint_type != urdf_rs::JointType::Fixed {
         let value = match &joint.mimic {
-            Some(_) => Value::Mimic(mimic_of(robot, joint, reader)?),
-            None => {
+            Some(_) if !options.independent_mimics => Value::Mimic(mimic_of(robot, joint, reader)?),
+            _ => {
                 actuate(&mut out.spec, joint, reader.efforts.contains(&joint.name));
                 Value::Variable(joint.name.clone())
             }

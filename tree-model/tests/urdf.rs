@@ -5,6 +5,7 @@ use tree_model::{from_file, from_urdf_str, Joint, PrimitiveKind, UrdfOptions};
 
 const FIXED: UrdfOptions = UrdfOptions {
     floating_base: false,
+    independent_mimics: false,
 };
 
 fn error_of(text: &str) -> String {
@@ -76,6 +77,7 @@ fn joints_become_chains_of_primitives_and_links_bodies() {
 fn a_floating_base_adds_six_variables_above_the_root() {
     let options = UrdfOptions {
         floating_base: true,
+        ..Default::default()
     };
     let m = from_urdf_str(&arm(GOOD_JOINT2), None, options).unwrap();
     let names: Vec<&str> = m.variables.iter().map(|v| v.name.as_str()).collect();
@@ -186,6 +188,7 @@ fn from_file_reads_urdf_by_extension_and_refuses_a_floating_toml() {
         &toml,
         UrdfOptions {
             floating_base: true,
+            ..Default::default()
         },
     )
     .unwrap_err();
