@@ -100,7 +100,7 @@ fn a_floating_base_adds_six_variables_above_the_root() {
 
 #[test]
 fn unsupported_and_broken_urdf_is_named_with_its_line() {
-    let cases: [(String, &str); 12] = [
+    let cases: [(String, &str); 15] = [
         (
             arm(r#"  <joint name="joint2" type="floating"><parent link="upper"/><child link="lower"/></joint>"#),
             "r.urdf:18: URDF: joint `joint2` is floating; only revolute, continuous, prismatic and fixed joints",
@@ -110,8 +110,24 @@ fn unsupported_and_broken_urdf_is_named_with_its_line() {
             "r.urdf:18: URDF: joint `joint2` is planar",
         ),
         (
-            arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><mimic joint="joint1"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#),
-            "r.urdf:18: URDF: joint `joint2` mimics joint `joint1`; mimic joints are not supported",
+            arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><mimic joint="joint0"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2` mimics joint `joint0`, which the file does not have",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><mimic joint="joint3"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>
+  <link name="tip"/>
+  <joint name="joint3" type="fixed"><parent link="lower"/><child link="tip"/></joint>"#),
+            "r.urdf:18: URDF: joint `joint2` mimics joint `joint3`, which is fixed: a mimic follows a moving joint",
+        ),
+        (
+            arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><mimic joint="joint3"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>
+  <link name="tip"><inertial><mass value="0.1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/></inertial></link>
+  <joint name="joint3" type="revolute"><parent link="lower"/><child link="tip"/><mimic joint="joint2"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#),
+            "r.urdf:18: URDF: the mimic joints `joint2`, `joint3` follow one another in a cycle",
+        ),
+        (
+            "<robot name=\"lone\">\n  <link name=\"body\"/>\n</robot>".to_string(),
+            "r.urdf:1: URDF: robot `lone` has no moving joint: fixed to the world it has nothing to simulate; give it a floating base (--floating-base)",
         ),
         (
             arm(r#"  <joint name="joint2" type="fixed"><parent link="upper"/><child link="hand"/></joint>"#),
@@ -387,4 +403,33 @@ fn what_the_dynamics_does_not_read_is_set_aside() {
         error_of(&bad),
         "r.urdf:10: URDF: link `lower`: <mass value=\"x\"> must be a number"
     );
+}
+
+/// A mimic joint follows the joint it names (`multiplier·q + offset`), through a chain of
+/// mimics with the maps composed, with its own damping; it makes no variable and no input.
+/// With `independent_mimics` (Pinocchio's default) each is a joint of its own.
+#[test]
+fn a_mimic_joint_follows_its_leader_through_a_chain() {
+    let text = arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><axis xyz="1 0 0"/><mimic joint="joint1" multiplier="2" offset="0.1"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>
+  <link name="tip"><inertial><mass value="0.1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/></inertial></link>
+  <joint name="joint3" type="prismatic"><parent link="lower"/><child link="tip"/><axis xyz="0 1 0"/><mimic joint="joint2" multiplier="-1" offset="0.3"/><dynamics damping="0.7"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#);
+    let m = from_urdf_str(&text, None, FIXED).unwrap();
+    assert_eq!(m.variables.len(), 1);
+    assert_eq!(m.inputs.len(), 1);
+    let mimic = |frame: &str| match m.frames[m.frame_index(frame).unwrap()].joint {
+        Joint::Mimic(x) => (x.variable, x.multiplier, x.offset, x.damping),
+        other => panic!("{frame}: {other:?}"),
+    };
+    assert_eq!(mimic("lower"), (0, 2.0, 0.1, 0.0));
+    // joint3 = −(2 q + 0.1) + 0.3.
+    let (v, k, o, c) = mimic("tip");
+    assert_eq!((v, k, c), (0, -2.0, 0.7));
+    assert!((o - 0.2).abs() < 1e-15);
+    let independent = UrdfOptions {
+        independent_mimics: true,
+        ..FIXED
+    };
+    let m = from_urdf_str(&text, None, independent).unwrap();
+    assert_eq!(m.variables.len(), 3);
+    assert!(m.frames.iter().all(|f| !matches!(f.joint, Joint::Mimic(_))));
 }
