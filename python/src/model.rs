@@ -350,35 +350,39 @@ impl Prescription for Kinematics {
 }
 
 /// Reads a model file (TOML, or URDF by its extension or its XML), with the variables of
-/// `lock` held still (the command line's `--lock`).
+/// `lock` held still (the command line's `--lock`); a URDF's mimic joints follow their
+/// leaders unless `independent_mimics` (the command line's `--independent-mimics`).
 #[pyfunction]
-#[pyo3(signature = (path, floating_base=false, lock=None))]
+#[pyo3(signature = (path, floating_base=false, lock=None, independent_mimics=false))]
 pub(crate) fn load(
     py: Python<'_>,
     path: PathBuf,
     floating_base: bool,
     lock: Option<&Bound<'_, PyAny>>,
+    independent_mimics: bool,
 ) -> PyResult<Model> {
     let m = model::from_file(
         &path,
         model::UrdfOptions {
             floating_base,
-            ..Default::default()
+            independent_mimics,
         },
     )
     .map_err(|e| model_error(py, &e))?;
     Model::of(locked(py, m, lock)?)
 }
 
-/// Reads a model from text: `format` "toml" or "urdf"; `lock` as [`load`]'s.
+/// Reads a model from text: `format` "toml" or "urdf"; `lock` and `independent_mimics` as
+/// [`load`]'s.
 #[pyfunction]
-#[pyo3(signature = (text, format="toml", floating_base=false, lock=None))]
+#[pyo3(signature = (text, format="toml", floating_base=false, lock=None, independent_mimics=false))]
 pub(crate) fn loads(
     py: Python<'_>,
     text: &str,
     format: &str,
     floating_base: bool,
     lock: Option<&Bound<'_, PyAny>>,
+    independent_mimics: bool,
 ) -> PyResult<Model> {
     let m = match format {
         "toml" => model::from_toml_str(text, None),
@@ -387,7 +391,7 @@ pub(crate) fn loads(
             None,
             model::UrdfOptions {
                 floating_base,
-                ..Default::default()
+                independent_mimics,
             },
         ),
         other => return Err(bad(format!("format `{other}`: use `toml` or `urdf`"))),

@@ -659,6 +659,21 @@ def test_a_newcomers_calls_lock_sizes_and_values_by_name():
         m.simulate(0.5, 0.01, dq0={"x": float("nan")})
 
 
+def test_a_mimic_joint_follows_its_leader_or_stands_alone_when_asked():
+    """The Panda with its hand: the second finger mirrors the first (one variable for both,
+    its frame moving with it); independent_mimics=True gives it a variable of its own."""
+    path = ROOT / "models/panda-hand.urdf"
+    hand = tm.load(str(path))
+    assert hand.nq == 8 and "panda_finger_joint2" not in hand.variables
+    independent = tm.load(path, independent_mimics=True)
+    assert independent.nq == 9 and "panda_finger_joint2" in independent.variables
+    text = path.read_text()
+    assert tm.loads(text, format="urdf").nq == 8
+    assert tm.loads(text, format="urdf", independent_mimics=True).nq == 9
+    run = hand.simulate(0.2, 0.01)
+    assert np.all(np.isfinite(run.q))
+
+
 @pytest.mark.parametrize("integrator", ["vi", "rk4"])
 def test_a_stepper_steps_as_simulate_runs_under_the_same_inputs(integrator):
     # The cart-pole pushed by u_k at step k: stepped one step at a time (the VI keeping its

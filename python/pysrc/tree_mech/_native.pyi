@@ -231,12 +231,14 @@ def load(
     path: Union[str, PathLike],
     floating_base: bool = False,
     lock: Union[str, Sequence[str], Mapping[str, Optional[float]], None] = None,
+    independent_mimics: bool = False,
 ) -> Model: ...
 def loads(
     text: str,
     format: str = "toml",
     floating_base: bool = False,
     lock: Union[str, Sequence[str], Mapping[str, Optional[float]], None] = None,
+    independent_mimics: bool = False,
 ) -> Model: ...
 def optimize_text(
     text: str,
