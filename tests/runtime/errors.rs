@@ -440,3 +440,42 @@ fn numbers_that_overflow_are_named_as_overflow_not_as_a_singular_matrix() {
         "{err}"
     );
 }
+
+/// A floating base whose Euler angles reach a gimbal lock (root_pitch at −90°): Newton fails
+/// and the message says why — the mass matrix nearly singular, naming the variable of its
+/// weakest pivot — instead of sending the user to a shorter step that cannot help.
+#[test]
+fn a_newton_failure_at_a_gimbal_lock_says_so() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/robots/example-robot-data/kinova_description/robots/kinova.urdf");
+    let options = tree_mech::model::UrdfOptions {
+        floating_base: true,
+        ..Default::default()
+    };
+    let mut sys =
+        tree_mech::TreeSystem::new(&tree_mech::model::from_file(path, options).unwrap()).unwrap();
+    let q0 = nalgebra::DVector::from_column_slice(&[
+        -2.399516, -0.877988, -2.553569, 0.625331, -1.505676, -1.480697, -1.329974, -2.527627,
+        1.513899, 0.946703, 0.66921, -2.927678,
+    ]);
+    let dq0 = nalgebra::DVector::from_column_slice(&[
+        -0.141072, 0.370407, -0.687307, -0.228684, -0.960332, -0.836284, -0.567093, -0.1707,
+        -0.07352, 0.769043, -0.366683, -0.957072,
+    ]);
+    let options = SimOptions {
+        method: Method::Vi(ViSettings::default()),
+        dt: 1e-3,
+        duration: 0.2,
+        ..Default::default()
+    };
+    let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("Newton did not converge")
+            && err.contains("the mass matrix is nearly singular here (its pivot at `root_roll`")
+            && err.contains("gimbal lock")
+            && !err.contains("lower --dt"),
+        "{err}"
+    );
+}

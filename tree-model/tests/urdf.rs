@@ -410,9 +410,11 @@ fn what_the_dynamics_does_not_read_is_set_aside() {
 /// With `independent_mimics` (Pinocchio's default) each is a joint of its own.
 #[test]
 fn a_mimic_joint_follows_its_leader_through_a_chain() {
-    let text = arm(r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><axis xyz="1 0 0"/><mimic joint="joint1" multiplier="2" offset="0.1"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>
+    let text = arm(
+        r#"  <joint name="joint2" type="revolute"><parent link="upper"/><child link="lower"/><axis xyz="1 0 0"/><mimic joint="joint1" multiplier="2" offset="0.1"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>
   <link name="tip"><inertial><mass value="0.1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/></inertial></link>
-  <joint name="joint3" type="prismatic"><parent link="lower"/><child link="tip"/><axis xyz="0 1 0"/><mimic joint="joint2" multiplier="-1" offset="0.3"/><dynamics damping="0.7"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#);
+  <joint name="joint3" type="prismatic"><parent link="lower"/><child link="tip"/><axis xyz="0 1 0"/><mimic joint="joint2" multiplier="-1" offset="0.3"/><dynamics damping="0.7"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>"#,
+    );
     let m = from_urdf_str(&text, None, FIXED).unwrap();
     assert_eq!(m.variables.len(), 1);
     assert_eq!(m.inputs.len(), 1);

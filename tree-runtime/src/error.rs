@@ -73,6 +73,9 @@ pub enum SimError {
         residual: f64,
         /// The largest `|h(q₂)|` at the end.
         violation: f64,
+        /// Where the mass matrix at the step's start is nearly singular, the variable of its
+        /// weakest pivot and `d/M_ii` there (`linalg::weakest_pivot`): the cause, not the step.
+        singular: Option<(String, f64)>,
     },
     /// A VI step turned a joint by more than a quarter turn:
     /// the step is too long for the motion.
@@ -217,10 +220,19 @@ impl fmt::Display for Detail<'_> {
                 f,
                 "variational integrator Newton matrix is singular (at {variable})"
             ),
-            SimError::NewtonFailed { iterations, residual, violation, .. } => write!(
-                f,
-                "Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e}): the step may be too long for the motion here; lower --dt"
-            ),
+            SimError::NewtonFailed { iterations, residual, violation, singular, .. } => {
+                write!(
+                    f,
+                    "Newton did not converge in {iterations} iterations (relative residual {residual:e}, constraint violation {violation:e})"
+                )?;
+                match singular {
+                    Some((variable, ratio)) => write!(
+                        f,
+                        ": the mass matrix is nearly singular here (its pivot at `{variable}` is {ratio:.1e} of its diagonal entry), a configuration where two variables move alike — rotations whose axes line up, as a floating base's root_pitch at ±90° (a gimbal lock of its Euler angles); a shorter step will not pass it: start away from it"
+                    ),
+                    None => f.write_str(": the step may be too long for the motion here; lower --dt"),
+                }
+            }
             SimError::StepTooCoarse { dt, variable, turn, .. } => write!(
                 f,
                 "`{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt"

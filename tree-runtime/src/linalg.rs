@@ -69,6 +69,40 @@ pub fn cholesky_factor_packed(a: &mut [f64], n: usize) -> Result<(), (usize, f64
     Ok(())
 }
 
+/// The weakest pivot of symmetric `A` (`n × n`, column-major in `a[..n²]`, overwritten by
+/// its factor): the smallest `d_j / A_jj` of its Cholesky factorisation `A = L D Lᵀ` and
+/// its index — 1 for a diagonal matrix, near 0 where a variable's motion is nearly another's
+/// (a gimbal lock), ≤ 0 at a singular one. `None` for `n = 0`.
+pub(crate) fn weakest_pivot(a: &mut [f64], n: usize) -> Option<(usize, f64)> {
+    let a = &mut a[..n * n];
+    let mut weakest: Option<(usize, f64)> = None;
+    for j in 0..n {
+        let (done, rest) = a.split_at_mut(j * n);
+        let col_j = &mut rest[..n];
+        let original = col_j[j];
+        for k in 0..j {
+            let col_k = &done[k * n..(k + 1) * n];
+            let ljk = col_k[j];
+            for i in j..n {
+                col_j[i] -= col_k[i] * ljk;
+            }
+        }
+        let ratio = col_j[j] / original.abs().max(f64::MIN_POSITIVE);
+        if weakest.is_none_or(|(_, r)| ratio < r) {
+            weakest = Some((j, ratio));
+        }
+        if !(col_j[j] > 0.0 && col_j[j].is_finite()) {
+            break;
+        }
+        let d = col_j[j].sqrt();
+        col_j[j] = d;
+        for x in &mut col_j[j + 1..n] {
+            *x /= d;
+        }
+    }
+    weakest
+}
+
 /// Solves `L Lᵀ x = b` with the factor from [`cholesky_factor`]; `b` becomes `x`.
 pub(crate) fn cholesky_substitute<N: Dim>(a: &Matrix<N>, b: &mut Vector<N>)
 where

@@ -672,7 +672,24 @@ where
         let (t, dt) = (cx.t, cx.dt);
         let result = self.advance(cx, q, p, q_next, 0);
         (cx.t, cx.dt) = (t, dt);
-        result
+        result.map_err(|e| match e {
+            SimError::NewtonFailed {
+                step,
+                t,
+                iterations,
+                residual,
+                violation,
+                ..
+            } => SimError::NewtonFailed {
+                step,
+                t,
+                iterations,
+                residual,
+                violation,
+                singular: nearly_singular(cx.sys, q),
+            },
+            e => e,
+        })
     }
 
     /// The step from `cx.t` of length `cx.dt`, split in halves on failure (moving `cx.t`
@@ -830,6 +847,7 @@ where
                     iterations,
                     residual: relative,
                     violation,
+                    singular: None,
                 };
                 return Err((iterations, failed));
             }
@@ -1112,4 +1130,27 @@ where
         self.q_alpha.gemv(1.0, &self.terms.mass, dq, 0.0);
         Ok(0.5 * dq.dot(&self.q_alpha) - self.terms.l)
     }
+}
+
+/// Below this `d/M_ii`, a failed step's mass matrix is called nearly singular: the motion
+/// of that variable is all but another's (1 for independent ones; a floating base's
+/// root_pitch 0.3° from ±90° gives 3e-5).
+const NEARLY_SINGULAR: f64 = 1e-4;
+
+/// The variable of the weakest pivot of the dynamic variables' mass matrix at `q`, and
+/// `d/M_ii` there, when it is below [`NEARLY_SINGULAR`]: why a step failed, asked only
+/// after it did (allocates).
+fn nearly_singular<S: System>(sys: &mut S, q: &Vector<S::N>) -> Option<(String, f64)>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let mut terms = Terms::zeros(sys.dim());
+    sys.mass_matrix(q, &mut terms);
+    let dynamic: Vec<usize> = (0..sys.dof()).filter(|&i| !sys.is_kinematic(i)).collect();
+    let n = dynamic.len();
+    let mut m: Vec<f64> = (0..n * n)
+        .map(|k| terms.mass[(dynamic[k % n], dynamic[k / n])])
+        .collect();
+    let (j, ratio) = crate::linalg::weakest_pivot(&mut m, n)?;
+    (ratio < NEARLY_SINGULAR).then(|| (sys.variable_name(dynamic[j]).to_string(), ratio))
 }
