@@ -469,7 +469,7 @@ impl TreePlan {
                 y = y * S::constant(f.multiplier);
             }
             if offsets && f.offset != 0.0 {
-                y = y + S::constant(f.offset);
+                y += S::constant(f.offset);
             }
             out[n + k] = y;
         }

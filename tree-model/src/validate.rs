@@ -598,14 +598,24 @@ fn check_directions(model: &Model, errs: &mut Problems) {
     }
 }
 
-/// Every dynamic variable moves some mass (else its mass-matrix column is zero).
+/// Every dynamic variable moves some mass (else its mass-matrix column is zero): through
+/// its own frame or a frame that mimics it.
 fn check_moves_mass(model: &Model, errs: &mut Problems) {
+    // The frames each variable moves (its own, then its followers'), in one pass.
+    let mut driven: Vec<Vec<usize>> = vec![Vec::new(); model.variables.len()];
+    for (f, frame) in model.frames.iter().enumerate() {
+        if let Some((i, factor)) = frame.joint.driver() {
+            if factor != 0.0 {
+                driven[i].push(f);
+            }
+        }
+    }
     for (i, v) in model.variables.iter().enumerate() {
         if v.is_kinematic() {
             continue;
         }
         let Some(frame) = v.frame else { continue };
-        if !variable_moves_mass(model, i) {
+        if !driven[i].iter().any(|&f| frame_moves_mass(model, f)) {
             errs.frame(
                 frame,
                 FrameField::Primitive,
@@ -820,20 +830,10 @@ fn symmetric_eigenvalues(a: &[[f64; 3]; 3]) -> [f64; 3] {
     [smallest, 3.0 * q - largest - smallest, largest]
 }
 
-/// Whether variable `i` moves some mass. A translation moves any mass below it; a rotation
-/// moves a body with inertia, or a mass reached through some translation. (A mass exactly on
-/// the rotation axis slips through; the runtime then reports a singular mass matrix.)
-fn variable_moves_mass(model: &Model, i: usize) -> bool {
-    model.frames.iter().enumerate().any(|(f, frame)| {
-        frame
-            .joint
-            .driver()
-            .is_some_and(|(j, factor)| j == i && factor != 0.0)
-            && frame_moves_mass(model, f)
-    })
-}
-
-/// Whether the transform of frame `f` moves some mass (see [`variable_moves_mass`]).
+/// Whether the transform of frame `f` moves some mass. A translation moves any mass below
+/// it; a rotation moves a body with inertia, or a mass reached through some translation. (A
+/// mass exactly on the rotation axis slips through; the runtime then reports a singular mass
+/// matrix.)
 fn frame_moves_mass(model: &Model, f: usize) -> bool {
     let rotation = model.frames[f].primitive.is_rotation();
     // offset[k]: whether the path from f down to k contains a non-trivial translation.
