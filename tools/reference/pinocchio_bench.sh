@@ -14,5 +14,8 @@ g++ -O3 -DNDEBUG -std=c++17 -DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS -DBOOST_MPL_
   -L"$prefix/lib" -Wl,-rpath,"$prefix/lib" \
   -lpinocchio_default -lpinocchio_parsers -lurdfdom_model -lboost_serialization \
   -o target/pinocchio_bench
+robots=tests/robots/example-robot-data
 target/pinocchio_bench ur5 models/ur5.urdf 0 panda models/panda.urdf 0 solo12 models/solo12.urdf 1 \
+  talos "$robots/talos_data/robots/talos_reduced.urdf" 1 \
+  g1 "$robots/g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf" 1 \
   | tee target/pinocchio-timing.json
