@@ -52,7 +52,8 @@ where
     let mut dynamics = Dynamics::new(&sys);
     let mut qdd = sys.zero_vector();
     let accel = time_ns(2000, || {
-        let mut cx = StepContext::new(&mut sys, &mut NoForce, &mut motion, 0.0);
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.0);
         dynamics.acceleration(&mut cx, &q, &dq, &mut qdd).unwrap();
         black_box(qdd[0]);
     });
@@ -63,7 +64,8 @@ where
         qk.copy_from(&q);
         pk.copy_from(&p0);
         vi.predict_from(&dq);
-        let mut cx = StepContext::new(&mut sys, &mut NoForce, &mut motion, 0.001);
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.001);
         vi.step(&mut cx, &mut qk, &mut pk, &mut next).unwrap();
     });
     let u = vec![0.0; sys.input_count()];
@@ -79,7 +81,8 @@ where
         qk.copy_from(&q);
         pk.copy_from(&p0);
         vi.predict_from(&dq);
-        let mut cx = StepContext::new(&mut sys, &mut NoForce, &mut motion, 0.001);
+        let mut force = NoForce;
+        let mut cx = StepContext::new(&mut sys, &mut force, &mut motion, 0.001);
         cx.u = &u;
         vi.step(&mut cx, &mut qk, &mut pk, &mut next).unwrap();
         vi.derivatives_into(&mut cx, &q, &p0, &qk, &mut first)
@@ -116,7 +119,9 @@ fn main() {
             Talos::DOF,
             Talos::STATEMENTS,
             measure(Talos),
-            measure(interpreted(&format!("{ROBOTS}/talos_data/robots/talos_reduced.urdf"))),
+            measure(interpreted(&format!(
+                "{ROBOTS}/talos_data/robots/talos_reduced.urdf"
+            ))),
         ),
         (
             "G1 with hands, floating base",
@@ -138,7 +143,10 @@ fn main() {
                 .collect::<Vec<_>>()
                 .join(" | ")
         };
-        println!("| {name} ({dof}, {statements}) | compiled | {} |", f(compiled));
+        println!(
+            "| {name} ({dof}, {statements}) | compiled | {} |",
+            f(compiled)
+        );
         println!("| | interpreted | {} |", f(interp));
         let ratio: Vec<String> = (compiled.iter().zip(interp))
             .map(|(c, i)| format!("{:.2}×", c / i))
