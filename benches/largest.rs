@@ -4,8 +4,9 @@
 //! VI step and one VI step with its first derivatives (against ABA's derivatives), best of 5
 //! batches, mean per call. Pinocchio's figures come from `target/pinocchio-timing.json`, which
 //! `tools/reference/pinocchio_bench.sh` writes. Their build time is the price of compiling:
-//! `touch benches/largest.rs && time cargo build --release --bench largest`.
-//! Run: `cargo bench --bench largest`.
+//! `touch benches/largest.rs && time cargo build --release --features largest-robots --bench
+//! largest` (opt-in: two minutes and 4–5 GB of compiler memory, kept out of CI).
+//! Run: `cargo bench --features largest-robots --bench largest`.
 
 use std::hint::black_box;
 use std::time::Instant;
