@@ -9,7 +9,6 @@
 //! Run: `cargo bench --features largest-robots --bench largest`.
 
 use std::hint::black_box;
-use std::time::Instant;
 
 use tree_mech::integrate::{MidpointVi, StepContext, ViSettings};
 use tree_mech::model::{self, UrdfOptions};
@@ -17,33 +16,18 @@ use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::runtime::{Dynamics, ModelMotions};
 use tree_mech::{tree_model, NoForce, System, Terms, TreeSystem};
 
+mod timing;
+use timing::{time_ns, timed_state};
+
 tree_model!(struct Talos from "tests/robots/example-robot-data/talos_data/robots/talos_reduced.urdf", floating_base);
 tree_model!(struct G1 from "tests/robots/example-robot-data/g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf", floating_base);
-
-/// Mean ns per call of `f` over `calls` calls: the best of 5 batches.
-fn time_ns(calls: usize, mut f: impl FnMut()) -> f64 {
-    let mut best = f64::INFINITY;
-    for _ in 0..5 {
-        let start = Instant::now();
-        for _ in 0..calls {
-            f();
-        }
-        best = best.min(start.elapsed().as_secs_f64() * 1e9 / calls as f64);
-    }
-    best
-}
 
 /// `[M, q̈, VI step, VI step + first derivatives]` in ns, at the state Pinocchio is timed at.
 fn measure<S: System>(mut sys: S) -> [f64; 4]
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    let n = sys.dof();
-    let (mut q, mut dq) = (sys.zero_vector(), sys.zero_vector());
-    for i in 0..n {
-        q[i] = 0.3 * (0.7 * i as f64).sin();
-        dq[i] = 0.5 * (1.3 * i as f64).cos();
-    }
+    let (q, dq) = timed_state(&sys);
     let mut terms = Terms::zeros(sys.dim());
     let mass = time_ns(2000, || {
         sys.mass_matrix(black_box(&q), &mut terms);

@@ -12,7 +12,6 @@
 //! (`tree_mech::kernel::cpu`), alternated, side by side.
 
 use std::hint::black_box;
-use std::time::Instant;
 
 use tree_mech::integrate::{MidpointVi, Rk4, StepContext, StepCovector, ViSettings};
 use tree_mech::model::{self, UrdfOptions};
@@ -22,22 +21,12 @@ use tree_mech::runtime::linearize::continuous_derivatives;
 use tree_mech::runtime::{Dynamics, ModelMotions, Vector};
 use tree_mech::{tree_model, NoForce, Order, System, Terms, TreeSystem};
 
+mod timing;
+use timing::{time_ns, timed_state};
+
 tree_model!(struct Ur5 from "models/ur5.urdf");
 tree_model!(struct Panda from "models/panda.urdf");
 tree_model!(struct Solo12 from "models/solo12.urdf", floating_base);
-
-/// Mean ns per call of `f`: the best of 5 batches.
-fn time_ns(calls: usize, mut f: impl FnMut()) -> f64 {
-    let mut best = f64::INFINITY;
-    for _ in 0..5 {
-        let start = Instant::now();
-        for _ in 0..calls {
-            f();
-        }
-        best = best.min(start.elapsed().as_secs_f64() * 1e9 / calls as f64);
-    }
-    best
-}
 
 /// `[M, q̈, full evaluation, VI step, RK4 step, continuous derivatives, VI step + first
 /// derivatives, contracted second derivatives]` in ns, at the state Pinocchio is timed at.
@@ -46,11 +35,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let n = sys.dof();
-    let (mut q, mut dq) = (sys.zero_vector(), sys.zero_vector());
-    for i in 0..n {
-        q[i] = 0.3 * (0.7 * i as f64).sin();
-        dq[i] = 0.5 * (1.3 * i as f64).cos();
-    }
+    let (q, dq) = timed_state(&sys);
     let calls = 20_000;
     let mut terms = Terms::zeros(sys.dim());
     let mass = time_ns(calls, || {

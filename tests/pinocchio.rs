@@ -88,9 +88,6 @@ where
         })
         .collect();
     let damping: Vec<f64> = (0..n).map(|i| sys.damping(i)).collect();
-    let frames: Vec<String> = (0..sys.frame_count())
-        .map(|k| sys.frame_name(k).to_string())
-        .collect();
     let mut terms = Terms::zeros(sys.dim());
     let mut dynamics = Dynamics::new(&sys);
     let mut motion = ModelMotions::of(&sys);
@@ -228,32 +225,43 @@ where
             }
         }
         assert!(sq > 1.0 && u.len() + if fx.floating_base { 6 } else { 0 } == n);
-        let mut poses = vec![Pose::IDENTITY; frames.len()];
-        sys.poses(&q, &mut poses);
-        let mut compared = 0;
-        for (link, pin_pose) in state["poses"].as_object().unwrap() {
-            let Some(k) = frames.iter().position(|f| f == link) else {
-                continue;
-            };
-            let h = numbers(pin_pose);
-            let g = poses[k].matrix();
-            for r in 0..4 {
-                for c in 0..4 {
-                    close(
-                        g[r][c],
-                        h[4 * r + c],
-                        1.0,
-                        &what(&format!("pose of `{link}`")),
-                    );
-                }
-            }
-            compared += 1;
-        }
-        assert!(
-            compared + 1 >= state["poses"].as_object().unwrap().len(),
-            "{label}: poses compared"
-        );
+        compare_poses(&mut sys, &q, state, &what(""));
     }
+}
+
+/// Every link's pose at `q` against the state's `poses` (all but at most one link named:
+/// the root fixed to the world may have no frame here).
+fn compare_poses<S: System>(sys: &mut S, q: &Vector<S::N>, state: &Value, what: &str)
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let frames: Vec<String> = (0..sys.frame_count())
+        .map(|k| sys.frame_name(k).to_string())
+        .collect();
+    let mut poses = vec![Pose::IDENTITY; frames.len()];
+    sys.poses(q, &mut poses);
+    let mut compared = 0;
+    for (link, pin_pose) in state["poses"].as_object().unwrap() {
+        let Some(k) = frames.iter().position(|f| f == link) else {
+            continue;
+        };
+        let (h, g) = (numbers(pin_pose), poses[k].matrix());
+        for r in 0..4 {
+            for c in 0..4 {
+                close(
+                    g[r][c],
+                    h[4 * r + c],
+                    1.0,
+                    &format!("{what}pose of `{link}`"),
+                );
+            }
+        }
+        compared += 1;
+    }
+    assert!(
+        compared + 1 >= state["poses"].as_object().unwrap().len(),
+        "{what}poses compared"
+    );
 }
 
 fn sys_vector<S: System>(n: usize) -> Vector<S::N>
@@ -361,8 +369,12 @@ fn compare_kinematics(fx: &Fixture, label: &str) {
         // (they do not move: its velocity, acceleration and Jacobian scale by m_moving/m).
         let (mut welded_mass, mut welded_moment) = (0.0, [0.0; 3]);
         for (f, frame) in m.frames.iter().enumerate() {
-            let moves = std::iter::successors(Some(f), |&a| m.frames[a].parent)
-                .any(|a| matches!(m.frames[a].joint, model::Joint::Variable(_)));
+            let moves = std::iter::successors(Some(f), |&a| m.frames[a].parent).any(|a| {
+                matches!(
+                    m.frames[a].joint,
+                    model::Joint::Variable(_) | model::Joint::Mimic(_)
+                )
+            });
             let Some(body) = frame.mass.as_ref().filter(|_| !moves) else {
                 continue;
             };
@@ -505,9 +517,6 @@ where
     let perm: Vec<usize> = (fx.variables.iter())
         .map(|name| (0..n).find(|&i| sys.variable_name(i) == name).unwrap())
         .collect();
-    let frames: Vec<String> = (0..sys.frame_count())
-        .map(|k| sys.frame_name(k).to_string())
-        .collect();
     let mut terms = Terms::zeros(sys.dim());
     let mut dynamics = Dynamics::new(&sys);
     let mut motion = ModelMotions::of(&sys);
@@ -569,30 +578,7 @@ where
         for i in 0..n {
             close(qdd[perm[i]], ddq_pin[i], scale(&ddq_pin), &what("q̈"));
         }
-        let mut poses = vec![Pose::IDENTITY; frames.len()];
-        sys.poses(&q, &mut poses);
-        let mut compared = 0;
-        for (link, pin_pose) in state["poses"].as_object().unwrap() {
-            let Some(k) = frames.iter().position(|f| f == link) else {
-                continue;
-            };
-            let (h, g) = (numbers(pin_pose), poses[k].matrix());
-            for r in 0..4 {
-                for c in 0..4 {
-                    close(
-                        g[r][c],
-                        h[4 * r + c],
-                        1.0,
-                        &what(&format!("pose of `{link}`")),
-                    );
-                }
-            }
-            compared += 1;
-        }
-        assert!(
-            compared + 1 >= state["poses"].as_object().unwrap().len(),
-            "{label}: poses compared"
-        );
+        compare_poses(&mut sys, &q, state, &what(""));
     }
 }
 

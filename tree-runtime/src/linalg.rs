@@ -46,14 +46,7 @@ pub fn cholesky_factor_packed(a: &mut [f64], n: usize) -> Result<(), (usize, f64
         let (done, rest) = a.split_at_mut(j * n);
         let col_j = &mut rest[..n];
         let original = col_j[j];
-        // Column j of the factor: a[i][j] −= Σ_k L[i][k] L[j][k] for i ≥ j.
-        for k in 0..j {
-            let col_k = &done[k * n..(k + 1) * n];
-            let ljk = col_k[j];
-            for i in j..n {
-                col_j[i] -= col_k[i] * ljk;
-            }
-        }
+        eliminate(done, col_j, j, n);
         let d = col_j[j];
         // Relative threshold: a pivot lost to rounding is as singular as a zero one.
         let scale = original.abs().max(f64::MIN_POSITIVE);
@@ -69,6 +62,19 @@ pub fn cholesky_factor_packed(a: &mut [f64], n: usize) -> Result<(), (usize, f64
     Ok(())
 }
 
+/// Column `j` of a Cholesky factor from the columns `done` before it:
+/// `a[i][j] −= Σ_k L[i][k] L[j][k]` for `i ≥ j`.
+#[inline(always)]
+fn eliminate(done: &[f64], col_j: &mut [f64], j: usize, n: usize) {
+    for k in 0..j {
+        let col_k = &done[k * n..(k + 1) * n];
+        let ljk = col_k[j];
+        for i in j..n {
+            col_j[i] -= col_k[i] * ljk;
+        }
+    }
+}
+
 /// The weakest pivot of symmetric `A` (`n × n`, column-major in `a[..n²]`, overwritten by
 /// its factor): the smallest `d_j / A_jj` of its Cholesky factorisation `A = L D Lᵀ` and
 /// its index — 1 for a diagonal matrix, near 0 where a variable's motion is nearly another's
@@ -80,13 +86,7 @@ pub(crate) fn weakest_pivot(a: &mut [f64], n: usize) -> Option<(usize, f64)> {
         let (done, rest) = a.split_at_mut(j * n);
         let col_j = &mut rest[..n];
         let original = col_j[j];
-        for k in 0..j {
-            let col_k = &done[k * n..(k + 1) * n];
-            let ljk = col_k[j];
-            for i in j..n {
-                col_j[i] -= col_k[i] * ljk;
-            }
-        }
+        eliminate(done, col_j, j, n);
         let ratio = col_j[j] / original.abs().max(f64::MIN_POSITIVE);
         if weakest.is_none_or(|(_, r)| ratio < r) {
             weakest = Some((j, ratio));
