@@ -51,14 +51,27 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
 
 /// Each variable: what it drives, its start, dynamic or how it is prescribed, its limits.
 fn print_variables(model: &model::Model) -> Result<(), String> {
-    for v in &model.variables {
-        let drives = match v.frame {
+    // The frames that follow each variable (mimics), found in one pass.
+    let mut followers: Vec<Vec<(usize, model::Mimic)>> = vec![Vec::new(); model.variables.len()];
+    for (f, frame) in model.frames.iter().enumerate() {
+        if let model::Joint::Mimic(m) = frame.joint {
+            followers[m.variable].push((f, m));
+        }
+    }
+    for (i, v) in model.variables.iter().enumerate() {
+        let mut drives = match v.frame {
             Some(f) => format!(
                 "drives `{}` by {}",
                 model.frames[f].name, model.frames[f].primitive
             ),
             None => "sets a constraint length".to_string(),
         };
+        // Its followers, as the tree writes their parameter.
+        for (f, m) in &followers[i] {
+            let frame = &model.frames[*f];
+            let (name, primitive) = (&frame.name, frame.primitive);
+            drives += &format!(" and `{name}` by {primitive}({})", m.describe(&v.name));
+        }
         let how = match &v.motion {
             None => format!("dynamic, damping = {}", Given(v.damping)),
             Some(model::Motion::Steady { q0, dq0 }) => {

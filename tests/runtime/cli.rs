@@ -224,6 +224,25 @@ fn check_draws_the_tree() {
     assert!(stdout.contains("└─ torso = rx(roll)"), "{stdout}");
 }
 
+/// `check` names a variable's followers beside its own frame; `--independent-mimics` makes
+/// each URDF mimic joint a variable of its own.
+#[test]
+fn check_names_the_frames_that_follow_a_variable() {
+    let (ok, stdout, stderr) = tree_mech(&["check", "tests/models/mimic.toml"]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains(
+            "grip                 drives `finger_a` by tx and `finger_b` by tx(-1·grip);"
+        ),
+        "{stdout}"
+    );
+    let (ok, stdout, stderr) = tree_mech(&["check", "models/panda-hand.urdf"]);
+    assert!(ok && stdout.contains("8 variables"), "{stdout}{stderr}");
+    let (ok, stdout, stderr) =
+        tree_mech(&["check", "models/panda-hand.urdf", "--independent-mimics"]);
+    assert!(ok && stdout.contains("9 variables"), "{stdout}{stderr}");
+}
+
 #[test]
 fn bad_input_is_a_short_error_and_a_failing_exit() {
     let dir = scratch("bad");
