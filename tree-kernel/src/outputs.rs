@@ -2,7 +2,7 @@
 //! one table the runtime's storage and the compiler's emission both read), and where an
 //! evaluation puts it ([`Sink`]).
 
-use crate::plan::{Follower, TreePlan};
+use crate::plan::TreePlan;
 use crate::scalar::Scalar;
 
 /// One scalar that an evaluation produces. Every evaluation adds its contributions into a
@@ -210,7 +210,8 @@ impl<S: Scalar, K: Sink<S>> Sink<S> for Weighted<'_, S, K> {
 }
 
 /// A sink in front of another that takes what the sweeps produce in full coordinates — the
-/// model's variables, then one per mimic frame ([`Follower`]) — to the model's variables.
+/// model's variables, then one per mimic frame ([`crate::Follower`]) — to the model's
+/// variables.
 /// With `q_full = A q + b` (a follower's row of `A` its multiplier in its leader's column),
 /// `L(q, q̇) = L_full(A q + b, A q̇)`, so every first derivative is `Aᵀ` times the full one and
 /// every second derivative `Aᵀ (·) A`: an output at full indices adds, times the product of
@@ -219,10 +220,8 @@ impl<S: Scalar, K: Sink<S>> Sink<S> for Weighted<'_, S, K> {
 /// becomes an `add` (several full entries land in one), so the storage is cleared first, as
 /// every evaluation's is. Without followers, everything passes on.
 pub struct Contract<'a, K> {
-    /// The mimic frames' variables.
-    pub followers: &'a [Follower],
-    /// The model's number of variables.
-    pub dof: usize,
+    /// The plan whose followers ([`TreePlan::reduced`]) are taken back.
+    pub plan: &'a TreePlan,
     /// Where everything goes.
     pub inner: &'a mut K,
 }
@@ -231,23 +230,16 @@ impl<'a, K> Contract<'a, K> {
     /// In front of `inner`, for `plan`'s followers.
     #[inline(always)]
     pub fn new(plan: &'a TreePlan, inner: &'a mut K) -> Self {
-        Contract {
-            followers: &plan.followers,
-            dof: plan.dof(),
-            inner,
-        }
+        Contract { plan, inner }
     }
 
-    /// Full variable `i` as the model's variable and the factor `∂q_full,i/∂q` (`None`: 1).
+    /// Full variable `i` as the model's variable, its factor `∂q_full,i/∂q` multiplied into
+    /// `factor`.
     #[inline(always)]
     fn reduce(&self, i: usize, factor: &mut f64) -> usize {
-        match i.checked_sub(self.dof) {
-            None => i,
-            Some(k) => {
-                *factor *= self.followers[k].multiplier;
-                self.followers[k].leader
-            }
-        }
+        let (variable, m) = self.plan.reduced(i);
+        *factor *= m;
+        variable
     }
 
     /// `at` at the model's variables, and the product of the multipliers.
@@ -277,7 +269,7 @@ impl<'a, K> Contract<'a, K> {
 impl<S: Scalar, K: Sink<S>> Sink<S> for Contract<'_, K> {
     #[inline(always)]
     fn add(&mut self, at: Output, x: S) {
-        if self.followers.is_empty() {
+        if self.plan.followers.is_empty() {
             return self.inner.add(at, x);
         }
         match self.reduced(at) {
@@ -292,7 +284,7 @@ impl<S: Scalar, K: Sink<S>> Sink<S> for Contract<'_, K> {
             at,
             Output::L | Output::Energy | Output::H(_) | Output::DhDot(_)
         );
-        if self.followers.is_empty() || unindexed {
+        if self.plan.followers.is_empty() || unindexed {
             self.inner.set(at, x)
         } else {
             self.add(at, x)

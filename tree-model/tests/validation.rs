@@ -672,3 +672,23 @@ fn a_body_is_judged_with_the_bodies_welded_to_it() {
         "{e}"
     );
 }
+
+/// The builder's distance constraint takes a number or a variable as its length; a mimic
+/// there is refused in a sentence naming the constraint and the variable.
+#[test]
+fn a_mimic_is_no_constraint_length() {
+    let err = ModelBuilder::new("m")
+        .frame("a", "world", PrimitiveKind::Tx, "x")
+        .mass("a", 1.0, [0.0; 3])
+        .frame("b", "world", PrimitiveKind::Tz, 1.0)
+        .distance("string", "a", "b", tree_model::MimicSpec::new("x"))
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(
+            "distance constraint `string`: a length is a number or a variable, not a mimic of `x`"
+        ),
+        "{err}"
+    );
+}
