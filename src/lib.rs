@@ -71,7 +71,7 @@ struct LibraryExamples;
 #[doc(hidden)]
 pub mod __private {
     pub use tree_kernel::articulated::{pivots_hold, ArticulatedIo};
-    pub use tree_kernel::cpu::fused;
+    pub use tree_kernel::cpu::{fused, Fused, MulAdd, Plain};
     pub use tree_kernel::Scalar;
     pub use tree_kernel::{__unless_fused_only, Order, Pose};
     pub use tree_kernel::{Dual, DualOutputs, Jet, JetOutputs, LANES};
@@ -79,7 +79,7 @@ pub mod __private {
     pub use tree_model as model;
     pub use tree_runtime::nalgebra::Const;
     pub use tree_runtime::Sparsity;
-    pub use tree_runtime::{ConstraintTerms, System, Terms, Vector};
+    pub use tree_runtime::{ConstraintTerms, System, Terms, TreeSystem, Vector};
 }
 
 /// Runs a program's `main` the way a command-line tool should end: an error is printed to

@@ -18,6 +18,11 @@ tree_model!(struct Specialised from "tests/models/specialised.toml");
 tree_model!(struct Elements from "tests/models/elements.toml");
 tree_model!(struct Mimic from "tests/models/mimic.toml");
 tree_model!(struct PandaHand from "models/panda-hand.urdf");
+// The same models compiled lean (as a large model is by default): one variant of the code,
+// the evaluations over dual numbers and jets the interpreted runtime's.
+tree_model!(struct LeanHumanoid from "models/humanoid.toml", lean);
+tree_model!(struct LeanElements from "tests/models/elements.toml", lean);
+tree_model!(struct UnabridgedPendulum from "models/pendulum.toml", lean = false);
 
 tree_model! {
     /// Declared inline.
@@ -359,6 +364,20 @@ fn generated_equals_interpreted_on_every_model() {
     check_equal(Pendulum19, &file_model("models/pendulum-19.toml"), 3);
     check_equal(Humanoid, &file_model("models/humanoid.toml"), 4);
     check_equal(FreeBody, &file_model("models/free-body.toml"), 5);
+}
+
+/// A model compiled lean equals the interpreted runtime as a full one does (its own f64
+/// programs; its dual-number and jet evaluations, constraints' and weighted Hessians'
+/// included, through its interpreted twin), and the macro says which it is.
+#[test]
+fn a_model_compiled_lean_equals_the_interpreted() {
+    assert!(LeanHumanoid::LEAN && LeanElements::LEAN);
+    assert!(!Humanoid::LEAN && !Elements::LEAN && !UnabridgedPendulum::LEAN);
+    assert_eq!(LeanHumanoid::STATEMENTS, Humanoid::STATEMENTS);
+    check_equal(LeanHumanoid, &file_model("models/humanoid.toml"), 4);
+    check_equal(LeanElements, &file_model("tests/models/elements.toml"), 7);
+    common::check_weighted_hessian(&mut LeanElements, 7, 1e-13);
+    check_equal(UnabridgedPendulum, &file_model("models/pendulum.toml"), 1);
 }
 
 /// Mimic frames (a transform following another's variable): the compiled code runs the

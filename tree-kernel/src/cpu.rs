@@ -84,3 +84,35 @@ pub fn force_plain(plain: bool) {
     let choice = if !plain && detected() { FUSED } else { PLAIN };
     CHOICE.store(choice, Ordering::Relaxed);
 }
+
+/// How a generated function's fused multiply-adds are computed: its body is written once,
+/// generic over this, and compiled twice — `a·b + c` rounded twice ([`Plain`], the recorded
+/// operations) and once ([`Fused`], inside a function built for AVX2 and FMA). One body
+/// halves what the compiler checks.
+#[doc(hidden)]
+pub trait MulAdd {
+    /// `a·b + c`.
+    fn mul_add(a: f64, b: f64, c: f64) -> f64;
+}
+
+/// `a·b + c` as two operations, each rounded: the recorded computation.
+#[doc(hidden)]
+pub struct Plain;
+
+/// `a·b + c` rounded once (`f64::mul_add`: one instruction where the caller is built for FMA).
+#[doc(hidden)]
+pub struct Fused;
+
+impl MulAdd for Plain {
+    #[inline(always)]
+    fn mul_add(a: f64, b: f64, c: f64) -> f64 {
+        a * b + c
+    }
+}
+
+impl MulAdd for Fused {
+    #[inline(always)]
+    fn mul_add(a: f64, b: f64, c: f64) -> f64 {
+        a.mul_add(b, c)
+    }
+}

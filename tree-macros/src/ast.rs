@@ -8,6 +8,7 @@ use syn::{braced, bracketed, parenthesized, Ident, LitStr, Token, Visibility};
 mod kw {
     syn::custom_keyword!(from);
     syn::custom_keyword!(floating_base);
+    syn::custom_keyword!(lean);
     syn::custom_keyword!(gravity);
     syn::custom_keyword!(frame);
     syn::custom_keyword!(mass);
@@ -27,6 +28,9 @@ pub struct Input {
     pub vis: Visibility,
     pub name: Ident,
     pub source: Source,
+    /// `lean` / `lean = false` after a file's path: whether the model is compiled lean
+    /// (`expand::LEAN_ABOVE`); `None` decides by its size.
+    pub lean: Option<bool>,
 }
 
 pub enum Source {
@@ -205,11 +209,24 @@ impl Parse for Input {
         if input.peek(kw::from) {
             input.parse::<kw::from>()?;
             let path: LitStr = input.parse()?;
-            let mut floating_base = false;
-            if input.peek(Token![,]) {
+            let (mut floating_base, mut lean) = (false, None);
+            while input.peek(Token![,]) {
                 input.parse::<Token![,]>()?;
-                input.parse::<kw::floating_base>()?;
-                floating_base = true;
+                let lookahead = input.lookahead1();
+                if lookahead.peek(kw::floating_base) {
+                    input.parse::<kw::floating_base>()?;
+                    floating_base = true;
+                } else if lookahead.peek(kw::lean) {
+                    input.parse::<kw::lean>()?;
+                    let mut value = true;
+                    if input.peek(Token![=]) {
+                        input.parse::<Token![=]>()?;
+                        value = input.parse::<syn::LitBool>()?.value;
+                    }
+                    lean = Some(value);
+                } else {
+                    return Err(lookahead.error());
+                }
             }
             input.parse::<Option<Token![;]>>()?;
             if !input.is_empty() {
@@ -220,6 +237,7 @@ impl Parse for Input {
                 vis,
                 name,
                 source: Source::File(path, floating_base),
+                lean,
             });
         }
         input.parse::<Token![;]>()?;
@@ -258,6 +276,7 @@ impl Parse for Input {
             vis,
             name,
             source: Source::Inline(model),
+            lean: None,
         })
     }
 }

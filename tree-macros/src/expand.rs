@@ -16,7 +16,9 @@ use tree_model::{Model, ModelSpec, ParameterSpec, Value};
 
 use crate::ast::{Input, Source};
 use crate::lower;
-use crate::program::{constant, identifier_part, Flavour, Program, Programs};
+use crate::program::{
+    constant, identifier_part, DualPrograms, Flavour, Program, Programs, Variants,
+};
 use crate::system_impl;
 use crate::trace::{self, Term};
 
@@ -130,7 +132,7 @@ fn traced(plan: &TreePlan, order: Order, evaluation: Evaluation) -> Traced {
 /// [`Flavour::F64`]; and the same evaluation handing its outputs to a sink by name
 /// (accumulated: the sink is cleared first), for [`Flavour::Generic`]. `None` without
 /// constraints.
-fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<(Program, Program)> {
+fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Traced> {
     if plan.rows == 0 {
         return None;
     }
@@ -148,11 +150,10 @@ fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<(Program, Pro
     let nonzero = (outputs.into_iter())
         .filter(|(_, t)| !matches!(t, Term::Const(c) if *c == 0.0))
         .collect();
-    let traced = Traced {
+    Some(Traced {
         nodes,
         outputs: nonzero,
-    };
-    Some((traced.clone().assigning(), traced.naming()))
+    })
 }
 
 /// The articulated-body step traced as the interpreted system runs it: the elements' forces
@@ -237,7 +238,7 @@ fn constant_name(prefix: &str, name: &str) -> String {
 }
 
 /// Associated items the expansion defines itself.
-const RESERVED: [&str; 11] = [
+const RESERVED: [&str; 12] = [
     "DOF",
     "INPUTS",
     "INPUT_VARIABLES",
@@ -247,6 +248,7 @@ const RESERVED: [&str; 11] = [
     "DQ0",
     "DAMPING",
     "STATEMENTS",
+    "LEAN",
     "CONSTRAINTS",
     "KINEMATIC",
 ];
@@ -480,7 +482,7 @@ impl<T: Literal> Literal for Vec<T> {
 pub fn expand(input: Input) -> syn::Result<TokenStream> {
     let loaded = load(&input)?;
     let plan = TreePlan::folded(&loaded.model);
-    let programs = Programs::emit(&plan, &loaded.model);
+    let programs = Programs::emit(&plan, &loaded.model, input.lean);
     let declaration = declaration(&input, &loaded, programs.full.statements);
     let inherent = inherent_impl(&input.name, &loaded, &programs)?;
     let system = system_impl::system_impl(&input.name, &loaded.model, &plan, &programs);
@@ -526,16 +528,26 @@ fn load(input: &Input) -> syn::Result<Loaded> {
     })
 }
 
+/// Above this many statements in a full evaluation a model is large (lean, unless the macro
+/// says `lean = false`; `lean` makes a smaller one so): its programs are
+/// compiled as recorded only (no variant for AVX2 and FMA) and its evaluations over dual
+/// numbers and jets are the interpreted runtime's, which keeps a 50-joint robot's build under
+/// a minute (docs/benchmarks.md, "The largest robots"). Past this size the generated code's
+/// gain on a step with its derivatives is some 10–30% (same page), and the dual numbers'
+/// evaluations are most of the code.
+const LEAN_ABOVE: usize = 20_000;
+
 impl Programs {
-    /// Traces and emits every program of `model`'s plan.
-    fn emit(plan: &TreePlan, model: &Model) -> Self {
+    /// Traces and emits every program of `model`'s plan, lean where `lean` says (by its size
+    /// where it says nothing).
+    fn emit(plan: &TreePlan, model: &Model, lean: Option<bool>) -> Self {
         let n = model.dof();
         let var_names: Vec<&str> = model.variables.iter().map(|v| v.name.as_str()).collect();
         let vars = &var_names[..];
         let kinematic: Vec<bool> = model.variables.iter().map(|v| v.is_kinematic()).collect();
         let terms_ty = quote!(::tree_mech::__private::Terms<::tree_mech::__private::Const<#n>>);
         let constraint_ty = quote!(::tree_mech::__private::ConstraintTerms);
-        let (f64_terms, f64_constraints, generic) = (
+        let (f64_terms, f64_constraints) = (
             Flavour::F64 {
                 out_ty: &terms_ty,
                 scratch: true,
@@ -544,7 +556,6 @@ impl Programs {
                 out_ty: &constraint_ty,
                 scratch: true,
             },
-            Flavour::Generic,
         );
         let lagrangian: Evaluation = kernel::evaluate;
         let constraints: Evaluation = kernel::constraints;
@@ -552,12 +563,19 @@ impl Programs {
         let mass: Evaluation = |plan, k, q, _, _, out| kernel::mass(plan, k, q, out);
         // `E = T + V` alone (`System::energy`): velocities and first moments, no columns.
         let energy: Evaluation = |plan, k, q, dq, _, out| kernel::energy(plan, k, q, dq, out);
-        // Every evaluation over f64; those the linearisations differentiate also generic (only
-        // instantiated, over dual numbers, where a program differentiates this model).
         let [l_first, l_dynamics, l_full] =
             [Order::First, Order::Dynamics, Order::Full].map(|o| traced(plan, o, lagrangian));
         let [c_first, c_dynamics, c_full] =
             [Order::First, Order::Dynamics, Order::Full].map(|o| traced(plan, o, constraints));
+        let full = l_full.assigning();
+        let lean = lean.unwrap_or(full.kept() > LEAN_ABOVE);
+        let variants = if lean {
+            Variants::RecordedOnly
+        } else {
+            Variants::Both
+        };
+        let emit =
+            |program: Program, prefix: &str, flavour| program.emit(prefix, vars, flavour, variants);
         let poses = Flavour::F64 {
             out_ty: &quote!([::tree_mech::__private::Pose]),
             scratch: false,
@@ -566,32 +584,63 @@ impl Programs {
             out_ty: &quote!(::tree_mech::__private::ArticulatedIo<#n>),
             scratch: false,
         };
+        let weighted = weighted_program(plan, &kinematic);
+        let duals = (!lean).then(|| DualPrograms {
+            d_dynamics: emit(l_dynamics.naming(), "__d_dynamics", Flavour::Generic),
+            d_full: emit(l_full.naming(), "__d_full", Flavour::Generic),
+            dc_dynamics: emit(c_dynamics.naming(), "__dc_dynamics", Flavour::Generic),
+            dc_full: emit(c_full.naming(), "__dc_full", Flavour::Generic),
+            weighted: (weighted.as_ref())
+                .map(|w| emit(w.naming(), "__dc_weighted", Flavour::Generic)),
+            inverse: emit(inverse_program(plan), "__d_inverse", Flavour::Generic),
+        });
         Programs {
-            first: l_first.assigning().emit("__first", vars, f64_terms),
-            mass: (traced(plan, Order::Dynamics, mass).assigning()).emit("__mass", vars, f64_terms),
-            energy: (traced(plan, Order::First, energy).assigning())
-                .emit("__energy", vars, f64_terms),
-            dynamics: l_dynamics.assigning().emit("__dynamics", vars, f64_terms),
-            full: l_full.assigning().emit("__full", vars, f64_terms),
-            poses: poses_program(plan).emit("__poses", vars, poses),
-            c_first: c_first.assigning().emit("__c_first", vars, f64_constraints),
-            c_dynamics: c_dynamics
-                .assigning()
-                .emit("__c_dynamics", vars, f64_constraints),
-            c_full: c_full.assigning().emit("__c_full", vars, f64_constraints),
-            d_dynamics: l_dynamics.naming().emit("__d_dynamics", vars, generic),
-            d_full: l_full.naming().emit("__d_full", vars, generic),
-            dc_dynamics: c_dynamics.naming().emit("__dc_dynamics", vars, generic),
-            dc_full: c_full.naming().emit("__dc_full", vars, generic),
-            weighted: weighted_program(plan, &kinematic).map(|(assigning, naming)| {
-                (
-                    assigning.emit("__c_weighted", vars, f64_constraints),
-                    naming.emit("__dc_weighted", vars, generic),
-                )
-            }),
+            first: emit(l_first.assigning(), "__first", f64_terms),
+            mass: emit(
+                traced(plan, Order::Dynamics, mass).assigning(),
+                "__mass",
+                f64_terms,
+            ),
+            energy: emit(
+                traced(plan, Order::First, energy).assigning(),
+                "__energy",
+                f64_terms,
+            ),
+            dynamics: emit(l_dynamics.assigning(), "__dynamics", f64_terms),
+            full: emit(full, "__full", f64_terms),
+            poses: emit(poses_program(plan), "__poses", poses),
+            c_first: emit(c_first.assigning(), "__c_first", f64_constraints),
+            c_dynamics: emit(c_dynamics.assigning(), "__c_dynamics", f64_constraints),
+            c_full: emit(c_full.assigning(), "__c_full", f64_constraints),
+            weighted: (weighted.as_ref())
+                .map(|w| emit(w.assigning(), "__c_weighted", f64_constraints)),
             articulated: articulated_program(plan, &kinematic)
-                .map(|program| program.emit("__articulated", vars, articulated)),
-            inverse: inverse_program(plan).emit("__d_inverse", vars, generic),
+                .map(|program| emit(program, "__articulated", articulated)),
+            duals,
+        }
+    }
+}
+
+/// A large model's twin in the interpreted runtime, built once per thread from the model:
+/// what its evaluations over dual numbers and jets call (`system_impl`).
+fn interpreted_twin() -> TokenStream {
+    quote! {
+        /// Runs `f` on this thread's interpreted twin of the model.
+        fn __interpreted<R>(
+            f: impl FnOnce(&mut ::tree_mech::__private::TreeSystem) -> R,
+        ) -> R {
+            ::std::thread_local! {
+                static TWIN: ::core::cell::RefCell<Option<::tree_mech::__private::TreeSystem>> =
+                    const { ::core::cell::RefCell::new(None) };
+            }
+            TWIN.with(|twin| {
+                let mut twin = twin.borrow_mut();
+                let twin = twin.get_or_insert_with(|| {
+                    ::tree_mech::__private::TreeSystem::new(Self::model_ref())
+                        .expect("a model tree_model! compiled builds in the interpreted runtime")
+                });
+                f(twin)
+            })
         }
     }
 }
@@ -677,10 +726,16 @@ fn inherent_impl(
         loaded.floating_base,
     );
     let functions = programs.functions();
+    let lean = programs.duals.is_none();
+    let interpreted = lean.then(interpreted_twin);
     Ok(quote! {
         impl #name {
             /// Number of configuration variables.
             pub const DOF: usize = #n;
+            /// Whether the model is compiled lean: one variant of its code (no AVX2 and FMA
+            /// copy), its evaluations over dual numbers and jets the interpreted runtime's
+            /// (large models, or `lean` after the file's path).
+            pub const LEAN: bool = #lean;
             /// Variable names, in the order of every vector and matrix.
             pub const VARIABLES: [&'static str; #n] = [#(#var_names),*];
             /// Frame names, parents before children.
@@ -720,6 +775,8 @@ fn inherent_impl(
                     ::std::sync::OnceLock::new();
                 MODEL.get_or_init(|| #constructor)
             }
+
+            #interpreted
 
             #(#functions)*
         }

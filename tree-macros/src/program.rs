@@ -1,8 +1,9 @@
 //! A recorded tape turned into Rust: dead statements dropped, the rest split into functions
 //! of bounded size (rustc and LLVM stay linear in the model's size), values that cross a
-//! function boundary passed through one scratch array. Each program is emitted twice: as
-//! recorded, and compiled on x86-64 for AVX2 and FMA — over `f64` with a product read by one
-//! sum fused into it ([`fusions`]) — the second called where the CPU has them
+//! function boundary passed through one scratch array. Each program is compiled twice from
+//! one body per function: as recorded, and on x86-64 for AVX2 and FMA — over `f64` with a
+//! product read by one sum fused into it ([`fusions`]; the recorded variant computes the same
+//! `V::mul_add` as two roundings) — the second called where the CPU has them
 //! (`tree_kernel::cpu::fused`).
 
 use proc_macro2::{Ident, TokenStream};
@@ -12,6 +13,15 @@ use crate::trace::{Node, Term};
 
 /// Statements per generated function.
 const CHUNK: usize = 300;
+
+/// Which variants of a program are compiled: both (the recorded one and the one fused for
+/// AVX2 and FMA, chosen by the CPU), or the recorded one alone (a large model's, which
+/// halves its build).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Variants {
+    Both,
+    RecordedOnly,
+}
 
 /// A recorded computation and the outputs it must assign: `(target expression, value)`.
 pub struct Program {
@@ -216,22 +226,22 @@ fn fusions(
             Node::Add(a, b) => match (product(a, &absorbed), product(b, &absorbed)) {
                 (Some((x, y, m)), _) => {
                     let c = term(b);
-                    (quote!((#x).mul_add(#y, #c)), m)
+                    (quote!(V::mul_add(#x, #y, #c)), m)
                 }
                 (None, Some((x, y, m))) => {
                     let c = term(a);
-                    (quote!((#x).mul_add(#y, #c)), m)
+                    (quote!(V::mul_add(#x, #y, #c)), m)
                 }
                 (None, None) => continue,
             },
             Node::Sub(a, b) => match (product(b, &absorbed), product(a, &absorbed)) {
                 (Some((x, y, m)), _) => {
                     let c = term(a);
-                    (quote!((-(#x)).mul_add(#y, #c)), m)
+                    (quote!(V::mul_add(-(#x), #y, #c)), m)
                 }
                 (None, Some((x, y, m))) => {
                     let c = term(b);
-                    (quote!((#x).mul_add(#y, -(#c))), m)
+                    (quote!(V::mul_add(#x, #y, -(#c))), m)
                 }
                 (None, None) => continue,
             },
@@ -254,8 +264,8 @@ pub struct Emitted {
 }
 
 /// Every program of the expansion, traced from the kernel and emitted: over `f64` into the
-/// runtime's terms (`first` … `c_full`), generic for dual numbers (`d_*`, `dc_*`), and the
-/// optional ones a model may not have.
+/// runtime's terms (`first` … `c_full`), the optional ones a model may not have, and those
+/// over dual numbers and jets (`duals`).
 pub(crate) struct Programs {
     pub(crate) first: Emitted,
     pub(crate) mass: Emitted,
@@ -266,14 +276,24 @@ pub(crate) struct Programs {
     pub(crate) c_first: Emitted,
     pub(crate) c_dynamics: Emitted,
     pub(crate) c_full: Emitted,
+    /// `Σ_r w_r D²h_r` over `f64` (constrained models only).
+    pub(crate) weighted: Option<Emitted>,
+    /// The articulated-body algorithm (models it resolves, without constraints).
+    pub(crate) articulated: Option<Emitted>,
+    /// The generic programs, instantiated over dual numbers and jets; `None` for a large
+    /// model, whose evaluations over them are the interpreted runtime's (`expand::LEAN_ABOVE`).
+    pub(crate) duals: Option<DualPrograms>,
+}
+
+/// The programs over dual numbers and jets (what the linearisations and second step
+/// derivatives differentiate).
+pub(crate) struct DualPrograms {
     pub(crate) d_dynamics: Emitted,
     pub(crate) d_full: Emitted,
     pub(crate) dc_dynamics: Emitted,
     pub(crate) dc_full: Emitted,
-    /// `Σ_r w_r D²h_r` over `f64` and over dual numbers (constrained models only).
-    pub(crate) weighted: Option<(Emitted, Emitted)>,
-    /// The articulated-body algorithm (models it resolves, without constraints).
-    pub(crate) articulated: Option<Emitted>,
+    /// `Σ_r w_r D²h_r` over dual numbers (constrained models only).
+    pub(crate) weighted: Option<Emitted>,
     /// The inverse dynamics and the constraints over jets.
     pub(crate) inverse: Emitted,
 }
@@ -291,15 +311,21 @@ impl Programs {
             &self.c_first,
             &self.c_dynamics,
             &self.c_full,
-            &self.d_dynamics,
-            &self.d_full,
-            &self.dc_dynamics,
-            &self.dc_full,
         ];
-        let weighted = self.weighted.iter().flat_map(|(a, b)| [a, b]);
+        let duals = self.duals.iter().flat_map(|d| {
+            [
+                &d.d_dynamics,
+                &d.d_full,
+                &d.dc_dynamics,
+                &d.dc_full,
+                &d.inverse,
+            ]
+            .into_iter()
+            .chain(d.weighted.iter())
+        });
         (always.into_iter().chain(self.articulated.iter()))
-            .chain(weighted)
-            .chain([&self.inverse])
+            .chain(self.weighted.iter())
+            .chain(duals)
             .map(|e| &e.functions)
     }
 }
@@ -307,43 +333,62 @@ impl Programs {
 impl Program {
     /// Emits the program as functions named `{prefix}_{n}` taking `(q, dq, s, out)`, over
     /// `flavour`'s number type, and their variant `{prefix}_fma_{n}` for AVX2 and FMA; the
-    /// body calls one or the other by the CPU. `variables` names the model's variables (the
-    /// statements reading them are named after them).
-    pub fn emit(&self, prefix: &str, variables: &[&str], flavour: Flavour) -> Emitted {
+    /// body calls one or the other by the CPU. Each chunk's statements are written once, in
+    /// `{prefix}_body_{n}` (over `f64` generic over how its fused multiply-adds round,
+    /// `tree_kernel::cpu::MulAdd`), and inlined into both: the compiler checks them once.
+    /// `variables` names the model's variables (the statements reading them are named after
+    /// them).
+    pub fn emit(
+        &self,
+        prefix: &str,
+        variables: &[&str],
+        flavour: Flavour,
+        variants: Variants,
+    ) -> Emitted {
         let generic = matches!(flavour, Flavour::Generic);
         let names = Names::of(&self.nodes, variables);
         let layout = Layout::of(&self.nodes, self.live_statements());
         let outputs = self.outputs_by_chunk(&layout, &names, generic);
         let signature = Signature::new(&flavour, variables.len(), layout.slots);
-        let uses = self.uses(&layout.kept);
+        let n = self.nodes.len();
+        // Over f64 a product one sum alone reads is fused into it; over a generic scalar the
+        // statements stay as recorded (the dual numbers' lanes are vectorised instead).
+        let (fused, absorbed) = if generic || variants == Variants::RecordedOnly {
+            (vec![None; n], vec![false; n])
+        } else {
+            let uses = self.uses(&layout.kept);
+            let at = (&uses[..], &layout.chunk_of[..], &layout.slot[..]);
+            fusions(&self.nodes, &layout.kept, at, &names)
+        };
+        let variant = Variant {
+            generic,
+            fused: &fused,
+            absorbed: &absorbed,
+        };
         let mut functions = TokenStream::new();
         let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
-        // The recorded program, then its variant for AVX2 and FMA (over f64 with the fusions;
-        // over a generic scalar as recorded, the dual numbers' lanes then vectorised).
-        for fused_variant in [false, true] {
-            let n = self.nodes.len();
-            let (fused, absorbed) = if fused_variant && !generic {
-                let at = (&uses[..], &layout.chunk_of[..], &layout.slot[..]);
-                fusions(&self.nodes, &layout.kept, at, &names)
-            } else {
-                (vec![None; n], vec![false; n])
+        for c in 0..layout.chunks {
+            let body = format_ident!("{}_body_{}", prefix, c);
+            let stmts = self.chunk_statements(c, &layout, &variant, &names, &signature.ty);
+            let chunk_outputs = &outputs[c];
+            functions.extend(signature.body(&body, quote!(#stmts #(#chunk_outputs)*)));
+            let compiled: &[bool] = match variants {
+                Variants::Both => &[false, true],
+                Variants::RecordedOnly => &[false],
             };
-            let variant = Variant {
-                generic,
-                fused_variant,
-                fused: &fused,
-                absorbed: &absorbed,
-            };
-            for c in 0..layout.chunks {
+            for &fused_variant in compiled {
                 let name = if fused_variant {
                     format_ident!("{}_fma_{}", prefix, c)
                 } else {
                     format_ident!("{}_{}", prefix, c)
                 };
-                let stmts = self.chunk_statements(c, &layout, &variant, &names, &signature.ty);
-                let chunk_outputs = &outputs[c];
-                let stmts = quote!(#stmts #(#chunk_outputs)*);
-                functions.extend(chunk_function(&name, &layout, &variant, &signature, stmts));
+                let alone = variants == Variants::RecordedOnly;
+                let function = chunk_function(&name, &body, &layout, fused_variant, &signature);
+                functions.extend(if fused_variant || alone {
+                    function
+                } else {
+                    quote!(::tree_mech::__private::__unless_fused_only! { #function })
+                });
                 let calls = if fused_variant {
                     &mut fused_calls
                 } else {
@@ -352,11 +397,20 @@ impl Program {
                 calls.extend(quote!(Self::#name(q, dq, s, out);));
             }
         }
+        let body = match variants {
+            Variants::Both => dispatch(plain_calls, fused_calls),
+            Variants::RecordedOnly => plain_calls,
+        };
         Emitted {
             functions,
-            body: dispatch(&flavour, layout.slots, plain_calls, fused_calls),
+            body: with_scratch(&flavour, layout.slots, body),
             statements: layout.kept.len(),
         }
+    }
+
+    /// How many statements the outputs read (what is emitted, before fusions).
+    pub fn kept(&self) -> usize {
+        self.live_statements().len()
     }
 
     /// The statements the outputs read, directly or through others (liveness, backwards
@@ -500,12 +554,11 @@ impl Layout {
     }
 }
 
-/// One of the two variants a program is emitted in: as recorded, or fused for AVX2 and FMA
-/// (`fused[i]`: statement i's fused expression; `absorbed[i]`: folded into another).
+/// How a program's statements are written (`fused[i]`: statement i's fused multiply-add,
+/// `V::mul_add(…)`; `absorbed[i]`: folded into another).
 struct Variant<'a> {
     /// Over a generic scalar (else `f64`).
     generic: bool,
-    fused_variant: bool,
     fused: &'a [Option<TokenStream>],
     absorbed: &'a [bool],
 }
@@ -513,45 +566,69 @@ struct Variant<'a> {
 /// The number type and the signature of a program's functions.
 struct Signature {
     ty: TokenStream,
-    of: Box<dyn Fn(&Ident) -> TokenStream>,
+    /// `(q, dq, s, out)` with their types.
+    parameters: TokenStream,
+    generic: bool,
 }
 
 impl Signature {
     fn new(flavour: &Flavour, dof: usize, slots: usize) -> Self {
         match flavour {
-            Flavour::F64 { out_ty, .. } => {
-                let out_ty = (*out_ty).clone();
-                Signature {
-                    ty: quote!(f64),
-                    of: Box::new(
-                        move |name: &Ident| quote!(fn #name(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty)),
-                    ),
-                }
-            }
+            Flavour::F64 { out_ty, .. } => Signature {
+                ty: quote!(f64),
+                parameters: quote!(q: &[f64; #dof], dq: &[f64; #dof], s: &mut [f64; #slots], out: &mut #out_ty),
+                generic: false,
+            },
             Flavour::Generic => Signature {
                 ty: quote!(S),
-                of: Box::new(move |name: &Ident| {
-                    quote!(fn #name<S: ::tree_mech::__private::Scalar>(
-                        q: &[S; #dof],
-                        dq: &[S; #dof],
-                        s: &mut [S; #slots],
-                        out: &mut impl ::tree_mech::__private::Sink<S>,
-                    ))
-                }),
+                parameters: quote!(
+                    q: &[S; #dof],
+                    dq: &[S; #dof],
+                    s: &mut [S; #slots],
+                    out: &mut impl ::tree_mech::__private::Sink<S>,
+                ),
+                generic: true,
             },
+        }
+    }
+
+    /// The type parameter of a function over a generic scalar.
+    fn scalar(&self) -> TokenStream {
+        if self.generic {
+            quote!(<S: ::tree_mech::__private::Scalar>)
+        } else {
+            TokenStream::new()
+        }
+    }
+
+    /// A chunk's statements as one function, inlined into both variants: over `f64`
+    /// generic over how its multiply-adds round (`V`), over a generic scalar as recorded.
+    fn body(&self, name: &Ident, stmts: TokenStream) -> TokenStream {
+        let parameters = &self.parameters;
+        let generics = if self.generic {
+            self.scalar()
+        } else {
+            quote!(<V: ::tree_mech::__private::MulAdd>)
+        };
+        quote! {
+            #[doc(hidden)]
+            #[inline(always)]
+            #[allow(unused_variables, clippy::all)]
+            fn #name #generics(#parameters) {
+                #stmts
+            }
         }
     }
 }
 
-/// One chunk's function: inlined when the program is one chunk; the fused variant compiled
-/// for AVX2 and FMA, the recorded one only where some CPU the build targets needs it (not on
-/// aarch64, nor on x86-64 built for AVX2 and FMA).
+/// One chunk's function of one variant, calling the chunk's body: inlined when the program
+/// is one chunk; the fused variant compiled for AVX2 and FMA.
 fn chunk_function(
     name: &Ident,
+    body: &Ident,
     layout: &Layout,
-    variant: &Variant,
+    fused_variant: bool,
     signature: &Signature,
-    stmts: TokenStream,
 ) -> TokenStream {
     let inline = if layout.chunks == 1 {
         quote!(#[inline(always)])
@@ -559,7 +636,7 @@ fn chunk_function(
         quote!(#[inline(never)])
     };
     // (A function with target features may be inlined, not always.)
-    let attributes = match (variant.fused_variant, layout.chunks) {
+    let attributes = match (fused_variant, layout.chunks) {
         (false, _) => quote!(#inline),
         (true, 1) => quote! {
             #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
@@ -570,34 +647,27 @@ fn chunk_function(
             #[inline(never)]
         },
     };
-    let signature = (signature.of)(name);
-    let function = quote! {
+    let call = match (signature.generic, fused_variant) {
+        (true, _) => quote!(Self::#body(q, dq, s, out)),
+        (false, false) => quote!(Self::#body::<::tree_mech::__private::Plain>(q, dq, s, out)),
+        (false, true) => quote!(Self::#body::<::tree_mech::__private::Fused>(q, dq, s, out)),
+    };
+    let (scalar, parameters) = (signature.scalar(), &signature.parameters);
+    quote! {
         #[doc(hidden)]
         #attributes
-        #[allow(unused_variables, clippy::all)]
-        #signature {
-            #stmts
+        #[allow(clippy::all)]
+        fn #name #scalar(#parameters) {
+            #call
         }
-    };
-    if variant.fused_variant {
-        function
-    } else {
-        quote!(::tree_mech::__private::__unless_fused_only! { #function })
     }
 }
 
-/// The body that calls one variant's functions by the CPU (where every CPU the build
-/// targets runs the fused variant, the recorded one is not compiled: `__unless_fused_only`;
-/// `cpu::fused` is then `true`), with the values passed between functions: the outputs'
-/// scratch (allocated once, never cleared: each slot is written before it is read), or a
-/// local array.
-fn dispatch(
-    flavour: &Flavour,
-    slots: usize,
-    plain_calls: TokenStream,
-    fused_calls: TokenStream,
-) -> TokenStream {
-    let body = quote! {
+/// The calls of one variant or the other by the CPU (where every CPU the build targets runs
+/// the fused variant, the recorded one is not compiled: `__unless_fused_only`; `cpu::fused`
+/// is then `true`).
+fn dispatch(plain_calls: TokenStream, fused_calls: TokenStream) -> TokenStream {
+    quote! {
         if ::tree_mech::__private::fused() {
             // SAFETY: on x86-64 the CPU has AVX2 and FMA (`fused` checked); elsewhere
             // the functions have no target features and the block is plain.
@@ -606,7 +676,12 @@ fn dispatch(
         } else {
             ::tree_mech::__private::__unless_fused_only! { let () = { #plain_calls }; }
         }
-    };
+    }
+}
+
+/// `body` with the values passed between functions: the outputs' scratch (allocated once,
+/// never cleared: each slot is written before it is read), or a local array.
+fn with_scratch(flavour: &Flavour, slots: usize, body: TokenStream) -> TokenStream {
     match flavour {
         Flavour::F64 { scratch: false, .. } => quote! {
             let s = &mut [0.0f64; #slots];
@@ -664,9 +739,9 @@ mod tests {
         let slot = vec![usize::MAX; nodes.len()];
         let (fused, absorbed) = fusions(&nodes, &kept, (&uses, &chunk_of, &slot), &names);
         let shown = |i: usize| fused[i].as_ref().map(|e| e.to_string().replace(' ', ""));
-        assert_eq!(shown(3).as_deref(), Some("(q0_x).mul_add(dq0_x,dq0_x)"));
-        assert_eq!(shown(5).as_deref(), Some("(-(q0_x)).mul_add(2f64,t3)"));
-        assert_eq!(shown(7).as_deref(), Some("(dq0_x).mul_add(dq0_x,-(t5))"));
+        assert_eq!(shown(3).as_deref(), Some("V::mul_add(q0_x,dq0_x,dq0_x)"));
+        assert_eq!(shown(5).as_deref(), Some("V::mul_add(-(q0_x),2f64,t3)"));
+        assert_eq!(shown(7).as_deref(), Some("V::mul_add(dq0_x,dq0_x,-(t5))"));
         assert_eq!((shown(9), shown(10), shown(12)), (None, None, None));
         let gone: Vec<usize> = (0..nodes.len()).filter(|&i| absorbed[i]).collect();
         assert_eq!(gone, [2, 4, 6]);

@@ -7,7 +7,7 @@ use quote::{format_ident, quote};
 use tree_kernel::TreePlan;
 use tree_model::Model;
 
-use crate::program::Programs;
+use crate::program::{DualPrograms, Programs};
 
 /// The `System` impl: what the model is (sizes, names, initial values), then its
 /// evaluations.
@@ -26,13 +26,17 @@ pub(crate) fn system_impl(
         .articulated
         .as_ref()
         .map(|e| articulated_method(n, &e.body));
-    let weighted = programs
-        .weighted
-        .as_ref()
-        .map(|(f64, dual)| weighted_methods(n, &f64.body, &dual.body));
-    let inverse = inverse_method(n, &programs.inverse.body);
+    let weighted = (programs.weighted.as_ref()).map(|f64| weighted_method(n, &f64.body));
     let poses = poses_method(n, model.frames.len(), &programs.poses.body);
-    let dual = dual_methods(n, programs);
+    let dual = match &programs.duals {
+        Some(duals) => {
+            let weighted = (duals.weighted.as_ref()).map(|d| weighted_dual_method(n, &d.body));
+            let inverse = inverse_method(n, &duals.inverse.body);
+            let dual = dual_methods(n, duals);
+            quote!(#weighted #inverse #dual)
+        }
+        None => interpreted_dual_methods(),
+    };
     quote! {
         impl ::tree_mech::__private::System for #name {
             type N = ::tree_mech::__private::Const<#n>;
@@ -47,7 +51,6 @@ pub(crate) fn system_impl(
             #mass_and_energy
             #articulated
             #weighted
-            #inverse
             #poses
             #dual
         }
@@ -273,9 +276,8 @@ fn articulated_method(n: usize, body: &TokenStream) -> TokenStream {
     }
 }
 
-/// `System::weighted_constraint_hessian` and its dual-number form.
-fn weighted_methods(n: usize, f64_body: &TokenStream, dual_body: &TokenStream) -> TokenStream {
-    let wrong = "weighted_constraint_hessian_dual takes one dual number per variable ({})";
+/// `System::weighted_constraint_hessian`.
+fn weighted_method(n: usize, f64_body: &TokenStream) -> TokenStream {
     quote! {
         fn weighted_constraint_hessian(
             &mut self,
@@ -293,7 +295,13 @@ fn weighted_methods(n: usize, f64_body: &TokenStream, dual_body: &TokenStream) -
             let dq = q;
             #f64_body
         }
+    }
+}
 
+/// `System::weighted_constraint_hessian_dual`.
+fn weighted_dual_method(n: usize, dual_body: &TokenStream) -> TokenStream {
+    let wrong = "weighted_constraint_hessian_dual takes one dual number per variable ({})";
+    quote! {
         fn weighted_constraint_hessian_dual(
             &mut self,
             q: &[::tree_mech::__private::Dual],
@@ -356,7 +364,7 @@ fn poses_method(n: usize, nf: usize, body: &TokenStream) -> TokenStream {
 
 /// `System::evaluate_dual` and `System::constraints_dual`: the generic programs over dual
 /// numbers, by order.
-fn dual_methods(n: usize, programs: &Programs) -> TokenStream {
+fn dual_methods(n: usize, programs: &DualPrograms) -> TokenStream {
     // A dual evaluation's slices as arrays of the model's size (a panic naming the method
     // otherwise).
     let dual_arrays = |method: &str| {
@@ -426,6 +434,52 @@ fn dual_by_order(clear: &str, dynamics: &TokenStream, full: &TokenStream) -> Tok
                 out.#clear(::tree_mech::__private::Order::Full);
                 #full
             }
+        }
+    }
+}
+
+/// A large model's evaluations over dual numbers and jets: the interpreted runtime's, on a
+/// twin of the model built once per thread (the same kernel, generic over the scalar).
+fn interpreted_dual_methods() -> TokenStream {
+    let private = quote!(::tree_mech::__private);
+    quote! {
+        fn evaluate_dual(
+            &mut self,
+            q: &[#private::Dual],
+            dq: &[#private::Dual],
+            order: #private::Order,
+            out: &mut #private::DualOutputs,
+        ) {
+            Self::__interpreted(|twin| twin.evaluate_dual(q, dq, order, out))
+        }
+
+        fn constraints_dual(
+            &mut self,
+            q: &[#private::Dual],
+            dq: &[#private::Dual],
+            order: #private::Order,
+            out: &mut #private::DualOutputs,
+        ) {
+            Self::__interpreted(|twin| twin.constraints_dual(q, dq, order, out))
+        }
+
+        fn weighted_constraint_hessian_dual(
+            &mut self,
+            q: &[#private::Dual],
+            weights: &[#private::Dual],
+            out: &mut #private::DualOutputs,
+        ) {
+            Self::__interpreted(|twin| twin.weighted_constraint_hessian_dual(q, weights, out))
+        }
+
+        fn inverse_dynamics_jet(
+            &mut self,
+            q: &[#private::Jet<{ #private::LANES }>],
+            dq: &[#private::Jet<{ #private::LANES }>],
+            qdd: &[f64],
+            out: &mut #private::JetOutputs<{ #private::LANES }>,
+        ) -> bool {
+            Self::__interpreted(|twin| twin.inverse_dynamics_jet(q, dq, qdd, out))
         }
     }
 }
