@@ -39,11 +39,25 @@ def test_configs_are_in_treps_order(recorded):
         assert ours[key] == theirs[key], f"{name}: {key}"
 
 
+def spring_energy(ours, theirs):
+    """What our potentials' ``V`` hold beyond trep's: a NonlinearConfigSpring's, whose ``V``
+    this layer integrates where trep's is 0 (its derivatives are trep's)."""
+    return sum(ours["V_parts"]) - sum(theirs["V_parts"])
+
+
+#: The systems whose energy holds a NonlinearConfigSpring's (trep's V of it is 0).
+SPRING_ENERGY = {"wrenches_and_curves"}
+
+
 @pytest.mark.parametrize("key", ["q", "dq", "L", "E", "L_dq", "L_ddq", "L_dqdq", "L_ddqdq",
                                  "L_ddqddq", "h", "h_dq"])
 def test_lagrangian_and_constraints_match_trep(recorded, key):
     name, ours, theirs = recorded
-    close(ours[key], theirs[key], 1e-12, f"{name} {key}")
+    # L = T − V and E = T + V: ours differ from trep's by the spring's energy alone.
+    shift = {"L": spring_energy(ours, theirs), "E": -spring_energy(ours, theirs)}.get(key, 0.0)
+    if name not in SPRING_ENERGY:
+        assert shift == 0.0, f"{name}: the potentials' energies differ from trep's"
+    close(np.asarray(ours[key]) + shift, theirs[key], 1e-12, f"{name} {key}")
 
 
 @pytest.mark.parametrize("key", ["f", "f_dq", "f_ddq", "f_du", "f_dddk", "lambda",
@@ -143,8 +157,9 @@ def test_the_system_is_left_where_treps_integrator_leaves_it(recorded):
               f"{name} system.{key} after initialize_from_configs")
     assert ours["vi_start_system"]["t"] == pytest.approx(theirs["vi_start_system"]["t"])
     for k, (a, b) in enumerate(zip(ours["vi"], theirs["vi"])):
+        a_system = dict(a["system"], E=a["system"]["E"] - spring_energy(a["system"], b["system"]))
         for key in ("q", "dq", "u", "E"):
-            close(a["system"][key], b["system"][key], max(1e-9, 2 * STEP_TOLERANCE.get(name, 0)),
+            close(a_system[key], b["system"][key], max(1e-9, 2 * STEP_TOLERANCE.get(name, 0)),
                   f"{name} step {k} system {key}")
         assert a["system"]["t"] == pytest.approx(b["system"]["t"], abs=1e-15)
 
@@ -157,7 +172,41 @@ def test_f_leaves_the_accelerations_in_ddq(recorded):
 def test_midpoint_vi_derivatives_match_trep(recorded):
     name, ours, theirs = recorded
     for key, value in theirs["vi_derivatives"].items():
+        if name in SPRING_ENERGY and key.split("_")[1].count("d") == 2:
+            # trep 1.0.2's NonlinearConfigSpring.V_dqdqdq has the wrong sign (+m² f″ where
+            # its own V_dqdq = −m f′ gives −m² f″): the second derivatives through it are
+            # held to central differences instead (the next test).
+            continue
         close(ours["vi_derivatives"][key], value, 1e-10, f"{name} {key}")
+
+
+def test_second_step_derivatives_with_a_nonlinear_spring_are_the_first_ones_differentiated():
+    s = trep_scripts.wrenches_and_curves(trep)
+    dt = 0.01
+    mvi = trep.MidpointVI(s, tolerance=1e-13)
+    mvi.initialize_from_configs(0.0, s.q, dt, s.q)
+    mvi.step(2 * dt)
+    t1, q1, p1, t2 = mvi.t1, np.array(mvi.q1), np.array(mvi.p1), mvi.t2
+    exact = {"q2_dq1dq1": mvi.q2_dq1dq1(), "p2_dq1dq1": mvi.p2_dq1dq1(),
+             "q2_dq1dp1": mvi.q2_dq1dp1(), "p2_dp1dp1": mvi.p2_dp1dp1()}
+
+    def first(q, p):
+        other = trep.MidpointVI(s, tolerance=1e-13)
+        other.initialize_from_state(t1, q, p)
+        other.step(t2)
+        return {"q2_dq1": other.q2_dq1(), "p2_dq1": other.p2_dq1(), "q2_dp1": other.q2_dp1(),
+                "p2_dp1": other.p2_dp1()}
+
+    h = 1e-6
+    for key, (of, by) in {"q2_dq1dq1": ("q2_dq1", "q"), "p2_dq1dq1": ("p2_dq1", "q"),
+                          "q2_dq1dp1": ("q2_dq1", "p"), "p2_dp1dp1": ("p2_dp1", "p")}.items():
+        for j in range(len(q1)):
+            step = np.eye(len(q1))[j] * h
+            plus = first(q1 + step, p1) if by == "q" else first(q1, p1 + step)
+            minus = first(q1 - step, p1) if by == "q" else first(q1, p1 - step)
+            approx = (plus[of] - minus[of]) / (2 * h)  # [output, a] along b_j
+            # trep's layout: [a, b, output].
+            close(exact[key][:, j, :], approx.T, 1e-6, f"{key}[:, {j}, :]")
 
 
 def test_satisfy_constraints_finds_the_configuration_trep_does(recorded):
@@ -213,6 +262,9 @@ UNIQUE_AT_EQUILIBRIUM = {"cart_pendulum_string": ["theta", "phi"],
 
 def test_minimize_potential_energy_finds_treps_equilibrium(recorded):
     name, ours, theirs = recorded
+    if name in SPRING_ENERGY:
+        pytest.skip("trep minimises a NonlinearConfigSpring's V as 0 (and fails here); ours "
+                    "is its integral")
     for label, value in theirs["minimize_potential_energy"].items():
         got = ours["minimize_potential_energy"][label]
         assert got["failed"] == value["failed"], f"{name} ({label}): failed {got['failed']}"
@@ -610,3 +662,87 @@ def test_added_python_terms_of_the_wrong_shape_are_refused_by_name(handed, messa
     m.add_python_terms(lambda *args: [("dL_dq", [2.0], None)])  # and a right one is added
     base = tm.load(str(HERE.parents[1] / "models" / "pendulum.toml")).evaluate([0.3], [0.0])
     assert m.evaluate([0.3], [0.0])["dL_dq"][0] == pytest.approx(base["dL_dq"][0] + 2.0)
+
+
+def test_splines_are_treps():
+    # Every way trep takes points (values, slopes or curvatures at the ends or inside, both,
+    # uneven spacing), on a grid reaching beyond the points (quadratic continuation).
+    for name, theirs in FIXTURE["splines"].items():
+        curve = trep.Spline(trep_scripts.SPLINES[name])
+        for key in ("y", "dy", "ddy"):
+            close([getattr(curve, key)(x) for x in theirs["x"]], theirs[key], 1e-12,
+                  f"spline {name} {key}")
+
+
+def test_a_spline_refuses_what_has_no_curve():
+    with pytest.raises(ValueError, match="x must increase"):
+        trep.Spline([[0, 0], [1, 1], [1, 2]])
+    with pytest.raises(ValueError, match="at least two points"):
+        trep.Spline([[0, 0]])
+    with pytest.raises(ValueError, match="finite"):
+        trep.Spline([[0, 0], [1, float("nan")]])
+
+
+def test_a_splines_integral_is_exact():
+    # The antiderivative (the nonlinear spring's energy) against a fine midpoint sum, inside
+    # and beyond the points.
+    curve = trep.Spline(trep_scripts.SPLINES["mixed"])
+    for a, b in [(0.2, 4.7), (-1.5, 0.5), (4.5, 7.0), (-2.0, 8.0)]:
+        xs = np.linspace(a, b, 200001)
+        mids = 0.5 * (xs[1:] + xs[:-1])
+        approx = float(np.sum([curve.y(x) for x in mids[::1]]) * (xs[1] - xs[0]))
+        assert abs(curve.integral(a, b) - approx) < 1e-8 * max(1.0, abs(approx)), (a, b)
+
+
+def test_a_nonlinear_springs_energy_is_the_integral_of_its_force():
+    s = trep_scripts.wrenches_and_curves(trep)
+    spring = s.potentials[1]
+    x = s.get_config("x")
+    for q in (-1.3, 0.2, 0.9, 2.4):
+        x.q = q
+        dv = spring.V_dq(x)
+        h = 1e-5
+        x.q = q + h
+        plus = spring.V()
+        x.q = q - h
+        minus = spring.V()
+        assert abs((plus - minus) / (2 * h) - dv) < 1e-8 * max(1.0, abs(dv))
+    # The VI conserves the energy it now counts (no damping; the wrenches do work, so
+    # without them): over 500 steps.
+    free = trep.System()
+    free.import_frames([trep.tx("x", name="X", mass=2.0)])
+    trep.potentials.NonlinearConfigSpring(
+        free, "x", trep.Spline(trep_scripts.SPLINES["natural"]), m=1.5, b=0.2)
+    free.q = [0.9]
+    mvi = trep.MidpointVI(free)
+    mvi.initialize_from_configs(0.0, free.q, 0.01, free.q)
+    energies = []
+    for _ in range(500):
+        mvi.step(mvi.t2 + 0.01)
+        energies.append(free.total_energy())
+    assert np.ptp(energies) < 2e-3 * np.max(np.abs(energies))
+    assert np.ptp([e for e in energies]) > 0.0
+
+
+def test_a_tape_measure_is_treps():
+    theirs = FIXTURE["tape_measure"]
+    ours = trep_scripts.tape_measure(trep)
+    for key, value in theirs.items():
+        close(ours[key], value, 1e-12, f"tape {key}")
+
+
+def test_a_tape_measure_checks_itself_and_refuses_a_zero_segment():
+    s = trep_scripts.wrenches_and_curves(trep)
+    s.dq = [0.5, -0.2, 0.1]
+    tape = trep.TapeMeasure(s, ["A", "tip", "X"])
+    for check in ("length_dq", "length_dqdq", "length_dqdqdq", "velocity_dq",
+                  "velocity_ddq", "velocity_dqdq", "velocity_ddqdq"):
+        assert getattr(tape, "validate_" + check)(), check
+    with pytest.raises(ValueError, match="zero length"):
+        trep.TapeMeasure(s, ["A", "A"]).length_dq(s.configs[0])
+
+
+def test_a_wrench_of_inputs_is_refused_by_name():
+    s = trep_scripts.wrenches_and_curves(trep)
+    with pytest.raises(NotImplementedError, match="names an input"):
+        trep.forces.BodyWrench(s, "tip", (0.0, "push", 0.0))

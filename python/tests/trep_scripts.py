@@ -272,9 +272,82 @@ def python_elements(trep):
     return s
 
 
+def wrenches_and_curves(trep):
+    """A two-joint arm (a about x, b about y) beside a slider x on a nonlinear spring: a
+    spline force curve through four points (m = 1.5, b = 0.2), a constant wrench on the tip
+    in its own axes, one on the elbow in world axes and one on the tip in world axes at its
+    origin; gravity."""
+    s = trep.System()
+    s.import_frames([
+        trep.rx("a", name="A"), [
+            trep.tz(-1.0, name="elbow"), [
+                trep.ry("b", name="B"), [
+                    trep.tz(-0.5, mass=(1.0, 0.1, 0.2, 0.3), name="tip")]]],
+        trep.tx("x", name="X", mass=2.0)])
+    trep.potentials.Gravity(s)
+    curve = trep.Spline([[-1.0, -2.0], [0.0, 0.0], [0.5, 1.5], [2.0, 2.0]])
+    trep.potentials.NonlinearConfigSpring(s, "x", curve, m=1.5, b=0.2)
+    trep.forces.BodyWrench(s, "tip", (1.0, -0.5, 0.3, 0.2, 0.1, -0.4))
+    trep.forces.SpatialWrench(s, "B", (0.3, 0.2, -0.1, 0.05, -0.2, 0.1))
+    trep.forces.HybridWrench(s, "tip", (0.5, 0.0, 1.0, 0.1, 0.3, 0.0))
+    s.q = [0.3, -0.4, 0.2]
+    return s
+
+
 SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline),
            ("imported_tree", imported_tree), ("coupled_pendulums", coupled_pendulums),
-           ("pinned_masses", pinned_masses), ("python_elements", python_elements)]
+           ("pinned_masses", pinned_masses), ("python_elements", python_elements),
+           ("wrenches_and_curves", wrenches_and_curves)]
+
+#: Splines through points given every way trep takes them: values alone, slopes or
+#: curvatures at the ends, at interior points, both, unevenly spaced.
+SPLINES = {
+    "two": [[0, 0], [1, 2]],
+    "natural": [[-1, 2], [0, 0], [1, 1], [3, -1]],
+    "clamped": [[0, 0, 1], [1, 1], [2, 0, 0]],
+    "end_curvatures": [[0, 0, 1, 0], [1, 1], [2, 0, None, 2]],
+    "first_slope": [[0, 0, 1], [1, 1], [2, 0]],
+    "first_curvature": [[0, 0, None, 1], [1, 1], [2, 0]],
+    "interior_slope": [[0, 0], [1, 1, 0], [2, 0], [3, 1]],
+    "interior_curvature": [[0, 0], [1, 1, None, 1], [2, 0], [3, 1]],
+    "interior_both": [[0, 0], [1, 1, 0, 1], [2, 0], [3, 1]],
+    "every_derivative": [[0, 0, 1, 0], [1, 1, 0, 1], [2, 0, 1, 0]],
+    "both_ends_full": [[0, 0, 1, 0], [1, 1], [2, 0], [3, 1, 1, 0]],
+    "mixed": [[0, 0], [1, 1, 0, 0], [2, 0], [3, 1], [4, 0, 1, 1], [5, 1]],
+    "slopes_and_a_full_end": [[0, 0, 1, 0], [1, 1, 0], [2, 0, 1], [3, 1]],
+    "slope_inside_full_ends": [[0, 0, 1, 0], [1, 1, 0], [2, 0], [3, 1, 1, 0]],
+    "uneven": [[-0.3, 0.2], [0.1, -0.5], [0.25, 0.4], [0.9, 1.3], [1.7, -0.2]],
+}
+
+
+def splines(trep):
+    """Each spline's value, slope and curvature on a grid reaching beyond its points."""
+    out = {}
+    for name, points in sorted(SPLINES.items()):
+        curve = trep.Spline(points)
+        lo, hi = points[0][0], points[-1][0]
+        xs = [lo - 0.7 + (hi - lo + 1.4) * i / 40.0 for i in range(41)]
+        out[name] = {"x": xs, "y": [curve.y(x) for x in xs], "dy": [curve.dy(x) for x in xs],
+                     "ddy": [curve.ddy(x) for x in xs]}
+    return out
+
+
+def tape_measure(trep):
+    """A tape from the arm's pivot through its tip to the slider, at a moving state: its
+    length, rate and every derivative trep gives."""
+    s = wrenches_and_curves(trep)
+    s.dq = [0.5, -0.2, 0.1]
+    tape = trep.TapeMeasure(s, ["A", "tip", "X"])
+    cs = s.configs
+    return {"length": tape.length(), "velocity": tape.velocity(),
+            "length_dq": [tape.length_dq(a) for a in cs],
+            "length_dqdq": [[tape.length_dqdq(a, b) for b in cs] for a in cs],
+            "length_dqdqdq": [[[tape.length_dqdqdq(a, b, c) for c in cs] for b in cs]
+                              for a in cs],
+            "velocity_dq": [tape.velocity_dq(a) for a in cs],
+            "velocity_ddq": [tape.velocity_ddq(a) for a in cs],
+            "velocity_dqdq": [[tape.velocity_dqdq(a, b) for b in cs] for a in cs],
+            "velocity_ddqdq": [[tape.velocity_ddqdq(a, b) for b in cs] for a in cs]}
 
 
 def _list(x):
@@ -296,6 +369,7 @@ def record(trep, build):
         s.u = [0.4 + 0.2 * i for i in range(s.nu)]
     out["q"], out["dq"] = _list(s.q), _list(s.dq)
     out["L"], out["E"] = s.L(), s.total_energy()
+    out["V_parts"] = [p.V() for p in s.potentials]
     cs = s.configs
     out["L_dq"] = [s.L_dq(a) for a in cs]
     out["L_ddq"] = [s.L_ddq(a) for a in cs]
@@ -345,7 +419,8 @@ def record(trep, build):
         steps.append({"t2": mvi.t2, "q2": _list(mvi.q2), "p2": _list(mvi.p2),
                       "lambda1": _list(mvi.lambda1),
                       "system": {"q": _list(s.q), "dq": _list(s.dq), "t": s.t, "u": _list(s.u),
-                                 "E": s.total_energy()}})
+                                 "E": s.total_energy(),
+                                 "V_parts": [p.V() for p in s.potentials]}})
     out["vi"] = steps
     d = {}
     inputs = ["q1", "p1", "u1", "k2"]

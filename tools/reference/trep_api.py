@@ -54,6 +54,8 @@ out['puppet'] = {'configs': [c.name for c in s.configs],
                  'q100': [float(x) for x in trep_scripts.step_puppet(trep, s, 100, 0.01)]}
 out['energy_pump'] = trep_scripts.energy_pump(trep)
 out['puppet_module'] = trep_scripts.puppet_module(trep)
+out['splines'] = trep_scripts.splines(trep)
+out['tape_measure'] = trep_scripts.tape_measure(trep)
 path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-api.json')
 with open(path, 'w') as f:
     json.dump(out, f, indent=1, sort_keys=True)

@@ -33,6 +33,8 @@ from ._core import (
     ty,
     tz,
 )
+from ._spline import Spline
+from ._tape import TapeMeasure
 from ._trajectory import load_trajectory, save_trajectory
 from . import discopt  # noqa: E402 (needs the core above)
 from . import puppets, system  # noqa: E402 (need the core above)
@@ -42,7 +44,8 @@ __version__ = "v1.0.2"
 
 __all__ = [
     "CONST_SE3", "RX", "RY", "RZ", "TX", "TY", "TZ", "WORLD", "Config", "Constraint",
-    "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "System",
+    "ConvergenceError", "Force", "Frame", "Input", "MidpointVI", "Potential", "Spline", "System",
+    "TapeMeasure",
     "constraints", "discopt", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
     "const_se3", "const_txyz", "load_trajectory", "puppets", "save_trajectory", "system",
 ]

@@ -439,6 +439,22 @@ class Frame:
             s1, s2 = s2, s1
         return s1 @ s2 @ self.g()
 
+    def g_dqdqdq(self, q1: Config, q2: Config, q3: Config) -> np.ndarray:
+        """``∂³g/∂q1∂q2∂q3`` (4×4): the spatial generators in order from the root, then ``g``
+        (each ``∂/∂q_i`` multiplies by ``S_i`` from the left, the nearer the root the
+        further left)."""
+        spatial = [(q.frame._depth(), self._spatial(q)) for q in (q1, q2, q3)]
+        if any(x is None for _, x in spatial):
+            return np.zeros((4, 4))
+        out = self.g()
+        for _, x in sorted(spatial, key=lambda d: -d[0]):
+            out = x @ out
+        return out
+
+    def p_dqdqdq(self, q1: Config, q2: Config, q3: Config) -> np.ndarray:
+        """``∂³p/∂q1∂q2∂q3``, homogeneous."""
+        return self.g_dqdqdq(q1, q2, q3)[:, 3].copy()
+
     def p_dq(self, q1: Config) -> np.ndarray:
         """``∂p/∂q1``, homogeneous (last entry 0)."""
         return self.g_dq(q1)[:, 3].copy()
@@ -599,6 +615,7 @@ class System:
 
     def _structure_changed(self) -> None:
         self._model = None
+        self._kinematic_twin = None
         self._cache = {}
         if self._holds:
             return
@@ -910,6 +927,14 @@ class System:
             self._add_python_terms()
         return self._model
 
+    def _twin(self) -> _native.Model:
+        """The native model without the Python elements (their frames' poses and velocities,
+        evaluated while the runtime calls them back), built once per structure."""
+        if getattr(self, "_kinematic_twin", None) is None:
+            self._native_model()
+            self._kinematic_twin = _loads_generated(self._toml())
+        return self._kinematic_twin
+
     def _add_python_terms(self) -> None:
         """The script's own potentials, forces and constraints (written in Python), added to
         the native model's terms: the runtime calls them back on every evaluation."""
@@ -953,9 +978,11 @@ class System:
         return out
 
     def _state(self) -> Dict[str, Any]:
-        """The model evaluated at the current state (cached until the state changes)."""
+        """The model evaluated at the current state (cached until the state changes). Inside
+        a call back from the runtime (a Python element reading a frame), the model without
+        the Python elements: the runtime is in the middle of evaluating the other."""
         if "state" not in self._cache:
-            m = self._native_model()
+            m = self._twin() if getattr(self, "_in_callback", False) else self._native_model()
             self._cache["state"] = self._native_call(lambda: m.evaluate(
                 self._to_model(self._q), self._to_model(self._dq), self.t,
                 self._u if self.nu else None, ddq=self._to_model(self._ddq)))

@@ -26,9 +26,11 @@ ORDER_DYNAMICS, ORDER_FULL = 1, 2
 
 
 def defined_in_python(part: Any) -> bool:
-    """Whether a potential, force or constraint is a script's own subclass (not one of the
-    layer's built-in elements, which become model text)."""
-    return not type(part).__module__.startswith("tree_mech.")
+    """Whether a potential, force or constraint is called back: a script's own subclass, or
+    one of the layer's elements that is no model text (``_called_back``: the wrenches, the
+    nonlinear spring)."""
+    return (getattr(part, "_called_back", False)
+            or not type(part).__module__.startswith("tree_mech."))
 
 
 def _grid(configs: Any, rank: int, entry) -> List[float]:
@@ -90,11 +92,13 @@ class PythonTerms:
         """Puts the system at ``(q, q̇)`` (model order), evaluates, and puts it back."""
         s = self.system
         perm = s._perm
-        kept = (s._q.copy(), s._dq.copy())
+        kept = (s._q.copy(), s._dq.copy(), s._cache)
         if self.identity:
             s._q[:], s._dq[:] = q, dq
         else:
             s._q[:], s._dq[:] = np.asarray(q)[perm], np.asarray(dq)[perm]
+        # A frame read now is evaluated at this state, on the model without these elements.
+        s._cache, s._in_callback = {}, True
         try:
             if along is not None:
                 along = (np.asarray(along[0])[perm], np.asarray(along[1])[perm])
@@ -105,7 +109,8 @@ class PythonTerms:
                 if kind == "terms":
                     entries += self._forces(order, along)
         finally:
-            s._q[:], s._dq[:] = kept
+            s._q[:], s._dq[:], s._cache = kept
+            s._in_callback = False
         return [(key, self._model_order(key, value),
                  None if tangent is None else self._model_order(key, tangent))
                 for key, value, tangent in entries]

@@ -1,14 +1,17 @@
 """trep's forces: ``Damping(system, default_damping=0.0, damping=None, name=None)``,
 ``ConfigForce(system, config, finput, name=None)`` (an input pushing on a config) and
 ``LinearDamper(system, frame1, frame2, c, name=None)`` — each writes its own part of the
-system's model file."""
+system's model file — and the constant wrenches ``BodyWrench``, ``SpatialWrench``,
+``HybridWrench`` ``(system, frame, wrench=(), name=None)``, called back by the runtime."""
 from __future__ import annotations
 
 from typing import Any, Dict, List, Optional
 
 from ._core import Config, Force, Input, System, _BetweenFrames, _toml_string
+from ._wrenches import BodyWrench, HybridWrench, SpatialWrench
 
-__all__ = ["ConfigForce", "Damping", "LinearDamper"]
+__all__ = ["BodyWrench", "ConfigForce", "Damping", "HybridWrench", "LinearDamper",
+           "SpatialWrench"]
 
 
 class Damping(Force):
