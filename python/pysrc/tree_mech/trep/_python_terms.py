@@ -43,6 +43,15 @@ def _grid(configs: Any, rank: int, entry) -> List[float]:
     return [entry(a, b, c) for a in configs for b in configs for c in configs]
 
 
+def _total(parts: List[Any], name: str):
+    """The parts' method ``name`` summed, as one callable (the method itself for one part:
+    this runs several times a step)."""
+    methods = [getattr(p, name) for p in parts]
+    if len(methods) == 1:
+        return methods[0]
+    return lambda *args: sum(m(*args) for m in methods)
+
+
 def _array(values: List[float], n: int, rank: int) -> np.ndarray:
     """Flat values as an n × … × n array (for the derivatives along a direction)."""
     return np.asarray(values, dtype=float).reshape((n,) * rank)
@@ -137,22 +146,25 @@ class PythonTerms:
         ps = self.parts()[0]
         configs = self.system._configs
         n = len(configs)
-        lagrangian = -sum(p.V() for p in ps)
+        lagrangian = -_total(ps, "V")()
         if energy_only and along is None:
             return [("L", [lagrangian], None)]
-        dl = _grid(configs, 1, lambda a: -sum(p.V_dq(a) for p in ps))
+        v_dq = _total(ps, "V_dq")
+        dl = [-v_dq(a) for a in configs]
         if along is None and order != ORDER_FULL:
             return [("L", [lagrangian], None), ("dL_dq", dl, None)]
         dq_along = along[0] if along is not None else None
         if energy_only:
             return [("L", [lagrangian], [float(np.dot(dl, dq_along))])]
-        d2l = _grid(configs, 2, lambda a, b: -sum(p.V_dqdq(a, b) for p in ps))
+        v_dqdq = _total(ps, "V_dqdq")
+        d2l = [-v_dqdq(a, b) for a in configs for b in configs]
         if along is None:
             return [("L", [lagrangian], None), ("dL_dq", dl, None), ("d2L_dqdq", d2l, None)]
         out = [("L", [lagrangian], [float(np.dot(dl, dq_along))]),
                ("dL_dq", dl, _array(d2l, n, 2) @ dq_along)]
         if order == ORDER_FULL:
-            d3l = _grid(configs, 3, lambda a, b, c: -sum(p.V_dqdqdq(a, b, c) for p in ps))
+            v_dqdqdq = _total(ps, "V_dqdqdq")
+            d3l = _grid(configs, 3, lambda a, b, c: -v_dqdqdq(a, b, c))
             out.append(("d2L_dqdq", d2l, _array(d3l, n, 3) @ dq_along))
         return out
 
@@ -169,11 +181,13 @@ class PythonTerms:
         def each(name: str, rank: int) -> List[float]:
             """The forces' ``name`` method summed, rows on the dynamic configs only."""
             zeros = [0.0] * ((n - nd) * n ** (rank - 1))
+            method = _total(fs, name)
             if rank == 1:
-                return [sum(getattr(x, name)(a) for x in fs) for a in configs[:nd]] + zeros
+                return [method(a) for a in configs[:nd]] + zeros
+            if rank == 2:
+                return [method(a, b) for a in configs[:nd] for b in configs] + zeros
             rest = _grid(configs, rank - 1, lambda *b: b)
-            return [sum(getattr(x, name)(a, *b) for x in fs)
-                    for a in configs[:nd] for b in rest] + zeros
+            return [method(a, *b) for a in configs[:nd] for b in rest] + zeros
 
         f = each("f", 1)
         full = order == ORDER_FULL
