@@ -328,7 +328,8 @@ def splines(trep):
         lo, hi = points[0][0], points[-1][0]
         xs = [lo - 0.7 + (hi - lo + 1.4) * i / 40.0 for i in range(41)]
         out[name] = {"x": xs, "y": [curve.y(x) for x in xs], "dy": [curve.dy(x) for x in xs],
-                     "ddy": [curve.ddy(x) for x in xs]}
+                     "ddy": [curve.ddy(x) for x in xs],
+                     "coefficients": _list(curve.coefficients)}
     return out
 
 

@@ -220,6 +220,23 @@ class Spline:
         """The points' y (read-only)."""
         return self._y.copy()
 
+    @property
+    def coefficients(self) -> np.ndarray:
+        """trep's table: a row of six coefficients (highest power first) for the quadratic
+        before the points, for each piece (in ``t = x − x_i``) and for the quadratic after
+        the points (in ``t = x − x_N``). trep writes the first in ``t = x − (x₀ − h)`` with
+        ``h`` the *last* piece's width (its previous piece, counted from the end)."""
+        xs = self._x
+        rows = np.zeros((len(xs) + 1, 6))
+        for i, c in enumerate(self._pieces):
+            rows[i + 1, 6 - len(c):] = c[::-1]
+        for row, (y, dy, ddy), shift in ((0, self._ends[0], -(xs[-1] - xs[-2])),
+                                         (len(xs), self._ends[1], 0.0)):
+            # The end's quadratic re-expanded about x_end + shift.
+            rows[row, 3:] = [0.5 * ddy, dy + ddy * shift,
+                             y + dy * shift + 0.5 * ddy * shift ** 2]
+        return rows
+
     def copy(self) -> "Spline":
         """An independent copy."""
         new = object.__new__(Spline)
