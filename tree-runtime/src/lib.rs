@@ -3,7 +3,8 @@
 //! Simulation of mechanical systems described as trees of frames (Johnson & Murphey): the
 //! [`System`] trait that interpreted and generated systems share, its [`Terms`] and
 //! [`ConstraintTerms`], the interpreted [`TreeSystem`], continuous [`dynamics`], the
-//! integrators in [`integrate`], the recorded [`Trajectory`] and the errors ([`SimError`]).
+//! integrators in [`integrate`], the recorded [`Trajectory`] and the errors ([`SimError`]);
+//! and [`cone`], the second-order cone's algebra the contact solver is to use.
 //!
 //! Beneath them, the kernel (`tree-kernel`): the recursions over any scalar, evaluated here
 //! over `f64`, dual numbers and SIMD lanes, and compiled by `tree_model!` with a tracing
@@ -22,6 +23,7 @@
 #![warn(missing_docs)]
 
 pub mod batch;
+pub mod cone;
 mod context;
 pub mod dynamics;
 mod error;

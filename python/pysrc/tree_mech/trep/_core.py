@@ -85,9 +85,12 @@ class Config:
         return self._frame
 
     # Read directly (a script's own elements read them many times an evaluation).
-    q = property(lambda self: self._system._q.item(self.index),
+    # (Inside a call back from the runtime the state is a plain list: see PythonTerms._at.)
+    q = property(lambda self: (self._system._q[self.index] if self._system._in_callback
+                               else self._system._q.item(self.index)),
                  lambda self, v: self._put("_q", v), doc="The config's value.")
-    dq = property(lambda self: self._system._dq.item(self.index),
+    dq = property(lambda self: (self._system._dq[self.index] if self._system._in_callback
+                                else self._system._dq.item(self.index)),
                   lambda self, v: self._put("_dq", v), doc="Its velocity.")
     ddq = property(lambda self: self._system._ddq.item(self.index),
                    lambda self, v: self._put("_ddq", v),
@@ -583,6 +586,9 @@ class System:
         self._dyn: tuple = ()
         self._kin: tuple = ()
         self._model: Optional[_native.Model] = None
+        #: Whether the runtime is calling the script's elements back (the state is then
+        #: plain lists, frames are read on the twin model: ``_state``).
+        self._in_callback = False
         # The script's own elements, called back by the native model (_add_python_terms).
         self._terms: Optional[PythonTerms] = None
         self._python_parts: Optional[tuple] = None
@@ -982,7 +988,7 @@ class System:
         a call back from the runtime (a Python element reading a frame), the model without
         the Python elements: the runtime is in the middle of evaluating the other."""
         if "state" not in self._cache:
-            m = self._twin() if getattr(self, "_in_callback", False) else self._native_model()
+            m = self._twin() if self._in_callback else self._native_model()
             self._cache["state"] = self._native_call(lambda: m.evaluate(
                 self._to_model(self._q), self._to_model(self._dq), self.t,
                 self._u if self.nu else None, ddq=self._to_model(self._ddq)))

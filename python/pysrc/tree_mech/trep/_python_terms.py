@@ -101,12 +101,14 @@ class PythonTerms:
         """Puts the system at ``(q, q̇)`` (model order), evaluates, and puts it back."""
         s = self.system
         perm = s._perm
-        kept = (s._q.copy(), s._dq.copy(), s._cache)
+        kept = (s._q, s._dq, s._cache)
+        # The state as plain lists while the script's methods read it (a list is read
+        # several times faster than an array); a frame read now is evaluated at this state,
+        # on the model without these elements.
         if self.identity:
-            s._q[:], s._dq[:] = q, dq
+            s._q, s._dq = q.tolist(), dq.tolist()
         else:
-            s._q[:], s._dq[:] = np.asarray(q)[perm], np.asarray(dq)[perm]
-        # A frame read now is evaluated at this state, on the model without these elements.
+            s._q, s._dq = np.asarray(q)[perm].tolist(), np.asarray(dq)[perm].tolist()
         s._cache, s._in_callback = {}, True
         try:
             if along is not None:
@@ -118,7 +120,7 @@ class PythonTerms:
                 if kind == "terms":
                     entries += self._forces(order, along)
         finally:
-            s._q[:], s._dq[:], s._cache = kept
+            s._q, s._dq, s._cache = kept
             s._in_callback = False
         return [(key, self._model_order(key, value),
                  None if tangent is None else self._model_order(key, tangent))
@@ -220,7 +222,7 @@ class PythonTerms:
         if along is None and order < ORDER_DYNAMICS:
             return [("h", h, None), ("Dh", dh, None)]
         d2h = np.asarray(each("h_dqdq", 2), dtype=float).reshape(m, n, n)
-        dq = s._dq.copy()
+        dq = np.array(s._dq)
         out = [("h", h, None if along is None else np.asarray(dh).reshape(m, n) @ along[0]),
                ("Dh", dh, None if along is None else d2h @ along[0])]
         d3h = None
