@@ -748,3 +748,27 @@ def test_a_wrench_of_inputs_is_refused_by_name():
     s = trep_scripts.wrenches_and_curves(trep)
     with pytest.raises(NotImplementedError, match="names an input"):
         trep.forces.BodyWrench(s, "tip", (0.0, "push", 0.0))
+
+
+def test_the_frames_fourth_derivatives_are_their_thirds_differentiated():
+    # vb_dqdqdq and g/p_dqdqdqdq (no fixture: trep's tensors would be megabytes) against
+    # central differences of the third derivatives, which are held to trep's.
+    s = trep_scripts.wrenches_and_curves(trep)
+    s.dq = [0.5, -0.2, 0.1]
+    cs = s.configs
+    h = 1e-6
+    for name in ("tip", "B"):
+        f = s.get_frame(name)
+        for a in cs:
+            for b in cs:
+                for c in cs:
+                    kept = c.q
+                    c.q = kept + h
+                    vb_plus, p_plus = f.vb_dqdq(a, b), f.p_dqdqdq(a, b, a)
+                    c.q = kept - h
+                    vb_minus, p_minus = f.vb_dqdq(a, b), f.p_dqdqdq(a, b, a)
+                    c.q = kept
+                    close(f.vb_dqdqdq(a, b, c), (vb_plus - vb_minus) / (2 * h), 1e-7,
+                          f"{name}.vb_dqdqdq({a.name}, {b.name}, {c.name})")
+                    close(f.p_dqdqdqdq(a, b, a, c), (p_plus - p_minus) / (2 * h), 1e-7,
+                          f"{name}.p_dqdqdqdq")

@@ -399,7 +399,16 @@ def record(trep, build):
                   "vb_ddq": [_list(f.vb_ddq(a)) for a in cs],
                   "g_inv": _list(f.g_inv()), "g_inv_dq": [_list(f.g_inv_dq(a)) for a in cs],
                   "lg": _list(f.lg()), "lg_dq": _list(f.lg_dq()),
-                  "twist_hat": _list(f.twist_hat())})
+                  "twist_hat": _list(f.twist_hat()),
+                  "g_inv_dqdq": [[_list(f.g_inv_dqdq(a, b)) for b in cs] for a in cs],
+                  "vb_dqdq": [[_list(f.vb_dqdq(a, b)) for b in cs] for a in cs],
+                  "vb_ddqdq": [[_list(f.vb_ddqdq(a, b)) for b in cs] for a in cs],
+                  "p_dqdqdq": [[[_list(f.p_dqdqdq(a, b, c)) for c in cs] for b in cs]
+                               for a in cs],
+                  "vb_ddqdqdq": [[[_list(f.vb_ddqdqdq(a, b, c)) for c in cs] for b in cs]
+                                 for a in cs],
+                  "lg_dqdq": _list(f.lg_dqdq()), "lg_inv": _list(f.lg_inv()),
+                  "lg_inv_dq": _list(f.lg_inv_dq()), "lg_inv_dqdq": _list(f.lg_inv_dqdq())})
         for f in s.frames if f.name is not None and f.name != "World")
     out["h"] = [c.h() for c in s.constraints]
     out["h_dq"] = [[c.h_dq(a) for a in cs] for c in s.constraints]

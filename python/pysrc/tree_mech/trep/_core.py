@@ -18,6 +18,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .. import _native
+from . import _products as products
 from ._python_terms import PythonTerms, defined_in_python
 
 WORLD = "world"
@@ -442,21 +443,34 @@ class Frame:
             s1, s2 = s2, s1
         return s1 @ s2 @ self.g()
 
-    def g_dqdqdq(self, q1: Config, q2: Config, q3: Config) -> np.ndarray:
-        """``∂³g/∂q1∂q2∂q3`` (4×4): the spatial generators in order from the root, then ``g``
-        (each ``∂/∂q_i`` multiplies by ``S_i`` from the left, the nearer the root the
-        further left)."""
-        spatial = [(q.frame._depth(), self._spatial(q)) for q in (q1, q2, q3)]
-        if any(x is None for _, x in spatial):
+    def _pose_by(self, configs: tuple) -> np.ndarray:
+        """``∂^S g`` for the configs ``S``: their spatial generators in order from the root,
+        then ``g`` (each ``∂/∂q_i`` multiplies by ``S_i`` from the left, the nearer the root
+        the further left); zero where one does not move this frame."""
+        spatial = [self._spatial(q) for q in configs]
+        if any(x is None for x in spatial):
             return np.zeros((4, 4))
         out = self.g()
-        for _, x in sorted(spatial, key=lambda d: -d[0]):
+        depths = [q.frame._depth() for q in configs]
+        for _, x in sorted(zip(depths, spatial), key=lambda d: -d[0]):
             out = x @ out
         return out
+
+    def g_dqdqdq(self, q1: Config, q2: Config, q3: Config) -> np.ndarray:
+        """``∂³g/∂q1∂q2∂q3`` (4×4)."""
+        return self._pose_by((q1, q2, q3))
+
+    def g_dqdqdqdq(self, q1: Config, q2: Config, q3: Config, q4: Config) -> np.ndarray:
+        """``∂⁴g/∂q1∂q2∂q3∂q4`` (4×4)."""
+        return self._pose_by((q1, q2, q3, q4))
 
     def p_dqdqdq(self, q1: Config, q2: Config, q3: Config) -> np.ndarray:
         """``∂³p/∂q1∂q2∂q3``, homogeneous."""
         return self.g_dqdqdq(q1, q2, q3)[:, 3].copy()
+
+    def p_dqdqdqdq(self, q1: Config, q2: Config, q3: Config, q4: Config) -> np.ndarray:
+        """``∂⁴p/∂q1∂q2∂q3∂q4``, homogeneous."""
+        return self.g_dqdqdqdq(q1, q2, q3, q4)[:, 3].copy()
 
     def p_dq(self, q1: Config) -> np.ndarray:
         """``∂p/∂q1``, homogeneous (last entry 0)."""
@@ -484,12 +498,45 @@ class Frame:
         """``∂v̂_b/∂q̇1 = g⁻¹ ∂g/∂q1`` (4×4)."""
         return self.g_inv() @ self.g_dq(dq1)
 
+    def g_inv_dqdq(self, q1: Config, q2: Config) -> np.ndarray:
+        """``∂²g⁻¹/∂q1∂q2`` (the product rule on ``∂g⁻¹ = −g⁻¹ ∂g g⁻¹``)."""
+        return products.value(self, products.derivatives([(1.0, (("inv",),))], q1, q2))
+
+    def _body_rate(self, *by: Config) -> np.ndarray:
+        """``∂^by v̂_b`` of ``v̂_b = Σ_i q̇_i g⁻¹ ∂g/∂q_i``."""
+        out = np.zeros((4, 4))
+        for c in self._system.configs:
+            if c.dq != 0.0 and self.uses_config(c):
+                terms = products.derivatives([(1.0, (("inv",), ("g", (c,))))], *by)
+                out += c.dq * products.value(self, terms)
+        return out
+
+    def _body_column(self, dq1: Config, *by: Config) -> np.ndarray:
+        """``∂^by (g⁻¹ ∂g/∂q1)``: the body velocity's column for ``q̇1``, differentiated."""
+        if not self.uses_config(dq1):
+            return np.zeros((4, 4))
+        return products.value(self, products.derivatives([(1.0, (("inv",), ("g", (dq1,))))],
+                                                          *by))
+
     def vb_dq(self, q1: Config) -> np.ndarray:
         """``∂v̂_b/∂q1`` of ``v̂_b = g⁻¹ ġ`` (4×4)."""
-        s = self._system
-        inv = self.g_inv()
-        d_rate = sum((self.g_dqdq(c, q1) * c.dq for c in s.configs), np.zeros((4, 4)))
-        return -inv @ self.g_dq(q1) @ inv @ self._rate() + inv @ d_rate
+        return self._body_rate(q1)
+
+    def vb_dqdq(self, q1: Config, q2: Config) -> np.ndarray:
+        """``∂²v̂_b/∂q1∂q2``."""
+        return self._body_rate(q1, q2)
+
+    def vb_dqdqdq(self, q1: Config, q2: Config, q3: Config) -> np.ndarray:
+        """``∂³v̂_b/∂q1∂q2∂q3``."""
+        return self._body_rate(q1, q2, q3)
+
+    def vb_ddqdq(self, dq1: Config, q2: Config) -> np.ndarray:
+        """``∂²v̂_b/∂q̇1∂q2 = ∂(g⁻¹ ∂g/∂q1)/∂q2``."""
+        return self._body_column(dq1, q2)
+
+    def vb_ddqdqdq(self, dq1: Config, q2: Config, q3: Config) -> np.ndarray:
+        """``∂³v̂_b/∂q̇1∂q2∂q3``."""
+        return self._body_column(dq1, q2, q3)
 
     def lg(self) -> np.ndarray:
         """The transform from the parent to this frame (4×4; the identity for the world)."""
@@ -501,6 +548,27 @@ class Frame:
         """Its derivative by the primitive's parameter, ``lg · ξ̂`` — for a constant frame
         too, as trep 1.0.2 returns it (its documentation says zero)."""
         return self.lg() @ self._generator()
+
+    def lg_dqdq(self) -> np.ndarray:
+        """``lg · ξ̂²``."""
+        return self.lg_dq() @ self._generator()
+
+    def lg_dqdqdq(self) -> np.ndarray:
+        """``lg · ξ̂³``."""
+        return self.lg_dqdq() @ self._generator()
+
+    def lg_inv(self) -> np.ndarray:
+        """``lg⁻¹``: the parent seen from this frame."""
+        return np.linalg.inv(self.lg())
+
+    def lg_inv_dq(self) -> np.ndarray:
+        """``−ξ̂ · lg⁻¹``."""
+        return -self._generator() @ self.lg_inv()
+
+    def lg_inv_dqdq(self) -> np.ndarray:
+        """``ξ̂² · lg⁻¹``."""
+        xi = self._generator()
+        return xi @ xi @ self.lg_inv()
 
     def twist_hat(self) -> np.ndarray:
         """The frame's own twist ``ξ̂``: its primitive's generator in its axes (4×4)."""

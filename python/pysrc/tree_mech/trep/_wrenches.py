@@ -12,8 +12,7 @@ config ``q_i``, where ``X_i`` is the frame's velocity generator for ``q̇_i`` in
 
 and ``(X)^∨ = (v, ω)`` of ``X = [ω̂ v; 0 0]``. Each ``X_i`` is a product of the factors
 ``g⁻¹``, ``∂^S g`` and ``K_S`` (``K`` built from ``∂^S R``); its derivatives come from the
-product rule with ``∂_j g⁻¹ = −g⁻¹ ∂_j g g⁻¹``, ``∂_j ∂^S g = ∂^{S+j} g`` and
-``∂_j K_S = K_{S+j}`` — written once (``_derivative``) for all three.
+product rule — ``_products``, written once for these three and the frames' body velocities.
 """
 from __future__ import annotations
 
@@ -22,53 +21,9 @@ from typing import Any, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ._core import Config, Force, Frame, System
+from ._products import Factor, Term, derivatives, value
 
 __all__ = ["BodyWrench", "HybridWrench", "SpatialWrench"]
-
-# A factor: ("inv",) is g⁻¹; ("g", S) is ∂^S g; ("K", S) is K built from ∂^S R.
-Factor = Tuple[Any, ...]
-Term = Tuple[float, Tuple[Factor, ...]]
-
-
-def _derivative(terms: List[Term], q: Config) -> List[Term]:
-    """``∂/∂q`` of a sum of products of factors, by the product rule."""
-    out: List[Term] = []
-    for coefficient, factors in terms:
-        for k, factor in enumerate(factors):
-            before, after = factors[:k], factors[k + 1:]
-            if factor[0] == "inv":
-                replaced: Tuple[Factor, ...] = (("inv",), ("g", (q,)), ("inv",))
-                out.append((-coefficient, before + replaced + after))
-            else:
-                out.append((coefficient, before + ((factor[0], factor[1] + (q,)),) + after))
-    return out
-
-
-def _value(frame: Frame, factor: Factor) -> np.ndarray:
-    """A factor's 4×4 matrix at the system's state."""
-    kind = factor[0]
-    if kind == "inv":
-        return frame.g_inv()
-    configs = factor[1]
-    g = _pose_derivative(frame, configs)
-    if kind == "g":
-        return g
-    out = np.zeros((4, 4))
-    out[:3, :3] = g[:3, :3].T
-    if not configs:
-        out[3, 3] = 1.0
-    return out
-
-
-def _pose_derivative(frame: Frame, configs: Tuple[Config, ...]) -> np.ndarray:
-    if not configs:
-        return frame.g()
-    if len(configs) == 1:
-        return frame.g_dq(*configs)
-    if len(configs) == 2:
-        return frame.g_dqdq(*configs)
-    return frame.g_dqdqdq(*configs)
-
 
 def _vee(x: np.ndarray) -> np.ndarray:
     """``(v, ω)`` of ``[ω̂ v; 0 0]``."""
@@ -123,14 +78,7 @@ class _Wrench(Force):
             return 0.0
         terms: List[Term] = [(1.0, tuple(("g", (q,)) if f == ("g", ()) else f
                                          for f in self._generator))]
-        for c in by:
-            terms = _derivative(terms, c)
-        total = np.zeros((4, 4))
-        for coefficient, factors in terms:
-            product = np.eye(4)
-            for factor in factors:
-                product = product @ _value(self._frame, factor)
-            total += coefficient * product
+        total = value(self._frame, derivatives(terms, *by))
         return float(self._wrench @ _vee(total))
 
     def f(self, q: Config) -> float:
