@@ -1,5 +1,6 @@
-//! Which variant of the generated code this CPU runs. `tree_model!` emits each program
-//! twice: as recorded, and compiled on x86-64 for AVX2 and FMA — over `f64` with every
+//! Which variant of the generated code this CPU runs. `tree_model!` compiles each program
+//! twice from one body per function ([`MulAdd`]; a lean model, once): as recorded, and on
+//! x86-64 for AVX2 and FMA — over `f64` with every
 //! product that one sum alone reads fused into it (`a·b + c` rounded once, `f64::mul_add`),
 //! over dual numbers and jets as recorded. The second ("fused") variant runs where the CPU
 //! has those instructions (every aarch64 CPU has them); both equal the interpreted runtime
