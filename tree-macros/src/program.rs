@@ -367,22 +367,19 @@ impl Program {
         };
         let mut functions = TokenStream::new();
         let (mut plain_calls, mut fused_calls) = (TokenStream::new(), TokenStream::new());
+        let alone = variants == Variants::RecordedOnly;
+        let compiled: &[bool] = if alone { &[false] } else { &[false, true] };
         for c in 0..layout.chunks {
             let body = format_ident!("{}_body_{}", prefix, c);
             let stmts = self.chunk_statements(c, &layout, &variant, &names, &signature.ty);
             let chunk_outputs = &outputs[c];
             functions.extend(signature.body(&body, quote!(#stmts #(#chunk_outputs)*)));
-            let compiled: &[bool] = match variants {
-                Variants::Both => &[false, true],
-                Variants::RecordedOnly => &[false],
-            };
             for &fused_variant in compiled {
                 let name = if fused_variant {
                     format_ident!("{}_fma_{}", prefix, c)
                 } else {
                     format_ident!("{}_{}", prefix, c)
                 };
-                let alone = variants == Variants::RecordedOnly;
                 let function = chunk_function(&name, &body, &layout, fused_variant, &signature);
                 functions.extend(if fused_variant || alone {
                     function

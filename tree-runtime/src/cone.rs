@@ -65,30 +65,25 @@ pub fn step_to_boundary(x: &Point, dx: &Point) -> f64 {
     if dx[0] < 0.0 {
         alpha = alpha.min(-x[0] / dx[0]);
     }
-    let roots = if a.abs() <= f64::EPSILON * (b.abs() + c.abs()) {
+    let mut bound = |r: f64| {
+        if r > 0.0 {
+            alpha = alpha.min(r);
+        }
+    };
+    if a.abs() <= f64::EPSILON * (b.abs() + c.abs()) {
         // Linear: 2bα + c = 0.
         if b < 0.0 {
-            vec![-c / (2.0 * b)]
-        } else {
-            vec![]
+            bound(-c / (2.0 * b));
         }
     } else {
         let disc = b * b - a * c;
-        if disc < 0.0 {
-            vec![]
-        } else {
-            // Roots of aα² + 2bα + c, the stable pair.
+        if disc >= 0.0 {
+            // The roots of aα² + 2bα + c, each computed without cancellation.
             let q = -(b + b.signum() * disc.sqrt());
-            let mut r = vec![q / a];
+            bound(q / a);
             if q != 0.0 {
-                r.push(c / q);
+                bound(c / q);
             }
-            r
-        }
-    };
-    for r in roots {
-        if r > 0.0 {
-            alpha = alpha.min(r);
         }
     }
     alpha.max(0.0)
@@ -120,7 +115,8 @@ pub fn nesterov_todd(s: &Point, z: &Point) -> Option<Scaling> {
             m[0][i] = sign * w[i];
             m[i][0] = sign * w[i];
             for j in 1..3 {
-                m[i][j] = f64::from(u8::from(i == j)) + w[i] * w[j] / (1.0 + w[0]);
+                let identity = if i == j { 1.0 } else { 0.0 };
+                m[i][j] = identity + w[i] * w[j] / (1.0 + w[0]);
             }
         }
         m.map(|row| row.map(|x| scale * x))
