@@ -299,6 +299,9 @@ SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", b
            ("pinned_masses", pinned_masses), ("python_elements", python_elements),
            ("wrenches_and_curves", wrenches_and_curves)]
 
+#: The systems whose frames' third derivatives are recorded too.
+THIRD_ORDER = (wrenches_and_curves,)
+
 #: Splines through points given every way trep takes them: values alone, slopes or
 #: curvatures at the ends, at interior points, both, unevenly spaced.
 SPLINES = {
@@ -355,6 +358,30 @@ def _list(x):
     return np.asarray(x, dtype=float).tolist()
 
 
+def frame_derivatives(f, cs, third_order):
+    """A frame's pose, body velocity and their derivatives by the configs ``cs`` (the third
+    order only where asked: those tensors are the fixture's bulk)."""
+    out = {"g_dq": [_list(f.g_dq(a)) for a in cs],
+           "g_dqdq": [[_list(f.g_dqdq(a, b)) for b in cs] for a in cs],
+           "p_dq": [_list(f.p_dq(a)) for a in cs],
+           "p_dqdq": [[_list(f.p_dqdq(a, b)) for b in cs] for a in cs],
+           "vb_dq": [_list(f.vb_dq(a)) for a in cs],
+           "vb_ddq": [_list(f.vb_ddq(a)) for a in cs],
+           "g_inv": _list(f.g_inv()), "g_inv_dq": [_list(f.g_inv_dq(a)) for a in cs],
+           "lg": _list(f.lg()), "lg_dq": _list(f.lg_dq()),
+           "twist_hat": _list(f.twist_hat()),
+           "g_inv_dqdq": [[_list(f.g_inv_dqdq(a, b)) for b in cs] for a in cs],
+           "vb_dqdq": [[_list(f.vb_dqdq(a, b)) for b in cs] for a in cs],
+           "vb_ddqdq": [[_list(f.vb_ddqdq(a, b)) for b in cs] for a in cs],
+           "lg_dqdq": _list(f.lg_dqdq()), "lg_inv": _list(f.lg_inv()),
+           "lg_inv_dq": _list(f.lg_inv_dq()), "lg_inv_dqdq": _list(f.lg_inv_dqdq())}
+    if third_order:
+        out["p_dqdqdq"] = [[[_list(f.p_dqdqdq(a, b, c)) for c in cs] for b in cs] for a in cs]
+        out["vb_ddqdqdq"] = [[[_list(f.vb_ddqdqdq(a, b, c)) for c in cs] for b in cs]
+                             for a in cs]
+    return out
+
+
 def record(trep, build):
     """Everything the layer covers, at one state and over a VI run: the Lagrangian and its
     derivatives, the dynamics and theirs, frames, constraints, MidpointVI steps and the last
@@ -390,26 +417,9 @@ def record(trep, build):
     out["tree"] = s.world_frame.tree_view()
     out["frames"] = dict((f.name, {"g": _list(f.g()), "p": _list(f.p()), "vb": _list(f.vb())})
                          for f in s.frames if f.name is not None)
-    out["frame_derivatives"] = dict(
-        (f.name, {"g_dq": [_list(f.g_dq(a)) for a in cs],
-                  "g_dqdq": [[_list(f.g_dqdq(a, b)) for b in cs] for a in cs],
-                  "p_dq": [_list(f.p_dq(a)) for a in cs],
-                  "p_dqdq": [[_list(f.p_dqdq(a, b)) for b in cs] for a in cs],
-                  "vb_dq": [_list(f.vb_dq(a)) for a in cs],
-                  "vb_ddq": [_list(f.vb_ddq(a)) for a in cs],
-                  "g_inv": _list(f.g_inv()), "g_inv_dq": [_list(f.g_inv_dq(a)) for a in cs],
-                  "lg": _list(f.lg()), "lg_dq": _list(f.lg_dq()),
-                  "twist_hat": _list(f.twist_hat()),
-                  "g_inv_dqdq": [[_list(f.g_inv_dqdq(a, b)) for b in cs] for a in cs],
-                  "vb_dqdq": [[_list(f.vb_dqdq(a, b)) for b in cs] for a in cs],
-                  "vb_ddqdq": [[_list(f.vb_ddqdq(a, b)) for b in cs] for a in cs],
-                  "p_dqdqdq": [[[_list(f.p_dqdqdq(a, b, c)) for c in cs] for b in cs]
-                               for a in cs],
-                  "vb_ddqdqdq": [[[_list(f.vb_ddqdqdq(a, b, c)) for c in cs] for b in cs]
-                                 for a in cs],
-                  "lg_dqdq": _list(f.lg_dqdq()), "lg_inv": _list(f.lg_inv()),
-                  "lg_inv_dq": _list(f.lg_inv_dq()), "lg_inv_dqdq": _list(f.lg_inv_dqdq())})
-        for f in s.frames if f.name is not None and f.name != "World")
+    out["frame_derivatives"] = dict((f.name, frame_derivatives(f, cs, build in THIRD_ORDER))
+                                    for f in s.frames
+                                    if f.name is not None and f.name != "World")
     out["h"] = [c.h() for c in s.constraints]
     out["h_dq"] = [[c.h_dq(a) for a in cs] for c in s.constraints]
     # The midpoint VI from rest at this configuration, 20 steps of dt = 0.01 with the

@@ -31,6 +31,15 @@ class ConvergenceError(Exception):
     """The midpoint VI's Newton iteration did not converge (or met a singular Jacobian)."""
 
 
+def _se3_inverse(g: np.ndarray) -> np.ndarray:
+    """``g⁻¹ = [Rᵀ −Rᵀp; 0 1]`` of a rigid motion (exact, no general inverse)."""
+    out = np.eye(4)
+    rt = g[:3, :3].T
+    out[:3, :3] = rt
+    out[:3, 3] = -rt @ g[:3, 3]
+    return out
+
+
 def _vector3(v: Any, what: str) -> List[float]:
     """Three finite numbers, or a ValueError naming `what`."""
     out = [float(x) for x in v]
@@ -421,7 +430,7 @@ class Frame:
         if driven is None or not self.uses_config(q):
             return None
         pose = driven.g()
-        return pose @ driven._generator() @ np.linalg.inv(pose)
+        return pose @ driven._generator() @ _se3_inverse(pose)
 
     def _depth(self) -> int:
         depth, f = 0, self
@@ -482,7 +491,7 @@ class Frame:
 
     def g_inv(self) -> np.ndarray:
         """``g⁻¹``: the world seen from this frame."""
-        return np.linalg.inv(self.g())
+        return _se3_inverse(self.g())
 
     def g_inv_dq(self, q1: Config) -> np.ndarray:
         """``∂g⁻¹/∂q1 = −g⁻¹ (∂g/∂q1) g⁻¹``."""
@@ -542,7 +551,7 @@ class Frame:
         """The transform from the parent to this frame (4×4; the identity for the world)."""
         if self._parent is None:
             return np.eye(4)
-        return np.linalg.inv(self._parent.g()) @ self.g()
+        return _se3_inverse(self._parent.g()) @ self.g()
 
     def lg_dq(self) -> np.ndarray:
         """Its derivative by the primitive's parameter, ``lg · ξ̂`` — for a constant frame
@@ -559,7 +568,7 @@ class Frame:
 
     def lg_inv(self) -> np.ndarray:
         """``lg⁻¹``: the parent seen from this frame."""
-        return np.linalg.inv(self.lg())
+        return _se3_inverse(self.lg())
 
     def lg_inv_dq(self) -> np.ndarray:
         """``−ξ̂ · lg⁻¹``."""
@@ -654,6 +663,7 @@ class System:
         self._dyn: tuple = ()
         self._kin: tuple = ()
         self._model: Optional[_native.Model] = None
+        self._kinematic_twin: Optional[_native.Model] = None
         #: Whether the runtime is calling the script's elements back (the state is then
         #: plain lists, frames are read on the twin model: ``_state``).
         self._in_callback = False
@@ -864,31 +874,31 @@ class System:
             target[[c.index for c in configs]] = v
         self._state_changed()
 
-    q = property(lambda self: self._q.copy(),
+    q = property(lambda self: np.array(self._q),
                  lambda self, v: self._set(self._q, v, self._configs),
                  doc="Every config's value, in ``configs`` order (settable).")
-    dq = property(lambda self: self._dq.copy(),
+    dq = property(lambda self: np.array(self._dq),
                   lambda self, v: self._set(self._dq, v, self._configs),
                   doc="Every config's velocity (settable).")
-    ddq = property(lambda self: self._ddq.copy(),
+    ddq = property(lambda self: np.array(self._ddq),
                    lambda self, v: self._set(self._ddq, v, self._configs),
                    doc="Every config's acceleration (settable; ``f`` gives the dynamic ones).")
-    qd = property(lambda self: self._q[: self.nQd].copy(),
+    qd = property(lambda self: np.array(self._q[: self.nQd]),
                   lambda self, v: self._set(self._q, v, self.dyn_configs),
                   doc="The dynamic configs' values (settable).")
-    dqd = property(lambda self: self._dq[: self.nQd].copy(),
+    dqd = property(lambda self: np.array(self._dq[: self.nQd]),
                    lambda self, v: self._set(self._dq, v, self.dyn_configs),
                    doc="The dynamic configs' velocities (settable).")
-    ddqd = property(lambda self: self._ddq[: self.nQd].copy(),
+    ddqd = property(lambda self: np.array(self._ddq[: self.nQd]),
                     lambda self, v: self._set(self._ddq, v, self.dyn_configs),
                     doc="The dynamic configs' accelerations (settable).")
-    qk = property(lambda self: self._q[self.nQd:].copy(),
+    qk = property(lambda self: np.array(self._q[self.nQd:]),
                   lambda self, v: self._set(self._q, v, self.kin_configs),
                   doc="The kinematic configs' values (settable).")
-    dqk = property(lambda self: self._dq[self.nQd:].copy(),
+    dqk = property(lambda self: np.array(self._dq[self.nQd:]),
                    lambda self, v: self._set(self._dq, v, self.kin_configs),
                    doc="The kinematic configs' velocities (settable).")
-    ddqk = property(lambda self: self._ddq[self.nQd:].copy(),
+    ddqk = property(lambda self: np.array(self._ddq[self.nQd:]),
                     lambda self, v: self._set(self._ddq, v, self.kin_configs),
                     doc="The kinematic configs' accelerations (settable).")
 
@@ -1004,8 +1014,8 @@ class System:
     def _twin(self) -> _native.Model:
         """The native model without the Python elements (their frames' poses and velocities,
         evaluated while the runtime calls them back), built once per structure."""
-        if getattr(self, "_kinematic_twin", None) is None:
-            self._native_model()
+        if self._kinematic_twin is None:
+            self._native_model()  # the config order (_perm) the evaluation reads
             self._kinematic_twin = _loads_generated(self._toml())
         return self._kinematic_twin
 

@@ -20,6 +20,8 @@ How the curve is chosen (docs/python.md, "Spline"):
 """
 from __future__ import annotations
 
+import bisect
+import math
 from typing import Any, List, Optional, Sequence
 
 import numpy as np
@@ -107,7 +109,12 @@ class Spline:
         self._x = np.array(xs)
         self._y = np.array(ys)
         self._pieces = self._solve(xs, ys, dys, ddys, _raised(dys, ddys))
-        self._ends = (self._taylor(0, 0.0), self._taylor(n - 2, xs[-1] - xs[-2]))
+        self._xs = [float(x) for x in xs]
+        # Each piece's coefficients and those of its first two derivatives, lowest first.
+        self._derived = [[[math.perm(k, order) * float(c[k]) for k in range(order, len(c))]
+                          for c in self._pieces] for order in range(3)]
+        self._ends = tuple(tuple(self._piece_at(i, t, o) for o in range(3))
+                           for i, t in ((0, 0.0), (n - 2, xs[-1] - xs[-2])))
 
     @staticmethod
     def _solve(xs, ys, dys, ddys, raised) -> List[np.ndarray]:
@@ -152,37 +159,35 @@ class Spline:
         c = np.linalg.solve(a, np.array(rhs))
         return [c[start[i]:start[i + 1]] for i in range(n - 1)]
 
-    def _taylor(self, i: int, t: float) -> np.ndarray:
-        """Value, slope and curvature of piece ``i`` at ``t``."""
-        c = self._pieces[i]
-        powers = np.arange(len(c))
-        return np.array([
-            float(np.sum(c * t ** powers)),
-            float(np.sum((c * powers)[1:] * t ** (powers[1:] - 1))),
-            float(np.sum((c * powers * (powers - 1))[2:] * t ** (powers[2:] - 2))),
-        ])
+    def _piece_at(self, i: int, t: float, order: int) -> float:
+        """Derivative ``order`` (0, 1, 2) of piece ``i`` at ``t`` (Horner's rule on plain
+        floats: a nonlinear spring asks this on every evaluation)."""
+        acc = 0.0
+        for a in reversed(self._derived[order][i]):
+            acc = acc * t + a
+        return acc
 
-    def _eval(self, x: float) -> np.ndarray:
-        xs = self._x
+    def _at(self, x: float, order: int) -> float:
+        """Derivative ``order`` of the curve at ``x``: its piece's, or the end quadratic's."""
+        xs = self._xs
         if x < xs[0] or x > xs[-1]:
-            end, x0 = (0, xs[0]) if x < xs[0] else (1, xs[-1])
-            y, dy, ddy = self._ends[end]
-            t = x - x0
-            return np.array([y + dy * t + 0.5 * ddy * t * t, dy + ddy * t, ddy])
-        i = min(int(np.searchsorted(xs, x, side="right")) - 1, len(xs) - 2)
-        return self._taylor(i, x - xs[i])
+            y, dy, ddy = self._ends[0] if x < xs[0] else self._ends[1]
+            t = x - (xs[0] if x < xs[0] else xs[-1])
+            return (y + dy * t + 0.5 * ddy * t * t, dy + ddy * t, ddy)[order]
+        i = min(bisect.bisect_right(xs, x) - 1, len(xs) - 2)
+        return self._piece_at(i, x - xs[i], order)
 
     def y(self, x: float) -> float:
         """The curve's value at ``x``."""
-        return float(self._eval(float(x))[0])
+        return self._at(float(x), 0)
 
     def dy(self, x: float) -> float:
         """The curve's slope at ``x``."""
-        return float(self._eval(float(x))[1])
+        return self._at(float(x), 1)
 
     def ddy(self, x: float) -> float:
         """The curve's second derivative at ``x``."""
-        return float(self._eval(float(x))[2])
+        return self._at(float(x), 2)
 
     def _antiderivative(self, x: float) -> float:
         """``∫_{x₀}^x y``: the pieces' integrals, the end quadratics' beyond them."""

@@ -25,6 +25,7 @@ from ._products import Factor, Term, derivatives, value
 
 __all__ = ["BodyWrench", "HybridWrench", "SpatialWrench"]
 
+
 def _vee(x: np.ndarray) -> np.ndarray:
     """``(v, ω)`` of ``[ω̂ v; 0 0]``."""
     return np.array([x[0, 3], x[1, 3], x[2, 3], x[2, 1], x[0, 2], x[1, 0]])
@@ -50,8 +51,13 @@ class _Wrench(Force):
                     "tree_mech.trep takes a wrench of numbers only — its integrators take "
                     "each input on one config (forces.ConfigForce), and a wrench's input "
                     "acts through the frame's Jacobian, which they do not take yet")
-            if not np.isfinite(float(x)):
-                raise ValueError(f"{type(self).__name__}: entry {k} of the wrench is {x}")
+            try:
+                finite = np.isfinite(float(x))
+            except (TypeError, ValueError):
+                finite = False
+            if not finite:
+                raise ValueError(f"{type(self).__name__}: entry {k} of the wrench is {x!r}; "
+                                 "each entry is a finite number")
         self._wrench = np.array(values, dtype=float)
         super().__init__(system, name)
 
