@@ -7,6 +7,7 @@ mod cli;
 mod cli_edges;
 mod collection;
 mod constraints;
+mod contact;
 mod continuous_derivatives;
 mod derivatives;
 mod discrete;

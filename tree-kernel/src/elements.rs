@@ -24,9 +24,9 @@ use crate::sweeps::Workspace;
 
 /// What the elements read — the outward sweep's kinematics, in the tree's workspace — and
 /// write: their own scratch, kept beside that workspace.
-struct At<'a, S: Scalar> {
-    tree: &'a Workspace<S>,
-    scratch: &'a mut Scratch<S>,
+pub(crate) struct At<'a, S: Scalar> {
+    pub(crate) tree: &'a Workspace<S>,
+    pub(crate) scratch: &'a mut Scratch<S>,
 }
 
 /// Per-variable scratch for the elements (allocated once, beside the tree's workspace).
@@ -34,13 +34,13 @@ struct At<'a, S: Scalar> {
 pub struct Scratch<S> {
     n: usize,
     /// `Dd_i = ∂(p_a − p_b)/∂q_i`.
-    dd: Vec<[S; 3]>,
+    pub(crate) dd: Vec<[S; 3]>,
     /// Gradient of the element's scalar function.
-    grad: Vec<S>,
+    pub(crate) grad: Vec<S>,
     /// Its Hessian, row-major `n × n`; zero outside the pairs of `vars`.
     hess: Vec<S>,
     /// The variables the current element depends on.
-    vars: Vec<usize>,
+    pub(crate) vars: Vec<usize>,
     involved: Vec<bool>,
     /// Whether the current element wrote into `hess` (so `reset` must clear it).
     hess_used: bool,
@@ -61,7 +61,7 @@ impl<S: Scalar> Scratch<S> {
     }
 
     /// Forgets the last element: zeroes what it touched.
-    fn reset(&mut self) {
+    pub(crate) fn reset(&mut self) {
         for &i in &self.vars {
             self.dd[i] = [S::zero(); 3];
             self.grad[i] = S::zero();
@@ -76,47 +76,47 @@ impl<S: Scalar> Scratch<S> {
         self.vars.clear();
     }
 
-    fn involve(&mut self, i: usize) {
+    pub(crate) fn involve(&mut self, i: usize) {
         if !self.involved[i] {
             self.involved[i] = true;
             self.vars.push(i);
         }
     }
 
-    fn add_hess(&mut self, i: usize, j: usize, x: S) {
+    pub(crate) fn add_hess(&mut self, i: usize, j: usize, x: S) {
         self.hess_used = true;
         self.hess[i * self.n + j] += x;
     }
 
     /// Adds `x` at `(i, j)` and, off the diagonal, at `(j, i)`.
-    fn add_hess_sym(&mut self, i: usize, j: usize, x: S) {
+    pub(crate) fn add_hess_sym(&mut self, i: usize, j: usize, x: S) {
         self.add_hess(i, j, x);
         if i != j {
             self.add_hess(j, i, x);
         }
     }
 
-    fn hess_at(&self, i: usize, j: usize) -> S {
+    pub(crate) fn hess_at(&self, i: usize, j: usize) -> S {
         self.hess[i * self.n + j]
     }
 }
 
 #[inline(always)]
-fn dot3<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> S {
+pub(crate) fn dot3<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> S {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-fn sub3<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> [S; 3] {
+pub(crate) fn sub3<S: Scalar>(a: &[S; 3], b: &[S; 3]) -> [S; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// `(plan column offset, ancestor variables)` of plan frame `f`.
-fn columns(plan: &TreePlan, f: usize) -> (usize, &[usize]) {
+pub(crate) fn columns(plan: &TreePlan, f: usize) -> (usize, &[usize]) {
     (plan.frames[f].col_offset, plan.ancestors(f))
 }
 
 /// Starts an element on the pair `(a, b)`: returns `d = p_a − p_b` and fills `Dd`.
-fn pair<S: Scalar>(plan: &TreePlan, ws: &mut At<'_, S>, a: usize, b: usize) -> [S; 3] {
+pub(crate) fn pair<S: Scalar>(plan: &TreePlan, ws: &mut At<'_, S>, a: usize, b: usize) -> [S; 3] {
     ws.scratch.reset();
     for (f, sign) in [(a, 1.0), (b, -1.0)] {
         let (col, vars) = columns(plan, f);
@@ -133,7 +133,7 @@ fn pair<S: Scalar>(plan: &TreePlan, ws: &mut At<'_, S>, a: usize, b: usize) -> [
 }
 
 /// Adds `scale · c·∂²p_f/∂q∂q` (c a world vector) into the Hessian scratch.
-fn add_point_hessian<S: Scalar>(
+pub(crate) fn add_point_hessian<S: Scalar>(
     plan: &TreePlan,
     ws: &mut At<'_, S>,
     f: usize,
@@ -199,7 +199,7 @@ fn pair_rate<S: Scalar>(ws: &At<'_, S>, dq: &[S]) -> [S; 3] {
 }
 
 /// Hessian of `s = d·d` into the scratch: `2 Dd_i·Dd_j + 2 d·∂²d/∂q_i∂q_j`.
-fn squared_distance_hessian<S: Scalar>(
+pub(crate) fn squared_distance_hessian<S: Scalar>(
     plan: &TreePlan,
     ws: &mut At<'_, S>,
     a: usize,
@@ -221,7 +221,7 @@ fn squared_distance_hessian<S: Scalar>(
 
 /// Emits the current element's value, gradient, `q̇ᵀD²h q̇` (`curvature`, from
 /// `Order::Dynamics` on) and Hessian (at `Order::Full`) as constraint row `r`.
-fn emit_row<S: Scalar>(
+pub(crate) fn emit_row<S: Scalar>(
     ws: &At<'_, S>,
     r: usize,
     h: S,

@@ -221,3 +221,36 @@ pub fn weighted_constraint_hessian<S: Scalar>(
     };
     constraints(plan, k, q, dq, Order::Full, inner);
 }
+
+/// The unilateral rows ([`crate::gaps`]) `φ`, `Dφ` and at `Order::Full` `D²φ` at `q`, into
+/// the same outputs as constraint rows (their own terms).
+pub fn gaps<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    order: Order,
+    out: &mut impl Sink<S>,
+) {
+    let (q, dq) = k.full.state(plan, q, q);
+    let out = &mut Contract::new(plan, out);
+    sweeps::forward(plan, &mut k.tree, q, dq, sweeps::Reach::Attachments);
+    crate::gaps::gaps(plan, &k.tree, &mut k.elements, q, order, out);
+}
+
+/// `φ`, `Dφ` and `Σ_r w_r D²φ_r` on the `columns` kept at `q` ([`gaps`] through [`Weighted`]):
+/// the impulses' term `Σ γ_j D²φ_j + Σ β_k D²τ_k` of the contact step's Newton matrix.
+pub fn weighted_gap_hessian<S: Scalar>(
+    plan: &TreePlan,
+    k: &mut Kernel<S>,
+    q: &[S],
+    weights: &[S],
+    columns: &[bool],
+    out: &mut impl Sink<S>,
+) {
+    let inner = &mut Weighted {
+        weights,
+        columns,
+        inner: out,
+    };
+    gaps(plan, k, q, Order::Full, inner);
+}

@@ -29,6 +29,7 @@ pub mod articulated;
 pub mod cpu;
 mod dual;
 pub mod elements;
+pub mod gaps;
 pub mod kernel;
 mod lanes;
 mod newton_euler;

@@ -8,7 +8,7 @@
 //! primitives costs one constant transform, and its body joins its kept ancestor's as one
 //! composite rigid body (docs/derivations.md §4).
 
-use tree_model::{
+use tree_model::{Gap, GapKind, 
     Constraint, ConstraintKind, Damper, Joint, Mass, Model, Parameter, PrimitiveKind, Spring,
     SpringKind,
 };
@@ -200,6 +200,11 @@ pub struct TreePlan {
     pub dampers: Vec<Damper>,
     /// Number of constraint rows.
     pub rows: usize,
+    /// The unilateral elements ([`tree_model::Model::gaps`]), their frames as indices into
+    /// `frames`.
+    pub gaps: Vec<Gap>,
+    /// Number of unilateral rows.
+    pub gap_rows: usize,
 }
 
 /// A frame before ancestor lists and offsets are filled in.
@@ -399,6 +404,8 @@ impl TreePlan {
                 })
                 .collect(),
             rows: model.constraint_rows(),
+            gaps: model.gaps().into_iter().map(|g| gap_at(&kept, g)).collect(),
+            gap_rows: model.gap_rows(),
         }
     }
 
@@ -434,7 +441,10 @@ impl TreePlan {
 
     /// Whether the tree has elements (constraints, springs or dampers).
     pub fn has_elements(&self) -> bool {
-        !(self.constraints.is_empty() && self.springs.is_empty() && self.dampers.is_empty())
+        !(self.constraints.is_empty()
+            && self.springs.is_empty()
+            && self.dampers.is_empty()
+            && self.gaps.is_empty())
     }
 
     /// Number of the model's configuration variables.
@@ -493,6 +503,18 @@ fn followers(model: &Model, drafts: &mut [Draft]) -> (Vec<Follower>, Vec<usize>,
         }
     }
     (followers, frames, damping)
+}
+
+/// A gap with its frames as plan indices.
+fn gap_at(kept: &[Option<usize>], mut g: Gap) -> Gap {
+    match &mut g.kind {
+        GapKind::Lower { .. } | GapKind::Upper { .. } => {}
+        GapKind::Ground { frame, .. } => *frame = at(kept, *frame),
+        GapKind::Spheres { frames, .. } | GapKind::String { frames, .. } => {
+            *frames = frames.map(|f| at(kept, f))
+        }
+    }
+    g
 }
 
 /// The plan index of model frame `f`, which an element attaches to (so it is kept).

@@ -337,6 +337,7 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
         quote!(#m::InputSpec { name: #name, variable: #variable, limits: #limits })
     });
     let (name, gravity) = (spec.name.literal(), spec.gravity.literal());
+    let contacts = contacts_spec(&m, &spec.contacts);
     quote!(#m::ModelSpec {
         name: #name,
         gravity: #gravity,
@@ -346,6 +347,31 @@ fn spec_tokens(spec: &ModelSpec) -> TokenStream {
         springs: ::std::vec![#(#springs),*],
         dampers: ::std::vec![#(#dampers),*],
         inputs: ::std::vec![#(#inputs),*],
+        contacts: #contacts,
+    })
+}
+
+/// The ground, the contacts and whether limits are enforced, as a literal.
+fn contacts_spec(m: &TokenStream, c: &tree_model::ContactsSpec) -> TokenStream {
+    let enforce = c.enforce_limits.literal();
+    let ground = match &c.ground {
+        Some(g) => {
+            let (h, n, f) = (g.height.literal(), g.normal.literal(), g.friction.literal());
+            quote!(Some(#m::GroundSpec { height: #h, normal: #n, friction: #f }))
+        }
+        None => quote!(None),
+    };
+    let contacts = c.contacts.iter().map(|c| {
+        let (name, frame, radius) = (c.name.literal(), c.frame.literal(), c.radius.literal());
+        let (friction, collide) = (c.friction.literal(), c.collide.literal());
+        quote!(#m::ContactSpec {
+            name: #name, frame: #frame, radius: #radius, friction: #friction, collide: #collide,
+        })
+    });
+    quote!(#m::ContactsSpec {
+        enforce_limits: #enforce,
+        ground: #ground,
+        contacts: ::std::vec![#(#contacts),*],
     })
 }
 
@@ -422,9 +448,10 @@ fn constraint_spec(m: &TokenStream, c: &tree_model::ConstraintSpec) -> TokenStre
         }
         None => quote!(None),
     };
-    let (normal, axes) = (c.normal.literal(), c.axes.literal());
+    let (normal, axes, slack) = (c.normal.literal(), c.axes.literal(), c.slack.literal());
     quote!(#m::ConstraintSpec {
         name: #name, kind: #kind, frames: #frames, length: #length, normal: #normal, axes: #axes,
+        slack: #slack,
     })
 }
 

@@ -177,6 +177,7 @@ fn constraint_kind(
             ConstraintKind::Distance { length }
         }
         "plane" => {
+            foreign("slack", c.slack.is_some(), report);
             foreign("length", c.length.is_some(), report);
             foreign("axes", c.axes.is_some(), report);
             let normal = match c.normal {
@@ -206,6 +207,7 @@ fn constraint_kind(
             ConstraintKind::Plane { normal }
         }
         "point" => {
+            foreign("slack", c.slack.is_some(), report);
             foreign("length", c.length.is_some(), report);
             foreign("normal", c.normal.is_some(), report);
             let text = c.axes.as_deref().unwrap_or("xyz");

@@ -63,6 +63,10 @@ pub enum Section {
     Damper,
     /// `[[input]]`
     Input,
+    /// `[[contact]]`
+    Contact,
+    /// `[ground]` (one, index 0)
+    Ground,
 }
 
 impl Section {
@@ -73,6 +77,8 @@ impl Section {
             Section::Spring => "spring",
             Section::Damper => "damper",
             Section::Input => "input",
+            Section::Contact => "contact",
+            Section::Ground => "ground",
         }
     }
 }

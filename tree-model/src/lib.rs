@@ -36,6 +36,7 @@
 #![warn(missing_docs)]
 
 mod builder;
+mod contact;
 mod elements;
 mod error;
 mod integrator;
@@ -54,6 +55,9 @@ mod urdf_format;
 mod validate;
 
 pub use builder::{n_link_pendulum, ModelBuilder};
+pub use contact::{
+    tangents, ContactSpec, ContactSphere, Contacts, ContactsSpec, Gap, GapKind, Ground, GroundSpec,
+};
 pub use error::{FrameField, ModelError, Problem, Section, Site};
 pub use integrator::Integrator;
 pub use lock::Lock;

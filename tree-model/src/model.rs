@@ -169,8 +169,8 @@ pub struct Variable {
     pub damping: f64,
     /// A prescribed variable's motion (`None`: a dynamic variable, simulated).
     pub motion: Option<Motion>,
-    /// `[lower, upper]` joint limits (from URDF or `limits = [..]`): kept and reported by
-    /// `check`, not enforced.
+    /// `[lower, upper]` joint limits (from URDF or `limits = [..]`): a dynamic variable's are
+    /// enforced by the variational integrator when [`crate::Contacts::enforce_limits`].
     pub limits: Option<[f64; 2]>,
 }
 
@@ -320,6 +320,9 @@ pub struct Model {
     pub dampers: Vec<Damper>,
     /// Inputs `u`, in declaration order: generalized forces on dynamic variables.
     pub inputs: Vec<Input>,
+    /// Limits enforced, the ground, contact spheres and slack strings: the unilateral rows
+    /// ([`Model::gaps`]).
+    pub contacts: crate::contact::Contacts,
 }
 
 impl Model {
@@ -380,6 +383,9 @@ impl Model {
         }
         for d in &self.dampers {
             d.frames.iter().for_each(|&f| used[f] = true);
+        }
+        for g in self.gaps() {
+            g.frames().into_iter().for_each(|f| used[f] = true);
         }
         (0..self.frames.len()).filter(|&k| used[k]).collect()
     }

@@ -39,7 +39,8 @@ pub struct VariableSpec {
     pub motion: Option<SineSpec>,
     /// Samples `(t, q)` of a spline prescription (kinematic variables only).
     pub samples: Option<Vec<[f64; 2]>>,
-    /// `[lower, upper]` joint limits: kept and reported, not enforced.
+    /// `[lower, upper]` joint limits (a dynamic variable's enforced when the model says
+    /// `enforce_limits = true`).
     pub limits: Option<[f64; 2]>,
 }
 
@@ -62,6 +63,8 @@ pub struct ModelSpec {
     pub dampers: Vec<DamperSpec>,
     /// `[[input]]` entries.
     pub inputs: Vec<InputSpec>,
+    /// `[ground]`, `[[contact]]` and `enforce_limits`.
+    pub contacts: crate::contact::ContactsSpec,
 }
 
 impl ModelSpec {
@@ -76,6 +79,7 @@ impl ModelSpec {
             springs: Vec::new(),
             dampers: Vec::new(),
             inputs: Vec::new(),
+            contacts: Default::default(),
         }
     }
 }
@@ -117,6 +121,8 @@ pub struct ConstraintSpec {
     pub normal: Option<[f64; 3]>,
     /// A point constraint's world axes, e.g. `"xz"`.
     pub axes: Option<String>,
+    /// A distance constraint that is a string: `‖p_a − p_b‖ ≤ length`, pulling only.
+    pub slack: Option<bool>,
 }
 
 /// A `[[spring]]` as written: between two frames, or on one variable.

@@ -7,6 +7,7 @@ use std::path::Path;
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::contact::{ContactSpec, ContactsSpec, GroundSpec};
 use crate::error::{FrameField, ModelError, Section, Site};
 use crate::model::Model;
 use crate::primitive::{MimicSpec, Primitive, PrimitiveKind, Value};
@@ -34,6 +35,28 @@ struct RawModel {
     damper: Vec<Spanned<RawDamper>>,
     #[serde(default)]
     input: Vec<Spanned<RawInput>>,
+    enforce_limits: Option<bool>,
+    ground: Option<Spanned<RawGround>>,
+    #[serde(default)]
+    contact: Vec<Spanned<RawContact>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGround {
+    height: Option<Spanned<f64>>,
+    normal: Option<Spanned<[f64; 3]>>,
+    friction: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawContact {
+    name: Option<Spanned<String>>,
+    frame: Spanned<String>,
+    radius: Option<Spanned<f64>>,
+    friction: Option<Spanned<f64>>,
+    collide: Option<Spanned<bool>>,
 }
 
 #[derive(Deserialize)]
@@ -53,6 +76,7 @@ struct RawConstraint {
     length: Option<Spanned<RawValue>>,
     normal: Option<Spanned<[f64; 3]>>,
     axes: Option<Spanned<String>>,
+    slack: Option<Spanned<bool>>,
 }
 
 #[derive(Deserialize)]
@@ -238,6 +262,7 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         springs: springs_of(&raw, &line_index, &mut lines.springs),
         dampers: dampers_of(&raw, &line_index, &mut lines.dampers),
         inputs: inputs_of(&raw, &line_index, &mut lines.inputs),
+        contacts: contacts_of(&raw, &line_index, &mut lines),
     };
     validate(&spec).map_err(|mut problems| {
         for p in &mut problems {
@@ -287,6 +312,8 @@ struct Lines {
     springs: Vec<ElementLines>,
     dampers: Vec<ElementLines>,
     inputs: Vec<ElementLines>,
+    contacts: Vec<ElementLines>,
+    ground: Vec<ElementLines>,
 }
 
 impl Lines {
@@ -306,6 +333,8 @@ impl Lines {
                     Section::Spring => &self.springs,
                     Section::Damper => &self.dampers,
                     Section::Input => &self.inputs,
+                    Section::Contact => &self.contacts,
+                    Section::Ground => &self.ground,
                 };
                 Some(lines[*index].line(*field))
             }
@@ -438,6 +467,48 @@ fn variables_of(
     variables
 }
 
+/// The ground and the contacts, with the line of each one's fields.
+fn contacts_of(raw: &RawModel, line_index: &LineIndex, lines: &mut Lines) -> ContactsSpec {
+    let value = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| *x.get_ref());
+    let ground = raw.ground.as_ref().map(|g| {
+        let mut l = ElementLines::new(line_index, g.span());
+        let g = g.get_ref();
+        l.field(line_index, "height", &g.height);
+        l.field(line_index, "normal", &g.normal);
+        l.field(line_index, "friction", &g.friction);
+        lines.ground.push(l);
+        GroundSpec {
+            height: value(&g.height),
+            normal: g.normal.as_ref().map(|n| *n.get_ref()),
+            friction: value(&g.friction),
+        }
+    });
+    let contacts = (raw.contact.iter())
+        .map(|c| {
+            let mut l = ElementLines::new(line_index, c.span());
+            let c = c.get_ref();
+            l.field(line_index, "name", &c.name);
+            l.field(line_index, "frame", &Some(c.frame.clone()));
+            l.field(line_index, "radius", &c.radius);
+            l.field(line_index, "friction", &c.friction);
+            l.field(line_index, "collide", &c.collide);
+            lines.contacts.push(l);
+            ContactSpec {
+                name: c.name.as_ref().map(|n| n.get_ref().clone()),
+                frame: c.frame.get_ref().clone(),
+                radius: value(&c.radius),
+                friction: value(&c.friction),
+                collide: c.collide.as_ref().map(|x| *x.get_ref()),
+            }
+        })
+        .collect();
+    ContactsSpec {
+        enforce_limits: raw.enforce_limits,
+        ground,
+        contacts,
+    }
+}
+
 /// The constraints, with the line of each one's fields.
 fn constraints_of(
     raw: &RawModel,
@@ -460,6 +531,7 @@ fn constraints_of(
             lines.field(line_index, "length", &c.length);
             lines.field(line_index, "normal", &c.normal);
             lines.field(line_index, "axes", &c.axes);
+            lines.field(line_index, "slack", &c.slack);
             constraint_lines.push(lines);
             ConstraintSpec {
                 name: c.name.as_ref().map(|n| n.get_ref().clone()),
@@ -468,6 +540,7 @@ fn constraints_of(
                 length: c.length.as_ref().map(|l| value(l.get_ref())),
                 normal: c.normal.as_ref().map(|n| *n.get_ref()),
                 axes: c.axes.as_ref().map(|a| a.get_ref().clone()),
+                slack: c.slack.as_ref().map(|s| *s.get_ref()),
             }
         })
         .collect();

@@ -80,18 +80,31 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
     let (constraints, springs, dampers) =
         crate::elements::validate_elements(spec, &index_of, &vars.index, &vars.list, &mut errs.0);
     let inputs = validate_inputs(spec, &vars.index, &vars.list, &mut errs);
+    let (ground, spheres) =
+        crate::contact::validate_contacts(&spec.contacts, &index_of, &mut errs.0);
     if !errs.0.is_empty() {
         return Err(errs.0);
     }
+    // Every constraint validated: one per entry, in order. The slack ones are strings.
+    let (strings, constraints): (Vec<_>, Vec<_>) = constraints
+        .into_iter()
+        .zip(&spec.constraints)
+        .partition(|(_, c)| c.slack == Some(true));
     let model = Model {
         name: spec.name.clone(),
         gravity,
         frames,
         variables: vars.list,
-        constraints,
+        constraints: constraints.into_iter().map(|(c, _)| c).collect(),
         springs,
         dampers,
         inputs,
+        contacts: crate::contact::Contacts {
+            enforce_limits: spec.contacts.enforce_limits.unwrap_or(false),
+            ground,
+            spheres,
+            strings: strings.into_iter().map(|(c, _)| c).collect(),
+        },
     };
     check_directions(&model, &mut errs);
     check_moves_mass(&model, &mut errs);

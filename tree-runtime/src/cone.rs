@@ -58,9 +58,14 @@ pub fn inverse(x: &Point) -> Option<Point> {
 /// The largest `α ∈ [0, 1]` with `x + α dx` in the (closed) cone, for `x` strictly inside:
 /// the smallest positive root of `det(x + α dx) = 0` on the cone's own sheet (`a > 0`).
 pub fn step_to_boundary(x: &Point, dx: &Point) -> f64 {
+    step_within(x, dx, 1.0)
+}
+
+/// [`step_to_boundary`] with `α ∈ [0, limit]`.
+pub fn step_within(x: &Point, dx: &Point, limit: f64) -> f64 {
     // det(x + α dx) = det x + 2α ⟨x, J dx⟩ + α² det dx, J = diag(1, −1, −1).
     let (c, b, a) = (det(x), x[0] * dx[0] - x[1] * dx[1] - x[2] * dx[2], det(dx));
-    let mut alpha: f64 = 1.0;
+    let mut alpha: f64 = limit;
     // The first sheet's apex line a = 0 bounds the step too.
     if dx[0] < 0.0 {
         alpha = alpha.min(-x[0] / dx[0]);

@@ -77,6 +77,23 @@ pub enum SimError {
         /// weakest pivot and `d/M_ii` there (`linalg::weakest_pivot`): the cause, not the step.
         singular: Option<(String, f64)>,
     },
+    /// The contact step's interior point did not converge (docs/derivations.md §13).
+    ContactFailed {
+        /// The step that failed.
+        step: usize,
+        /// The simulated time at its start.
+        t: f64,
+        /// The iterations tried.
+        iterations: usize,
+        /// The unilateral element furthest from converged (a contact, limit or string).
+        contact: String,
+        /// Its gap at the last iterate.
+        gap: f64,
+        /// The dynamic rows' relative residual at the end.
+        residual: f64,
+        /// The largest complementarity (relative) at the end.
+        complementarity: f64,
+    },
     /// A VI step turned a joint by more than a quarter turn:
     /// the step is too long for the motion.
     StepTooCoarse {
@@ -142,6 +159,7 @@ impl SimError {
             | SimError::SingularConstraints { step, t, .. }
             | SimError::SingularJacobian { step, t, .. }
             | SimError::NewtonFailed { step, t, .. }
+            | SimError::ContactFailed { step, t, .. }
             | SimError::StepTooCoarse { step, t, .. }
             | SimError::NonFinite { step, t, .. }
             | SimError::StepSizeTooSmall { step, t, .. }
@@ -233,6 +251,10 @@ impl fmt::Display for Detail<'_> {
                     None => f.write_str(": the step may be too long for the motion here; lower --dt"),
                 }
             }
+            SimError::ContactFailed { iterations, contact, gap, residual, complementarity, .. } => write!(
+                f,
+                "the contact step did not converge in {iterations} iterations: `{contact}` is furthest (gap {gap:e}, relative residual {residual:e}, complementarity {complementarity:e}); the step may be too long for the impact, lower --dt"
+            ),
             SimError::StepTooCoarse { dt, variable, turn, .. } => write!(
                 f,
                 "`{variable}` turned {turn:.3e} rad in a step of {dt:e} s, more than a quarter turn: the motion is too fast for this step; lower --dt"

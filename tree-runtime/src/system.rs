@@ -589,6 +589,22 @@ where
         }
     }
 
+    /// The unilateral elements in row order — enforced limits, contacts with the ground and
+    /// between spheres, slack strings (docs/derivations.md §13) — each a gap `φ(q) ≥ 0`, a
+    /// ground contact with friction followed by its two tangent rows. Allocates: call it when
+    /// setting up. A system that has any evaluates them in [`Self::gaps`].
+    fn unilateral(&self) -> Vec<tree_model::Gap> {
+        Vec::new()
+    }
+
+    /// `φ(q)` and `Dφ(q)` of every unilateral row ([`Self::unilateral`]) into `out.h`,
+    /// `out.dh` (sized rows × dof); with `weights` (one per row) also `Σ_r w_r D²φ_r(q)` on
+    /// the dynamic variables' columns into `out.weighted_d2h` — the impulses' term of the
+    /// contact step's Newton matrix.
+    fn gaps(&mut self, q: &Vector<Self::N>, weights: Option<&[f64]>, out: &mut ConstraintTerms) {
+        let _ = (q, weights, out);
+    }
+
     /// Evaluates the Lagrangian terms up to `order` at `(q, q̇)` into `out`, springs and the
     /// model's forces included.
     fn lagrangian(

@@ -19,6 +19,7 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator, Dim, Dyn};
 
+mod contact;
 mod derivatives;
 
 pub use derivatives::{
@@ -143,6 +144,11 @@ pub struct ViSettings {
     pub forcing: Forcing,
     /// When Newton fails, retry the step as two half steps, recursively, this deep (0: never).
     pub max_subdivisions: usize,
+    /// The relaxation of unilateral rows (docs/derivations.md §13): 0 for hard contact
+    /// (complementarity driven to the tolerance), or `κ > 0` held on the central path
+    /// (`φ γ = κ`, in metres times newton-seconds; smooth contact, whose step derivatives are
+    /// those of a smooth system).
+    pub kappa: f64,
     /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): a Newton
     /// check expected to converge is of second order, so the derivatives find the terms at
     /// the solution already evaluated instead of evaluating them again (one expected to fail
@@ -163,6 +169,7 @@ impl Default for ViSettings {
             jacobian: JacobianUpdate::OncePerStep,
             forcing: Forcing::Split,
             max_subdivisions: 4,
+            kappa: 0.0,
             derivatives: false,
         }
     }
@@ -245,6 +252,8 @@ where
     linearization: Option<Box<derivatives::Linearization>>,
     /// The second derivatives' scratch over dual numbers, made on their first use.
     dual_jacobians: Option<Box<derivatives::DualJacobians>>,
+    /// The contact step's workspace (a system with unilateral rows only).
+    contact: Option<Box<contact::ContactStep>>,
     /// The energy the model's own forces (damping, dampers) took out over the last step:
     /// the discrete work `−F(q_α, v)·(q₂ − q₁)` of the force the step applied, summed over
     /// its sub-steps.
@@ -306,6 +315,7 @@ where
             dissipated: 0.0,
             linearization: None,
             dual_jacobians: None,
+            contact: contact::ContactStep::new(sys, nd, m),
             angles: split
                 .dynamic
                 .iter()
@@ -746,7 +756,11 @@ where
     {
         self.prepare(cx.sys, q);
         let continuing = self.predict(cx, q, q_next);
-        let solved = self.solve(cx, q, p, q_next);
+        let solved = if self.contact.is_some() {
+            self.solve_contact(cx, q, p, q_next)
+        } else {
+            self.solve(cx, q, p, q_next)
+        };
         self.iterations += match solved {
             Ok(iterations) | Err((iterations, _)) => iterations,
         };

@@ -337,6 +337,24 @@ impl System for TreeSystem {
         }
     }
 
+    fn unilateral(&self) -> Vec<tree_model::Gap> {
+        self.model.gaps()
+    }
+
+    fn gaps(&mut self, q: &Vector<Dyn>, weights: Option<&[f64]>, out: &mut ConstraintTerms) {
+        let (plan, kernel, q) = (&self.plan, &mut self.kernel, q.as_slice());
+        match weights {
+            None => {
+                out.clear(Order::First);
+                kernel::gaps(plan, kernel, q, Order::First, out);
+            }
+            Some(w) => {
+                out.weigh(w, true);
+                kernel::weighted_gap_hessian(plan, kernel, q, w, &self.dynamic, out);
+            }
+        }
+    }
+
     fn lagrangian(
         &mut self,
         q: &Vector<Dyn>,

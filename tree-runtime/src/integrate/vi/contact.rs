@@ -1,0 +1,571 @@
+//! The contact step: the discrete Euler–Lagrange equations with unilateral rows, solved by a
+//! primal-dual interior point inside the VI's Newton iteration (docs/derivations.md §13).
+//!
+//! Unknowns, in order: the dynamic part of `q₂`, the bilateral constraints' `λ`, then per
+//! unilateral element its normal impulse `γ` and gap slack `s` and, for a ground contact with
+//! friction, its friction impulse `b ∈ ℝ²` and the cone point `η = (ψ, δ)`. Equations:
+//! * `r_d(q₂) + Nᵀγ + Tᵀb = 0` (`N = Dφ(q₂)`, `T` the tangent rows at `q₂`: the impulses
+//!   act at the step's end configuration, where the gap is measured);
+//! * `h(q₂) = 0`;
+//! * `s − φ(q₂) = 0` and `s γ = κ` (`s, γ > 0`);
+//! * `δ − (τ(q₂) − τ(q₁)) = 0`, the contact's tangential displacement over the step, and
+//!   `(μγ, b) ∘ (ψ, δ) = κ e` with both points inside the second-order cone: Coulomb friction
+//!   by maximum dissipation (`b` minimises `b·δ` over `‖b‖ ≤ μγ`), the exact cone.
+//!
+//! Each iteration forms the whole Newton matrix with the exact Jacobian (the VI's eq. (26)
+//! plus the impulses' `Σ γ D²φ + Σ b·D²τ`), factors it once and solves twice: Mehrotra's
+//! predictor (the affine direction, `κ = 0`) and corrector (centring `σμ`, `σ = (μ_aff/μ)³`,
+//! with the second-order term `Δs_aff Δγ_aff`), each step kept inside the cones by a fraction
+//! 0.99 of the way to their boundary. Hard contact drives the complementarity to the
+//! tolerance; a user's `κ > 0` (`ViSettings::kappa`) stops on its central path instead.
+
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
+
+use super::MidpointVi;
+use crate::cone::{self, Point};
+use crate::context::StepContext;
+use crate::dynamics::GeneralizedForce;
+use crate::error::SimError;
+use crate::linalg::{lu_factor_packed, lu_solve_packed};
+use crate::system::{ConstraintTerms, System, Vector};
+
+/// Iterations a contact step may take before it fails.
+const MAX_ITERATIONS: usize = 60;
+
+/// How far towards a cone's boundary a step goes.
+const FRACTION_TO_BOUNDARY: f64 = 0.99;
+
+/// The complementarity a fresh step starts from, as a gap in metres (or radians) times the
+/// step's momentum scale.
+const START_GAP: f64 = 1e-3;
+
+/// One unilateral element's place in the step.
+#[derive(Clone, Debug)]
+struct Element {
+    /// Its gap's row in the gap terms (its tangent rows follow).
+    row: usize,
+    /// Index of its `γ` among the unknowns (`s` next; with friction `b` and `η` after).
+    base: usize,
+    /// Coulomb coefficient (0: no friction unknowns).
+    friction: f64,
+}
+
+impl Element {
+    fn has_friction(&self) -> bool {
+        self.friction > 0.0
+    }
+}
+
+/// The contact step's workspace (allocated once; nothing per step).
+#[derive(Clone, Debug)]
+pub(crate) struct ContactStep {
+    elements: Vec<Element>,
+    /// The elements' names, for errors.
+    names: Vec<String>,
+    /// Number of unknowns.
+    nz: usize,
+    /// φ, Dφ and the weighted Hessian at the current `q₂`.
+    gaps: ConstraintTerms,
+    /// Every gap row's value at `q₁` (the tangent rows' `τ(q₁)`).
+    at_start: Vec<f64>,
+    /// The impulses as the gap rows' weights: `γ` at a gap row, `b` at its tangent rows.
+    weights: Vec<f64>,
+    /// Unknowns (the `q₂` and `λ` entries are updates' scratch; the contact ones persist).
+    z: Vec<f64>,
+    residual: Vec<f64>,
+    matrix: Vec<f64>,
+    pivots: Vec<usize>,
+    affine: Vec<f64>,
+    direction: Vec<f64>,
+    /// The last step's impulses per gap row (γ, then b at tangent rows) and gaps at `q₂`.
+    pub(crate) impulses: Vec<f64>,
+    pub(crate) gap_values: Vec<f64>,
+}
+
+impl ContactStep {
+    /// The workspace for `sys`'s unilateral rows, `nd` dynamic variables and `m` bilateral
+    /// rows; `None` without unilateral rows.
+    pub(crate) fn new<S: System>(sys: &S, nd: usize, m: usize) -> Option<Box<Self>>
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        let gaps = sys.unilateral();
+        if gaps.is_empty() {
+            return None;
+        }
+        let (mut row, mut base) = (0, nd + m);
+        let mut elements = Vec::with_capacity(gaps.len());
+        for g in &gaps {
+            elements.push(Element {
+                row,
+                base,
+                friction: g.friction,
+            });
+            row += g.rows();
+            base += if g.friction > 0.0 { 7 } else { 2 };
+        }
+        let (rows, nz) = (row, base);
+        Some(Box::new(ContactStep {
+            elements,
+            names: gaps.into_iter().map(|g| g.name).collect(),
+            nz,
+            gaps: ConstraintTerms::zeros(rows, sys.dof()),
+            at_start: vec![0.0; rows],
+            weights: vec![0.0; rows],
+            z: vec![0.0; nz],
+            residual: vec![0.0; nz],
+            matrix: vec![0.0; nz * nz],
+            pivots: vec![0; nz],
+            affine: vec![0.0; nz],
+            direction: vec![0.0; nz],
+            impulses: vec![0.0; rows],
+            gap_values: vec![0.0; rows],
+        }))
+    }
+
+}
+
+/// `(μγ, b)` and `η` of a frictional element in the unknowns `z`.
+fn cone_points(e: &Element, z: &[f64]) -> (Point, Point) {
+    let b = e.base;
+    (
+        [e.friction * z[b], z[b + 2], z[b + 3]],
+        [z[b + 4], z[b + 5], z[b + 6]],
+    )
+}
+
+/// The mean complementarity `(Σ sγ + Σ (μγ, b)·η) / count` of the unknowns `z`.
+fn mean_complementarity(elements: &[Element], z: &[f64]) -> f64 {
+    let mut sum = 0.0;
+    let mut count = 0;
+    for e in elements {
+        sum += z[e.base] * z[e.base + 1];
+        count += 1;
+        if e.has_friction() {
+            let (x, y) = cone_points(e, z);
+            sum += x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+            count += 1;
+        }
+    }
+    sum / count as f64
+}
+
+/// The largest `α ∈ (0, limit]` keeping `z + α·dz` inside every cone (the way to the
+/// nearest boundary).
+fn step_length(elements: &[Element], z: &[f64], dz: &[f64], limit: f64) -> f64 {
+    let mut alpha: f64 = limit;
+    for e in elements {
+        for k in [e.base, e.base + 1] {
+            if dz[k] < 0.0 {
+                alpha = alpha.min(-z[k] / dz[k]);
+            }
+        }
+        if e.has_friction() {
+            let (x, y) = cone_points(e, z);
+            let (dx, dy) = cone_points(e, dz);
+            alpha = alpha.min(cone::step_within(&x, &dx, limit));
+            alpha = alpha.min(cone::step_within(&y, &dy, limit));
+        }
+    }
+    alpha
+}
+
+/// Where the contact step stands after an evaluation.
+struct Measures {
+    /// The dynamic rows' residual relative to their momentum scale.
+    relative: f64,
+    /// The largest bilateral violation, gap-slack and displacement mismatch.
+    violation: f64,
+    /// The largest complementarity relative to the step's momentum scale (hard contact), or
+    /// the largest departure from the central path at κ relative to κ.
+    complementarity: f64,
+    /// The element with the largest complementarity or violation, for errors.
+    worst: usize,
+}
+
+impl<N: Dim> MidpointVi<N>
+where
+    DefaultAllocator: Allocator<N> + Allocator<N, N>,
+{
+    /// The contact step from `(q₁, p₁)`, `q₂` predicted in `q_next`: interior-point Newton on
+    /// the equations of the module docs. The iterations taken, also on failure.
+    pub(super) fn solve_contact<S, F, P>(
+        &mut self,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> Result<usize, (usize, SimError)>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        let mut c = self.contact.take().expect("a contact step has its workspace");
+        let result = self.contact_newton(&mut c, cx, q1, p1, q_next);
+        self.contact = Some(c);
+        result
+    }
+
+    fn contact_newton<S, F, P>(
+        &mut self,
+        c: &mut ContactStep,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> Result<usize, (usize, SimError)>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        let (step, t) = (cx.index, cx.t);
+        cx.sys.gaps(q1, None, &mut c.gaps);
+        c.at_start.copy_from_slice(c.gaps.h.as_slice());
+        self.evaluate_residual(cx, q1, p1, q_next, true);
+        let scale = self.momentum_scale();
+        self.start_contact(c, cx, q_next, scale);
+        let kappa = self.settings.kappa;
+        let mut iterations = 0;
+        let mut at_floor = false;
+        loop {
+            if iterations > 0 {
+                self.evaluate_residual(cx, q1, p1, q_next, true);
+            }
+            self.form_jacobian();
+            weights_of(c);
+            cx.sys.gaps(q_next, Some(&c.weights), &mut c.gaps);
+            let m = self.contact_residual(c, scale, kappa, 0.0);
+            if !(m.relative.is_finite() && m.violation.is_finite() && m.complementarity.is_finite()) {
+                let what = "the contact step's residual".into();
+                return Err((iterations, SimError::NonFinite { step, t, what }));
+            }
+            let tol = self.settings.tolerance;
+            let rest = m.violation <= self.settings.constraint_tolerance && m.complementarity <= tol;
+            // The last update was lost in the rounding of q: the residual is at its floor
+            // (≈ ε‖M‖‖q‖/Δt), as in the smooth step.
+            if rest && (m.relative <= tol || (at_floor && m.relative <= tol.sqrt())) {
+                break;
+            }
+            if iterations >= MAX_ITERATIONS {
+                let e = &c.elements[m.worst];
+                return Err((
+                    iterations,
+                    SimError::ContactFailed {
+                        step,
+                        t,
+                        iterations,
+                        contact: c.names[m.worst].clone(),
+                        gap: c.gaps.h[e.row],
+                        residual: m.relative,
+                        complementarity: m.complementarity,
+                    },
+                ));
+            }
+            iterations += 1;
+            self.contact_matrix(c);
+            let nz = c.nz;
+            lu_factor_packed(&mut c.matrix, nz, &mut c.pivots).map_err(|k| {
+                (iterations, self.singular_unknown(c, cx.sys, k, step, t))
+            })?;
+            self.mehrotra(c, scale, kappa);
+            at_floor = self.apply_contact_update(c, q_next, scale);
+        }
+        for (k, w) in c.weights.iter().enumerate() {
+            c.impulses[k] = *w;
+        }
+        c.gap_values.copy_from_slice(c.gaps.h.as_slice());
+        Ok(iterations)
+    }
+
+    /// The step's momentum scale: the largest dynamic row's (at least the smallest normal
+    /// float, for a model at rest without forces).
+    fn momentum_scale(&self) -> f64 {
+        (self.split.dynamic.iter())
+            .map(|&i| self.row_scale[i])
+            .fold(f64::MIN_POSITIVE, f64::max)
+    }
+
+    /// A fresh step's contact unknowns at the predicted `q₂`: `s = max(φ, d₀)`, `γ` with
+    /// `sγ = d₀·P`; with friction `b = 0`, `δ` the predicted displacement and `ψ` with
+    /// `μγψ = d₀·P` beyond `‖δ‖`.
+    fn start_contact<S, F, P>(
+        &mut self,
+        c: &mut ContactStep,
+        cx: &mut StepContext<S, F, P>,
+        q2: &Vector<N>,
+        scale: f64,
+    ) where
+        S: System<N = N>,
+    {
+        cx.sys.gaps(q2, None, &mut c.gaps);
+        let target = START_GAP * scale;
+        for e in &c.elements {
+            let (b, phi) = (e.base, c.gaps.h[e.row]);
+            let s = phi.max(START_GAP);
+            c.z[b + 1] = s;
+            c.z[b] = target / s;
+            if e.has_friction() {
+                let d = [1, 2].map(|k| c.gaps.h[e.row + k] - c.at_start[e.row + k]);
+                let norm = (d[0] * d[0] + d[1] * d[1]).sqrt();
+                c.z[b + 2] = 0.0;
+                c.z[b + 3] = 0.0;
+                c.z[b + 4] = norm + target / (e.friction * c.z[b]);
+                c.z[b + 5] = d[0];
+                c.z[b + 6] = d[1];
+            }
+        }
+        for (k, &l) in self.lambda.iter().enumerate() {
+            c.z[self.split.dynamic.len() + k] = l;
+        }
+    }
+
+    /// The residual of every equation at the current unknowns into `c.residual`, the
+    /// complementarity rows against `target` (`κ`'s or the centring's), and the measures.
+    fn contact_residual(&mut self, c: &mut ContactStep, scale: f64, kappa: f64, target: f64) -> Measures {
+        let (dynamic, nd, m) = (&self.split.dynamic, self.split.dynamic.len(), self.split.rows);
+        let g = &c.gaps;
+        // r_d + Nᵀγ + Tᵀb, and each row's momentum scale with the impulses' terms.
+        let mut largest: f64 = 0.0;
+        for (ci, &i) in dynamic.iter().enumerate() {
+            let (mut x, mut s) = (self.residual[i], self.row_scale[i]);
+            for (r, &w) in c.weights.iter().enumerate() {
+                let v = g.dh[(r, i)] * w;
+                x += v;
+                s += v.abs();
+            }
+            c.residual[ci] = x;
+            self.column[ci] = s;
+            largest = largest.max(s);
+        }
+        let floor = super::FLOOR * largest;
+        let relative = (0..nd)
+            .map(|ci| c.residual[ci].abs() / self.column[ci].max(floor).max(f64::MIN_POSITIVE))
+            .fold(0.0, f64::max);
+        let mut violation: f64 = 0.0;
+        for r in 0..m {
+            c.residual[nd + r] = self.constraint_terms.h[r];
+            violation = violation.max(self.constraint_terms.h[r].abs());
+        }
+        let (mut complementarity, mut worst, mut worst_value): (f64, usize, f64) = (0.0, 0, -1.0);
+        for (k, e) in c.elements.iter().enumerate() {
+            let (b, z) = (e.base, &c.z);
+            let gap = z[b + 1] - g.h[e.row];
+            c.residual[b] = gap;
+            c.residual[b + 1] = z[b] * z[b + 1] - target;
+            let mut v = gap.abs() / z[b + 1].abs().max(1.0);
+            let mut comp = central(z[b] * z[b + 1], scale, kappa);
+            if e.has_friction() {
+                for k in 0..2 {
+                    let d = z[b + 5 + k] - (g.h[e.row + 1 + k] - c.at_start[e.row + 1 + k]);
+                    c.residual[b + 2 + k] = d;
+                    v = v.max(d.abs() / z[b + 5 + k].abs().max(1.0));
+                }
+                let (x, y) = cone_points(e, z);
+                let p = cone::product(&x, &y);
+                c.residual[b + 4] = p[0] - target;
+                c.residual[b + 5] = p[1];
+                c.residual[b + 6] = p[2];
+                comp = comp.max(cone_central(&p, scale, kappa));
+            }
+            violation = violation.max(v);
+            complementarity = complementarity.max(comp);
+            if comp.max(v) > worst_value {
+                (worst, worst_value) = (k, comp.max(v));
+            }
+        }
+        Measures {
+            relative,
+            violation,
+            complementarity,
+            worst,
+        }
+    }
+
+    /// The Newton matrix of every equation in the unknowns, column-major, into `c.matrix`.
+    fn contact_matrix(&self, c: &mut ContactStep) {
+        let (dynamic, nd, m, nz) = (&self.split.dynamic, self.split.dynamic.len(), self.split.rows, c.nz);
+        let (g, k) = (&c.gaps, &mut c.matrix);
+        k.fill(0.0);
+        let n = self.jacobian.nrows();
+        let jac = self.jacobian.as_slice();
+        let w = &g.weighted_d2h;
+        for (cj, &j) in dynamic.iter().enumerate() {
+            for (ci, &i) in dynamic.iter().enumerate() {
+                k[cj * nz + ci] = jac[j * n + i] + w[(i, j)];
+            }
+            for r in 0..m {
+                k[cj * nz + nd + r] = self.constraint_terms.dh[(r, j)];
+            }
+        }
+        for r in 0..m {
+            for (ci, &i) in dynamic.iter().enumerate() {
+                k[(nd + r) * nz + ci] = self.dt * self.dh1[(r, i)];
+            }
+        }
+        let z = &c.z;
+        for e in &c.elements {
+            let b = e.base;
+            for (ci, &i) in dynamic.iter().enumerate() {
+                // ∂r_d/∂γ = N, and the gap row's −N in q₂'s columns.
+                k[b * nz + ci] = g.dh[(e.row, i)];
+                k[ci * nz + b] = -g.dh[(e.row, i)];
+            }
+            k[(b + 1) * nz + b] = 1.0;
+            // s γ: ∂/∂γ = s, ∂/∂s = γ.
+            k[b * nz + b + 1] = z[b + 1];
+            k[(b + 1) * nz + b + 1] = z[b];
+            if !e.has_friction() {
+                continue;
+            }
+            for t in 0..2 {
+                let (row, col) = (b + 2 + t, b + 2 + t);
+                for (ci, &i) in dynamic.iter().enumerate() {
+                    k[col * nz + ci] = g.dh[(e.row + 1 + t, i)];
+                    k[ci * nz + row] = -g.dh[(e.row + 1 + t, i)];
+                }
+                k[(b + 5 + t) * nz + row] = 1.0;
+            }
+            // (μγ, b) ∘ η: by γ (through μγ), b and η.
+            let (x, y) = cone_points(e, z);
+            let rows = [b + 4, b + 5, b + 6];
+            let columns: [(usize, Point); 6] = [
+                (b, [e.friction * y[0], e.friction * y[1], e.friction * y[2]]),
+                (b + 2, [y[1], y[0], 0.0]),
+                (b + 3, [y[2], 0.0, y[0]]),
+                (b + 4, [x[0], x[1], x[2]]),
+                (b + 5, [x[1], x[0], 0.0]),
+                (b + 6, [x[2], 0.0, x[0]]),
+            ];
+            for (col, v) in columns {
+                for (r, &row) in rows.iter().enumerate() {
+                    k[col * nz + row] = v[r];
+                }
+            }
+        }
+    }
+
+    /// Mehrotra's predictor and corrector from the factored matrix: the direction into
+    /// `c.direction`.
+    fn mehrotra(&mut self, c: &mut ContactStep, scale: f64, kappa: f64) {
+        let nz = c.nz;
+        // The predictor: every complementarity towards zero.
+        for k in 0..nz {
+            c.affine[k] = -c.residual[k];
+        }
+        for e in &c.elements {
+            c.affine[e.base + 1] = -c.z[e.base] * c.z[e.base + 1];
+            if e.has_friction() {
+                let (x, y) = cone_points(e, &c.z);
+                let p = cone::product(&x, &y);
+                for r in 0..3 {
+                    c.affine[e.base + 4 + r] = -p[r];
+                }
+            }
+        }
+        lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.affine);
+        let mu = mean_complementarity(&c.elements, &c.z);
+        let alpha = step_length(&c.elements, &c.z, &c.affine, 1.0);
+        for k in 0..nz {
+            c.direction[k] = c.z[k] + alpha * c.affine[k];
+        }
+        let mu_affine = mean_complementarity(&c.elements, &c.direction);
+        let sigma = (mu_affine / mu).clamp(0.0, 1.0).powi(3);
+        let target = (sigma * mu).max(kappa);
+        let _ = scale;
+        // The corrector: centred at `target`, with the predictor's second-order term.
+        for k in 0..nz {
+            c.direction[k] = -c.residual[k];
+        }
+        for e in &c.elements {
+            let (b, a) = (e.base, &c.affine);
+            c.direction[b + 1] = -(c.z[b] * c.z[b + 1] - target + a[b] * a[b + 1]);
+            if e.has_friction() {
+                let (x, y) = cone_points(e, &c.z);
+                let (dx, dy) = cone_points(e, a);
+                let p = cone::product(&x, &y);
+                let dp = cone::product(&dx, &dy);
+                c.direction[b + 4] = -(p[0] - target + dp[0]);
+                c.direction[b + 5] = -(p[1] + dp[1]);
+                c.direction[b + 6] = -(p[2] + dp[2]);
+            }
+        }
+        lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.direction);
+    }
+
+    /// Takes the corrector's direction a fraction of the way to the cones' boundary — the
+    /// fraction nearer 1 as the complementarity vanishes, so the last iterations converge
+    /// as Newton's — to `q₂`, `λ` and the contact unknowns. Whether the update of `q₂` was
+    /// below the rounding of `q`.
+    fn apply_contact_update(&mut self, c: &mut ContactStep, q_next: &mut Vector<N>, scale: f64) -> bool {
+        let mu = mean_complementarity(&c.elements, &c.z) / scale;
+        let fraction = FRACTION_TO_BOUNDARY.max(1.0 - mu);
+        let room = step_length(&c.elements, &c.z, &c.direction, 1.0 / fraction);
+        let alpha = (fraction * room).min(1.0);
+        let nd = self.split.dynamic.len();
+        let mut largest: f64 = 0.0;
+        for (ci, &i) in self.split.dynamic.iter().enumerate() {
+            let dq = alpha * c.direction[ci];
+            q_next[i] += dq;
+            largest = largest.max(dq.abs());
+        }
+        for r in 0..self.split.rows {
+            self.lambda[r] += alpha * c.direction[nd + r];
+        }
+        for k in nd + self.split.rows..c.nz {
+            c.z[k] += alpha * c.direction[k];
+        }
+        largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0)
+    }
+
+    /// The error for a zero pivot at unknown `k`.
+    fn singular_unknown<S: System<N = N>>(
+        &self,
+        c: &ContactStep,
+        sys: &S,
+        k: usize,
+        step: usize,
+        t: f64,
+    ) -> SimError {
+        let (nd, m) = (self.split.dynamic.len(), self.split.rows);
+        let variable = if k < nd {
+            format!("variable `{}`", sys.variable_name(self.split.dynamic[k]))
+        } else if k < nd + m {
+            format!("the λ of constraint `{}`", sys.constraint_name(k - nd))
+        } else {
+            let e = c.elements.iter().rposition(|e| e.base <= k).unwrap_or(0);
+            format!("the impulse of contact `{}`", c.names[e])
+        };
+        SimError::SingularJacobian { step, t, variable }
+    }
+}
+
+/// The impulses as gap-row weights: `γ` at each gap row, `b` at its tangent rows.
+fn weights_of(c: &mut ContactStep) {
+    for e in &c.elements {
+        c.weights[e.row] = c.z[e.base];
+        if e.has_friction() {
+            c.weights[e.row + 1] = c.z[e.base + 2];
+            c.weights[e.row + 2] = c.z[e.base + 3];
+        }
+    }
+}
+
+/// [`central`] for a cone's product `p = (μγ, b) ∘ η`, whose target is `κ e`.
+fn cone_central(p: &Point, scale: f64, kappa: f64) -> f64 {
+    let off = p[1].abs().max(p[2].abs());
+    if kappa > 0.0 {
+        central(p[0], scale, kappa).max(off / kappa)
+    } else {
+        p[0].abs().max(off) / scale
+    }
+}
+
+/// How far a complementarity `x` is from done: relative to the momentum scale for hard
+/// contact (`κ = 0`), from `κ` relative to `κ` on the central path.
+fn central(x: f64, scale: f64, kappa: f64) -> f64 {
+    if kappa > 0.0 {
+        (x - kappa).abs() / kappa
+    } else {
+        x.abs() / scale
+    }
+}
