@@ -24,9 +24,189 @@ fn a_dropped_ball_lands_on_time_and_rests_at_its_radius() {
     let landing = (0..z.len()).find(|&k| z[k] <= 0.1 + 1e-9).unwrap();
     let expected = (2.0 * 1.0 / 9.81f64).sqrt();
     let t = traj.t[landing];
-    eprintln!("landed at {t} (expected {expected}), rests at {}", z.last().unwrap());
-    assert!((t - expected).abs() <= 2.0 * dt, "landed at {t}, expected {expected}");
+    eprintln!(
+        "landed at {t} (expected {expected}), rests at {}",
+        z.last().unwrap()
+    );
+    assert!(
+        (t - expected).abs() <= 2.0 * dt,
+        "landed at {t}, expected {expected}"
+    );
     let lowest = z.iter().cloned().fold(f64::INFINITY, f64::min);
     assert!(lowest >= 0.1 - 1e-9, "penetrated to {lowest}");
-    assert!((z.last().unwrap() - 0.1).abs() <= 1e-9, "rests at {}", z.last().unwrap());
+    assert!(
+        (z.last().unwrap() - 0.1).abs() <= 1e-9,
+        "rests at {}",
+        z.last().unwrap()
+    );
+}
+
+/// A cube sliding at v₀ on its four lower corners with friction μ stops after v₀²/(2μg), at
+/// t = v₀/(μg), without tipping or leaving the ground.
+#[test]
+fn a_sliding_box_stops_where_coulomb_says() {
+    let model = load("tests/models/box.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    let dt = 1e-3;
+    let traj = simulate(&mut sys, &q0, &dq0, &vi(dt, 0.4), &mut NoForce, &mut |_| {}).unwrap();
+    let (mu, g, v0) = (0.5, 9.81, 1.0);
+    let (distance, time) = (v0 * v0 / (2.0 * mu * g), v0 / (mu * g));
+    let x: Vec<f64> = (0..traj.len()).map(|k| traj.q(k)[0]).collect();
+    let end = *x.last().unwrap();
+    let stop = (1..x.len())
+        .find(|&k| (x[k] - x[k - 1]).abs() < 1e-12)
+        .unwrap();
+    eprintln!(
+        "stopped at x = {end} after t = {} (expected {distance}, {time})",
+        traj.t[stop]
+    );
+    assert!(
+        (end - distance).abs() <= 5e-3 * distance,
+        "stopped at {end}, expected {distance}"
+    );
+    assert!(
+        (traj.t[stop] - time).abs() <= 2.0 * dt,
+        "stopped at t = {}",
+        traj.t[stop]
+    );
+    for k in 0..traj.len() {
+        let q = traj.q(k);
+        assert!((q[2] - 0.1).abs() < 1e-9, "z = {} at step {k}", q[2]);
+        assert!(
+            q[3..].iter().all(|a| a.abs() < 1e-9),
+            "turned: {:?}",
+            &q[3..]
+        );
+    }
+}
+
+/// The cube on a slope (gravity tilted by θ): it sticks when tan θ < μ and slides with
+/// g(sin θ − μ cos θ) otherwise.
+#[test]
+fn a_box_on_a_slope_sticks_or_slides_as_coulomb_says() {
+    let text = std::fs::read_to_string("tests/models/box.toml").unwrap();
+    let text = text.replace("[variables.x]\ndq0 = 1.0\n", "");
+    for theta in [0.3f64, 0.6] {
+        let g = 9.81;
+        let gravity = format!(
+            "gravity = [{}, 0.0, {}]\n",
+            g * theta.sin(),
+            -g * theta.cos()
+        );
+        let model = model::from_toml_str(&format!("{gravity}{text}"), Some("slope.toml")).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let (q0, dq0) = sys.initial_state();
+        let (dt, duration) = (1e-3, 0.5);
+        let traj = simulate(
+            &mut sys,
+            &q0,
+            &dq0,
+            &vi(dt, duration),
+            &mut NoForce,
+            &mut |_| {},
+        )
+        .unwrap();
+        let x = traj.q(traj.len() - 1)[0];
+        let a = g * (theta.sin() - 0.5 * theta.cos());
+        if theta.tan() < 0.5 {
+            assert!(x.abs() < 1e-9, "θ = {theta}: slid to {x}");
+        } else {
+            let expected = 0.5 * a * duration * duration;
+            eprintln!("θ = {theta}: slid {x}, expected {expected}");
+            assert!(
+                (x - expected).abs() <= 5e-3 * expected,
+                "θ = {theta}: slid {x}, expected {expected}"
+            );
+        }
+    }
+}
+
+/// A pendulum thrown at its limit never passes it and never gains energy.
+#[test]
+fn a_pendulum_thrown_at_its_limit_never_passes_it() {
+    let model = load("tests/models/limited-pendulum.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    let traj = simulate(
+        &mut sys,
+        &q0,
+        &dq0,
+        &vi(1e-3, 2.0),
+        &mut NoForce,
+        &mut |_| {},
+    )
+    .unwrap();
+    let theta: Vec<f64> = (0..traj.len()).map(|k| traj.q(k)[0]).collect();
+    let (lowest, highest) = theta
+        .iter()
+        .fold((0.0f64, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
+    assert!(
+        lowest >= -0.5 - 1e-9 && highest <= 0.5 + 1e-9,
+        "θ in [{lowest}, {highest}]"
+    );
+    assert!(
+        highest > 0.5 - 1e-9 && lowest < -0.5 + 1e-9,
+        "it reached both limits"
+    );
+    let e0 = traj.energy[0];
+    let gained = traj
+        .energy
+        .iter()
+        .map(|e| e - e0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(gained <= 1e-9 * e0.abs().max(1.0), "gained {gained}");
+}
+
+/// A mass on a slack string falls freely (½gt²) until the string is taut, then hangs at its
+/// length.
+#[test]
+fn a_mass_on_a_slack_string_falls_freely_until_taut() {
+    let model = load("tests/models/string-drop.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    let dt = 1e-3;
+    let traj = simulate(&mut sys, &q0, &dq0, &vi(dt, 1.0), &mut NoForce, &mut |_| {}).unwrap();
+    let taut = (2.0 * 0.5 / 9.81f64).sqrt();
+    for k in 0..traj.len() {
+        let (t, z) = (traj.t[k], traj.q(k)[0]);
+        assert!(z >= -1.0 - 1e-9, "the string stretched to {z} at t = {t}");
+        if t < taut - dt {
+            let free = -0.5 - 0.5 * 9.81 * t * t;
+            assert!(
+                (z - free).abs() < 1e-9,
+                "z = {z} at t = {t}, free fall gives {free}"
+            );
+        }
+    }
+    assert!((traj.q(traj.len() - 1)[0] + 1.0).abs() < 1e-9);
+}
+
+/// Two equal balls in a head-on inelastic collision move on together at the mean velocity.
+#[test]
+fn two_balls_meeting_head_on_move_on_together() {
+    let model = load("tests/models/two-balls.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    let traj = simulate(
+        &mut sys,
+        &q0,
+        &dq0,
+        &vi(1e-3, 0.5),
+        &mut NoForce,
+        &mut |_| {},
+    )
+    .unwrap();
+    let last = traj.len() - 1;
+    let (q, dq) = (traj.q(last), traj.dq(last));
+    eprintln!("apart {} at velocities {dq:?}", q[1] - q[0]);
+    assert!((q[1] - q[0] - 0.2).abs() < 1e-9, "apart {}", q[1] - q[0]);
+    assert!(
+        (dq[0] - 1.0).abs() < 1e-9 && (dq[1] - 1.0).abs() < 1e-9,
+        "{dq:?}"
+    );
+    let lowest = (0..traj.len())
+        .map(|k| traj.q(k)[1] - traj.q(k)[0])
+        .fold(f64::INFINITY, f64::min);
+    assert!(lowest >= 0.2 - 1e-9, "overlapped to {lowest}");
 }

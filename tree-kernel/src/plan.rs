@@ -8,9 +8,9 @@
 //! primitives costs one constant transform, and its body joins its kept ancestor's as one
 //! composite rigid body (docs/derivations.md §4).
 
-use tree_model::{Gap, GapKind, 
-    Constraint, ConstraintKind, Damper, Joint, Mass, Model, Parameter, PrimitiveKind, Spring,
-    SpringKind,
+use tree_model::{
+    Constraint, ConstraintKind, Damper, Gap, GapKind, Joint, Mass, Model, Parameter, PrimitiveKind,
+    Spring, SpringKind,
 };
 
 use crate::scalar::Scalar;

@@ -204,7 +204,9 @@ impl Model {
         }
         if let Some(ground) = c.ground {
             for s in &c.spheres {
-                let friction = s.friction.map_or(ground.friction, |f| f.min(ground.friction));
+                let friction = s
+                    .friction
+                    .map_or(ground.friction, |f| f.min(ground.friction));
                 gaps.push(Gap {
                     name: s.name.clone(),
                     kind: GapKind::Ground {
@@ -338,10 +340,7 @@ pub(crate) fn validate_contacts(
                 None
             }
             None => {
-                at(
-                    "frame",
-                    format!("{what}: unknown frame `{}`", c.frame),
-                );
+                at("frame", format!("{what}: unknown frame `{}`", c.frame));
                 None
             }
         };

@@ -183,7 +183,7 @@ where
 {
     let n = b.len();
     let b = b.as_mut_slice();
-    lu_core_factor(a.as_mut_slice(), n, 1.0, |j, p| b.swap(j, p))?;
+    lu_core_factor(a.as_mut_slice(), n, 1.0, LOST, |j, p| b.swap(j, p))?;
     forward_backward(a.as_slice(), n, b);
     Ok(())
 }
@@ -195,7 +195,7 @@ pub(crate) type Pivots<N> = nalgebra::OVector<usize, N>;
 /// pivoting), recording the interchanges in `pivots[..n]`. The caller may pack a smaller
 /// system into larger fixed-size storage. On failure returns the column whose pivot vanished.
 pub fn lu_factor_packed(a: &mut [f64], n: usize, pivots: &mut [usize]) -> Result<(), usize> {
-    lu_core_factor(&mut a[..n * n], n, 1.0, |j, p| pivots[j] = p)
+    lu_core_factor(&mut a[..n * n], n, 1.0, LOST, |j, p| pivots[j] = p)
 }
 
 /// [`lu_factor_packed`] with threshold pivoting: the diagonal entry stays the pivot while
@@ -212,7 +212,7 @@ pub(crate) fn lu_factor_packed_threshold(
     pivots: &mut [usize],
     threshold: f64,
 ) -> Result<(), usize> {
-    lu_core_factor(&mut a[..n * n], n, threshold, |j, p| pivots[j] = p)
+    lu_core_factor(&mut a[..n * n], n, threshold, LOST, |j, p| pivots[j] = p)
 }
 
 /// Solves `A x = b[..n]` with the factors from [`lu_factor_packed`]; `b` becomes `x`.
@@ -521,13 +521,29 @@ fn lu_core_factor(
     a: &mut [f64],
     n: usize,
     threshold: f64,
+    lost: f64,
     swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
     if multiversion::target::target_cfg_f!(target_feature = "fma") {
-        factor_with::<true>(a, n, threshold, swapped)
+        factor_with::<true>(a, n, threshold, lost, swapped)
     } else {
-        factor_with::<false>(a, n, threshold, swapped)
+        factor_with::<false>(a, n, threshold, lost, swapped)
     }
+}
+
+/// A pivot at most this fraction of its column's largest entry is lost in rounding: the
+/// matrix is singular there.
+const LOST: f64 = 1e-14;
+
+/// [`lu_factor_packed`] that refuses only a zero or non-finite pivot: for an interior
+/// point's Newton matrix, ill-conditioned by design near the solution (an impulse and its
+/// gap tending to zero together), whose direction is still accurate where it matters.
+pub(crate) fn lu_factor_packed_unguarded(
+    a: &mut [f64],
+    n: usize,
+    pivots: &mut [usize],
+) -> Result<(), usize> {
+    lu_core_factor(&mut a[..n * n], n, 1.0, 0.0, |j, p| pivots[j] = p)
 }
 
 /// [`lu_core_factor`] with fused multiply-adds or without (both tested on any CPU).
@@ -536,11 +552,12 @@ fn factor_with<const FUSED: bool>(
     a: &mut [f64],
     n: usize,
     threshold: f64,
+    lost: f64,
     mut swapped: impl FnMut(usize, usize),
 ) -> Result<(), usize> {
     let mut j = 0;
     while j < n {
-        pivot_column(a, n, j, threshold, &mut swapped)?;
+        pivot_column(a, n, j, threshold, lost, &mut swapped)?;
         if j + 1 == n {
             break;
         }
@@ -554,7 +571,7 @@ fn factor_with<const FUSED: bool>(
                 *x -= m * t0;
             }
         }
-        pivot_column(a, n, j + 1, threshold, &mut swapped)?;
+        pivot_column(a, n, j + 1, threshold, lost, &mut swapped)?;
         // The trailing columns: entry j + 1 from entry j, then both updates below.
         let (left, right) = a.split_at_mut((j + 2) * n);
         let m0 = &left[j * n + j + 2..(j + 1) * n];
@@ -619,6 +636,7 @@ fn pivot_column(
     n: usize,
     j: usize,
     threshold: f64,
+    lost: f64,
     swapped: &mut impl FnMut(usize, usize),
 ) -> Result<(), usize> {
     // Pivot: the diagonal entry when it is within `threshold` of the largest at or below it
@@ -639,7 +657,7 @@ fn pivot_column(
     let scale = largest_magnitude(&col[..j])
         .max(largest_below)
         .max(f64::MIN_POSITIVE);
-    if !pivot.is_finite() || pivot.abs() <= 1e-14 * scale {
+    if !pivot.is_finite() || pivot.abs() <= lost * scale {
         return Err(j);
     }
     swapped(j, p);
@@ -731,7 +749,7 @@ mod tests {
         for n in [1, 2, 5, 8, 19] {
             let a = scattered(n);
             let (mut factor, mut pivots) = (a.clone(), vec![0; n]);
-            factor_with::<FUSED>(&mut factor, n, 1.0, |j, p| pivots[j] = p).expect("regular");
+            factor_with::<FUSED>(&mut factor, n, 1.0, LOST, |j, p| pivots[j] = p).expect("regular");
             if n > 1 {
                 assert_ne!(pivots[0], 0, "the first pivot is swapped");
             }

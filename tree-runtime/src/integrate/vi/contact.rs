@@ -26,7 +26,7 @@ use crate::cone::{self, Point};
 use crate::context::StepContext;
 use crate::dynamics::GeneralizedForce;
 use crate::error::SimError;
-use crate::linalg::{lu_factor_packed, lu_solve_packed};
+use crate::linalg::{lu_factor_packed_unguarded, lu_solve_packed};
 use crate::system::{ConstraintTerms, System, Vector};
 
 /// Iterations a contact step may take before it fails.
@@ -34,6 +34,10 @@ const MAX_ITERATIONS: usize = 60;
 
 /// How far towards a cone's boundary a step goes.
 const FRACTION_TO_BOUNDARY: f64 = 0.99;
+
+/// The largest fraction of the way to a cone's boundary a step goes (never onto it: a point
+/// on the boundary makes the Newton matrix singular).
+const LAST_FRACTION: f64 = 1.0 - 1e-6;
 
 /// The complementarity a fresh step starts from, as a gap in metres (or radians) times the
 /// step's momentum scale.
@@ -122,7 +126,6 @@ impl ContactStep {
             gap_values: vec![0.0; rows],
         }))
     }
-
 }
 
 /// `(μγ, b)` and `η` of a frictional element in the unknowns `z`.
@@ -200,7 +203,10 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
-        let mut c = self.contact.take().expect("a contact step has its workspace");
+        let mut c = self
+            .contact
+            .take()
+            .expect("a contact step has its workspace");
         let result = self.contact_newton(&mut c, cx, q1, p1, q_next);
         self.contact = Some(c);
         result
@@ -235,12 +241,14 @@ where
             weights_of(c);
             cx.sys.gaps(q_next, Some(&c.weights), &mut c.gaps);
             let m = self.contact_residual(c, scale, kappa, 0.0);
-            if !(m.relative.is_finite() && m.violation.is_finite() && m.complementarity.is_finite()) {
+            if !(m.relative.is_finite() && m.violation.is_finite() && m.complementarity.is_finite())
+            {
                 let what = "the contact step's residual".into();
                 return Err((iterations, SimError::NonFinite { step, t, what }));
             }
             let tol = self.settings.tolerance;
-            let rest = m.violation <= self.settings.constraint_tolerance && m.complementarity <= tol;
+            let rest =
+                m.violation <= self.settings.constraint_tolerance && m.complementarity <= tol;
             // The last update was lost in the rounding of q: the residual is at its floor
             // (≈ ε‖M‖‖q‖/Δt), as in the smooth step.
             if rest && (m.relative <= tol || (at_floor && m.relative <= tol.sqrt())) {
@@ -264,9 +272,8 @@ where
             iterations += 1;
             self.contact_matrix(c);
             let nz = c.nz;
-            lu_factor_packed(&mut c.matrix, nz, &mut c.pivots).map_err(|k| {
-                (iterations, self.singular_unknown(c, cx.sys, k, step, t))
-            })?;
+            lu_factor_packed_unguarded(&mut c.matrix, nz, &mut c.pivots)
+                .map_err(|k| (iterations, self.singular_unknown(c, cx.sys, k, step, t)))?;
             self.mehrotra(c, scale, kappa);
             at_floor = self.apply_contact_update(c, q_next, scale);
         }
@@ -321,8 +328,18 @@ where
 
     /// The residual of every equation at the current unknowns into `c.residual`, the
     /// complementarity rows against `target` (`κ`'s or the centring's), and the measures.
-    fn contact_residual(&mut self, c: &mut ContactStep, scale: f64, kappa: f64, target: f64) -> Measures {
-        let (dynamic, nd, m) = (&self.split.dynamic, self.split.dynamic.len(), self.split.rows);
+    fn contact_residual(
+        &mut self,
+        c: &mut ContactStep,
+        scale: f64,
+        kappa: f64,
+        target: f64,
+    ) -> Measures {
+        let (dynamic, nd, m) = (
+            &self.split.dynamic,
+            self.split.dynamic.len(),
+            self.split.rows,
+        );
         let g = &c.gaps;
         // r_d + Nᵀγ + Tᵀb, and each row's momentum scale with the impulses' terms.
         let mut largest: f64 = 0.0;
@@ -353,7 +370,13 @@ where
             c.residual[b] = gap;
             c.residual[b + 1] = z[b] * z[b + 1] - target;
             let mut v = gap.abs() / z[b + 1].abs().max(1.0);
-            let mut comp = central(z[b] * z[b + 1], scale, kappa);
+            let mut comp = if kappa > 0.0 {
+                central(z[b] * z[b + 1], scale, kappa)
+            } else {
+                // Hard contact: the gap closed or the impulse gone (the smaller of the two,
+                // each relative: a resting contact that carries no load has both small).
+                z[b + 1].min(z[b] / scale)
+            };
             if e.has_friction() {
                 for k in 0..2 {
                     let d = z[b + 5 + k] - (g.h[e.row + 1 + k] - c.at_start[e.row + 1 + k]);
@@ -383,7 +406,12 @@ where
 
     /// The Newton matrix of every equation in the unknowns, column-major, into `c.matrix`.
     fn contact_matrix(&self, c: &mut ContactStep) {
-        let (dynamic, nd, m, nz) = (&self.split.dynamic, self.split.dynamic.len(), self.split.rows, c.nz);
+        let (dynamic, nd, m, nz) = (
+            &self.split.dynamic,
+            self.split.dynamic.len(),
+            self.split.rows,
+            c.nz,
+        );
         let (g, k) = (&c.gaps, &mut c.matrix);
         k.fill(0.0);
         let n = self.jacobian.nrows();
@@ -496,9 +524,14 @@ where
     /// fraction nearer 1 as the complementarity vanishes, so the last iterations converge
     /// as Newton's — to `q₂`, `λ` and the contact unknowns. Whether the update of `q₂` was
     /// below the rounding of `q`.
-    fn apply_contact_update(&mut self, c: &mut ContactStep, q_next: &mut Vector<N>, scale: f64) -> bool {
+    fn apply_contact_update(
+        &mut self,
+        c: &mut ContactStep,
+        q_next: &mut Vector<N>,
+        scale: f64,
+    ) -> bool {
         let mu = mean_complementarity(&c.elements, &c.z) / scale;
-        let fraction = FRACTION_TO_BOUNDARY.max(1.0 - mu);
+        let fraction = FRACTION_TO_BOUNDARY.max(1.0 - mu).min(LAST_FRACTION);
         let room = step_length(&c.elements, &c.z, &c.direction, 1.0 / fraction);
         let alpha = (fraction * room).min(1.0);
         let nd = self.split.dynamic.len();
