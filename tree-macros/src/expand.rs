@@ -156,6 +156,35 @@ fn weighted_program(plan: &TreePlan, kinematic: &[bool]) -> Option<Traced> {
     })
 }
 
+/// The unilateral rows' `φ` and `Dφ` (`kernel::gaps` at `Order::First`) and, with the
+/// impulses as weights (an input, `out.weights[r]`), `Σ_r w_r D²φ_r` on the dynamic
+/// variables' columns (`kernel::weighted_gap_hessian`): what the contact step evaluates at
+/// each iterate. `None` without unilateral rows.
+fn gap_programs(plan: &TreePlan, kinematic: &[bool]) -> Option<(Traced, Traced)> {
+    if plan.gap_rows == 0 {
+        return None;
+    }
+    let first: Evaluation = |plan, k, q, _, _, out| kernel::gaps(plan, k, q, Order::First, out);
+    let n = plan.dof();
+    let columns: Vec<bool> = kinematic.iter().map(|&k| !k).collect();
+    let (nodes, outputs) = trace::record(|| {
+        let (q, _) = state_inputs(n);
+        let weights: Vec<Term> = (0..plan.gap_rows).map(trace::weight).collect();
+        let mut k = Kernel::<Term>::new(plan);
+        let mut out = Recorder::default();
+        kernel::weighted_gap_hessian(plan, &mut k, &q, &weights, &columns, &mut out);
+        out.values
+    });
+    let nonzero = (outputs.into_iter())
+        .filter(|(_, t)| !matches!(t, Term::Const(c) if *c == 0.0))
+        .collect();
+    let weighted = Traced {
+        nodes,
+        outputs: nonzero,
+    };
+    Some((traced(plan, Order::First, first), weighted))
+}
+
 /// The articulated-body step traced as the interpreted system runs it: the elements' forces
 /// (`kernel::elements_at`, its outward sweep included) added to `τ`, then
 /// `articulated::accelerations` — each dynamic variable's `q̈`, pivot and pivot scale into
@@ -643,6 +672,12 @@ impl Programs {
                 .map(|w| emit(w.assigning(), "__c_weighted", f64_constraints)),
             articulated: articulated_program(plan, &kinematic)
                 .map(|program| emit(program, "__articulated", articulated)),
+            gaps: gap_programs(plan, &kinematic).map(|(first, weighted)| {
+                (
+                    emit(first.assigning(), "__g_first", f64_constraints),
+                    emit(weighted.assigning(), "__g_weighted", f64_constraints),
+                )
+            }),
             duals,
         }
     }

@@ -280,6 +280,9 @@ pub(crate) struct Programs {
     pub(crate) weighted: Option<Emitted>,
     /// The articulated-body algorithm (models it resolves, without constraints).
     pub(crate) articulated: Option<Emitted>,
+    /// The unilateral rows: `φ, Dφ`, and with the impulses' weights `Σ w D²φ` (models with
+    /// limits enforced, contacts or slack strings).
+    pub(crate) gaps: Option<(Emitted, Emitted)>,
     /// The generic programs, instantiated over dual numbers and jets; `None` for a large
     /// model, whose evaluations over them are the interpreted runtime's (`expand::LEAN_ABOVE`).
     pub(crate) duals: Option<DualPrograms>,
@@ -323,8 +326,10 @@ impl Programs {
             .into_iter()
             .chain(d.weighted.iter())
         });
+        let gaps = self.gaps.iter().flat_map(|(a, b)| [a, b]);
         (always.into_iter().chain(self.articulated.iter()))
             .chain(self.weighted.iter())
+            .chain(gaps)
             .chain(duals)
             .map(|e| &e.functions)
     }

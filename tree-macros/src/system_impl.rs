@@ -28,6 +28,8 @@ pub(crate) fn system_impl(
         .map(|e| articulated_method(n, &e.body));
     let weighted = (programs.weighted.as_ref()).map(|f64| weighted_method(n, &f64.body));
     let poses = poses_method(n, model.frames.len(), &programs.poses.body);
+    let gaps = (programs.gaps.as_ref())
+        .map(|(first, weighted)| gaps_methods(n, &first.body, &weighted.body));
     let dual = match &programs.duals {
         Some(duals) => {
             let weighted = (duals.weighted.as_ref()).map(|d| weighted_dual_method(n, &d.body));
@@ -51,6 +53,7 @@ pub(crate) fn system_impl(
             #mass_and_energy
             #articulated
             #weighted
+            #gaps
             #poses
             #dual
         }
@@ -272,6 +275,38 @@ fn articulated_method(n: usize, body: &TokenStream) -> TokenStream {
                 }
             }
             held
+        }
+    }
+}
+
+/// `System::unilateral` and `System::gaps`: the model's gaps, and the programs that evaluate
+/// them (the weighted one assigns what the rows reach, as the constraints' does).
+fn gaps_methods(n: usize, first: &TokenStream, weighted: &TokenStream) -> TokenStream {
+    quote! {
+        fn unilateral(&self) -> ::std::vec::Vec<::tree_mech::__private::model::Gap> {
+            Self::model_ref().gaps()
+        }
+
+        fn gaps(
+            &mut self,
+            q: &::tree_mech::__private::Vector<Self::N>,
+            weights: ::core::option::Option<&[f64]>,
+            out: &mut ::tree_mech::__private::ConstraintTerms,
+        ) {
+            let q: &[f64; #n] = &q.data.0[0];
+            // The traced sweeps read no velocity.
+            let dq = q;
+            match weights {
+                ::core::option::Option::None => {
+                    out.clear(::tree_mech::__private::Order::First);
+                    #first
+                }
+                ::core::option::Option::Some(weights) => {
+                    static MODEL: u8 = 0;
+                    out.weigh_assigned(weights, ::core::ptr::addr_of!(MODEL) as usize);
+                    #weighted
+                }
+            }
         }
     }
 }
