@@ -361,3 +361,159 @@ fn compiled_contact_steps_equal_interpreted() {
         assert!(worst <= 1e-9, "{name}: differs by {worst:e}");
     }
 }
+
+/// RK4 and rk45 would pass through the ground: refused, pointing to the VI.
+#[test]
+fn the_smooth_integrators_refuse_unilateral_rows() {
+    use tree_mech::integrate::Tolerance;
+    let model = load("tests/models/ball.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    for method in [Method::Rk4, Method::Rk45(Tolerance::default())] {
+        let options = SimOptions::new(method, 1e-3, 0.1);
+        let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("only the variational integrator enforces") && text.contains("`ball`"),
+            "{text}"
+        );
+    }
+}
+
+mod derivatives {
+    use super::*;
+    use nalgebra::{DMatrix, Dyn};
+    use tree_mech::integrate::{MidpointVi, StepContext, StepDerivatives};
+    use tree_mech::runtime::ModelMotions;
+
+    /// A tightly converged step at κ from `(q1, p1)`: `(q₂, p₂)`, and the integrator.
+    fn step(
+        sys: &mut TreeSystem,
+        settings: ViSettings,
+        dt: f64,
+        q1: &Vector<Dyn>,
+        p1: &Vector<Dyn>,
+    ) -> (Vector<Dyn>, Vector<Dyn>, MidpointVi<Dyn>) {
+        let mut motion = ModelMotions::of(sys);
+        let mut vi = MidpointVi::new(sys, settings);
+        vi.predict_from_rest();
+        let (mut q, mut p, mut next) = (q1.clone(), p1.clone(), q1.clone());
+        let mut force = NoForce;
+        let mut cx = StepContext::new(sys, &mut force, &mut motion, dt);
+        vi.step(&mut cx, &mut q, &mut p, &mut next).unwrap();
+        (q, p, vi)
+    }
+
+    fn derivatives(
+        sys: &mut TreeSystem,
+        settings: ViSettings,
+        dt: f64,
+        q1: &Vector<Dyn>,
+        p1: &Vector<Dyn>,
+    ) -> StepDerivatives {
+        let (q2, _, mut vi) = step(sys, settings, dt, q1, p1);
+        let mut motion = ModelMotions::of(sys);
+        let mut force = NoForce;
+        let mut cx = StepContext::new(sys, &mut force, &mut motion, dt);
+        vi.derivatives(&mut cx, q1, p1, &q2).unwrap()
+    }
+
+    /// `∂(q₂, p₂)/∂(q₁, p₁)` against central differences of tightly converged steps at κ,
+    /// relative to each block's largest entry.
+    fn check(model: &Model, q1: Vec<f64>, dq1: Vec<f64>, kappa: f64, what: &str) {
+        let mut sys = TreeSystem::new(model).unwrap();
+        let settings = ViSettings {
+            kappa,
+            tolerance: 1e-14,
+            ..ViSettings::default()
+        };
+        let dt = 1e-3;
+        let n = sys.dof();
+        let q1 = Vector::<Dyn>::from_vec(q1);
+        let dq1 = Vector::<Dyn>::from_vec(dq1);
+        let mut vi = MidpointVi::new(&sys, settings);
+        let p1 = vi.initial_momentum(&mut sys, &q1, &dq1);
+        let d = derivatives(&mut sys, settings, dt, &q1, &p1);
+        let dynamic: Vec<usize> = (0..n).filter(|&i| !sys.is_kinematic(i)).collect();
+        let h = 1e-7;
+        for (block, by_p) in [("q1", false), ("p1", true)] {
+            let columns: Vec<usize> = if by_p {
+                dynamic.clone()
+            } else {
+                (0..n).collect()
+            };
+            let mut fd_q = DMatrix::zeros(dynamic.len(), columns.len());
+            let mut fd_p = DMatrix::zeros(dynamic.len(), columns.len());
+            for (c, &j) in columns.iter().enumerate() {
+                let (mut qp, mut qm, mut pp, mut pm) =
+                    (q1.clone(), q1.clone(), p1.clone(), p1.clone());
+                if by_p {
+                    pp[j] += h;
+                    pm[j] -= h;
+                } else {
+                    qp[j] += h;
+                    qm[j] -= h;
+                }
+                let (q2p, p2p, _) = step(&mut sys, settings, dt, &qp, &pp);
+                let (q2m, p2m, _) = step(&mut sys, settings, dt, &qm, &pm);
+                for (r, &i) in dynamic.iter().enumerate() {
+                    fd_q[(r, c)] = (q2p[i] - q2m[i]) / (2.0 * h);
+                    fd_p[(r, c)] = (p2p[i] - p2m[i]) / (2.0 * h);
+                }
+            }
+            let (aq, ap) = if by_p {
+                (&d.q2_dp1, &d.p2_dp1)
+            } else {
+                (&d.q2_dq1, &d.p2_dq1)
+            };
+            for (name, exact, fd) in [("q2", aq, &fd_q), ("p2", ap, &fd_p)] {
+                let cols = fd.ncols();
+                // A block that nearly vanishes (free flight: p₂ hardly sees q₁) is held to 1e-5
+                // absolute, the differences' own noise.
+                let scale = fd.amax().max(1.0);
+                let worst = (0..fd.nrows())
+                    .flat_map(|r| (0..cols).map(move |c| (r, c)))
+                    .map(|(r, c)| (exact[(r, c)] - fd[(r, c)]).abs())
+                    .fold(0.0, f64::max);
+                eprintln!("{what}: d{name}/d{block} worst {:e} of {scale:e}", worst);
+                assert!(
+                    worst <= 1e-5 * scale,
+                    "{what}: d{name}/d{block} off by {worst:e} (scale {scale:e})"
+                );
+            }
+        }
+    }
+
+    /// Sticking, sliding and separating, with friction, at κ > 0; and every kind of row.
+    #[test]
+    fn step_derivatives_through_contact_match_differences() {
+        let cube = load("tests/models/box.toml");
+        let mut q = vec![0.0; cube.dof()];
+        q[2] = 0.1;
+        let mut sliding = vec![0.0; cube.dof()];
+        sliding[0] = 1.0;
+        sliding[1] = 0.3;
+        check(&cube, q.clone(), sliding, 1e-6, "sliding");
+        check(&cube, q.clone(), vec![0.0; cube.dof()], 1e-6, "resting");
+        let mut tilted = q.clone();
+        tilted[3] = 0.2;
+        tilted[4] = 0.1;
+        let mut turning = vec![0.0; cube.dof()];
+        turning[0] = 0.01;
+        turning[5] = 0.5;
+        check(&cube, tilted, turning, 1e-6, "rocking");
+        let mut above = q.clone();
+        above[2] = 0.3;
+        check(
+            &cube,
+            above,
+            vec![0.5, 0.0, -0.2, 0.1, 0.0, 0.0],
+            1e-6,
+            "separated",
+        );
+        let every = load("tests/models/contacts.toml");
+        let q0: Vec<f64> = every.variables.iter().map(|v| v.q0).collect();
+        let dq0 = vec![0.3, -0.2, 0.1, 0.2, -0.4, 0.0];
+        check(&every, q0, dq0, 1e-6, "every kind");
+    }
+}

@@ -94,6 +94,7 @@ where
         return None;
     }
     let steps = check_options(options).ok()?;
+    super::check_unilateral(sys, &options.method).ok()?;
     let n = sys.dof();
     let fits = |s: &LaneStart| {
         s.q0.len() == n

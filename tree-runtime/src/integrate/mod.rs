@@ -194,6 +194,33 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
     Ok(steps as usize)
 }
 
+/// Unilateral rows — enforced limits, contacts, slack strings — are the variational
+/// integrator's alone (docs/derivations.md §13): RK4 and rk45 integrate the smooth equations
+/// of motion and would pass through a limit, the ground or a taut string unseen. Allocates
+/// (at setup).
+pub fn check_unilateral<S: System>(sys: &S, method: &Method) -> Result<(), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    if matches!(method, Method::Vi(_)) {
+        return Ok(());
+    }
+    let gaps = sys.unilateral();
+    let Some(first) = gaps.first() else {
+        return Ok(());
+    };
+    let name = match method {
+        Method::Rk45(_) => "rk45",
+        _ => "rk4",
+    };
+    Err(SimError::Unsupported(format!(
+        "the model has {} unilateral element{} (limits enforced, contacts or slack strings; the first is `{}`), which only the variational integrator enforces, and {name} would pass through them: use the VI (--integrator vi), or drop them (enforce_limits = false, no [ground] or [[contact]], no slack strings)",
+        gaps.len(),
+        if gaps.len() == 1 { "" } else { "s" },
+        first.name
+    )))
+}
+
 /// The loosest Newton tolerance the VI accepts: looser, Newton can accept its predictor and
 /// a run gains or loses energy unseen; at this one a step is solved to well below the
 /// integrator's own error (docs/derivations.md §7).
@@ -365,6 +392,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let steps = check_options(options)?;
+    check_unilateral(sys, &options.method)?;
     check_input_width(sys, if inputs.is_empty() { 0 } else { inputs.width() })?;
     check_start(sys, q0.len(), dq0.len())?;
     let n = sys.dim();

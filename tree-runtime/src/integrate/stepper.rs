@@ -77,6 +77,7 @@ where
     /// its own steps and is refused) at steps of `dt`.
     pub fn new(sys: S, method: Method, dt: f64, q0: &[f64], dq0: &[f64]) -> Result<Self, SimError> {
         check_options(&SimOptions::new(method, dt, dt))?;
+        super::check_unilateral(&sys, &method)?;
         let stepping = match method {
             Method::Rk4 => Stepping::Rk4(Box::new(Rk4::new(&sys))),
             Method::Vi(settings) => Stepping::Vi {

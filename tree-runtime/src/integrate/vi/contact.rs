@@ -19,7 +19,7 @@
 //! 0.99 of the way to their boundary. Hard contact drives the complementarity to the
 //! tolerance; a user's `κ > 0` (`ViSettings::kappa`) stops on its central path instead.
 
-use nalgebra::{allocator::Allocator, DefaultAllocator, Dim};
+use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dim};
 
 use super::MidpointVi;
 use crate::cone::{self, Point};
@@ -70,8 +70,9 @@ pub(crate) struct ContactStep {
     nz: usize,
     /// φ, Dφ and the weighted Hessian at the current `q₂`.
     gaps: ConstraintTerms,
-    /// Every gap row's value at `q₁` (the tangent rows' `τ(q₁)`).
+    /// Every gap row's value at `q₁` (the tangent rows' `τ(q₁)`) and its derivative.
     at_start: Vec<f64>,
+    dh_start: DMatrix<f64>,
     /// The impulses as the gap rows' weights: `γ` at a gap row, `b` at its tangent rows.
     weights: Vec<f64>,
     /// Unknowns (the `q₂` and `λ` entries are updates' scratch; the contact ones persist).
@@ -115,6 +116,7 @@ impl ContactStep {
             nz,
             gaps: ConstraintTerms::zeros(rows, sys.dof()),
             at_start: vec![0.0; rows],
+            dh_start: DMatrix::zeros(rows, sys.dof()),
             weights: vec![0.0; rows],
             z: vec![0.0; nz],
             residual: vec![0.0; nz],
@@ -173,6 +175,138 @@ fn step_length(elements: &[Element], z: &[f64], dz: &[f64], limit: f64) -> f64 {
     alpha
 }
 
+/// The contact impulses' generalized force `f_c = Σ_r w_r Dφ_r(q₂)` differentiated at a
+/// converged step, the impulses eliminated element by element (each one's unknowns are a
+/// smooth function of its gap and displacement at κ > 0): rows the dynamic variables,
+/// columns every variable (docs/derivations.md §13).
+#[derive(Clone, Debug)]
+pub(crate) struct ContactJacobian {
+    /// `∂f_c/∂q₂ = Σ w D²φ + Σ_e A_eᵀ S_e A_e`, `A_e = (N_e; T_e)` at `q₂` and `S_e` the
+    /// element's `∂(γ, b)/∂(φ, δ)`.
+    pub(crate) dq2: DMatrix<f64>,
+    /// `∂f_c/∂q₁ = −Σ_e A_eᵀ S_e^δ T_e(q₁)` (friction's displacement starts at `q₁`).
+    pub(crate) dq1: DMatrix<f64>,
+    /// One element's block and right-hand sides (7 × 7, 7 × 3).
+    local: Vec<f64>,
+    pivots: Vec<usize>,
+    sensitivity: Vec<f64>,
+}
+
+impl ContactJacobian {
+    /// Zeros for `nd` dynamic rows over `n` variables.
+    pub(crate) fn new(nd: usize, n: usize) -> Self {
+        ContactJacobian {
+            dq2: DMatrix::zeros(nd, n),
+            dq1: DMatrix::zeros(nd, n),
+            local: vec![0.0; 49],
+            pivots: vec![0; 7],
+            sensitivity: vec![0.0; 21],
+        }
+    }
+}
+
+impl ContactStep {
+    /// Element `e`'s name.
+    pub(crate) fn name(&self, e: usize) -> &str {
+        &self.names[e]
+    }
+
+    /// The contact force's derivatives at the step just converged into `out`; the element
+    /// whose block is singular on failure.
+    pub(crate) fn jacobian(
+        &self,
+        dynamic: &[usize],
+        out: &mut ContactJacobian,
+    ) -> Result<(), usize> {
+        let (g, z) = (&self.gaps, &self.z);
+        let n = g.dh.ncols();
+        out.dq2.fill(0.0);
+        out.dq1.fill(0.0);
+        for (ci, &i) in dynamic.iter().enumerate() {
+            for j in 0..n {
+                // Σ w D²φ is formed on the dynamic columns; symmetric, its kinematic ones are
+                // the kinematic rows'.
+                out.dq2[(ci, j)] = if dynamic.contains(&j) {
+                    g.weighted_d2h[(i, j)]
+                } else {
+                    g.weighted_d2h[(j, i)]
+                };
+            }
+        }
+        for (k, e) in self.elements.iter().enumerate() {
+            let size = if e.has_friction() { 7 } else { 2 };
+            local_block(e, z, &mut out.local[..size * size]);
+            lu_factor_packed_unguarded(&mut out.local[..size * size], size, &mut out.pivots)
+                .map_err(|_| k)?;
+            // dv = G⁻¹ (e_gap dφ + e_fric,k dδ_k): columns φ, δ₁, δ₂.
+            let columns = if e.has_friction() { 3 } else { 1 };
+            for col in 0..columns {
+                let rhs = &mut out.sensitivity[col * 7..col * 7 + size];
+                rhs.fill(0.0);
+                rhs[if col == 0 { 0 } else { 1 + col }] = 1.0;
+                lu_solve_packed(&out.local[..size * size], size, &out.pivots, rhs);
+            }
+            // S (rows γ, b₁, b₂ = local unknowns 0, 2, 3) against A = (N; T) rows.
+            let unknowns = [0, 2, 3];
+            let rows_of = |r: usize| e.row + r;
+            for a in 0..columns {
+                for col in 0..columns {
+                    let s_ac = out.sensitivity[col * 7 + unknowns[a]];
+                    if s_ac == 0.0 {
+                        continue;
+                    }
+                    for (ci, &i) in dynamic.iter().enumerate() {
+                        let left = g.dh[(rows_of(a), i)] * s_ac;
+                        if left == 0.0 {
+                            continue;
+                        }
+                        for j in 0..n {
+                            out.dq2[(ci, j)] += left * g.dh[(rows_of(col), j)];
+                            if col > 0 {
+                                out.dq1[(ci, j)] -= left * self.dh_start[(rows_of(col), j)];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Element `e`'s own block of the Newton matrix (its equations in its unknowns, column-major:
+/// `γ, s[, b₁, b₂, ψ, δ₁, δ₂]`) at the unknowns `z`.
+fn local_block(e: &Element, z: &[f64], out: &mut [f64]) {
+    let b = e.base;
+    let size = if e.has_friction() { 7 } else { 2 };
+    out.fill(0.0);
+    let at = |row: usize, col: usize| col * size + row;
+    // s − φ: ∂/∂s = 1; s γ: ∂/∂γ = s, ∂/∂s = γ.
+    out[at(0, 1)] = 1.0;
+    out[at(1, 0)] = z[b + 1];
+    out[at(1, 1)] = z[b];
+    if size == 2 {
+        return;
+    }
+    // δ − Δτ: ∂/∂δ = 1.
+    out[at(2, 5)] = 1.0;
+    out[at(3, 6)] = 1.0;
+    let (x, y) = cone_points(e, z);
+    let columns: [(usize, Point); 6] = [
+        (0, [e.friction * y[0], e.friction * y[1], e.friction * y[2]]),
+        (2, [y[1], y[0], 0.0]),
+        (3, [y[2], 0.0, y[0]]),
+        (4, x),
+        (5, [x[1], x[0], 0.0]),
+        (6, [x[2], 0.0, x[0]]),
+    ];
+    for (col, v) in columns {
+        for (r, &x) in v.iter().enumerate() {
+            out[at(4 + r, col)] = x;
+        }
+    }
+}
+
 /// Where the contact step stands after an evaluation.
 struct Measures {
     /// The dynamic rows' residual relative to their momentum scale.
@@ -227,6 +361,7 @@ where
         let (step, t) = (cx.index, cx.t);
         cx.sys.gaps(q1, None, &mut c.gaps);
         c.at_start.copy_from_slice(c.gaps.h.as_slice());
+        c.dh_start.copy_from(&c.gaps.dh);
         self.evaluate_residual(cx, q1, p1, q_next, true);
         let scale = self.momentum_scale();
         self.start_contact(c, cx, q_next, scale);
@@ -247,11 +382,14 @@ where
                 return Err((iterations, SimError::NonFinite { step, t, what }));
             }
             let tol = self.settings.tolerance;
-            let rest =
-                m.violation <= self.settings.constraint_tolerance && m.complementarity <= tol;
-            // The last update was lost in the rounding of q: the residual is at its floor
-            // (≈ ε‖M‖‖q‖/Δt), as in the smooth step.
-            if rest && (m.relative <= tol || (at_floor && m.relative <= tol.sqrt())) {
+            // Once the last update was lost in the rounding of q, the residual and the
+            // complementarity are at their floor (≈ ε‖M‖‖q‖/Δt, and a gap's rounding against
+            // its own size), as in the smooth step: within √tol they are converged.
+            let within = |x: f64| x <= tol || (at_floor && x <= tol.sqrt());
+            if m.violation <= self.settings.constraint_tolerance
+                && within(m.relative)
+                && within(m.complementarity)
+            {
                 break;
             }
             if iterations >= MAX_ITERATIONS {
@@ -498,23 +636,30 @@ where
         }
         let mu_affine = mean_complementarity(&c.elements, &c.direction);
         let sigma = (mu_affine / mu).clamp(0.0, 1.0).powi(3);
-        let target = (sigma * mu).max(kappa);
         let _ = scale;
-        // The corrector: centred at `target`, with the predictor's second-order term.
+        // The corrector: centred at `target`, with the predictor's second-order term — or,
+        // once the centring reaches a user's κ, plain Newton onto its central path (the
+        // predictor's term, heading for zero, would only spoil that convergence).
+        let on_path = kappa > 0.0 && sigma * mu <= kappa;
+        let (target, second) = if on_path {
+            (kappa, 0.0)
+        } else {
+            (sigma * mu, 1.0)
+        };
         for k in 0..nz {
             c.direction[k] = -c.residual[k];
         }
         for e in &c.elements {
             let (b, a) = (e.base, &c.affine);
-            c.direction[b + 1] = -(c.z[b] * c.z[b + 1] - target + a[b] * a[b + 1]);
+            c.direction[b + 1] = -(c.z[b] * c.z[b + 1] - target + second * a[b] * a[b + 1]);
             if e.has_friction() {
                 let (x, y) = cone_points(e, &c.z);
                 let (dx, dy) = cone_points(e, a);
                 let p = cone::product(&x, &y);
                 let dp = cone::product(&dx, &dy);
-                c.direction[b + 4] = -(p[0] - target + dp[0]);
-                c.direction[b + 5] = -(p[1] + dp[1]);
-                c.direction[b + 6] = -(p[2] + dp[2]);
+                c.direction[b + 4] = -(p[0] - target + second * dp[0]);
+                c.direction[b + 5] = -(p[1] + second * dp[1]);
+                c.direction[b + 6] = -(p[2] + second * dp[2]);
             }
         }
         lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.direction);

@@ -70,6 +70,9 @@ pub(crate) struct Linearization {
     /// The point: `q₁`, `q₂` (all variables).
     pub(super) q1: Vec<f64>,
     pub(super) q2: Vec<f64>,
+    /// The contact impulses' force differentiated (a step with unilateral rows), added to
+    /// `R_z` and `R_x` before the factorisation.
+    pub(super) contact: Option<crate::integrate::vi::contact::ContactJacobian>,
 }
 
 impl Linearization {
@@ -124,6 +127,7 @@ impl Linearization {
             combination: CompactCombination::default(),
             q1: vec![0.0; n],
             q2: vec![0.0; n],
+            contact: None,
             shape,
         }
     }
@@ -166,6 +170,9 @@ impl Linearization {
             scratch: &mut self.rows_scratch,
         };
         jacobians_in_pieces(sh, &terms, &mut pieces);
+        if let Some(c) = &self.contact {
+            add_contact(sh, k, c, &mut self.lu, &mut self.rhs);
+        }
         self.lu.factor()?;
         self.tangent_ready = false;
         // R_z⁻¹ R_x = −dz/dx on the solved columns, all in one solve.
@@ -520,6 +527,33 @@ impl JacobianSink<f64> for Pieces<'_> {
         k2.iter_mut()
             .zip(self.kinematic)
             .for_each(|(o, &v)| *o = dh2[v]);
+    }
+}
+
+/// The contact force's derivatives into `R_z` (its `q₂` block) and `R_x` (the `q₁` and `k₂`
+/// columns) of the dynamic rows: the residual is `r_d + f_c(q₁, q₂)`.
+fn add_contact(
+    sh: &Shape,
+    k: usize,
+    c: &crate::integrate::vi::contact::ContactJacobian,
+    lu: &mut OrderedFactor,
+    rhs: &mut [f64],
+) {
+    let (n, nd) = (sh.n, sh.nd());
+    let (factor, position) = lu.storage();
+    let rows = position.len();
+    for r in 0..nd {
+        let equation = position[r];
+        for (cj, &j) in sh.dynamic.iter().enumerate() {
+            factor[position[cj] * rows + equation] += c.dq2[(r, j)];
+        }
+        let row = &mut rhs[equation * k..(equation + 1) * k];
+        for j in 0..n {
+            row[j] += c.dq1[(r, j)];
+        }
+        for (kk, &j) in sh.kinematic.iter().enumerate() {
+            row[n + nd + kk] += c.dq2[(r, j)];
+        }
     }
 }
 

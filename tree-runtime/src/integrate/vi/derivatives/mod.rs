@@ -254,6 +254,11 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
+        if self.contact.is_some() {
+            return Err(SimError::Unsupported(
+                "second derivatives of a step through contact are not formed (docs/derivations.md §13): use the first derivatives (a Gauss–Newton model)".into(),
+            ));
+        }
         let cached = self.dual_jacobians.take();
         let lin = self.linearize(cx, q1, p1, q2)?;
         lin.fill_tangent();
@@ -327,6 +332,11 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
+        if self.contact.is_some() {
+            return Err(SimError::Unsupported(
+                "second derivatives of a step through contact are not formed (docs/derivations.md §13): use the first derivatives (a Gauss–Newton model)".into(),
+            ));
+        }
         let cached = self.dual_jacobians.take();
         let lin = self.linearize(cx, q1, p1, q2)?;
         lin.fill_tangent();
@@ -462,6 +472,18 @@ where
         row_major_into(self.constraint_terms.dh.as_slice(), m, &mut lin.dh2);
         lin.q1.copy_from_slice(q1.as_slice());
         lin.q2.copy_from_slice(q2.as_slice());
+        if let Some(contact) = &self.contact {
+            let nd = lin.shape.nd();
+            let jacobian =
+                (lin.contact).get_or_insert_with(|| super::contact::ContactJacobian::new(nd, n));
+            contact
+                .jacobian(&lin.shape.dynamic, jacobian)
+                .map_err(|e| SimError::SingularJacobian {
+                    step: cx.index,
+                    t: cx.t,
+                    variable: format!("the impulse of contact `{}`", contact.name(e)),
+                })?;
+        }
         let lin = self.linearization.insert(lin);
         let in_place = (
             t.d2l_dq_dq.as_slice(),
