@@ -517,3 +517,47 @@ mod derivatives {
         check(&every, q0, dq0, 1e-6, "every kind");
     }
 }
+
+/// A start through the ground is refused naming the contact and the depth; one beyond a limit
+/// is moved onto it and said.
+#[test]
+fn a_start_inside_the_ground_is_refused_and_one_beyond_a_limit_moved() {
+    let model = load("tests/models/ball.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (mut q0, dq0) = sys.initial_state();
+    q0[2] = 0.05;
+    let err = simulate(
+        &mut sys,
+        &q0,
+        &dq0,
+        &vi(1e-3, 0.01),
+        &mut NoForce,
+        &mut |_| {},
+    )
+    .unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("`ball`") && text.contains("penetrates by 5.000e-2"),
+        "{text}"
+    );
+    let model = load("tests/models/limited-pendulum.toml");
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (mut q0, dq0) = sys.initial_state();
+    q0[0] = 0.7;
+    let mut motion = tree_mech::runtime::ModelMotions::of(&sys);
+    let summary = tree_mech::integrate::run(
+        &mut sys,
+        &q0,
+        &dq0,
+        &vi(1e-3, 0.01),
+        &mut NoForce,
+        &mut motion,
+        &mut |_| Ok(()),
+    )
+    .unwrap();
+    let moved = &summary.moved[0];
+    assert_eq!(
+        (moved.variable.as_str(), moved.from, moved.to),
+        ("theta", 0.7, 0.5)
+    );
+}

@@ -491,7 +491,9 @@ where
             what: "initial state".into(),
         });
     }
-    project_initial_state(sys, split, q, dq)
+    let mut moved = projection::start_within_gaps(sys, q)?;
+    moved.extend(project_initial_state(sys, split, q, dq)?);
+    Ok(moved)
 }
 
 /// An integrator as [`run`] drives it: it hands out its start, then steps, saying when it

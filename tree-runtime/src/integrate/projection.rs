@@ -8,6 +8,7 @@ use crate::dynamics::Split;
 use crate::error::SimError;
 use crate::linalg::cholesky_solve;
 use crate::system::{ConstraintTerms, Order, System, Vector};
+use tree_model::GapKind;
 
 /// A variable the projection changed.
 #[derive(Clone, Debug, PartialEq)]
@@ -133,6 +134,60 @@ where
                     to: after,
                 });
             }
+        }
+    }
+    Ok(moved)
+}
+
+/// A start outside the unilateral rows (docs/derivations.md §13): a dynamic variable beyond an
+/// enforced limit is moved onto it (and said); a contact or string that starts violated by
+/// more than `1e-9·max(1, ‖q‖∞)` is an error naming it and the depth — the step would push
+/// it out in one impulse, an explosion of energy nobody asked for.
+pub(crate) fn start_within_gaps<S: System>(
+    sys: &mut S,
+    q: &mut Vector<S::N>,
+) -> Result<Vec<Moved>, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let gaps = sys.unilateral();
+    let mut moved = Vec::new();
+    for g in &gaps {
+        let (i, bound, beyond) = match g.kind {
+            GapKind::Lower { variable, bound } => (variable, bound, q[variable] < bound),
+            GapKind::Upper { variable, bound } => (variable, bound, q[variable] > bound),
+            _ => continue,
+        };
+        if beyond {
+            moved.push(Moved {
+                variable: sys.variable_name(i).to_string(),
+                velocity: false,
+                from: q[i],
+                to: bound,
+            });
+            q[i] = bound;
+        }
+    }
+    let rows: usize = gaps.iter().map(|g| g.rows()).sum();
+    if rows == 0 {
+        return Ok(moved);
+    }
+    let mut terms = ConstraintTerms::zeros(rows, sys.dof());
+    sys.gaps(q, None, &mut terms);
+    let tolerance = 1e-9 * q.amax().max(1.0);
+    let mut r = 0;
+    for g in &gaps {
+        let phi = terms.h[r];
+        r += g.rows();
+        if phi < -tolerance {
+            let what = match g.kind {
+                GapKind::String { .. } => "is stretched",
+                _ => "penetrates",
+            };
+            return Err(SimError::InvalidInput(format!(
+                "the start violates `{}`: it {what} by {:.3e} (its gap is {phi:.3e}); start the model clear of it (move it up or apart), or shorten the string's length",
+                g.name, -phi
+            )));
         }
     }
     Ok(moved)
