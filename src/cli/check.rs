@@ -42,6 +42,7 @@ fn run_check(path: &Path, source: &Source) -> Result<(), String> {
     );
     print_variables(&model)?;
     print_constraints(&model)?;
+    print_contacts(&model)?;
     print_inputs(&model)?;
     print_elements(&model)?;
     print_masses(&model)?;
@@ -104,7 +105,14 @@ fn print_variables(model: &model::Model) -> Result<(), String> {
         };
         let limits = v
             .limits
-            .map(|[lo, hi]| format!("; limits [{}, {}] (not enforced)", Given(lo), Given(hi)))
+            .map(|[lo, hi]| {
+                let enforced = match (model.contacts.enforce_limits, v.is_kinematic()) {
+                    (true, false) => "enforced",
+                    (true, true) => "not enforced: prescribed",
+                    (false, _) => "not enforced",
+                };
+                format!("; limits [{}, {}] ({enforced})", Given(lo), Given(hi))
+            })
             .unwrap_or_default();
         say!(
             "  {:<20} {drives}; q0 = {}, dq0 = {}; {how}{limits}",
@@ -125,6 +133,57 @@ fn print_constraints(model: &model::Model) -> Result<(), String> {
             let what = c.describe(model);
             say!("  {:<20} {what} between `{a}` and `{b}`", c.name);
         }
+    }
+    Ok(())
+}
+
+/// The ground, each contact sphere and slack string, and the unilateral rows they make.
+fn print_contacts(model: &model::Model) -> Result<(), String> {
+    let c = &model.contacts;
+    if let Some(g) = c.ground {
+        let n = g.normal.map(Given);
+        say!(
+            "ground: n·x ≥ {} with n = [{}, {}, {}], friction {}",
+            Given(g.height),
+            n[0],
+            n[1],
+            n[2],
+            Given(g.friction)
+        );
+    }
+    if !c.spheres.is_empty() {
+        say!("{}:", counted(c.spheres.len(), "contact"));
+        for s in &c.spheres {
+            let friction = s
+                .friction
+                .map_or(String::new(), |f| format!(", friction {}", Given(f)));
+            let collide = if s.collide { "" } else { ", the ground only" };
+            say!(
+                "  {:<20} sphere of radius {} on `{}`{friction}{collide}",
+                s.name,
+                Given(s.radius),
+                model.frames[s.frame].name
+            );
+        }
+    }
+    if !c.strings.is_empty() {
+        say!("{}:", counted(c.strings.len(), "slack string"));
+    }
+    for s in &c.strings {
+        let [a, b] = s.frames.map(|f| model.frames[f].name.as_str());
+        say!(
+            "  {:<20} {} between `{a}` and `{b}`, pulling only",
+            s.name,
+            s.describe(model)
+        );
+    }
+    let gaps = model.gaps();
+    if !gaps.is_empty() {
+        let names: Vec<&str> = gaps.iter().map(|g| g.name.as_str()).collect();
+        say!(
+            "unilateral rows (the VI enforces them; rk4 and rk45 refuse the model): {}",
+            names.join(", ")
+        );
     }
     Ok(())
 }

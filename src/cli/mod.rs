@@ -55,6 +55,34 @@ pub struct Cli {
         value_delimiter = ','
     )]
     lock: Vec<String>,
+    /// Add the ground: the plane z = HEIGHT (default 0) under the world, replacing the
+    /// model's own (docs/model-format.md, "Contact"); a negative height as `--ground=-0.1`.
+    #[arg(
+        long,
+        global = true,
+        value_name = "HEIGHT",
+        num_args = 0..=1,
+        default_missing_value = "0"
+    )]
+    ground: Option<f64>,
+    /// The ground's Coulomb friction μ (with --ground; default 0, frictionless).
+    #[arg(long, global = true, value_name = "MU")]
+    friction: Option<f64>,
+    /// Add a contact sphere on a frame: `--contact FRAME[:RADIUS]` (radius 0: a point),
+    /// repeated or comma-separated; named after its frame.
+    #[arg(
+        long,
+        global = true,
+        value_name = "FRAME[:RADIUS]",
+        value_delimiter = ','
+    )]
+    contact: Vec<String>,
+    /// Enforce the variables' limits (as `enforce_limits = true` in the model).
+    #[arg(long, global = true, conflicts_with = "no_limits")]
+    limits: bool,
+    /// Do not enforce the variables' limits, whatever the model says.
+    #[arg(long, global = true)]
+    no_limits: bool,
 }
 
 #[derive(Subcommand)]
@@ -83,6 +111,13 @@ impl Cli {
                 independent_mimics: self.independent_mimics,
             },
             locks: self.lock,
+            contacts: contacts_of(
+                self.ground,
+                self.friction,
+                &self.contact,
+                self.limits,
+                self.no_limits,
+            ),
         };
         match self.command {
             Command::Simulate(args) => simulate::run(args, &source),
@@ -93,8 +128,9 @@ impl Cli {
                 if source.urdf.floating_base
                     || source.urdf.independent_mimics
                     || !source.locks.is_empty()
+                    || source.contacts != model::ContactsSpec::default()
                 {
-                    Err("--floating-base, --independent-mimics and --lock do not apply to optimize: say `floating_base = true` in the task file, and lock joints in the model".into())
+                    Err("--floating-base, --independent-mimics, --lock, --ground, --contact and --limits do not apply to optimize: say `floating_base = true` in the task file, and put locks and contacts in the model".into())
                 } else {
                     optimize::run(request)
                 }
@@ -103,16 +139,62 @@ impl Cli {
     }
 }
 
-/// How every command reads its model: the URDF options and the variables to lock.
+/// How every command reads its model: the URDF options, the variables to lock and the
+/// contact added.
 pub struct Source {
     urdf: model::UrdfOptions,
     locks: Vec<String>,
+    contacts: model::ContactsSpec,
+}
+
+/// The contact the command line adds: `--ground [HEIGHT]` with `--friction`, each
+/// `--contact FRAME[:RADIUS]`, `--limits` / `--no-limits`. A radius that is not a number is
+/// kept as NaN, which the model's validation refuses with its sentence.
+fn contacts_of(
+    ground: Option<f64>,
+    friction: Option<f64>,
+    contacts: &[String],
+    limits: bool,
+    no_limits: bool,
+) -> model::ContactsSpec {
+    let ground = match (ground, friction) {
+        (None, None) => None,
+        (height, friction) => Some(model::GroundSpec {
+            height,
+            friction,
+            normal: None,
+        }),
+    };
+    let contacts = contacts
+        .iter()
+        .map(|c| {
+            let (frame, radius) = match c.split_once(':') {
+                Some((f, r)) => (f, Some(r.trim().parse::<f64>().unwrap_or(f64::NAN))),
+                None => (c.as_str(), None),
+            };
+            model::ContactSpec {
+                frame: frame.trim().to_string(),
+                radius,
+                ..Default::default()
+            }
+        })
+        .collect();
+    model::ContactsSpec {
+        enforce_limits: (limits || no_limits).then_some(limits),
+        ground,
+        contacts,
+    }
 }
 
 impl Source {
     /// The model at `path`, with the locked variables held.
     pub fn model(&self, path: &Path) -> Result<model::Model, String> {
-        let model = model::from_file(path, self.urdf).map_err(|e| e.to_string())?;
+        let mut model = model::from_file(path, self.urdf).map_err(|e| e.to_string())?;
+        if self.contacts != model::ContactsSpec::default() {
+            model = model
+                .with_contacts(&self.contacts)
+                .map_err(|e| format!("--ground/--contact: {e}"))?;
+        }
         if self.locks.is_empty() {
             return Ok(model);
         }

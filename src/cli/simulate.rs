@@ -67,6 +67,10 @@ pub struct Args {
     /// VI Newton tolerance: each residual row relative to its momentum scale.
     #[arg(long, default_value = "1e-12")]
     newton_tol: f64,
+    /// VI contact relaxation κ (gap × impulse, m·N·s): 0 drives each contact's
+    /// complementarity to the tolerance (hard contact); κ > 0 holds it there (smooth).
+    #[arg(long, default_value_t = 0.0)]
+    kappa: f64,
     /// VI Newton Jacobian: exact, evaluated and factored once per step at the predicted
     /// point and reused while the residual at least halves (a chord iteration), or
     /// re-evaluated every iteration (plain Newton). Both converge to the same tolerance.
@@ -141,6 +145,7 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
         camera,
         alpha,
         newton_tol,
+        kappa,
         jacobian,
         rtol,
         atol,
@@ -155,6 +160,7 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
         Integrator::Vi => Method::Vi(ViSettings {
             alpha,
             tolerance: newton_tol,
+            kappa,
             jacobian: match jacobian {
                 JacobianArg::EveryIteration => JacobianUpdate::EveryIteration,
                 JacobianArg::OncePerStep => JacobianUpdate::OncePerStep,

@@ -1282,3 +1282,60 @@ fn a_solve_that_stops_says_why() {
         assert!((a - b).abs() < 1e-9, "ee_link[{i}]: {a} against {b}");
     }
 }
+
+/// `--ground`, `--friction` and `--contact` add contact to a model from the command line:
+/// `check` lists it, `simulate` lands the ball on it, rk4 refuses, a bad radius is a sentence.
+#[test]
+fn contact_is_added_from_the_command_line() {
+    let (ok, stdout, stderr) = tree_mech(&[
+        "check",
+        "tests/models/string-pendulum.toml",
+        "--ground=-2",
+        "--friction",
+        "0.5",
+        "--contact",
+        "bob:0.1",
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("ground: n·x ≥ -2") && stdout.contains("friction 0.5"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("bob                  sphere of radius 0.1 on `bob`"),
+        "{stdout}"
+    );
+    let dir = scratch("cli-contact");
+    let csv = dir.join("ball.csv");
+    let (ok, stdout, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/ball.toml",
+        "--dt",
+        "0.001",
+        "--duration",
+        "1",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("Simulated `ball`"), "{stdout}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let last = text.lines().last().unwrap();
+    let z: f64 = last.split(',').nth(3).unwrap().parse().unwrap();
+    assert!((z - 0.1).abs() < 1e-9, "rests at {z}");
+    let (ok, _, stderr) = tree_mech(&["simulate", "tests/models/ball.toml", "--integrator", "rk4"]);
+    assert!(
+        !ok && stderr.contains("only the variational integrator enforces"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = tree_mech(&["check", "tests/models/ball.toml", "--contact", "by:wide"]);
+    assert!(
+        !ok && stderr.contains("radius NaN must be finite"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = tree_mech(&["check", "tests/models/ball.toml", "--contact", "nowhere"]);
+    assert!(
+        !ok && stderr.contains("unknown frame `nowhere`"),
+        "{stderr}"
+    );
+}

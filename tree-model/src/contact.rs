@@ -6,7 +6,7 @@
 
 use std::collections::HashMap;
 
-use crate::error::{Problem, Section, Site};
+use crate::error::{ModelError, Problem, Section, Site};
 use crate::model::{Constraint, ConstraintKind, Joint, Model, Parameter, Variable};
 
 /// The ground and contact spheres as written (`[ground]`, `[[contact]]`), and whether the
@@ -265,6 +265,61 @@ impl Model {
             k = self.frames[i].parent;
         }
         None
+    }
+}
+
+impl Model {
+    /// This model with `extra`'s ground (replacing its own), contact spheres (after its own)
+    /// and limits setting (when given): what a user adds to a model without editing it (the
+    /// CLI's `--ground`, `--contact`, `--limits`). An added sphere without a name takes its
+    /// frame's. Problems as a model's, each naming its entry.
+    ///
+    /// ```
+    /// use tree_model::{ContactSpec, ContactsSpec, GroundSpec};
+    /// let arm = tree_model::n_link_pendulum(2);
+    /// let extra = ContactsSpec {
+    ///     ground: Some(GroundSpec { height: Some(-2.5), ..Default::default() }),
+    ///     contacts: vec![ContactSpec { frame: "link2".into(), radius: Some(0.05), ..Default::default() }],
+    ///     ..Default::default()
+    /// };
+    /// let model = arm.with_contacts(&extra).unwrap();
+    /// assert_eq!(model.gaps().len(), 1);
+    /// ```
+    pub fn with_contacts(&self, extra: &ContactsSpec) -> Result<Model, ModelError> {
+        let index_of: HashMap<&str, usize> = (self.frames.iter().enumerate())
+            .map(|(k, f)| (f.name.as_str(), k))
+            .collect();
+        let mut problems = Vec::new();
+        let (ground, spheres) = validate_contacts(extra, &index_of, &mut problems);
+        let mut model = self.clone();
+        let c = &mut model.contacts;
+        // An added sphere without a name is named after its frame.
+        for (mut s, e) in spheres.into_iter().zip(&extra.contacts) {
+            if e.name.is_none() {
+                s.name = e.frame.clone();
+            }
+            if c.spheres.iter().any(|o| o.name == s.name) {
+                problems.push(Problem {
+                    site: Site::Model,
+                    message: format!("a contact named `{}` is in the model already", s.name),
+                    line: None,
+                });
+            }
+            c.spheres.push(s);
+        }
+        if ground.is_some() {
+            c.ground = ground;
+        }
+        if let Some(enforce) = extra.enforce_limits {
+            c.enforce_limits = enforce;
+        }
+        match problems.is_empty() {
+            true => Ok(model),
+            false => Err(ModelError {
+                source_name: None,
+                problems,
+            }),
+        }
     }
 }
 

@@ -101,7 +101,8 @@ impl Model {
                 constant => constant,
             };
         }
-        for c in &mut model.constraints {
+        let strings = model.contacts.strings.iter_mut();
+        for c in model.constraints.iter_mut().chain(strings) {
             if let crate::model::ConstraintKind::Distance { length } = &mut c.kind {
                 if let Parameter::Variable(i) = *length {
                     *length = match index[i] {

@@ -163,6 +163,12 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
                 return Err(SimError::InvalidInput(loose_tolerance(what, x)));
             }
         }
+        if !(s.kappa.is_finite() && s.kappa >= 0.0) {
+            return Err(SimError::InvalidInput(format!(
+                "the contact relaxation κ must be finite and not negative, got {}",
+                s.kappa
+            )));
+        }
         if s.max_iterations == 0 {
             return Err(SimError::InvalidInput(
                 "the VI needs at least one Newton iteration a step".into(),
