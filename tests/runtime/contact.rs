@@ -40,6 +40,12 @@ fn a_dropped_ball_lands_on_time_and_rests_at_its_radius() {
         "rests at {}",
         z.last().unwrap()
     );
+    // At rest it reports rest (the contact holds the velocity the step's momentum would
+    // give, −gΔt/2), and its energy is m g r from then on.
+    let last = traj.len() - 1;
+    assert!(traj.dq(last)[2].abs() < 1e-9, "reports {:?}", traj.dq(last));
+    let e = traj.energy[last];
+    assert!((e - 9.81 * 0.1).abs() < 1e-9, "E = {e}");
 }
 
 /// A cube sliding at v₀ on its four lower corners with friction μ stops after v₀²/(2μg), at

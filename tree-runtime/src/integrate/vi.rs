@@ -254,6 +254,8 @@ where
     dual_jacobians: Option<Box<derivatives::DualJacobians>>,
     /// The contact step's workspace (a system with unilateral rows only).
     contact: Option<Box<contact::ContactStep>>,
+    /// The `q` the contact step's impulses and gaps were last solved at (its step's end).
+    contact_at: Vector<N>,
     /// The energy the model's own forces (damping, dampers) took out over the last step:
     /// the discrete work `−F(q_α, v)·(q₂ − q₁)` of the force the step applied, summed over
     /// its sub-steps.
@@ -316,6 +318,7 @@ where
             linearization: None,
             dual_jacobians: None,
             contact: contact::ContactStep::new(sys, nd, m),
+            contact_at: z(),
             angles: split
                 .dynamic
                 .iter()
@@ -761,6 +764,9 @@ where
         } else {
             self.solve(cx, q, p, q_next)
         };
+        if self.contact.is_some() && solved.is_ok() {
+            self.contact_at.copy_from(q_next);
+        }
         self.iterations += match solved {
             Ok(iterations) | Err((iterations, _)) => iterations,
         };
@@ -1140,6 +1146,18 @@ where
             step,
             t,
         )?;
+        // The contacts in force at q (the last step's end) hold their rows' velocity.
+        if let Some(c) = self.contact.as_mut().filter(|_| self.contact_at == *q) {
+            let closed = 1e3 * self.settings.constraint_tolerance * q.amax().max(1.0);
+            let n = q.len();
+            c.project_velocity(
+                self.terms.mass.as_slice(),
+                n,
+                &self.split.dynamic,
+                dq.as_mut_slice(),
+                closed,
+            );
+        }
         // E = ½ q̇ᵀMq̇ − L(q, 0), and L(q, 0) = −V(q).
         self.q_alpha.gemv(1.0, &self.terms.mass, dq, 0.0);
         Ok(0.5 * dq.dot(&self.q_alpha) - self.terms.l)

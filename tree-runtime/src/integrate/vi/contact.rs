@@ -85,6 +85,15 @@ pub(crate) struct ContactStep {
     /// The last step's impulses per gap row (γ, then b at tangent rows) and gaps at `q₂`.
     pub(crate) impulses: Vec<f64>,
     pub(crate) gap_values: Vec<f64>,
+    /// The velocity projection's workspace: the rows held, `M_dd`'s factor, `M_dd⁻¹Aᵀ`, the
+    /// small system.
+    held: Vec<usize>,
+    mass: Vec<f64>,
+    mass_pivots: Vec<usize>,
+    solved: Vec<f64>,
+    small: Vec<f64>,
+    small_pivots: Vec<usize>,
+    rhs: Vec<f64>,
 }
 
 impl ContactStep {
@@ -126,6 +135,13 @@ impl ContactStep {
             direction: vec![0.0; nz],
             impulses: vec![0.0; rows],
             gap_values: vec![0.0; rows],
+            held: Vec::with_capacity(rows),
+            mass: vec![0.0; nd * nd],
+            mass_pivots: vec![0; nd],
+            solved: vec![0.0; nd * rows],
+            small: vec![0.0; rows * rows],
+            small_pivots: vec![0; rows],
+            rhs: vec![0.0; rows],
         }))
     }
 }
@@ -271,6 +287,89 @@ impl ContactStep {
             }
         }
         Ok(())
+    }
+}
+
+impl ContactStep {
+    /// The velocity at the last step's end made consistent with the contacts in force
+    /// (docs/derivations.md §13): among the elements closed at `q₂` (gap within `closed`) and
+    /// pressing (`γ > 0`), those the velocity `q̇` would drive in (`N q̇ < 0`), with the
+    /// tangent rows of those that stick (`‖b‖ < μγ`), are held at zero velocity by the
+    /// projection in `M_dd`'s metric, `q̇_d ← q̇_d − M⁻¹Aᵀ(AM⁻¹Aᵀ)⁻¹A q̇` — as the bilateral
+    /// rows are. Without it a ball at rest on the ground reports the `−gΔt/2` of its step's
+    /// momentum. `mass` is the full `M(q₂)`; nothing is allocated.
+    pub(crate) fn project_velocity(
+        &mut self,
+        mass: &[f64],
+        n: usize,
+        dynamic: &[usize],
+        dq: &mut [f64],
+        closed: f64,
+    ) {
+        let g = &self.gaps;
+        let row_speed = |r: usize, dq: &[f64]| (0..n).map(|j| g.dh[(r, j)] * dq[j]).sum::<f64>();
+        self.held.clear();
+        for e in &self.elements {
+            let (gamma, gap) = (self.impulses[e.row], self.gap_values[e.row]);
+            if gamma <= 0.0 || gap > closed || row_speed(e.row, dq) >= 0.0 {
+                continue;
+            }
+            self.held.push(e.row);
+            if e.has_friction() {
+                let b =
+                    (self.impulses[e.row + 1].powi(2) + self.impulses[e.row + 2].powi(2)).sqrt();
+                if b < (1.0 - 1e-6) * e.friction * gamma {
+                    self.held.extend([e.row + 1, e.row + 2]);
+                }
+            }
+        }
+        let (r, nd) = (self.held.len(), dynamic.len());
+        if r == 0 {
+            return;
+        }
+        for (cj, &j) in dynamic.iter().enumerate() {
+            for (ci, &i) in dynamic.iter().enumerate() {
+                self.mass[cj * nd + ci] = mass[j * n + i];
+            }
+        }
+        if lu_factor_packed_unguarded(&mut self.mass, nd, &mut self.mass_pivots).is_err() {
+            return;
+        }
+        // X = M_dd⁻¹ Aᵀ, S = A X, y = S⁻¹ A q̇, q̇_d −= X y.
+        for (k, &row) in self.held.iter().enumerate() {
+            let x = &mut self.solved[k * nd..(k + 1) * nd];
+            for (ci, &i) in dynamic.iter().enumerate() {
+                x[ci] = g.dh[(row, i)];
+            }
+            lu_solve_packed(&self.mass, nd, &self.mass_pivots, x);
+            self.rhs[k] = row_speed(row, dq);
+        }
+        for (a, &row) in self.held.iter().enumerate() {
+            for k in 0..r {
+                let x = &self.solved[k * nd..(k + 1) * nd];
+                self.small[k * r + a] = dynamic
+                    .iter()
+                    .enumerate()
+                    .map(|(ci, &i)| g.dh[(row, i)] * x[ci])
+                    .sum();
+            }
+        }
+        if lu_factor_packed_unguarded(&mut self.small[..r * r], r, &mut self.small_pivots).is_err()
+        {
+            return;
+        }
+        lu_solve_packed(
+            &self.small[..r * r],
+            r,
+            &self.small_pivots,
+            &mut self.rhs[..r],
+        );
+        for k in 0..r {
+            let (x, y) = (&self.solved[k * nd..(k + 1) * nd], self.rhs[k]);
+            for (ci, &i) in dynamic.iter().enumerate() {
+                dq[i] -= x[ci] * y;
+            }
+        }
     }
 }
 
