@@ -308,6 +308,8 @@ fn trajectories_linearise_step_by_step_whatever_the_thread_count() {
             lambda: &[],
             violation: 0.0,
             u: &[],
+            impulse: &[],
+            gap: &[],
         });
     }
     let e = linearize_trajectory(&sys, &bare, &settings, 1).unwrap_err();

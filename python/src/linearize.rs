@@ -89,6 +89,8 @@ impl Model {
                 lambda: &row(&lam, k),
                 violation: 0.0,
                 u: &row(&u, k),
+                impulse: &[],
+                gap: &[],
             });
         }
         Ok(run)

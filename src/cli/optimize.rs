@@ -264,6 +264,8 @@ impl<'a> Knots<'a> {
             lambda: res.lambda[k].as_slice(),
             violation: res.violation[k],
             u: res.solution.u[k.min(self.task.knots - 1)].as_slice(),
+            impulse: &[],
+            gap: &[],
         }
     }
 }

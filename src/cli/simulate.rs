@@ -303,10 +303,10 @@ fn run_simulate<S: System<N = Dyn>>(
     let constraints: Vec<String> = (0..sys.constraint_count())
         .map(|r| sys.constraint_name(r).to_string())
         .collect();
+    let unilateral = tree_mech::integrate::unilateral_row_names(&sys);
     let mut csv = open_csv(
         outputs.csv.as_ref(),
-        &names,
-        &constraints,
+        [&names, &constraints, &unilateral],
         &sys.input_names(),
     )?;
     if let Some(file) = &outputs.csv {
@@ -381,8 +381,7 @@ fn start_state<S: System<N = Dyn>>(
 /// The CSV stream into `--out`'s temporary file, its header written.
 fn open_csv(
     out: Option<&OutputFile>,
-    names: &[String],
-    constraints: &[String],
+    [names, constraints, unilateral]: [&[String]; 3],
     inputs: &[String],
 ) -> Result<Option<CsvStream<std::io::BufWriter<std::fs::File>>>, String> {
     let Some(file) = out else {
@@ -391,7 +390,8 @@ fn open_csv(
     let shown = file.path().display();
     let f =
         std::fs::File::create(file.temp()).map_err(|e| format!("cannot write `{shown}`: {e}"))?;
-    CsvStream::with_inputs(std::io::BufWriter::new(f), names, constraints, inputs)
+    let f = std::io::BufWriter::new(f);
+    CsvStream::with_all(f, names, constraints, inputs, unilateral)
         .map(Some)
         .map_err(|e| format!("cannot write `{shown}`: {e}"))
 }

@@ -46,6 +46,18 @@ fn a_dropped_ball_lands_on_time_and_rests_at_its_radius() {
     assert!(traj.dq(last)[2].abs() < 1e-9, "reports {:?}", traj.dq(last));
     let e = traj.energy[last];
     assert!((e - 9.81 * 0.1).abs() < 1e-9, "E = {e}");
+    // Its impulses and gaps: resting, each step's impulse is its weight's, m g Δt, its gap 0,
+    // no friction; at the start none, and the gap is the drop.
+    assert_eq!(traj.unilateral, ["ball", "ball.t1", "ball.t2"]);
+    let (impulse, gap) = (traj.impulse(last), traj.gap(last));
+    assert!(
+        (impulse[0] - 9.81 * dt).abs() < 1e-9 * 9.81 * dt,
+        "γ = {}",
+        impulse[0]
+    );
+    assert!(gap[0].abs() < 1e-9 && impulse[1].abs() < 1e-12 && impulse[2].abs() < 1e-12);
+    assert_eq!(traj.impulse(0), [0.0; 3]);
+    assert!((traj.gap(0)[0] - 1.0).abs() < 1e-12);
 }
 
 /// A cube sliding at v₀ on its four lower corners with friction μ stops after v₀²/(2μg), at

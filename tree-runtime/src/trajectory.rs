@@ -24,6 +24,11 @@ pub struct Sample<'a> {
     pub violation: f64,
     /// The system's inputs in force from this sample on (empty without inputs).
     pub u: &'a [f64],
+    /// Each unilateral row's impulse over the step that ended here (γ, or a friction
+    /// component at a tangent row; N·s) — empty without unilateral rows (docs §13).
+    pub impulse: &'a [f64],
+    /// Each unilateral row's value here (a gap in m or rad; a tangent row's coordinate).
+    pub gap: &'a [f64],
 }
 
 /// One run's output, stored row by row in flat vectors (`dof` values a row).
@@ -45,6 +50,11 @@ pub struct Trajectory {
     u: Vec<f64>,
     /// `max |h|` at each sample.
     pub violation: Vec<f64>,
+    /// The unilateral rows' names (a limit's `variable.lower`, a contact's name with `.t1`,
+    /// `.t2` for its tangent rows, `a|b` for two spheres, a slack string's).
+    pub unilateral: Vec<String>,
+    impulse: Vec<f64>,
+    gap: Vec<f64>,
     /// Total Newton iterations (VI only).
     pub newton_iterations: usize,
     /// Steps the VI had to subdivide.
@@ -96,6 +106,21 @@ impl Trajectory {
         self.energy.push(s.energy);
         self.violation.push(s.violation);
         self.u.extend_from_slice(s.u);
+        self.impulse.extend_from_slice(s.impulse);
+        self.gap.extend_from_slice(s.gap);
+    }
+
+    /// Each unilateral row's impulse over the step that ended at sample `k` (zero at the
+    /// start; empty without unilateral rows).
+    pub fn impulse(&self, k: usize) -> &[f64] {
+        let r = self.unilateral.len();
+        &self.impulse[k * r..(k + 1) * r]
+    }
+
+    /// Each unilateral row's value at sample `k` (the gaps; empty without unilateral rows).
+    pub fn gap(&self, k: usize) -> &[f64] {
+        let r = self.unilateral.len();
+        &self.gap[k * r..(k + 1) * r]
     }
 
     /// Configuration of sample `k`.
@@ -158,7 +183,8 @@ impl Trajectory {
 
     /// Writes the whole trajectory as CSV (see [`CsvStream`]).
     pub fn write_csv(&self, w: impl Write) -> io::Result<()> {
-        let mut csv = CsvStream::new(w, &self.variables, &self.constraints)?;
+        let mut csv =
+            CsvStream::with_all(w, &self.variables, &self.constraints, &[], &self.unilateral)?;
         for k in 0..self.len() {
             csv.write(&Sample {
                 step: k,
@@ -170,6 +196,8 @@ impl Trajectory {
                 lambda: self.lambda(k),
                 violation: self.violation[k],
                 u: &[],
+                impulse: self.impulse(k),
+                gap: self.gap(k),
             })?;
         }
         csv.finish()
@@ -181,6 +209,8 @@ impl Trajectory {
 pub struct CsvStream<W: Write> {
     out: W,
     constraints: bool,
+    /// Columns `impulse_<row>` and `gap_<row>` per unilateral row.
+    unilateral: usize,
     /// Columns `u_<input>` at the end.
     inputs: usize,
 }
@@ -193,17 +223,30 @@ impl<W: Write> CsvStream<W> {
 
     /// Writes the header to `out`, with a column `u_<name>` per input at the end.
     pub fn with_inputs(
-        mut out: W,
+        out: W,
         variables: &[String],
         constraints: &[String],
         inputs: &[String],
     ) -> io::Result<Self> {
-        let header = csv_header(variables, constraints, inputs)?;
+        Self::with_all(out, variables, constraints, inputs, &[])
+    }
+
+    /// Writes the header to `out`, with columns `impulse_<row>`, `gap_<row>` per unilateral
+    /// row after the constraints' and `u_<name>` per input at the end.
+    pub fn with_all(
+        mut out: W,
+        variables: &[String],
+        constraints: &[String],
+        inputs: &[String],
+        unilateral: &[String],
+    ) -> io::Result<Self> {
+        let header = csv_header(variables, constraints, inputs, unilateral)?;
         let header: Vec<String> = header.iter().map(|h| csv_field(h)).collect();
         writeln!(out, "{}", header.join(","))?;
         Ok(CsvStream {
             out,
             constraints: !constraints.is_empty(),
+            unilateral: unilateral.len(),
             inputs: inputs.len(),
         })
     }
@@ -228,6 +271,12 @@ impl<W: Write> CsvStream<W> {
             out.write_all(b",")?;
             out.write_all(buf.format(s.violation).as_bytes())?;
         }
+        for column in [s.impulse, s.gap] {
+            for k in 0..self.unilateral {
+                out.write_all(b",")?;
+                out.write_all(buf.format(column.get(k).copied().unwrap_or(0.0)).as_bytes())?;
+            }
+        }
         for k in 0..self.inputs {
             out.write_all(b",")?;
             out.write_all(buf.format(s.u.get(k).copied().unwrap_or(0.0)).as_bytes())?;
@@ -242,13 +291,15 @@ impl<W: Write> CsvStream<W> {
 }
 
 /// The trajectory's column names — `t`, each variable, `d` + each variable, `energy`,
-/// `lambda_` + each constraint row, `violation` (with constraints), `u_` + each input — or an
+/// `lambda_` + each constraint row, `violation` (with constraints), `impulse_` and `gap_` + each
+/// unilateral row, `u_` + each input — or an
 /// `InvalidInput` error naming the first two columns that would bear one name (a variable `t`,
 /// or `theta` beside a variable `dtheta`), so that a reader can never take one for the other.
 fn csv_header(
     variables: &[String],
     constraints: &[String],
     inputs: &[String],
+    unilateral: &[String],
 ) -> io::Result<Vec<String>> {
     let mut named: Vec<(String, String)> = vec![("t".into(), "the time".into())];
     named.extend(
@@ -270,6 +321,11 @@ fn csv_header(
     }));
     if !constraints.is_empty() {
         named.push(("violation".into(), "the constraint violation".into()));
+    }
+    for (prefix, what) in [("impulse", "the impulse"), ("gap", "the gap")] {
+        named.extend(
+            (unilateral.iter()).map(|r| (format!("{prefix}_{r}"), format!("{what} of `{r}`"))),
+        );
     }
     named.extend(
         inputs

@@ -196,6 +196,8 @@ where
             lambda: &[],
             violation: 0.0,
             u: lane.inputs.at(t),
+            impulse: &[],
+            gap: &[],
         };
         lane.rec.record(&sample).ok()?;
     }

@@ -316,7 +316,30 @@ where
         .collect();
     // Room for every sample at once (checked above): no doubling past what was checked.
     let samples = recorded_samples(options) as usize;
-    Ok(Trajectory::new(names, constraints, samples))
+    let mut traj = Trajectory::new(names, constraints, samples);
+    traj.unilateral = unilateral_row_names(sys);
+    Ok(traj)
+}
+
+/// Each unilateral row's name: an element's, and `name.t1`, `name.t2` for a ground contact's
+/// tangent rows (allocates; at setup).
+pub fn unilateral_row_names<S: System>(sys: &S) -> Vec<String>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let mut names = Vec::new();
+    for g in sys.unilateral() {
+        if g.rows() == 3 {
+            names.extend([
+                g.name.clone(),
+                format!("{}.t1", g.name),
+                format!("{}.t2", g.name),
+            ]);
+        } else {
+            names.push(g.name);
+        }
+    }
+    names
 }
 
 /// A recorded run's totals, from its summary.
@@ -663,9 +686,11 @@ where
         dq: &mut Vector<S::N>,
     ) -> Result<(), SimError> {
         self.p = self.vi.initial_momentum(cx.sys, q, dq);
+        self.vi.contact_start(cx.sys, q);
         // The start as the continuous equations see it, λ included.
         let (energy, violation) = rec.state(cx, q, dq)?;
         let lambda = rec.dynamics.lambda.clone();
+        let (impulse, gap) = self.vi.contact_rows();
         rec.record(&Sample {
             step: 0,
             t: 0.0,
@@ -676,6 +701,8 @@ where
             lambda: lambda.as_slice(),
             violation,
             u: cx.u,
+            impulse,
+            gap,
         })?;
         if rec.dynamics.split.rows > 0 {
             let dh0 = &rec.dynamics.constraint_terms.dh;
@@ -710,6 +737,7 @@ where
         let (k, t) = (cx.index, cx.t);
         let violation = self.vi.constraint_terms.violation();
         let energy = self.vi.velocity_and_energy(cx, q, &self.p, dq)?;
+        let (impulse, gap) = self.vi.contact_rows();
         rec.record(&Sample {
             step: k,
             t,
@@ -720,6 +748,8 @@ where
             lambda: self.vi.lambda.as_slice(),
             violation,
             u: cx.u,
+            impulse,
+            gap,
         })
     }
 }
@@ -819,6 +849,8 @@ where
             lambda: lambda.as_slice(),
             violation,
             u: cx.u,
+            impulse: &[],
+            gap: &[],
         });
         self.dynamics.lambda = lambda;
         result

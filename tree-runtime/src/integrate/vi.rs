@@ -1056,6 +1056,24 @@ where
         Ok(p2)
     }
 
+    /// Each unilateral row's impulse over the last step and value at its end (γ and the gap;
+    /// a friction component and a tangent coordinate at a tangent row); empty without
+    /// unilateral rows.
+    pub fn contact_rows(&self) -> (&[f64], &[f64]) {
+        match &self.contact {
+            Some(c) => (&c.impulses, &c.gap_values),
+            None => (&[], &[]),
+        }
+    }
+
+    /// Starts the contact rows' record at `q`: no impulse yet, the gaps there.
+    pub fn contact_start<S: System<N = N>>(&mut self, sys: &mut S, q: &Vector<N>) {
+        if let Some(c) = self.contact.as_mut() {
+            c.start_record(sys, q);
+            self.contact_at.copy_from(q);
+        }
+    }
+
     /// The largest dynamic row of the last residual relative to its momentum scale: `max_i
     /// |r_i| / s_i`, where `s_i = |p₁ᵢ| + |(1−α)Δt ∂L/∂qᵢ| + |∂L/∂q̇ᵢ| + |f⁻ᵢ| + Σ_r |Δt
     /// Dh(q₁)ᵣᵢ λᵣ|` sums the magnitudes of the terms `r_i` adds up. Every term scales with the

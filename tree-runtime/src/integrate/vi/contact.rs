@@ -222,6 +222,16 @@ impl ContactJacobian {
 }
 
 impl ContactStep {
+    /// No impulses yet, and the gaps at `q` (a run's first sample).
+    pub(crate) fn start_record<S: System>(&mut self, sys: &mut S, q: &Vector<S::N>)
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        sys.gaps(q, None, &mut self.gaps);
+        self.gap_values.copy_from_slice(self.gaps.h.as_slice());
+        self.impulses.fill(0.0);
+    }
+
     /// Element `e`'s name.
     pub(crate) fn name(&self, e: usize) -> &str {
         &self.names[e]
