@@ -24,6 +24,12 @@ pub(crate) struct Trajectory {
     pub(crate) violation: Py<PyAny>,
     /// Inputs in force (samples, inputs).
     pub(crate) u: Py<PyAny>,
+    /// Each unilateral row's impulse over the step ending at each sample (samples, rows).
+    pub(crate) impulse: Py<PyAny>,
+    /// Each unilateral row's gap at each sample (samples, rows).
+    pub(crate) gap: Py<PyAny>,
+    /// The unilateral rows' names (limits, contacts with `.t1`/`.t2` tangent rows, strings).
+    pub(crate) unilateral: Vec<String>,
     /// Variable names.
     pub(crate) variables: Vec<String>,
     /// Newton iterations over the run (VI).
@@ -56,6 +62,9 @@ impl Trajectory {
                     u.to_vec()
                 }
             }),
+            impulse: rows(py, len, t.unilateral.len(), |k| t.impulse(k).to_vec()),
+            gap: rows(py, len, t.unilateral.len(), |k| t.gap(k).to_vec()),
+            unilateral: t.unilateral.clone(),
             variables: t.variables.clone(),
             newton_iterations: t.newton_iterations,
             dissipated: t.dissipated,

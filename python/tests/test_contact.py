@@ -28,5 +28,5 @@ def test_a_ball_lands_and_its_impulses_and_gaps_are_arrays():
 
 def test_rk4_refuses_a_model_with_contact():
     m = tm.load(BALL)
-    with pytest.raises(ValueError, match="only the variational integrator enforces"):
+    with pytest.raises(tm.SimulationError, match="only the variational integrator enforces"):
         m.simulate(duration=0.1, dt=1e-3, integrator="rk4")

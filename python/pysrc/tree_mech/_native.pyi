@@ -38,6 +38,9 @@ class Trajectory:
     lam: npt.NDArray[np.float64]
     violation: npt.NDArray[np.float64]
     u: npt.NDArray[np.float64]
+    impulse: npt.NDArray[np.float64]
+    gap: npt.NDArray[np.float64]
+    unilateral: list[str]
     variables: list[str]
     newton_iterations: int
     dissipated: float
