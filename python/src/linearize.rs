@@ -133,6 +133,8 @@ impl Model {
             alpha,
             explicit: Explicit::of(integrator.parse().map_err(bad)?),
             second_order,
+            // Hard contact (Python's simulate and linearize take no κ yet).
+            kappa: 0.0,
         };
         // The model's own system, whose workspaces (the jets' kernel among them) stay warm
         // between calls.

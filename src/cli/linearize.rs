@@ -24,6 +24,8 @@ pub struct Request<'a> {
     pub dt: Option<f64>,
     pub forcing: Forcing,
     pub alpha: f64,
+    /// The VI's contact relaxation κ.
+    pub kappa: f64,
     /// Linearise an explicit step instead of the VI's.
     pub explicit: Option<Explicit>,
     /// Add the VI step's second derivatives.
@@ -61,6 +63,10 @@ pub struct Args {
     /// VI quadrature point α.
     #[arg(long, default_value_t = 0.5)]
     alpha: f64,
+    /// VI contact relaxation κ (gap × impulse, m·N·s): the step's derivatives through contact
+    /// are those of the relaxed, smooth step; 0 is hard contact.
+    #[arg(long, default_value_t = 0.0)]
+    kappa: f64,
     /// The step to linearise with --dt: the VI (state (q, p)), or RK4 or rk45's
     /// Dormand–Prince step (state (q, q̇)).
     #[arg(long, default_value = "vi", value_parser = integrator_arg())]
@@ -83,6 +89,7 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
         p,
         forcing,
         alpha,
+        kappa,
         integrator,
         second_order,
     } = args;
@@ -98,6 +105,7 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
             dt,
             forcing: forcing.into(),
             alpha,
+            kappa,
             explicit: Explicit::of(integrator),
             second_order,
         },
@@ -209,6 +217,7 @@ fn linearize(path: &Path, source: &Source, request: Request) -> Result<(), Strin
             alpha: request.alpha,
             explicit: request.explicit,
             second_order: request.second_order,
+            kappa: request.kappa,
         },
     )
     .map_err(|e| e.to_string())?;

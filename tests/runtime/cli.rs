@@ -1339,3 +1339,40 @@ fn contact_is_added_from_the_command_line() {
         "{stderr}"
     );
 }
+
+/// `linearize --dt --kappa` differentiates one VI step through contact; without a step (the
+/// continuous equations know no contact) it is refused.
+#[test]
+fn linearize_goes_through_contact_with_a_step_only() {
+    let (ok, stdout, stderr) = tree_mech(&[
+        "linearize",
+        "tests/models/box.toml",
+        "--dt",
+        "0.001",
+        "--kappa",
+        "1e-6",
+    ]);
+    assert!(ok, "{stderr}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    // Resting on its four lower corners, the box's height cannot follow its start: ∂z₂/∂z₁
+    // is far below the free body's 1.
+    let z = json["vi"]["q2_dq1"][2][2].as_f64().unwrap();
+    assert!(z.abs() < 0.5, "∂z₂/∂z₁ = {z}");
+    let (ok, _, stderr) = tree_mech(&["linearize", "tests/models/box.toml"]);
+    assert!(
+        !ok && stderr.contains("linearise one VI step (--dt"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = tree_mech(&[
+        "linearize",
+        "tests/models/box.toml",
+        "--dt",
+        "0.001",
+        "--kappa",
+        "-1",
+    ]);
+    assert!(
+        !ok && stderr.contains("κ must be finite and not negative"),
+        "{stderr}"
+    );
+}

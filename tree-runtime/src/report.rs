@@ -69,6 +69,8 @@ pub struct Request {
     pub explicit: Option<Explicit>,
     /// Also the VI step's second derivatives (trep's 30).
     pub second_order: bool,
+    /// The VI's contact relaxation κ (`ViSettings::kappa`).
+    pub kappa: f64,
 }
 
 /// The report: the continuous entries, and the step's under its key (`vi`, `rk4`, `rk45`).
@@ -130,6 +132,13 @@ where
     DefaultAllocator: Allocator<Dyn> + Allocator<Dyn, Dyn>,
 {
     check_request(request)?;
+    // The continuous equations know no contact: with unilateral rows only a VI step (which
+    // enforces them) is a linearisation of the model.
+    if !sys.unilateral().is_empty() && (request.dt.is_none() || request.explicit.is_some()) {
+        return Err(SimError::Unsupported(
+            "the model has unilateral rows (limits enforced, contacts or slack strings), which the continuous dynamics and RK4/rk45 do not know: linearise one VI step (--dt, the VI), whose derivatives go through the contacts".into(),
+        ));
+    }
     let (mut q, mut dq) = (q.clone(), dq.clone());
     let t = request.t;
     for k in (0..sys.dof()).filter(|&i| sys.is_kinematic(i)) {
@@ -166,6 +175,12 @@ fn check_request(request: &Request) -> Result<(), SimError> {
     }
     if !request.t.is_finite() {
         return bad(format!("the time {} is not finite", request.t));
+    }
+    if !(request.kappa.is_finite() && request.kappa >= 0.0) {
+        return bad(format!(
+            "the contact relaxation κ must be finite and not negative, got {}",
+            request.kappa
+        ));
     }
     if let Some(dt) = request.dt {
         if !(dt > 0.0 && dt.is_finite()) {
@@ -256,6 +271,7 @@ where
         forcing: request.forcing,
         max_subdivisions: 0,
         derivatives: true,
+        kappa: request.kappa,
         ..ViSettings::default()
     };
     let dynamic: Vec<usize> = (0..q.len()).filter(|&i| !cx.sys.is_kinematic(i)).collect();
