@@ -41,7 +41,7 @@ impl Model {
     ) -> PyResult<Stepper> {
         let py = slf.py();
         let this = slf.borrow();
-        let method: Method = method(integrator, alpha, forcing, newton_tol, 1e-8, 1e-10)?;
+        let method: Method = method(integrator, alpha, forcing, newton_tol, 1e-8, 1e-10, 0.0)?;
         let (q0, dq0) = this.start(q0, dq0)?;
         let stepper =
             CoreStepper::new(this.system(), method, dt, &q0, &dq0).map_err(|e| refused(py, &e))?;

@@ -104,7 +104,7 @@ impl Model {
     /// under `vi` (trep's names: `q2_dq1` …, `lambda1` = −Δt λ; with `second_order`, trep's
     /// 30 second derivatives as (output, input₁, input₂)) or, with `integrator` "rk4" or
     /// "rk45", under that key (`x2_dx1`, `x2_du1` on (q_d, q̇_d)).
-    #[pyo3(signature = (q=None, dq=None, u=None, t=0.0, dt=None, p=None, integrator="vi", forcing="split", alpha=0.5, second_order=false, ddq=None))]
+    #[pyo3(signature = (q=None, dq=None, u=None, t=0.0, dt=None, p=None, integrator="vi", forcing="split", alpha=0.5, second_order=false, ddq=None, kappa=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn linearize<'py>(
         &self,
@@ -120,6 +120,7 @@ impl Model {
         alpha: f64,
         second_order: bool,
         ddq: Option<PerVariable<'_>>,
+        kappa: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let dq = self.vector("dq", dq, |i| self.model.variables[i].dq0)?;
@@ -133,8 +134,7 @@ impl Model {
             alpha,
             explicit: Explicit::of(integrator.parse().map_err(bad)?),
             second_order,
-            // Hard contact (Python's simulate and linearize take no κ yet).
-            kappa: 0.0,
+            kappa,
         };
         // The model's own system, whose workspaces (the jets' kernel among them) stay warm
         // between calls.
@@ -183,7 +183,7 @@ impl Model {
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let threads = threads.map(|k| count("threads", k, 1)).transpose()?;
-        let Method::Vi(settings) = method("vi", alpha, forcing, newton_tol, 0.0, 0.0)? else {
+        let Method::Vi(settings) = method("vi", alpha, forcing, newton_tol, 0.0, 0.0, 0.0)? else {
             unreachable!("the VI's settings")
         };
         let run = self.core_trajectory(py, &trajectory)?;

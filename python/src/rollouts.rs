@@ -65,7 +65,7 @@ impl Model {
         let options = SimOptions {
             every,
             ..SimOptions::new(
-                method(integrator, 0.5, "split", None, 1e-8, 1e-10)?,
+                method(integrator, 0.5, "split", None, 1e-8, 1e-10, 0.0)?,
                 dt,
                 duration,
             )

@@ -23,12 +23,14 @@ pub(crate) fn method(
     newton_tol: Option<f64>,
     rtol: f64,
     atol: f64,
+    kappa: f64,
 ) -> PyResult<Method> {
     Ok(match integrator.parse().map_err(bad)? {
         Integrator::Vi => Method::Vi(ViSettings {
             alpha,
             forcing: forcing(forcing_name)?,
             tolerance: newton_tol.unwrap_or(ViSettings::default().tolerance),
+            kappa,
             ..ViSettings::default()
         }),
         Integrator::Rk4 => Method::Rk4,
@@ -79,8 +81,9 @@ impl Model {
     /// Simulates from (q0, dq0) (default the model's) for `duration` s at step `dt`; `u`
     /// None, constant (inputs,) or per step (steps, inputs). Returns a `Trajectory`. The GIL
     /// is released while it runs; about a hundred times a run Ctrl-C is honoured and
-    /// `progress(t, duration)`, if given, is called (a tqdm bar's `update`, say).
-    #[pyo3(signature = (duration, dt, integrator="vi", q0=None, dq0=None, u=None, every=1, alpha=0.5, forcing="split", newton_tol=None, rtol=1e-8, atol=1e-10, max_steps=1_000_000, progress=None))]
+    /// `progress(t, duration)`, if given, is called (a tqdm bar's `update`, say). `kappa`: the
+    /// VI's contact relaxation (0, the default: hard contact; κ > 0: smooth, `φγ = κ`).
+    #[pyo3(signature = (duration, dt, integrator="vi", q0=None, dq0=None, u=None, every=1, alpha=0.5, forcing="split", newton_tol=None, rtol=1e-8, atol=1e-10, max_steps=1_000_000, progress=None, kappa=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn simulate(
         &self,
@@ -99,6 +102,7 @@ impl Model {
         atol: f64,
         max_steps: i64,
         progress: Option<Py<PyAny>>,
+        kappa: f64,
     ) -> PyResult<Trajectory> {
         let every = count("every", every, 1)?;
         let max_steps = count("max_steps", max_steps, 1)?;
@@ -108,7 +112,7 @@ impl Model {
             every,
             max_steps,
             ..SimOptions::new(
-                method(integrator, alpha, forcing, newton_tol, rtol, atol)?,
+                method(integrator, alpha, forcing, newton_tol, rtol, atol, kappa)?,
                 dt,
                 duration,
             )

@@ -1,5 +1,6 @@
 """Contact from Python: a model with a ground and a contact sphere simulates on the VI, its
-impulses and gaps come back as arrays, and RK4 refuses it with the runtime's sentence."""
+impulses and gaps come back as arrays, smooth contact (κ) rests on its central path, and RK4
+runs until a contact closes, then stops with the runtime's sentence."""
 import pathlib
 
 import numpy as np
@@ -26,7 +27,24 @@ def test_a_ball_lands_and_its_impulses_and_gaps_are_arrays():
     assert traj.dq[-1, 2] == pytest.approx(0.0, abs=1e-9)
 
 
-def test_rk4_refuses_a_model_with_contact():
+def test_rk4_runs_while_the_ball_falls_and_stops_where_it_lands():
     m = tm.load(BALL)
-    with pytest.raises(tm.SimulationError, match="only the variational integrator enforces"):
-        m.simulate(duration=0.1, dt=1e-3, integrator="rk4")
+    # In flight nothing acts: RK4's fall is exact (z = 1.1 − g t²/2).
+    traj = m.simulate(duration=0.3, dt=1e-3, integrator="rk4")
+    assert traj.q[-1, 2] == pytest.approx(1.1 - 0.5 * 9.81 * 0.3**2, abs=1e-9)
+    # Reaching the ground it cannot hold the contact, and says so rather than pass through.
+    with pytest.raises(tm.SimulationError, match=r"`ball` closed .*only the variational integrator"):
+        m.simulate(duration=1.0, dt=1e-3, integrator="rk4")
+
+
+def test_smooth_contact_rests_on_its_central_path():
+    m = tm.load(BALL)
+    dt, kappa = 1e-3, 1e-6
+    traj = m.simulate(duration=1.0, dt=dt, kappa=kappa)
+    # Resting: γ = m g Δt a step, and the gap holds γ φ = κ above the ground.
+    gamma = traj.impulse[-1, 0]
+    assert gamma == pytest.approx(9.81 * dt, rel=1e-6)
+    assert traj.gap[-1, 0] == pytest.approx(kappa / gamma, rel=1e-6)
+    with pytest.raises((ValueError, tm.SimulationError), match="relaxation κ must be finite"):
+        m.simulate(duration=0.1, dt=dt, kappa=-1.0)
+

@@ -181,7 +181,7 @@ fn print_contacts(model: &model::Model) -> Result<(), String> {
     if !gaps.is_empty() {
         let names: Vec<&str> = gaps.iter().map(|g| g.name.as_str()).collect();
         say!(
-            "unilateral rows (the VI enforces them; rk4 and rk45 refuse the model): {}",
+            "unilateral rows (the VI enforces them; rk4 and rk45 run until one closes, then stop): {}",
             names.join(", ")
         );
     }

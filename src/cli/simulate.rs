@@ -588,7 +588,30 @@ fn print_summary<S: System<N = Dyn>>(
         )
     };
     let (e0, e_end) = (record.e0, record.e_end);
-    let energy = energy_account(sys, e_end - e0 + summary.dissipated, summary.dissipated);
+    let contact = !sys.unilateral().is_empty();
+    let mut energy = energy_account(sys, e_end - e0 + summary.dissipated, summary.dissipated);
+    if contact && !(0..sys.dof()).any(|i| sys.is_kinematic(i)) {
+        // With contacts in force the balance is what impacts and friction took out (the VI's
+        // own drift, bounded and small, included).
+        let lost = -(e_end - e0 + summary.dissipated);
+        energy = match summary.dissipated != 0.0 {
+            false => format!("impacts and friction took out {} J", num(lost)),
+            true => format!(
+                "damping took out {} J, impacts and friction {} J",
+                num(summary.dissipated),
+                num(lost)
+            ),
+        };
+    }
+    let contact = if contact && matches!(options.method, Method::Vi(_)) {
+        format!(
+            " Contact: deepest penetration {:.3e} (m or rad), {:.2} interior-point iterations per step.",
+            summary.worst_penetration,
+            summary.contact_iterations as f64 / summary.steps.max(1) as f64
+        )
+    } else {
+        String::new()
+    };
     let variables = if sys.dof() == 1 {
         "variable"
     } else {
@@ -596,7 +619,7 @@ fn print_summary<S: System<N = Dyn>>(
     };
     say!(
         "Simulated `{}` ({} {variables}) for {} s with {method}: {} steps in {:.3} s of wall time{newton}.{subdivided} \
-         Energy went from {} to {} J ({energy}).{constrained}{}{}{}",
+         Energy went from {} to {} J ({energy}).{constrained}{contact}{}{}{}",
         model.name,
         sys.dof(),
         Seconds(record.t_end),

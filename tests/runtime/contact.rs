@@ -3,7 +3,7 @@
 use tree_mech::integrate::{simulate, Method, SimOptions, ViSettings};
 use tree_mech::model::{self, Model};
 use tree_mech::runtime::Vector;
-use tree_mech::{ConstraintTerms, NoForce, System, TreeSystem};
+use tree_mech::{ConstraintTerms, NoForce, System, Trajectory, TreeSystem};
 
 fn load(path: &str) -> Model {
     model::from_toml_file(path).unwrap()
@@ -13,14 +13,27 @@ fn vi(dt: f64, duration: f64) -> SimOptions {
     SimOptions::new(Method::Vi(ViSettings::default()), dt, duration)
 }
 
+/// The model run from its own start on the hard-contact VI, unforced.
+fn run(model: &Model, dt: f64, duration: f64) -> Trajectory {
+    let mut sys = TreeSystem::new(model).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    simulate(
+        &mut sys,
+        &q0,
+        &dq0,
+        &vi(dt, duration),
+        &mut NoForce,
+        &mut |_| {},
+    )
+    .unwrap()
+}
+
 /// A ball dropped from 1 m above the ground touches it at √(2h/g) and rests at its radius.
 #[test]
 fn a_dropped_ball_lands_on_time_and_rests_at_its_radius() {
     let model = load("tests/models/ball.toml");
-    let mut sys = TreeSystem::new(&model).unwrap();
-    let (q0, dq0) = sys.initial_state();
     let dt = 1e-3;
-    let traj = simulate(&mut sys, &q0, &dq0, &vi(dt, 1.0), &mut NoForce, &mut |_| {}).unwrap();
+    let traj = run(&model, dt, 1.0);
     let z: Vec<f64> = (0..traj.len()).map(|k| traj.q(k)[2]).collect();
     let landing = (0..z.len()).find(|&k| z[k] <= 0.1 + 1e-9).unwrap();
     let expected = (2.0 * 1.0 / 9.81f64).sqrt();
@@ -65,10 +78,8 @@ fn a_dropped_ball_lands_on_time_and_rests_at_its_radius() {
 #[test]
 fn a_sliding_box_stops_where_coulomb_says() {
     let model = load("tests/models/box.toml");
-    let mut sys = TreeSystem::new(&model).unwrap();
-    let (q0, dq0) = sys.initial_state();
     let dt = 1e-3;
-    let traj = simulate(&mut sys, &q0, &dq0, &vi(dt, 0.4), &mut NoForce, &mut |_| {}).unwrap();
+    let traj = run(&model, dt, 0.4);
     let (mu, g, v0) = (0.5, 9.81, 1.0);
     let (distance, time) = (v0 * v0 / (2.0 * mu * g), v0 / (mu * g));
     let x: Vec<f64> = (0..traj.len()).map(|k| traj.q(k)[0]).collect();
@@ -114,18 +125,8 @@ fn a_box_on_a_slope_sticks_or_slides_as_coulomb_says() {
             -g * theta.cos()
         );
         let model = model::from_toml_str(&format!("{gravity}{text}"), Some("slope.toml")).unwrap();
-        let mut sys = TreeSystem::new(&model).unwrap();
-        let (q0, dq0) = sys.initial_state();
         let (dt, duration) = (1e-3, 0.5);
-        let traj = simulate(
-            &mut sys,
-            &q0,
-            &dq0,
-            &vi(dt, duration),
-            &mut NoForce,
-            &mut |_| {},
-        )
-        .unwrap();
+        let traj = run(&model, dt, duration);
         let x = traj.q(traj.len() - 1)[0];
         let a = g * (theta.sin() - 0.5 * theta.cos());
         if theta.tan() < 0.5 {
@@ -145,17 +146,7 @@ fn a_box_on_a_slope_sticks_or_slides_as_coulomb_says() {
 #[test]
 fn a_pendulum_thrown_at_its_limit_never_passes_it() {
     let model = load("tests/models/limited-pendulum.toml");
-    let mut sys = TreeSystem::new(&model).unwrap();
-    let (q0, dq0) = sys.initial_state();
-    let traj = simulate(
-        &mut sys,
-        &q0,
-        &dq0,
-        &vi(1e-3, 2.0),
-        &mut NoForce,
-        &mut |_| {},
-    )
-    .unwrap();
+    let traj = run(&model, 1e-3, 2.0);
     let theta: Vec<f64> = (0..traj.len()).map(|k| traj.q(k)[0]).collect();
     let (lowest, highest) = theta
         .iter()
@@ -182,10 +173,8 @@ fn a_pendulum_thrown_at_its_limit_never_passes_it() {
 #[test]
 fn a_mass_on_a_slack_string_falls_freely_until_taut() {
     let model = load("tests/models/string-drop.toml");
-    let mut sys = TreeSystem::new(&model).unwrap();
-    let (q0, dq0) = sys.initial_state();
     let dt = 1e-3;
-    let traj = simulate(&mut sys, &q0, &dq0, &vi(dt, 1.0), &mut NoForce, &mut |_| {}).unwrap();
+    let traj = run(&model, dt, 1.0);
     let taut = (2.0 * 0.5 / 9.81f64).sqrt();
     for k in 0..traj.len() {
         let (t, z) = (traj.t[k], traj.q(k)[0]);
@@ -205,17 +194,7 @@ fn a_mass_on_a_slack_string_falls_freely_until_taut() {
 #[test]
 fn two_balls_meeting_head_on_move_on_together() {
     let model = load("tests/models/two-balls.toml");
-    let mut sys = TreeSystem::new(&model).unwrap();
-    let (q0, dq0) = sys.initial_state();
-    let traj = simulate(
-        &mut sys,
-        &q0,
-        &dq0,
-        &vi(1e-3, 0.5),
-        &mut NoForce,
-        &mut |_| {},
-    )
-    .unwrap();
+    let traj = run(&model, 1e-3, 0.5);
     let last = traj.len() - 1;
     let (q, dq) = (traj.q(last), traj.dq(last));
     eprintln!("apart {} at velocities {dq:?}", q[1] - q[0]);
@@ -380,22 +359,47 @@ fn compiled_contact_steps_equal_interpreted() {
     }
 }
 
-/// RK4 and rk45 would pass through the ground: refused, pointing to the VI.
+/// RK4 and rk45 integrate the fall exactly while the ball is in the air (nothing acts), and
+/// stop at the step that reaches the ground, naming it and pointing to the VI — never passing
+/// through; so does a stepper.
 #[test]
-fn the_smooth_integrators_refuse_unilateral_rows() {
-    use tree_mech::integrate::Tolerance;
+fn the_smooth_integrators_run_until_a_gap_closes_then_stop() {
+    use tree_mech::integrate::{Stepper, Tolerance};
     let model = load("tests/models/ball.toml");
     let mut sys = TreeSystem::new(&model).unwrap();
     let (q0, dq0) = sys.initial_state();
+    let (g, z0, r): (f64, f64, f64) = (9.81, 1.1, 0.1);
+    let landing = (2.0 * (z0 - r) / g).sqrt();
     for method in [Method::Rk4, Method::Rk45(Tolerance::default())] {
-        let options = SimOptions::new(method, 1e-3, 0.1);
+        let flight = SimOptions::new(method, 1e-3, 0.3);
+        let traj = simulate(&mut sys, &q0, &dq0, &flight, &mut NoForce, &mut |_| {}).unwrap();
+        let z = traj.q(traj.len() - 1)[2];
+        assert!((z - (z0 - 0.5 * g * 0.09)).abs() < 1e-9, "{z}");
+        let options = SimOptions::new(method, 1e-3, 1.0);
         let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
         let text = err.to_string();
         assert!(
-            text.contains("only the variational integrator enforces") && text.contains("`ball`"),
+            text.contains("`ball` closed") && text.contains("only the variational integrator"),
             "{text}"
         );
+        let (_, t) = err.when().unwrap();
+        // RK4 stops at the step that lands; rk45, whose free fall is exact, at the end of the
+        // long step it took through the ground.
+        let late = if method == Method::Rk4 { 0.01 } else { 1.0 };
+        assert!(
+            t >= landing && t < landing + late,
+            "stopped at {t}, landing {landing}"
+        );
     }
+    let mut stepper = Stepper::new(sys, Method::Rk4, 1e-3, q0.as_slice(), dq0.as_slice()).unwrap();
+    let mut stopped = None;
+    for _ in 0..1000 {
+        if let Err(e) = stepper.step(&[]) {
+            stopped = Some(e.to_string());
+            break;
+        }
+    }
+    assert!(stopped.unwrap().contains("`ball` closed"));
 }
 
 mod derivatives {

@@ -39,7 +39,7 @@ pub struct VariableSpec {
     pub motion: Option<SineSpec>,
     /// Samples `(t, q)` of a spline prescription (kinematic variables only).
     pub samples: Option<Vec<[f64; 2]>>,
-    /// `[lower, upper]` joint limits (a dynamic variable's enforced when the model says
+    /// `[lower, upper]` joint limits (a dynamic variable's enforced by the VI when the model says
     /// `enforce_limits = true`).
     pub limits: Option<[f64; 2]>,
 }

@@ -94,6 +94,19 @@ pub enum SimError {
         /// The largest complementarity (relative) at the end.
         complementarity: f64,
     },
+    /// A smooth integrator (RK4, rk45) closed a unilateral row it cannot enforce.
+    Unenforced {
+        /// The step that closed it.
+        step: usize,
+        /// The simulated time at its end.
+        t: f64,
+        /// The limit, contact or string closed.
+        element: String,
+        /// Its gap there (negative).
+        gap: f64,
+        /// The integrator's name.
+        integrator: &'static str,
+    },
     /// A VI step turned a joint by more than a quarter turn:
     /// the step is too long for the motion.
     StepTooCoarse {
@@ -160,6 +173,7 @@ impl SimError {
             | SimError::SingularJacobian { step, t, .. }
             | SimError::NewtonFailed { step, t, .. }
             | SimError::ContactFailed { step, t, .. }
+            | SimError::Unenforced { step, t, .. }
             | SimError::StepTooCoarse { step, t, .. }
             | SimError::NonFinite { step, t, .. }
             | SimError::StepSizeTooSmall { step, t, .. }
@@ -254,6 +268,10 @@ impl fmt::Display for Detail<'_> {
             SimError::ContactFailed { iterations, contact, gap, residual, complementarity, .. } => write!(
                 f,
                 "the contact step did not converge in {iterations} iterations: `{contact}` is furthest (gap {gap:e}, relative residual {residual:e}, complementarity {complementarity:e}); the step may be too long for the impact, lower --dt"
+            ),
+            SimError::Unenforced { element, gap, integrator, .. } => write!(
+                f,
+                "`{element}` closed (gap {gap:.3e}): {integrator} integrates the smooth equations of motion and cannot enforce a limit, a contact or a taut string, only the variational integrator does; use the VI (--integrator vi), or drop the element (--no-limits or enforce_limits = false for a limit; no [ground], [[contact]] or slack string)"
             ),
             SimError::StepTooCoarse { dt, variable, turn, .. } => write!(
                 f,

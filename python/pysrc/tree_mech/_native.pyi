@@ -138,6 +138,7 @@ class Model:
         atol: float = 1e-10,
         max_steps: int = 1_000_000,
         progress: Optional[Callable[[float, float], object]] = None,
+        kappa: float = 0.0,
     ) -> Trajectory: ...
     def linearize(
         self,
@@ -152,6 +153,7 @@ class Model:
         alpha: float = 0.5,
         second_order: bool = False,
         ddq: Optional[_PerVariable] = None,
+        kappa: float = 0.0,
     ) -> dict: ...
     def linearize_trajectory(
         self,

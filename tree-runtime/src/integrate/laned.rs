@@ -94,7 +94,10 @@ where
         return None;
     }
     let steps = check_options(options).ok()?;
-    super::check_unilateral(sys, &options.method).ok()?;
+    // A smooth run watches its unilateral rows (watch.rs); lanes leave it to single runs.
+    if !sys.unilateral().is_empty() {
+        return None;
+    }
     let n = sys.dof();
     let fits = |s: &LaneStart| {
         s.q0.len() == n
@@ -131,6 +134,7 @@ where
             qdd: sys.zero_vector(),
             dynamics: Dynamics::new(sys),
             every: options.every,
+            watch: None,
         };
         lanes.push(Lane {
             q,

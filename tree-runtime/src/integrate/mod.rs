@@ -10,6 +10,7 @@ mod rk4;
 pub(crate) mod rk45;
 mod stepper;
 mod vi;
+mod watch;
 
 pub use crate::context::StepContext;
 pub use discrete::DiscreteLagrangian;
@@ -30,6 +31,7 @@ use crate::dynamics::{
 use crate::error::{Seconds, SimError};
 use crate::system::{System, Terms, Vector};
 use crate::trajectory::{Sample, Trajectory};
+use watch::GapWatch;
 
 /// The most steps a fixed-step run may take.
 pub(crate) const MAX_STEPS: f64 = 1e9;
@@ -107,6 +109,11 @@ pub struct RunSummary {
     pub dissipated: f64,
     /// What the projection of the initial state onto the constraints moved.
     pub moved: Vec<Moved>,
+    /// Interior-point iterations of the VI's contact steps over the run.
+    pub contact_iterations: usize,
+    /// The deepest any unilateral row (limit, contact, string) went below zero at a step's
+    /// end over the run, in its own unit (m or rad); 0 when none did.
+    pub worst_penetration: f64,
 }
 
 fn check_options(o: &SimOptions) -> Result<usize, SimError> {
@@ -198,33 +205,6 @@ fn check_options(o: &SimOptions) -> Result<usize, SimError> {
         )));
     }
     Ok(steps as usize)
-}
-
-/// Unilateral rows — enforced limits, contacts, slack strings — are the variational
-/// integrator's alone (docs/derivations.md §13): RK4 and rk45 integrate the smooth equations
-/// of motion and would pass through a limit, the ground or a taut string unseen. Allocates
-/// (at setup).
-pub fn check_unilateral<S: System>(sys: &S, method: &Method) -> Result<(), SimError>
-where
-    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
-{
-    if matches!(method, Method::Vi(_)) {
-        return Ok(());
-    }
-    let gaps = sys.unilateral();
-    let Some(first) = gaps.first() else {
-        return Ok(());
-    };
-    let name = match method {
-        Method::Rk45(_) => "rk45",
-        _ => "rk4",
-    };
-    Err(SimError::Unsupported(format!(
-        "the model has {} unilateral element{} (limits enforced, contacts or slack strings; the first is `{}`), which only the variational integrator enforces, and {name} would pass through them: use the VI (--integrator vi), or drop them (enforce_limits = false, no [ground] or [[contact]], no slack strings)",
-        gaps.len(),
-        if gaps.len() == 1 { "" } else { "s" },
-        first.name
-    )))
 }
 
 /// The loosest Newton tolerance the VI accepts: looser, Newton can accept its predictor and
@@ -421,7 +401,6 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let steps = check_options(options)?;
-    check_unilateral(sys, &options.method)?;
     check_input_width(sys, if inputs.is_empty() { 0 } else { inputs.width() })?;
     check_start(sys, q0.len(), dq0.len())?;
     let n = sys.dim();
@@ -443,6 +422,11 @@ where
         qdd: sys.zero_vector(),
         dynamics,
         every: options.every,
+        watch: match options.method {
+            Method::Rk4 => GapWatch::new(sys, "rk4"),
+            Method::Rk45(_) => GapWatch::new(sys, "rk45"),
+            Method::Vi(_) => None,
+        },
     };
     let mut cx = StepContext::new(sys, force, motion, options.dt);
     // One line per integrator: what it is driven as.
@@ -586,6 +570,7 @@ where
         cx.u = inputs.at(t);
         let (reached, last) = it.advance(cx.at(k, t), rec, q, dq)?;
         (k, t) = (k + 1, reached);
+        watch::watch(&mut rec.watch, cx.sys, q, k, t)?;
         if k.is_multiple_of(rec.every) || last {
             cx.u = inputs.at(t);
             it.sample(cx.at(k, t), rec, q, dq)?;
@@ -722,6 +707,9 @@ where
         self.vi.step(cx, q, &mut self.p, &mut self.q_next)?;
         rec.summary.newton_iterations += self.vi.iterations;
         rec.summary.dissipated += self.vi.dissipated;
+        rec.summary.contact_iterations += self.vi.contact_iterations;
+        let deepest = rec.summary.worst_penetration.max(self.vi.penetration);
+        rec.summary.worst_penetration = deepest;
         rec.summary.subdivided_steps += (self.vi.subdivisions > 0) as usize;
         let k = cx.index + 1;
         Ok((k as f64 * cx.dt, k == self.steps))
@@ -769,6 +757,8 @@ where
     dynamics: Dynamics<N>,
     /// Record every `every`-th step.
     every: usize,
+    /// A smooth integrator's watch on the unilateral rows it cannot enforce.
+    watch: Option<GapWatch>,
 }
 
 impl<N: Dim> Recorder<'_, N>

@@ -5,6 +5,7 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator};
 
+use super::watch::{watch, GapWatch};
 use super::{
     check_finite, check_input_width, check_options, check_start, start_state, Method, MidpointVi,
     Rk4, SimOptions,
@@ -19,7 +20,8 @@ enum Stepping<S: System>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    Rk4(Box<Rk4<S::N>>),
+    /// RK4, and its watch on the unilateral rows it cannot enforce.
+    Rk4(Box<Rk4<S::N>>, Option<GapWatch>),
     /// The VI on `(q, p)`; `q_next` is its buffer for the next configuration.
     Vi {
         vi: Box<MidpointVi<S::N>>,
@@ -77,9 +79,8 @@ where
     /// its own steps and is refused) at steps of `dt`.
     pub fn new(sys: S, method: Method, dt: f64, q0: &[f64], dq0: &[f64]) -> Result<Self, SimError> {
         check_options(&SimOptions::new(method, dt, dt))?;
-        super::check_unilateral(&sys, &method)?;
         let stepping = match method {
-            Method::Rk4 => Stepping::Rk4(Box::new(Rk4::new(&sys))),
+            Method::Rk4 => Stepping::Rk4(Box::new(Rk4::new(&sys)), GapWatch::new(&sys, "rk4")),
             Method::Vi(settings) => Stepping::Vi {
                 vi: Box::new(MidpointVi::new(&sys, settings)),
                 p: sys.zero_vector(),
@@ -175,13 +176,16 @@ where
         let mut cx = StepContext::new(&mut self.sys, &mut force, &mut self.motion, dt);
         cx.u = u;
         match &mut self.stepping {
-            Stepping::Rk4(rk) => rk.step(cx.at(k, t), &mut self.q, &mut self.dq)?,
+            Stepping::Rk4(rk, _) => rk.step(cx.at(k, t), &mut self.q, &mut self.dq)?,
             Stepping::Vi { vi, p, q_next } => {
                 vi.step(cx.at(k, t), &mut self.q, p, q_next)?;
                 vi.velocity_and_energy(cx.at(k + 1, reached), &self.q, p, &mut self.dq)?;
             }
         }
         check_finite(k + 1, reached, &self.q, &self.dq)?;
+        if let Stepping::Rk4(_, w) = &mut self.stepping {
+            watch(w, &mut self.sys, &self.q, k + 1, reached)?;
+        }
         self.steps = k + 1;
         Ok(())
     }
@@ -205,7 +209,7 @@ where
     pub fn p(&self) -> Option<&Vector<S::N>> {
         match &self.stepping {
             Stepping::Vi { p, .. } => Some(p),
-            Stepping::Rk4(_) => None,
+            Stepping::Rk4(..) => None,
         }
     }
 
@@ -228,7 +232,7 @@ where
     pub fn newton_iterations(&self) -> usize {
         match &self.stepping {
             Stepping::Vi { vi, .. } => vi.iterations,
-            Stepping::Rk4(_) => 0,
+            Stepping::Rk4(..) => 0,
         }
     }
 

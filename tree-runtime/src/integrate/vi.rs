@@ -248,6 +248,11 @@ where
     pub iterations: usize,
     /// Subdivisions the last step needed (0 when it went through whole).
     pub subdivisions: usize,
+    /// Interior-point iterations of the last step's contact solves (all its sub-steps; a
+    /// step solved free of contact takes none).
+    pub contact_iterations: usize,
+    /// The deepest any unilateral row went below zero at the last step's end (0: none did).
+    pub penetration: f64,
     /// The derivatives' workspace, made on their first call.
     linearization: Option<Box<derivatives::Linearization>>,
     /// The second derivatives' scratch over dual numbers, made on their first use.
@@ -314,6 +319,8 @@ where
             full_known: false,
             iterations: 0,
             subdivisions: 0,
+            contact_iterations: 0,
+            penetration: 0.0,
             dissipated: 0.0,
             linearization: None,
             dual_jacobians: None,
@@ -681,6 +688,8 @@ where
     {
         self.iterations = 0;
         self.subdivisions = 0;
+        self.contact_iterations = 0;
+        self.penetration = 0.0;
         self.dissipated = 0.0;
         let (t, dt) = (cx.t, cx.dt);
         let result = self.advance(cx, q, p, q_next, 0);

@@ -24,7 +24,7 @@ use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dim};
 use super::MidpointVi;
 use crate::cone::{self, Point};
 use crate::context::StepContext;
-use crate::dynamics::GeneralizedForce;
+use crate::dynamics::{GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::linalg::{lu_factor_packed_unguarded, lu_solve_packed};
 use crate::system::{ConstraintTerms, System, Vector};
@@ -85,6 +85,14 @@ pub(crate) struct ContactStep {
     /// The last step's impulses per gap row (γ, then b at tangent rows) and gaps at `q₂`.
     pub(crate) impulses: Vec<f64>,
     pub(crate) gap_values: Vec<f64>,
+    /// The last step was solved free: every gap open at its end with no impulse — exact for
+    /// hard contact, whose open rows carry none (its derivatives see no contact).
+    pub(crate) free: bool,
+    /// The last step's impulses were all negligible (the next hard step tries free first).
+    quiet: bool,
+    /// The predicted `q₂` and the `λ` a free attempt started from, to start again from.
+    predicted: Vec<f64>,
+    saved_lambda: Vec<f64>,
     /// The velocity projection's workspace: the rows held, `M_dd`'s factor, `M_dd⁻¹Aᵀ`, the
     /// small system.
     held: Vec<usize>,
@@ -135,6 +143,10 @@ impl ContactStep {
             direction: vec![0.0; nz],
             impulses: vec![0.0; rows],
             gap_values: vec![0.0; rows],
+            free: false,
+            quiet: true,
+            predicted: vec![0.0; sys.dim().value()],
+            saved_lambda: vec![0.0; m],
             held: Vec::with_capacity(rows),
             mass: vec![0.0; nd * nd],
             mass_pivots: vec![0; nd],
@@ -230,6 +242,7 @@ impl ContactStep {
         sys.gaps(q, None, &mut self.gaps);
         self.gap_values.copy_from_slice(self.gaps.h.as_slice());
         self.impulses.fill(0.0);
+        (self.free, self.quiet) = (false, true);
     }
 
     /// Element `e`'s name.
@@ -248,6 +261,9 @@ impl ContactStep {
         let n = g.dh.ncols();
         out.dq2.fill(0.0);
         out.dq1.fill(0.0);
+        if self.free {
+            return Ok(());
+        }
         for (ci, &i) in dynamic.iter().enumerate() {
             for j in 0..n {
                 // Σ w D²φ is formed on the dynamic columns; symmetric, its kinematic ones are
@@ -445,14 +461,72 @@ where
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
+        P: Prescription,
     {
         let mut c = self
             .contact
             .take()
             .expect("a contact step has its workspace");
-        let result = self.contact_newton(&mut c, cx, q1, p1, q_next);
+        let mut tried = 0;
+        let result = match self.free_step(&mut c, cx, q1, p1, q_next) {
+            Ok(iterations) => Ok(iterations),
+            Err(iterations) => {
+                tried = iterations;
+                let result = self.contact_newton(&mut c, cx, q1, p1, q_next);
+                self.contact_iterations += match result {
+                    Ok(k) | Err((k, _)) => k,
+                };
+                result
+            }
+        };
+        let deepest = (c.elements.iter())
+            .map(|e| -c.gap_values[e.row])
+            .fold(0.0, f64::max);
+        self.penetration = self.penetration.max(deepest);
         self.contact = Some(c);
-        result
+        result.map(|k| k + tried).map_err(|(k, e)| (k + tried, e))
+    }
+
+    /// Hard contact after a step with no impulse: the smooth step first (every row open,
+    /// `γ = 0`), kept when every gap at its end is open — then it is the contact step's
+    /// solution exactly, at the cost of one gap evaluation. Otherwise `q_next` and `λ` are
+    /// put back as predicted and the iterations spent are the error.
+    fn free_step<S, F, P>(
+        &mut self,
+        c: &mut ContactStep,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> Result<usize, usize>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+        P: Prescription,
+    {
+        c.free = false;
+        if self.settings.kappa > 0.0 || !c.quiet {
+            return Err(0);
+        }
+        c.predicted.copy_from_slice(q_next.as_slice());
+        c.saved_lambda.copy_from_slice(self.lambda.as_slice());
+        let (iterations, solved) = match self.solve(cx, q1, p1, q_next) {
+            Ok(k) => (k, true),
+            Err((k, _)) => (k, false),
+        };
+        if solved {
+            cx.sys.gaps(q_next, None, &mut c.gaps);
+        }
+        if solved && (c.elements.iter()).all(|e| c.gaps.h[e.row] >= 0.0) {
+            c.impulses.fill(0.0);
+            c.weights.fill(0.0);
+            c.gap_values.copy_from_slice(c.gaps.h.as_slice());
+            c.free = true;
+            return Ok(iterations);
+        }
+        q_next.as_mut_slice().copy_from_slice(&c.predicted);
+        self.lambda.as_mut_slice().copy_from_slice(&c.saved_lambda);
+        Err(iterations)
     }
 
     fn contact_newton<S, F, P>(
@@ -528,6 +602,8 @@ where
             c.impulses[k] = *w;
         }
         c.gap_values.copy_from_slice(c.gaps.h.as_slice());
+        let negligible = self.settings.tolerance * scale;
+        c.quiet = (c.elements.iter()).all(|e| c.z[e.base] <= negligible);
         Ok(iterations)
     }
 
@@ -750,28 +826,13 @@ where
         // once the centring reaches a user's κ, plain Newton onto its central path (the
         // predictor's term, heading for zero, would only spoil that convergence).
         let on_path = kappa > 0.0 && sigma * mu <= kappa;
+
         let (target, second) = if on_path {
             (kappa, 0.0)
         } else {
             (sigma * mu, 1.0)
         };
-        for k in 0..nz {
-            c.direction[k] = -c.residual[k];
-        }
-        for e in &c.elements {
-            let (b, a) = (e.base, &c.affine);
-            c.direction[b + 1] = -(c.z[b] * c.z[b + 1] - target + second * a[b] * a[b + 1]);
-            if e.has_friction() {
-                let (x, y) = cone_points(e, &c.z);
-                let (dx, dy) = cone_points(e, a);
-                let p = cone::product(&x, &y);
-                let dp = cone::product(&dx, &dy);
-                c.direction[b + 4] = -(p[0] - target + second * dp[0]);
-                c.direction[b + 5] = -(p[1] + second * dp[1]);
-                c.direction[b + 6] = -(p[2] + second * dp[2]);
-            }
-        }
-        lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.direction);
+        corrector(c, target, second);
     }
 
     /// Takes the corrector's direction a fraction of the way to the cones' boundary — the
@@ -824,6 +885,30 @@ where
         };
         SimError::SingularJacobian { step, t, variable }
     }
+}
+
+/// The corrector's direction into `c.direction` from the factored matrix: every residual
+/// cancelled, each complementarity aimed at `target` with `second` times the predictor's
+/// second-order term.
+fn corrector(c: &mut ContactStep, target: f64, second: f64) {
+    let nz = c.nz;
+    for k in 0..nz {
+        c.direction[k] = -c.residual[k];
+    }
+    for e in &c.elements {
+        let (b, a) = (e.base, &c.affine);
+        c.direction[b + 1] = -(c.z[b] * c.z[b + 1] - target + second * a[b] * a[b + 1]);
+        if e.has_friction() {
+            let (x, y) = cone_points(e, &c.z);
+            let (dx, dy) = cone_points(e, a);
+            let p = cone::product(&x, &y);
+            let dp = cone::product(&dx, &dy);
+            c.direction[b + 4] = -(p[0] - target + second * dp[0]);
+            c.direction[b + 5] = -(p[1] + second * dp[1]);
+            c.direction[b + 6] = -(p[2] + second * dp[2]);
+        }
+    }
+    lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.direction);
 }
 
 /// The impulses as gap-row weights: `γ` at each gap row, `b` at its tangent rows.

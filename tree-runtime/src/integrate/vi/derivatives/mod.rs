@@ -254,7 +254,7 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
-        if self.contact.is_some() {
+        if self.contact.as_ref().is_some_and(|c| !c.free) {
             return Err(SimError::Unsupported(
                 "second derivatives of a step through contact are not formed (docs/derivations.md §13): use the first derivatives (a Gauss–Newton model)".into(),
             ));
@@ -332,7 +332,7 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
-        if self.contact.is_some() {
+        if self.contact.as_ref().is_some_and(|c| !c.free) {
             return Err(SimError::Unsupported(
                 "second derivatives of a step through contact are not formed (docs/derivations.md §13): use the first derivatives (a Gauss–Newton model)".into(),
             ));
