@@ -351,31 +351,34 @@ impl Prescription for Kinematics {
 
 /// Reads a model file (TOML, or URDF by its extension or its XML), with the variables of
 /// `lock` held still (the command line's `--lock`); a URDF's mimic joints follow their
-/// leaders unless `independent_mimics` (the command line's `--independent-mimics`).
+/// leaders unless `independent_mimics` (the command line's `--independent-mimics`); its
+/// `<collision><sphere>` elements become contact spheres when `contacts` (`--contacts`).
 #[pyfunction]
-#[pyo3(signature = (path, floating_base=false, lock=None, independent_mimics=false))]
+#[pyo3(signature = (path, floating_base=false, lock=None, independent_mimics=false, contacts=false))]
 pub(crate) fn load(
     py: Python<'_>,
     path: PathBuf,
     floating_base: bool,
     lock: Option<&Bound<'_, PyAny>>,
     independent_mimics: bool,
+    contacts: bool,
 ) -> PyResult<Model> {
     let m = model::from_file(
         &path,
         model::UrdfOptions {
             floating_base,
             independent_mimics,
+            collision_spheres: contacts,
         },
     )
     .map_err(|e| model_error(py, &e))?;
     Model::of(locked(py, m, lock)?)
 }
 
-/// Reads a model from text: `format` "toml" or "urdf"; `lock` and `independent_mimics` as
-/// [`load`]'s.
+/// Reads a model from text: `format` "toml" or "urdf"; `lock`, `independent_mimics` and
+/// `contacts` as [`load`]'s.
 #[pyfunction]
-#[pyo3(signature = (text, format="toml", floating_base=false, lock=None, independent_mimics=false))]
+#[pyo3(signature = (text, format="toml", floating_base=false, lock=None, independent_mimics=false, contacts=false))]
 pub(crate) fn loads(
     py: Python<'_>,
     text: &str,
@@ -383,6 +386,7 @@ pub(crate) fn loads(
     floating_base: bool,
     lock: Option<&Bound<'_, PyAny>>,
     independent_mimics: bool,
+    contacts: bool,
 ) -> PyResult<Model> {
     let m = match format {
         "toml" => model::from_toml_str(text, None),
@@ -392,6 +396,7 @@ pub(crate) fn loads(
             model::UrdfOptions {
                 floating_base,
                 independent_mimics,
+                collision_spheres: contacts,
             },
         ),
         other => return Err(bad(format!("format `{other}`: use `toml` or `urdf`"))),

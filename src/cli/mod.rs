@@ -46,6 +46,10 @@ pub struct Cli {
     /// (Pinocchio's default; by default a mimic joint follows the joint it names).
     #[arg(long, global = true)]
     independent_mimics: bool,
+    /// URDF models: each `<collision><sphere>` becomes a contact sphere on its link (they
+    /// touch the ground, not each other).
+    #[arg(long, global = true)]
+    contacts: bool,
     /// Hold a variable still as a constant, at its q0 or at VALUE: `--lock NAME[=VALUE]`,
     /// repeated or comma-separated (as Pinocchio's reduced model locks joints).
     #[arg(
@@ -109,6 +113,7 @@ impl Cli {
             urdf: model::UrdfOptions {
                 floating_base: self.floating_base,
                 independent_mimics: self.independent_mimics,
+                collision_spheres: self.contacts,
             },
             locks: self.lock,
             contacts: contacts_of(
@@ -127,10 +132,11 @@ impl Cli {
             Command::Optimize(request) => {
                 if source.urdf.floating_base
                     || source.urdf.independent_mimics
+                    || source.urdf.collision_spheres
                     || !source.locks.is_empty()
                     || source.contacts != model::ContactsSpec::default()
                 {
-                    Err("--floating-base, --independent-mimics, --lock, --ground, --contact and --limits do not apply to optimize: say `floating_base = true` in the task file, and put locks and contacts in the model".into())
+                    Err("--floating-base, --independent-mimics, --contacts, --lock, --ground, --contact and --limits do not apply to optimize: say `floating_base = true` in the task file, and put locks and contacts in the model".into())
                 } else {
                     optimize::run(request)
                 }

@@ -1306,6 +1306,19 @@ fn contact_is_added_from_the_command_line() {
         stdout.contains("bob                  sphere of radius 0.1 on `bob`"),
         "{stdout}"
     );
+    // A URDF robot's collision spheres, asked for: the Go1's feet.
+    let (ok, stdout, stderr) = tree_mech(&[
+        "check",
+        "tests/robots/example-robot-data/go1_description/urdf/go1.urdf",
+        "--floating-base",
+        "--contacts",
+        "--ground",
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("RL_foot              sphere of radius 0.02 on `RL_foot`, the ground only"),
+        "{stdout}"
+    );
     let dir = scratch("cli-contact");
     let csv = dir.join("ball.csv");
     let (ok, stdout, stderr) = tree_mech(&[

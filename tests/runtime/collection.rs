@@ -76,6 +76,7 @@ fn load(entry: &Value) -> Result<Model, String> {
     let options = UrdfOptions {
         floating_base: entry["floating_base"].as_bool().unwrap(),
         independent_mimics: !entry["mimic"].as_bool().unwrap(),
+        ..Default::default()
     };
     let path = root().join("robots/example-robot-data").join(file);
     model::from_file(path, options).map_err(|e| e.to_string())

@@ -1,5 +1,6 @@
 //! Contact in the variational integrator (docs/derivations.md §13): analytic cases.
 
+use nalgebra::Dyn;
 use tree_mech::integrate::{simulate, Method, SimOptions, ViSettings};
 use tree_mech::model::{self, Model};
 use tree_mech::runtime::Vector;
@@ -17,15 +18,18 @@ fn vi(dt: f64, duration: f64) -> SimOptions {
 fn run(model: &Model, dt: f64, duration: f64) -> Trajectory {
     let mut sys = TreeSystem::new(model).unwrap();
     let (q0, dq0) = sys.initial_state();
-    simulate(
-        &mut sys,
-        &q0,
-        &dq0,
-        &vi(dt, duration),
-        &mut NoForce,
-        &mut |_| {},
-    )
-    .unwrap()
+    run_from(&mut sys, &q0, &dq0, dt, duration)
+}
+
+/// `sys` run from `(q0, q̇0)` on the hard-contact VI, unforced.
+fn run_from(
+    sys: &mut TreeSystem,
+    q0: &Vector<Dyn>,
+    dq0: &Vector<Dyn>,
+    dt: f64,
+    duration: f64,
+) -> Trajectory {
+    simulate(sys, q0, dq0, &vi(dt, duration), &mut NoForce, &mut |_| {}).unwrap()
 }
 
 /// A ball dropped from 1 m above the ground touches it at √(2h/g) and rests at its radius.
@@ -581,5 +585,79 @@ fn a_start_inside_the_ground_is_refused_and_one_beyond_a_limit_moved() {
     assert_eq!(
         (moved.variable.as_str(), moved.from, moved.to),
         ("theta", 0.7, 0.5)
+    );
+}
+
+/// A URDF robot's `<collision><sphere>` elements become contacts when asked: the Go1's four
+/// feet (radius 0.02 m each, on the foot links), which then land on the ground a setting adds
+/// with no penetration beyond 1e-9 m. A sphere off its link's origin sits on a child frame
+/// there; a bad radius is a sentence with its line.
+#[test]
+fn a_urdf_robot_s_collision_spheres_become_contacts() {
+    use tree_mech::model::{ContactsSpec, GroundSpec, UrdfOptions};
+    let path = "tests/robots/example-robot-data/go1_description/urdf/go1.urdf";
+    let options = UrdfOptions {
+        floating_base: true,
+        collision_spheres: true,
+        ..Default::default()
+    };
+    let model = model::from_urdf_file(path, options).unwrap();
+    let feet: Vec<_> = (model.contacts.spheres.iter())
+        .map(|s| (s.name.as_str(), model.frames[s.frame].name.as_str()))
+        .collect();
+    let expected = ["FR_foot", "FL_foot", "RR_foot", "RL_foot"].map(|f| (f, f));
+    assert_eq!(feet, expected, "{feet:?}");
+    assert!((model.contacts.spheres.iter()).all(|s| s.radius == 0.02 && !s.collide));
+    let plain = UrdfOptions {
+        floating_base: true,
+        ..Default::default()
+    };
+    assert!((model::from_urdf_file(path, plain).unwrap().contacts.spheres).is_empty());
+    let ground = ContactsSpec {
+        ground: Some(GroundSpec::default()),
+        ..Default::default()
+    };
+    let model = model.with_contacts(&ground).unwrap();
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (mut q0, dq0) = sys.initial_state();
+    q0[2] = 0.45; // root_z: the feet some 0.1 m above the ground
+    let traj = run_from(&mut sys, &q0, &dq0, 1e-3, 0.25);
+    // The ground is frictionless: every row is a foot's gap (no tangent rows).
+    assert_eq!(traj.unilateral.len(), 4);
+    let deepest = (0..traj.len())
+        .flat_map(|k| traj.gap(k).to_vec())
+        .fold(f64::INFINITY, f64::min);
+    let landed = (0..traj.len()).any(|k| traj.impulse(k).iter().any(|&g| g > 0.0));
+    assert!(
+        deepest > -1e-9 && landed,
+        "deepest gap {deepest:e}, landed {landed}"
+    );
+
+    // Off the link's origin: a child frame at the offset; a negative radius refused.
+    let arm = |collision: &str| {
+        format!(
+            r#"<robot name="arm"><link name="base"/>
+  <link name="upper"><inertial><mass value="1"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>
+    {collision}</link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="5" velocity="1"/></joint>
+</robot>"#
+        )
+    };
+    let text = arm(
+        r#"<collision name="tip"><origin xyz="0 0 -0.5"/><geometry><sphere radius="0.05"/></geometry></collision>"#,
+    );
+    let model = model::from_urdf_str(&text, Some("arm.urdf"), options).unwrap();
+    let tip = &model.contacts.spheres[0];
+    assert_eq!((tip.name.as_str(), tip.radius), ("tip", 0.05));
+    assert_eq!(model.frames[tip.frame].name, "tip#sphere1");
+    let text = arm(r#"<collision><geometry><sphere radius="-1"/></geometry></collision>"#);
+    let err = model::from_urdf_str(&text, Some("arm.urdf"), options)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("arm.urdf:4") && err.contains("radius `-1` is not a finite number ≥ 0"),
+        "{err}"
     );
 }

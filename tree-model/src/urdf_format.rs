@@ -12,6 +12,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use crate::contact::ContactSpec;
 use crate::error::{FrameField, ModelError, Problem, Site};
 use crate::model::Model;
 use crate::primitive::{MimicSpec, Primitive, PrimitiveKind, Value};
@@ -29,6 +30,9 @@ pub struct UrdfOptions {
     /// default, `mimic=False`): for a file whose mimic joints follow joints it does not have.
     /// By default a mimic joint follows its leader (`multiplier·q + offset`).
     pub independent_mimics: bool,
+    /// Make each `<collision><sphere>` a contact sphere on its link (docs/model-format.md,
+    /// "Contact"): they touch the ground a model or `--ground` gives, not each other.
+    pub collision_spheres: bool,
 }
 
 /// The names of the floating base's variables, outermost first, with their primitives.
@@ -104,6 +108,9 @@ pub fn from_urdf_str(
         ));
     }
     bodies(&mut out, &robot, &reader);
+    if options.collision_spheres {
+        collision_spheres(&mut out, &robot, &reader);
+    }
     out.validate(&reader)
 }
 
@@ -117,6 +124,19 @@ struct Reader {
     joint_lines: HashMap<String, usize>,
     /// The joints whose `<limit>` says an `effort` (urdf-rs reads an absent one as 0).
     efforts: std::collections::HashSet<String>,
+    /// Each link's `<collision>` spheres, in file order (read here: the text urdf-rs reads
+    /// has its collisions taken out).
+    spheres: HashMap<String, Vec<CollisionSphere>>,
+}
+
+/// A `<collision>` whose geometry is a `<sphere>`.
+struct CollisionSphere {
+    /// The collision's `name`, if it has one.
+    name: Option<String>,
+    /// Its `<origin xyz>` in the link's frame.
+    xyz: [f64; 3],
+    radius: f64,
+    line: usize,
 }
 
 impl Reader {
@@ -172,12 +192,15 @@ impl Reader {
             })
             .map(|j| j.attribute("name").unwrap_or_default().to_string())
             .collect();
+        let spheres =
+            collision_spheres_of(root, &line_at).map_err(|(m, line)| fail(m, Some(line)))?;
         let reader = Reader {
             source_name: src,
             robot_line: line_at(root.range().start),
             link_lines,
             joint_lines,
             efforts,
+            spheres,
         };
         Ok((reader, robot))
     }
@@ -194,6 +217,69 @@ impl Reader {
     fn link_line(&self, name: &str) -> Option<usize> {
         self.link_lines.get(name).copied()
     }
+}
+
+/// `n`'s child elements named `tag`.
+fn elements<'a, 'input>(
+    n: roxmltree::Node<'a, 'input>,
+    tag: &'static str,
+) -> impl Iterator<Item = roxmltree::Node<'a, 'input>> {
+    n.children()
+        .filter(move |c| c.is_element() && c.tag_name().name() == tag)
+}
+
+/// Every link's `<collision>` spheres, or the sentence for one that is not a finite radius
+/// ≥ 0 at a finite origin, with its line.
+fn collision_spheres_of(
+    root: roxmltree::Node,
+    line_at: &dyn Fn(usize) -> usize,
+) -> Result<HashMap<String, Vec<CollisionSphere>>, (String, usize)> {
+    let mut out: HashMap<String, Vec<CollisionSphere>> = HashMap::new();
+    for link in elements(root, "link") {
+        let link_name = link.attribute("name").unwrap_or_default();
+        for collision in elements(link, "collision") {
+            let geometry = elements(collision, "geometry").next();
+            let Some(sphere) = geometry.and_then(|g| elements(g, "sphere").next()) else {
+                continue;
+            };
+            let line = line_at(sphere.range().start);
+            let bad = |what: String| {
+                (
+                    format!("URDF: link `{link_name}`: a collision sphere's {what}"),
+                    line,
+                )
+            };
+            let text = sphere.attribute("radius").unwrap_or("");
+            let radius = match text.trim().parse::<f64>() {
+                Ok(r) if r.is_finite() && r >= 0.0 => r,
+                _ => return Err(bad(format!("radius `{text}` is not a finite number ≥ 0"))),
+            };
+            let mut xyz = [0.0; 3];
+            let origin = elements(collision, "origin").next();
+            if let Some(text) = origin.and_then(|o| o.attribute("xyz")) {
+                let numbers: Vec<_> = text.split_whitespace().map(str::parse::<f64>).collect();
+                match numbers[..] {
+                    [Ok(x), Ok(y), Ok(z)] if [x, y, z].iter().all(|v| v.is_finite()) => {
+                        xyz = [x, y, z]
+                    }
+                    _ => {
+                        return Err(bad(format!(
+                            "origin xyz `{text}` is not three finite numbers"
+                        )))
+                    }
+                }
+            }
+            out.entry(link_name.to_string())
+                .or_default()
+                .push(CollisionSphere {
+                    name: collision.attribute("name").map(str::to_string),
+                    xyz,
+                    radius,
+                    line,
+                });
+        }
+    }
+    Ok(out)
 }
 
 /// The robot as a tree: each link's index by name, its children (joints), one root link.
@@ -933,4 +1019,48 @@ pub fn from_file(path: impl AsRef<Path>, options: UrdfOptions) -> Result<Model, 
         ));
     }
     crate::toml_format::from_toml_str(&text, Some(&shown))
+}
+
+/// Each `<collision>` sphere of a link as a contact on it (`UrdfOptions::collision_spheres`):
+/// at the link's frame when its origin is, else on constant child frames to the origin's
+/// offset (a sphere's orientation is immaterial). Named by the collision's `name`, else by
+/// its link (`link_2` … for a link's second and later spheres). They touch the ground only:
+/// a robot's neighbouring links overlap by design, and self-collision is not modelled.
+fn collision_spheres(out: &mut Frames, robot: &urdf_rs::Robot, reader: &Reader) {
+    for (l, link) in robot.links.iter().enumerate() {
+        let (Some(f), Some(spheres)) = (out.link_frame[l], reader.spheres.get(&link.name)) else {
+            continue;
+        };
+        let link_frame = out.spec.frames[f].name.clone();
+        for (k, sphere) in spheres.iter().enumerate() {
+            let name = match sphere.name.as_deref() {
+                Some(n) if !n.is_empty() => n.to_string(),
+                _ if k == 0 => link.name.clone(),
+                _ => format!("{}_{}", link.name, k + 1),
+            };
+            let offsets = [PrimitiveKind::Tx, PrimitiveKind::Ty, PrimitiveKind::Tz]
+                .into_iter()
+                .zip(sphere.xyz)
+                .filter(|&(_, x)| x != 0.0);
+            let mut parent = link_frame.clone();
+            for (i, (kind, x)) in offsets.enumerate() {
+                let frame = format!("{name}#sphere{}", i + 1);
+                let line = Some(sphere.line);
+                out.push(
+                    frame.clone(),
+                    Some(parent),
+                    (kind, Value::Constant(x)),
+                    line,
+                );
+                parent = frame;
+            }
+            out.spec.contacts.contacts.push(ContactSpec {
+                name: Some(name),
+                frame: parent,
+                radius: Some(sphere.radius),
+                friction: None,
+                collide: Some(false),
+            });
+        }
+    }
 }

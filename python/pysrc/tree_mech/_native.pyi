@@ -237,6 +237,7 @@ def load(
     floating_base: bool = False,
     lock: Union[str, Sequence[str], Mapping[str, Optional[float]], None] = None,
     independent_mimics: bool = False,
+    contacts: bool = False,
 ) -> Model: ...
 def loads(
     text: str,
@@ -244,6 +245,7 @@ def loads(
     floating_base: bool = False,
     lock: Union[str, Sequence[str], Mapping[str, Optional[float]], None] = None,
     independent_mimics: bool = False,
+    contacts: bool = False,
 ) -> Model: ...
 def optimize_text(
     text: str,
