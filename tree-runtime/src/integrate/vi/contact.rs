@@ -46,6 +46,8 @@ const START_GAP: f64 = 1e-3;
 /// One unilateral element's place in the step.
 #[derive(Clone, Debug)]
 struct Element {
+    /// Its place in the model's list (names, `forced`).
+    index: usize,
     /// Its gap's row in the gap terms (its tangent rows follow).
     row: usize,
     /// Index of its `γ` among the unknowns (`s` next; with friction `b` and `η` after).
@@ -63,10 +65,16 @@ impl Element {
 /// The contact step's workspace (allocated once; nothing per step).
 #[derive(Clone, Debug)]
 pub(crate) struct ContactStep {
+    /// Every unilateral element of the model.
+    all: Vec<Element>,
+    /// The elements the current step solves for, their unknowns packed after `q₂` and `λ`
+    /// (every one at κ > 0; at hard contact those a step could close, see [`Self::select`]).
     elements: Vec<Element>,
+    /// Elements a hard step found closed though left out, taken in for the rest of it.
+    forced: Vec<bool>,
     /// The elements' names, for errors.
     names: Vec<String>,
-    /// Number of unknowns.
+    /// Number of unknowns of the current step (at most `q₂`, `λ` and every element's).
     nz: usize,
     /// φ, Dφ and the weighted Hessian at the current `q₂`.
     gaps: ConstraintTerms,
@@ -117,8 +125,9 @@ impl ContactStep {
         }
         let (mut row, mut base) = (0, nd + m);
         let mut elements = Vec::with_capacity(gaps.len());
-        for g in &gaps {
+        for (index, g) in gaps.iter().enumerate() {
             elements.push(Element {
+                index,
                 row,
                 base,
                 friction: g.friction,
@@ -128,6 +137,8 @@ impl ContactStep {
         }
         let (rows, nz) = (row, base);
         Some(Box::new(ContactStep {
+            all: elements.clone(),
+            forced: vec![false; elements.len()],
             elements,
             names: gaps.into_iter().map(|g| g.name).collect(),
             nz,
@@ -179,6 +190,9 @@ fn mean_complementarity(elements: &[Element], z: &[f64]) -> f64 {
             sum += x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
             count += 1;
         }
+    }
+    if count == 0 {
+        return 0.0;
     }
     sum / count as f64
 }
@@ -234,6 +248,27 @@ impl ContactJacobian {
 }
 
 impl ContactStep {
+    /// Chooses the elements the step solves for, their unknowns packed from `first`: all of
+    /// them when `every` (κ > 0: each carries `κ/φ`), else — hard contact — those a step could
+    /// close: a gap at `q₁` or at the predicted `q₂` (in `gaps`) within twice its change over
+    /// the step, those that pressed in the last step, and those found closed before. The rest are open at the step's end (checked)
+    /// and carry no impulse: exactly the complementarity's solution, and their derivatives
+    /// vanish nearby. A robot far from its limits solves for none of them.
+    fn select(&mut self, every: bool, first: usize) {
+        self.elements.clear();
+        let mut base = first;
+        for e in &self.all {
+            let (before, after) = (self.at_start[e.row], self.gaps.h[e.row]);
+            let near = before.min(after) <= 2.0 * (after - before).abs();
+            let pressed = self.impulses[e.row] > 0.0;
+            if every || near || pressed || self.forced[e.index] {
+                self.elements.push(Element { base, ..e.clone() });
+                base += if e.has_friction() { 7 } else { 2 };
+            }
+        }
+        self.nz = base;
+    }
+
     /// No impulses yet, and the gaps at `q` (a run's first sample).
     pub(crate) fn start_record<S: System>(&mut self, sys: &mut S, q: &Vector<S::N>)
     where
@@ -275,11 +310,11 @@ impl ContactStep {
                 };
             }
         }
-        for (k, e) in self.elements.iter().enumerate() {
+        for e in &self.elements {
             let size = if e.has_friction() { 7 } else { 2 };
             local_block(e, z, &mut out.local[..size * size]);
             lu_factor_packed_unguarded(&mut out.local[..size * size], size, &mut out.pivots)
-                .map_err(|_| k)?;
+                .map_err(|_| e.index)?;
             // dv = G⁻¹ (e_gap dφ + e_fric,k dδ_k): columns φ, δ₁, δ₂.
             let columns = if e.has_friction() { 3 } else { 1 };
             for col in 0..columns {
@@ -479,7 +514,7 @@ where
                 result
             }
         };
-        let deepest = (c.elements.iter())
+        let deepest = (c.all.iter())
             .map(|e| -c.gap_values[e.row])
             .fold(0.0, f64::max);
         self.penetration = self.penetration.max(deepest);
@@ -517,7 +552,7 @@ where
         if solved {
             cx.sys.gaps(q_next, None, &mut c.gaps);
         }
-        if solved && (c.elements.iter()).all(|e| c.gaps.h[e.row] >= 0.0) {
+        if solved && (c.all.iter()).all(|e| c.gaps.h[e.row] >= 0.0) {
             c.impulses.fill(0.0);
             c.weights.fill(0.0);
             c.gap_values.copy_from_slice(c.gaps.h.as_slice());
@@ -540,11 +575,71 @@ where
     where
         S: System<N = N>,
         F: GeneralizedForce<N>,
+        P: Prescription,
     {
-        let (step, t) = (cx.index, cx.t);
         cx.sys.gaps(q1, None, &mut c.gaps);
         c.at_start.copy_from_slice(c.gaps.h.as_slice());
         c.dh_start.copy_from(&c.gaps.dh);
+        c.predicted.copy_from_slice(q_next.as_slice());
+        c.saved_lambda.copy_from_slice(self.lambda.as_slice());
+        c.forced.fill(false);
+        let first = self.split.dynamic.len() + self.split.rows;
+        let mut total = 0;
+        loop {
+            cx.sys.gaps(q_next, None, &mut c.gaps);
+            c.select(self.settings.kappa > 0.0, first);
+            let k = if c.elements.is_empty() {
+                // Nothing near: the smooth step, every row open (checked below).
+                c.weights.fill(0.0);
+                let k = self
+                    .solve(cx, q1, p1, q_next)
+                    .map_err(|(k, e)| (total + k, e))?;
+                cx.sys.gaps(q_next, None, &mut c.gaps);
+                k
+            } else {
+                self.interior_point(c, cx, q1, p1, q_next)
+                    .map_err(|(k, e)| (total + k, e))?
+            };
+            total += k;
+            // Left-out elements closed at the end are taken in, and the step solved again.
+            let mut closed = false;
+            for e in &c.all {
+                if !c.forced[e.index] && c.gaps.h[e.row] < 0.0 {
+                    let taken = c.elements.iter().any(|a| a.index == e.index);
+                    if !taken {
+                        (c.forced[e.index], closed) = (true, true);
+                    }
+                }
+            }
+            if !closed {
+                if c.elements.is_empty() {
+                    c.impulses.fill(0.0);
+                    c.gap_values.copy_from_slice(c.gaps.h.as_slice());
+                    (c.quiet, c.free) = (true, true);
+                }
+                return Ok(total);
+            }
+            q_next.as_mut_slice().copy_from_slice(&c.predicted);
+            self.lambda.as_mut_slice().copy_from_slice(&c.saved_lambda);
+        }
+    }
+
+    /// The interior point for the selected elements from the predicted `q₂` in `q_next`
+    /// (`c.at_start` holding the gaps at `q₁`): the iterations taken, also on failure.
+    fn interior_point<S, F, P>(
+        &mut self,
+        c: &mut ContactStep,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> Result<usize, (usize, SimError)>
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        let (step, t) = (cx.index, cx.t);
+        c.weights.fill(0.0);
         self.evaluate_residual(cx, q1, p1, q_next, true);
         let scale = self.momentum_scale();
         self.start_contact(c, cx, q_next, scale);
@@ -583,7 +678,7 @@ where
                         step,
                         t,
                         iterations,
-                        contact: c.names[m.worst].clone(),
+                        contact: c.names[e.index].clone(),
                         gap: c.gaps.h[e.row],
                         residual: m.relative,
                         complementarity: m.complementarity,
@@ -593,7 +688,7 @@ where
             iterations += 1;
             self.contact_matrix(c);
             let nz = c.nz;
-            lu_factor_packed_unguarded(&mut c.matrix, nz, &mut c.pivots)
+            lu_factor_packed_unguarded(&mut c.matrix[..nz * nz], nz, &mut c.pivots)
                 .map_err(|k| (iterations, self.singular_unknown(c, cx.sys, k, step, t)))?;
             self.mehrotra(c, scale, kappa);
             at_floor = self.apply_contact_update(c, q_next, scale);
@@ -813,7 +908,7 @@ where
                 }
             }
         }
-        lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.affine);
+        lu_solve_packed(&c.matrix[..nz * nz], nz, &c.pivots, &mut c.affine[..nz]);
         let mu = mean_complementarity(&c.elements, &c.z);
         let alpha = step_length(&c.elements, &c.z, &c.affine, 1.0);
         for k in 0..nz {
@@ -881,7 +976,7 @@ where
             format!("the λ of constraint `{}`", sys.constraint_name(k - nd))
         } else {
             let e = c.elements.iter().rposition(|e| e.base <= k).unwrap_or(0);
-            format!("the impulse of contact `{}`", c.names[e])
+            format!("the impulse of contact `{}`", c.names[c.elements[e].index])
         };
         SimError::SingularJacobian { step, t, variable }
     }
@@ -908,7 +1003,7 @@ fn corrector(c: &mut ContactStep, target: f64, second: f64) {
             c.direction[b + 6] = -(p[2] + second * dp[2]);
         }
     }
-    lu_solve_packed(&c.matrix, nz, &c.pivots, &mut c.direction);
+    lu_solve_packed(&c.matrix[..nz * nz], nz, &c.pivots, &mut c.direction[..nz]);
 }
 
 /// The impulses as gap-row weights: `γ` at each gap row, `b` at its tangent rows.
