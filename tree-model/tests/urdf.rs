@@ -6,6 +6,7 @@ use tree_model::{from_file, from_urdf_str, Joint, PrimitiveKind, UrdfOptions};
 const FIXED: UrdfOptions = UrdfOptions {
     floating_base: false,
     independent_mimics: false,
+    collision_spheres: false,
 };
 
 fn error_of(text: &str) -> String {
