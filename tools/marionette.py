@@ -39,7 +39,7 @@ HIP_PITCH = 0.8
 HAND_STROKE, KNEE_STROKE = 0.05, 0.03   # amplitudes of the strings' lengths
 # The floor model: the floor a little below the feet, the strings paid out from t = 1 s.
 FOOT_CLEARANCE = 0.002
-LOWER, LOWER_START, LOWER_TIME = 0.35, 1.0, 1.5
+LOWER, LOWER_START, LOWER_TIME = 0.5, 1.0, 1.5
 FLOOR_SPHERES = (("foot", 0.015), ("knee", 0.02), ("hand", 0.02))
 
 frames = []

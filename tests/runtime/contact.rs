@@ -661,3 +661,75 @@ fn a_urdf_robot_s_collision_spheres_become_contacts() {
         "{err}"
     );
 }
+
+/// The marionette over a floor (models/marionette-floor.toml): it hangs from its strings with
+/// its feet just above the floor; paid out from t = 1 s, the strings let it down onto its feet
+/// and go slack as it collapses — feet, knees, hands and torso on the floor, none through it
+/// (1e-9 m), no string ever pushing (its gap never below −1e-9).
+#[test]
+fn the_marionette_settles_on_the_floor_as_its_strings_are_lowered() {
+    let model = load("models/marionette-floor.toml");
+    let traj = run(&model, 1e-3, 4.0);
+    let rows = &traj.unilateral;
+    let row = |name: &str| rows.iter().position(|r| r == name).unwrap();
+    let gaps: Vec<usize> = (0..rows.len())
+        .filter(|&r| !rows[r].contains(".t"))
+        .collect();
+    let deepest = (0..traj.len())
+        .flat_map(|k| gaps.iter().map(move |&r| (k, r)))
+        .map(|(k, r)| traj.gap(k)[r])
+        .fold(f64::INFINITY, f64::min);
+    assert!(deepest > -1e-9, "deepest gap {deepest:e}");
+    let at = |t: f64| ((t / 1e-3).round() as usize).min(traj.len() - 1);
+    let strings = [
+        "left-shoulder-string",
+        "right-shoulder-string",
+        "left-hand-string",
+    ];
+    let feet = ["left_foot", "right_foot"];
+    // Hanging: the strings pull, the feet are off the floor.
+    let k = at(0.9);
+    for s in strings {
+        assert!(
+            traj.impulse(k)[row(s)] > 0.0 && traj.gap(k)[row(s)] < 1e-9,
+            "{s} at 0.9 s"
+        );
+    }
+    for f in feet {
+        assert!(traj.gap(k)[row(f)] > 1e-3, "{f} at 0.9 s");
+    }
+    // Standing: the feet on the floor, the strings still holding it up.
+    let k = at(1.3);
+    for f in feet {
+        assert!(
+            traj.gap(k)[row(f)] < 1e-9 && traj.impulse(k)[row(f)] > 0.0,
+            "{f} at 1.3 s"
+        );
+    }
+    assert!(traj.impulse(k)[row("left-shoulder-string")] > 0.0);
+    // Collapsed: every string slack (no impulse beyond 1e-12 N·s; the puppet's weight is
+    // 5e-3 N·s a step), feet, knees, hands and torso on the floor, the torso's
+    // centre its radius above it.
+    let end = traj.len() - 1;
+    for s in strings {
+        assert!(
+            traj.gap(end)[row(s)] > 0.1 && traj.impulse(end)[row(s)] < 1e-12,
+            "{s} at 4 s"
+        );
+    }
+    for side in ["left", "right"] {
+        for part in ["foot", "knee", "hand"] {
+            let name = format!("{side}_{part}");
+            assert!(
+                traj.gap(end)[row(&name)].abs() < 1e-9,
+                "{name} on the floor at 4 s"
+            );
+        }
+    }
+    let floor = model.contacts.ground.unwrap().height;
+    assert!(
+        (traj.q(end)[2] - (floor + 0.05)).abs() < 1e-9,
+        "torso at {}",
+        traj.q(end)[2]
+    );
+}
