@@ -7,7 +7,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use plotters::style::{register_font, FontStyle};
-use tree_mech::model::{ConstraintKind, Joint, Model, Rounded, SpringKind};
+use tree_mech::model::{tangents, ConstraintKind, Joint, Model, Rounded, SpringKind};
 use tree_mech::runtime::{Pose, Seconds};
 
 use super::bodies::{BodyBox, Rail};
@@ -47,6 +47,8 @@ const ANCHOR: RGBColor = RGBColor(200, 40, 40);
 const GRID: RGBColor = RGBColor(215, 215, 220);
 const RAIL: RGBColor = RGBColor(150, 150, 160);
 const TARGET: RGBColor = RGBColor(220, 0, 120);
+const GROUND: RGBColor = RGBColor(150, 120, 90);
+const CONTACT: RGBColor = RGBColor(0, 150, 170);
 
 impl Figure {
     fn of(model: &Model) -> Figure {
@@ -83,6 +85,9 @@ impl Figure {
                 _ => ANCHOR,
             };
             links.push((c.frames, color));
+        }
+        for c in &model.contacts.strings {
+            links.push((c.frames, STRING));
         }
         for s in &model.springs {
             if let SpringKind::Frames(f) = s.kind {
@@ -384,8 +389,8 @@ pub fn write_gif(
 
 /// The GIF's one palette: the figure's own colours exactly, then a 6×6×6 colour cube and a
 /// ramp of greys for everything between (anti-aliased text).
-const NAMED: [RGBColor; 11] = [
-    WHITE, BLACK, STRING, SPRING, DAMPER, BONE, WOOD, ANCHOR, GRID, RAIL, TARGET,
+const NAMED: [RGBColor; 13] = [
+    WHITE, BLACK, STRING, SPRING, DAMPER, BONE, WOOD, ANCHOR, GRID, RAIL, TARGET, GROUND, CONTACT,
 ];
 const GREYS: usize = 256 - NAMED.len() - 216;
 
@@ -484,6 +489,7 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
         }
     }
     draw_dots(root, scene, poses)?;
+    draw_spheres(root, scene, poses)?;
     let extent = (0..3)
         .map(|i| scene.hi[i] - scene.lo[i])
         .fold(1e-3, f64::max);
@@ -515,7 +521,8 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
 }
 
 /// A floor grid at the bottom of the view, fixed in the world: its lines on multiples of a
-/// tenth of the view, so a tracking camera sees it slide by.
+/// tenth of the view, so a tracking camera sees it slide by. A model's ground is drawn
+/// instead, in its own plane and colour.
 fn draw_floor(
     scene: &Scene,
     line: &dyn Fn([f64; 3], [f64; 3], ShapeStyle) -> Result<(), String>,
@@ -523,6 +530,9 @@ fn draw_floor(
     let (lo, hi) = (scene.lo, scene.hi);
     let extent = (0..3).map(|i| hi[i] - lo[i]).fold(1e-3, f64::max);
     let cell = extent / 10.0;
+    if let Some(ground) = scene.model.contacts.ground {
+        return draw_ground(&ground, lo, hi, cell, line);
+    }
     let z = lo[2] - 0.02 * extent;
     let (x0, x1) = (lo[0] - 0.25 * extent, hi[0] + 0.25 * extent);
     let (y0, y1) = (lo[1] - 0.25 * extent, hi[1] + 0.25 * extent);
@@ -533,6 +543,48 @@ fn draw_floor(
     for i in (y0 / cell).ceil() as i64..=(y1 / cell).floor() as i64 {
         let y = i as f64 * cell;
         line([x0, y, z], [x1, y, z], GRID.stroke_width(1))?;
+    }
+    Ok(())
+}
+
+/// The ground's plane `n·x = height` as a grid of lines `cell` apart, about the view's centre
+/// set down onto it, a quarter of the view beyond it each way.
+fn draw_ground(
+    ground: &tree_mech::model::Ground,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    cell: f64,
+    line: &dyn Fn([f64; 3], [f64; 3], ShapeStyle) -> Result<(), String>,
+) -> Result<(), String> {
+    let n = ground.normal;
+    let [t1, t2] = tangents(&n);
+    let centre = [0, 1, 2].map(|i| 0.5 * (lo[i] + hi[i]));
+    let lift = dot(centre, n) - ground.height;
+    let on = [0, 1, 2].map(|i| centre[i] - lift * n[i]);
+    let half = 0.75 * (0..3).map(|i| hi[i] - lo[i]).fold(1e-3, f64::max);
+    let steps = (half / cell).floor() as i64;
+    let at = |a: f64, b: f64| [0, 1, 2].map(|i| on[i] + a * t1[i] + b * t2[i]);
+    for k in -steps..=steps {
+        let x = k as f64 * cell;
+        line(at(x, -half), at(x, half), GROUND.stroke_width(1))?;
+        line(at(-half, x), at(half, x), GROUND.stroke_width(1))?;
+    }
+    Ok(())
+}
+
+/// The contact spheres as circles of their radius at their frames (a point as a small
+/// cross-less ring).
+fn draw_spheres(root: &Area, scene: &Scene, poses: &[Pose]) -> Result<(), String> {
+    for sphere in &scene.model.contacts.spheres {
+        let p = poses[sphere.frame].p;
+        let Some((at, depth)) = scene.camera.project(p) else {
+            continue;
+        };
+        let r = (scene.camera.focal * sphere.radius / depth)
+            .round()
+            .max(2.0) as i32;
+        root.draw(&Circle::new(at, r, CONTACT.stroke_width(2)))
+            .map_err(|x| drawing_error(&x))?;
     }
     Ok(())
 }
@@ -634,6 +686,54 @@ mod tests {
                 assert!(filled > 0.5, "the body fills {filled} of the height");
             }
         }
+    }
+
+    /// A model's ground is drawn as a grid in its own colour and its contact spheres as rings;
+    /// without them, neither colour appears.
+    #[test]
+    fn the_ground_and_the_contact_spheres_are_drawn() {
+        let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+        let count = |path: &str| {
+            let path = format!("{}/{path}", env!("CARGO_MANIFEST_DIR"));
+            let model = tree_mech::model::from_toml_file(path).unwrap();
+            let mut sys = TreeSystem::new(&model).unwrap();
+            let (q0, _) = sys.initial_state();
+            let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
+            sys.poses(&q0, &mut poses);
+            let figure = Figure::of(&model);
+            let frames = vec![poses.clone()];
+            let view = View::of(&figure, &model, &frames, &[], CameraMode::Fixed);
+            let (lo, hi) = view.at(&poses);
+            let camera = Camera::framing(lo, hi);
+            let mut rgb = vec![255u8; 3 * (SIZE.0 * SIZE.1) as usize];
+            {
+                let area = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
+                let scene = Scene {
+                    figure: &figure,
+                    camera: &camera,
+                    lo,
+                    hi,
+                    rails: &[],
+                    targets: &[],
+                    root: None,
+                    model: &model,
+                };
+                draw_frame(&area, &scene, 0.0, &poses).unwrap();
+                area.present().unwrap();
+            }
+            let of = |c: RGBColor| {
+                rgb.chunks_exact(3)
+                    .filter(|p| *p == [c.0, c.1, c.2])
+                    .count()
+            };
+            (of(GROUND), of(CONTACT))
+        };
+        let (ground, rings) = count("models/marionette-floor.toml");
+        assert!(
+            ground > 50 && rings > 100,
+            "ground {ground} px, rings {rings} px"
+        );
+        assert_eq!(count("models/marionette.toml"), (0, 0));
     }
 
     #[test]
