@@ -19,6 +19,9 @@ mod kw {
     syn::custom_keyword!(spring);
     syn::custom_keyword!(damper);
     syn::custom_keyword!(input);
+    syn::custom_keyword!(ground);
+    syn::custom_keyword!(contact);
+    syn::custom_keyword!(enforce_limits);
 }
 
 /// `tree_model!(pub struct Name from "file.toml")` or `tree_model! { pub struct Name; … }`.
@@ -43,9 +46,12 @@ pub enum Source {
 /// The inline tree.
 pub struct InlineModel {
     pub gravity: Option<([f64; 3], Span)>,
+    /// `enforce_limits = true;`
+    pub enforce_limits: Option<bool>,
     pub frames: Vec<InlineFrame>,
     pub variables: Vec<InlineVariable>,
-    /// Constraints, springs and dampers, each list in the order written.
+    /// Constraints, springs, dampers, inputs, the ground and contacts, each list in the order
+    /// written.
     pub elements: Vec<InlineElement>,
 }
 
@@ -56,11 +62,14 @@ pub enum ElementKind {
     Spring,
     Damper,
     Input,
+    Ground,
+    Contact,
 }
 
 /// `constraint NAME = KIND(a, b) { … }`, `spring(a, b) { … }` or `spring(var) { … }`,
-/// `damper(a, b) { … }`, `input NAME = VARIABLE { … }`: what the TOML `[[constraint]]`,
-/// `[[spring]]`, `[[damper]]`, `[[input]]` tables say.
+/// `damper(a, b) { … }`, `input NAME = VARIABLE { … }`, `ground { … }`,
+/// `contact NAME = sphere(frame) { … }`: what the TOML `[[constraint]]`, `[[spring]]`,
+/// `[[damper]]`, `[[input]]`, `[ground]` and `[[contact]]` tables say.
 pub struct InlineElement {
     pub element: ElementKind,
     /// The keyword (`constraint`, `spring`, `damper`): where whole-element errors point.
@@ -243,6 +252,7 @@ impl Parse for Input {
         input.parse::<Token![;]>()?;
         let mut model = InlineModel {
             gravity: None,
+            enforce_limits: None,
             frames: Vec::new(),
             variables: Vec::new(),
             elements: Vec::new(),
@@ -257,6 +267,14 @@ impl Parse for Input {
                 input.parse::<Token![=]>()?;
                 model.gravity = Some(parse_vector3(input)?);
                 input.parse::<Token![;]>()?;
+            } else if lookahead.peek(kw::enforce_limits) {
+                let kw: kw::enforce_limits = input.parse()?;
+                if model.enforce_limits.is_some() {
+                    return Err(syn::Error::new(kw.span, "enforce_limits is given twice"));
+                }
+                input.parse::<Token![=]>()?;
+                model.enforce_limits = Some(input.parse::<syn::LitBool>()?.value);
+                input.parse::<Token![;]>()?;
             } else if lookahead.peek(kw::frame) {
                 model.frames.push(input.parse()?);
             } else if lookahead.peek(kw::variable) {
@@ -265,6 +283,8 @@ impl Parse for Input {
                 || lookahead.peek(kw::spring)
                 || lookahead.peek(kw::damper)
                 || lookahead.peek(kw::input)
+                || lookahead.peek(kw::ground)
+                || lookahead.peek(kw::contact)
             {
                 model.elements.push(input.parse()?);
             } else {
@@ -382,6 +402,36 @@ impl Parse for InlineElement {
             input.parse::<Token![=]>()?;
             let kind: Ident = input.parse()?;
             (ElementKind::Constraint, k.span, Some(name), Some(kind))
+        } else if lookahead.peek(kw::contact) {
+            // `contact NAME = sphere(frame) { radius = …; friction = …; collide = …; }`
+            let k: kw::contact = input.parse()?;
+            let name: Ident = input.parse()?;
+            input.parse::<Token![=]>()?;
+            let kind: Ident = input.parse()?;
+            if kind != "sphere" {
+                return Err(syn::Error::new(
+                    kind.span(),
+                    format!("unknown contact shape `{kind}`: expected sphere(frame)"),
+                ));
+            }
+            (ElementKind::Contact, k.span, Some(name), Some(kind))
+        } else if lookahead.peek(kw::ground) {
+            // `ground { height = …; normal = […]; friction = …; }` or `ground;`
+            let k: kw::ground = input.parse()?;
+            let settings = if input.peek(Token![;]) {
+                input.parse::<Token![;]>()?;
+                Vec::new()
+            } else {
+                parse_settings(input)?
+            };
+            return Ok(InlineElement {
+                element: ElementKind::Ground,
+                keyword: k.span,
+                name: None,
+                kind: None,
+                arguments: Vec::new(),
+                settings,
+            });
         } else if lookahead.peek(kw::spring) {
             let k: kw::spring = input.parse()?;
             (ElementKind::Spring, k.span, None, None)

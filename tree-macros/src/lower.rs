@@ -7,9 +7,9 @@ use std::path::PathBuf;
 use proc_macro2::Span;
 use syn::LitStr;
 use tree_model::{
-    ConstraintSpec, DamperSpec, FrameField, FrameSpec, InputSpec, MimicSpec, Model, ModelSpec,
-    ParameterSpec, Primitive, PrimitiveKind, Section, SineSpec, Site, SpringSpec, Value,
-    VariableSpec,
+    ConstraintSpec, ContactSpec, ContactsSpec, DamperSpec, FrameField, FrameSpec, GroundSpec,
+    InputSpec, MimicSpec, Model, ModelSpec, ParameterSpec, Primitive, PrimitiveKind, Section,
+    SineSpec, Site, SpringSpec, Value, VariableSpec,
 };
 
 use crate::ast::{Argument, ElementKind, InlineElement, InlineFrame, InlineModel, Setting};
@@ -206,7 +206,7 @@ impl ElementSpans {
     /// names, the setting's key, or the keyword.
     fn of(&self, field: Option<&str>, message: &str) -> Span {
         match field {
-            Some("frames" | "variable") => self
+            Some("frames" | "variable" | "frame") => self
                 .arguments
                 .iter()
                 .find(|(name, _)| message.contains(&format!("`{name}`")))
@@ -292,6 +292,53 @@ fn element_spec(
             spec.inputs.push(input_spec(e, names, errors));
             (Section::Input, spans)
         }
+        ElementKind::Ground => {
+            let mut g = GroundSpec::default();
+            for (key, value) in &e.settings {
+                match (key.to_string().as_str(), value) {
+                    ("height", v) => g.height = number(key, v, errors),
+                    ("friction", v) => g.friction = number(key, v, errors),
+                    ("normal", Setting::Vector(n, span)) => match n[..] {
+                        [x, y, z] => g.normal = Some([x.value, y.value, z.value]),
+                        _ => {
+                            errors.push(*span, format!("expected three numbers, found {}", n.len()))
+                        }
+                    },
+                    ("normal", v) => {
+                        errors.push(v.span(), "`normal` takes three numbers [x, y, z]")
+                    }
+                    _ => unknown(key, "ground", "height, normal or friction", errors),
+                }
+            }
+            if spec.contacts.ground.replace(g).is_some() {
+                errors.push(e.keyword, "the ground is given twice");
+            }
+            (Section::Ground, spans)
+        }
+        ElementKind::Contact => {
+            let mut c = ContactSpec {
+                name: e.name.as_ref().map(|n| n.to_string()),
+                frame: names.first().cloned().unwrap_or_default(),
+                ..ContactSpec::default()
+            };
+            if names.len() != 1 {
+                errors.push(
+                    e.keyword,
+                    format!("a contact sphere sits on one frame, found {}", names.len()),
+                );
+            }
+            for (key, value) in &e.settings {
+                match (key.to_string().as_str(), value) {
+                    ("radius", v) => c.radius = number(key, v, errors),
+                    ("friction", v) => c.friction = number(key, v, errors),
+                    ("collide", Setting::Bool(b, _)) => c.collide = Some(*b),
+                    ("collide", v) => errors.push(v.span(), "`collide` takes true or false"),
+                    _ => unknown(key, "contact", "radius, friction or collide", errors),
+                }
+            }
+            spec.contacts.contacts.push(c);
+            (Section::Contact, spans)
+        }
     }
 }
 
@@ -327,7 +374,9 @@ fn constraint_spec(e: &InlineElement, names: Vec<String>, errors: &mut Errors) -
             ("axes", Setting::Text(t)) => c.axes = Some(t.value()),
             ("axes", Setting::Name(t)) => c.axes = Some(t.to_string()),
             ("axes", v) => errors.push(v.span(), "`axes` takes some of x, y, z (e.g. xz)"),
-            _ => unknown(key, "constraint", "length, normal or axes", errors),
+            ("slack", Setting::Bool(b, _)) => c.slack = Some(*b),
+            ("slack", v) => errors.push(v.span(), "`slack` takes true or false"),
+            _ => unknown(key, "constraint", "length, normal, axes or slack", errors),
         }
     }
     c
@@ -384,6 +433,10 @@ pub fn from_inline(name: &syn::Ident, inline: &InlineModel) -> syn::Result<(Mode
     }
     let mut spec = ModelSpec {
         gravity: inline.gravity.map(|g| g.0),
+        contacts: ContactsSpec {
+            enforce_limits: inline.enforce_limits,
+            ..ContactsSpec::default()
+        },
         frames,
         variables,
         ..ModelSpec::new(name.to_string())
