@@ -5,7 +5,7 @@
 
 use nalgebra::{allocator::Allocator, DefaultAllocator};
 
-use super::watch::{watch, GapWatch};
+use super::watch::GapWatch;
 use super::{
     check_finite, check_input_width, check_options, check_start, start_state, Method, MidpointVi,
     Rk4, SimOptions,
@@ -21,7 +21,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     /// RK4, and its watch on the unilateral rows it cannot enforce.
-    Rk4(Box<Rk4<S::N>>, Option<GapWatch>),
+    Rk4(Box<Rk4<S::N>>, Option<Box<GapWatch>>),
     /// The VI on `(q, p)`; `q_next` is its buffer for the next configuration.
     Vi {
         vi: Box<MidpointVi<S::N>>,
@@ -80,7 +80,10 @@ where
     pub fn new(sys: S, method: Method, dt: f64, q0: &[f64], dq0: &[f64]) -> Result<Self, SimError> {
         check_options(&SimOptions::new(method, dt, dt))?;
         let stepping = match method {
-            Method::Rk4 => Stepping::Rk4(Box::new(Rk4::new(&sys)), GapWatch::new(&sys, "rk4")),
+            Method::Rk4 => Stepping::Rk4(
+                Box::new(Rk4::new(&sys)),
+                GapWatch::new(&sys, "rk4").map(Box::new),
+            ),
             Method::Vi(settings) => Stepping::Vi {
                 vi: Box::new(MidpointVi::new(&sys, settings)),
                 p: sys.zero_vector(),
@@ -183,8 +186,8 @@ where
             }
         }
         check_finite(k + 1, reached, &self.q, &self.dq)?;
-        if let Stepping::Rk4(_, w) = &mut self.stepping {
-            watch(w, &mut self.sys, &self.q, k + 1, reached)?;
+        if let Stepping::Rk4(_, Some(w)) = &mut self.stepping {
+            w.check(&mut self.sys, &self.q, k + 1, reached)?;
         }
         self.steps = k + 1;
         Ok(())
