@@ -329,22 +329,17 @@ pub fn write_gif(
     let picture = |k: usize| -> Result<gif::Frame<'static>, String> {
         let (lo, hi) = view.at(&frames[k]);
         let camera = Camera::framing(lo, hi);
-        let mut rgb = vec![255u8; 3 * (SIZE.0 * SIZE.1) as usize];
-        {
-            let area = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
-            let scene = Scene {
-                figure: &figure,
-                camera: &camera,
-                lo,
-                hi,
-                rails: &rails,
-                targets,
-                root: (mode == CameraMode::Track).then_some(view.root),
-                model,
-            };
-            draw_frame(&area, &scene, times[k], &frames[k])?;
-            area.present().map_err(|e| drawing_error(&e))?;
-        }
+        let scene = Scene {
+            figure: &figure,
+            camera: &camera,
+            lo,
+            hi,
+            rails: &rails,
+            targets,
+            root: (mode == CameraMode::Track).then_some(view.root),
+            model,
+        };
+        let rgb = render(&scene, times[k], &frames[k])?;
         let indices: Vec<u8> = rgb
             .chunks_exact(3)
             .map(|p| palette_index([p[0], p[1], p[2]]))
@@ -385,6 +380,17 @@ pub fn write_gif(
         .and_then(|mut w| std::io::Write::flush(&mut w))
         .map_err(|e| err(&e.to_string()))?;
     Ok(())
+}
+
+/// One picture of `scene` at `t` with the frames at `poses`, as RGB bytes.
+fn render(scene: &Scene, t: f64, poses: &[Pose]) -> Result<Vec<u8>, String> {
+    let mut rgb = vec![255u8; 3 * (SIZE.0 * SIZE.1) as usize];
+    {
+        let area = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
+        draw_frame(&area, scene, t, poses)?;
+        area.present().map_err(|e| drawing_error(&e))?;
+    }
+    Ok(rgb)
 }
 
 /// The GIF's one palette: the figure's own colours exactly, then a 6×6×6 colour cube and a
@@ -705,22 +711,17 @@ mod tests {
             let view = View::of(&figure, &model, &frames, &[], CameraMode::Fixed);
             let (lo, hi) = view.at(&poses);
             let camera = Camera::framing(lo, hi);
-            let mut rgb = vec![255u8; 3 * (SIZE.0 * SIZE.1) as usize];
-            {
-                let area = BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area();
-                let scene = Scene {
-                    figure: &figure,
-                    camera: &camera,
-                    lo,
-                    hi,
-                    rails: &[],
-                    targets: &[],
-                    root: None,
-                    model: &model,
-                };
-                draw_frame(&area, &scene, 0.0, &poses).unwrap();
-                area.present().unwrap();
-            }
+            let scene = Scene {
+                figure: &figure,
+                camera: &camera,
+                lo,
+                hi,
+                rails: &[],
+                targets: &[],
+                root: None,
+                model: &model,
+            };
+            let rgb = render(&scene, 0.0, &poses).unwrap();
             let of = |c: RGBColor| {
                 rgb.chunks_exact(3)
                     .filter(|p| *p == [c.0, c.1, c.2])

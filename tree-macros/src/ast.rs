@@ -418,19 +418,13 @@ impl Parse for InlineElement {
         } else if lookahead.peek(kw::ground) {
             // `ground { height = …; normal = […]; friction = …; }` or `ground;`
             let k: kw::ground = input.parse()?;
-            let settings = if input.peek(Token![;]) {
-                input.parse::<Token![;]>()?;
-                Vec::new()
-            } else {
-                parse_settings(input)?
-            };
             return Ok(InlineElement {
                 element: ElementKind::Ground,
                 keyword: k.span,
                 name: None,
                 kind: None,
                 arguments: Vec::new(),
-                settings,
+                settings: parse_settings_or_end(input)?,
             });
         } else if lookahead.peek(kw::spring) {
             let k: kw::spring = input.parse()?;
@@ -444,19 +438,13 @@ impl Parse for InlineElement {
             let name: Ident = input.parse()?;
             input.parse::<Token![=]>()?;
             let variable: Ident = input.parse()?;
-            let settings = if input.peek(Token![;]) {
-                input.parse::<Token![;]>()?;
-                Vec::new()
-            } else {
-                parse_settings(input)?
-            };
             return Ok(InlineElement {
                 element: ElementKind::Input,
                 keyword: k.span,
                 name: Some(name),
                 kind: None,
                 arguments: vec![variable],
-                settings,
+                settings: parse_settings_or_end(input)?,
             });
         } else {
             return Err(lookahead.error());
@@ -474,6 +462,15 @@ impl Parse for InlineElement {
             settings,
         })
     }
+}
+
+/// `{ key = value; … }`, or `;` for none.
+fn parse_settings_or_end(input: ParseStream) -> syn::Result<Vec<(Ident, Setting)>> {
+    if input.peek(Token![;]) {
+        input.parse::<Token![;]>()?;
+        return Ok(Vec::new());
+    }
+    parse_settings(input)
 }
 
 /// `{ key = value; … }`
