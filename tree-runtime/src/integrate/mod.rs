@@ -570,7 +570,9 @@ where
         cx.u = inputs.at(t);
         let (reached, last) = it.advance(cx.at(k, t), rec, q, dq)?;
         (k, t) = (k + 1, reached);
-        watch::watch(&mut rec.watch, cx.sys, q, k, t)?;
+        if let Some(w) = rec.watch.as_mut() {
+            w.check(cx.sys, q, k, t)?;
+        }
         if k.is_multiple_of(rec.every) || last {
             cx.u = inputs.at(t);
             it.sample(cx.at(k, t), rec, q, dq)?;

@@ -68,20 +68,3 @@ impl GapWatch {
         }
     }
 }
-
-/// [`GapWatch::check`] when there is a watch.
-pub(crate) fn watch<S: System>(
-    watch: &mut Option<GapWatch>,
-    sys: &mut S,
-    q: &Vector<S::N>,
-    step: usize,
-    t: f64,
-) -> Result<(), SimError>
-where
-    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
-{
-    match watch {
-        Some(w) => w.check(sys, q, step, t),
-        None => Ok(()),
-    }
-}
