@@ -590,7 +590,8 @@ fn print_summary<S: System<N = Dyn>>(
     let (e0, e_end) = (record.e0, record.e_end);
     let contact = !sys.unilateral().is_empty();
     let mut energy = energy_account(sys, e_end - e0 + summary.dissipated, summary.dissipated);
-    if contact && !(0..sys.dof()).any(|i| sys.is_kinematic(i)) {
+    let vi = matches!(options.method, Method::Vi(_));
+    if contact && vi && !(0..sys.dof()).any(|i| sys.is_kinematic(i)) {
         // With contacts in force the balance is what impacts and friction took out (the VI's
         // own drift, bounded and small, included).
         let lost = -(e_end - e0 + summary.dissipated);
@@ -603,7 +604,7 @@ fn print_summary<S: System<N = Dyn>>(
             ),
         };
     }
-    let contact = if contact && matches!(options.method, Method::Vi(_)) {
+    let contact = if contact && vi {
         format!(
             " Contact: deepest penetration {:.3e} (m or rad), {:.2} interior-point iterations per step.",
             summary.worst_penetration,

@@ -1344,6 +1344,26 @@ fn contact_is_added_from_the_command_line() {
     let last = text.lines().last().unwrap();
     let z: f64 = last.split(',').nth(3).unwrap().parse().unwrap();
     assert!((z - 0.1).abs() < 1e-9, "rests at {z}");
+    // RK4 in flight writes the rows' gaps and no impulse.
+    let flight = dir.join("flight.csv");
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "tests/models/ball.toml",
+        "--integrator",
+        "rk4",
+        "--duration",
+        "0.3",
+        "--out",
+        flight.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&flight).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let last: Vec<f64> = (text.lines().last().unwrap().split(','))
+        .map(|x| x.parse().unwrap())
+        .collect();
+    let at = |name: &str| last[header.iter().position(|h| *h == name).unwrap()];
+    assert!((at("gap_ball") - (at("z") - 0.1)).abs() < 1e-12 && at("impulse_ball") == 0.0);
     let (ok, _, stderr) = tree_mech(&["simulate", "tests/models/ball.toml", "--integrator", "rk4"]);
     assert!(
         !ok && stderr.contains("`ball` closed")

@@ -401,8 +401,12 @@ fn the_smooth_integrators_run_until_a_gap_closes_then_stop() {
     for method in [Method::Rk4, Method::Rk45(Tolerance::default())] {
         let flight = SimOptions::new(method, 1e-3, 0.3);
         let traj = simulate(&mut sys, &q0, &dq0, &flight, &mut NoForce, &mut |_| {}).unwrap();
-        let z = traj.q(traj.len() - 1)[2];
+        let last = traj.len() - 1;
+        let z = traj.q(last)[2];
         assert!((z - (z0 - 0.5 * g * 0.09)).abs() < 1e-9, "{z}");
+        // Its samples carry the rows' gaps, and no impulse.
+        assert!((traj.gap(last)[0] - (z - r)).abs() < 1e-12);
+        assert!((0..traj.len()).all(|k| traj.impulse(k).iter().all(|&x| x == 0.0)));
         let options = SimOptions::new(method, 1e-3, 1.0);
         let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {}).unwrap_err();
         let text = err.to_string();

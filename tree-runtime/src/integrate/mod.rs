@@ -831,6 +831,12 @@ where
     {
         let (energy, violation) = self.state(cx, q, dq)?;
         let lambda = std::mem::take(&mut self.dynamics.lambda);
+        // A smooth run of a model with unilateral rows reports their gaps and no impulse.
+        let mut watch = self.watch.take();
+        let (impulse, gap) = match watch.as_mut() {
+            Some(w) => w.sample(cx.sys, q),
+            None => (&[][..], &[][..]),
+        };
         let result = self.record(&Sample {
             step: cx.index,
             t: cx.t,
@@ -841,9 +847,10 @@ where
             lambda: lambda.as_slice(),
             violation,
             u: cx.u,
-            impulse: &[],
-            gap: &[],
+            impulse,
+            gap,
         });
+        self.watch = watch;
         self.dynamics.lambda = lambda;
         result
     }

@@ -15,6 +15,8 @@ pub(crate) struct GapWatch {
     /// Each element's gap row and name (tangent rows are not gaps).
     rows: Vec<(usize, String)>,
     terms: ConstraintTerms,
+    /// A smooth run's impulses: none (one zero a row, for the samples).
+    zeros: Vec<f64>,
     /// The integrator's name, for the error.
     integrator: &'static str,
 }
@@ -39,6 +41,7 @@ impl GapWatch {
         Some(GapWatch {
             rows,
             terms: ConstraintTerms::zeros(row, sys.dof()),
+            zeros: vec![0.0; row],
             integrator,
         })
     }
@@ -66,5 +69,16 @@ impl GapWatch {
                 integrator: self.integrator,
             }),
         }
+    }
+}
+
+impl GapWatch {
+    /// A sample's impulses (none) and every row's value at `q`, as the VI's samples carry them.
+    pub(crate) fn sample<S: System>(&mut self, sys: &mut S, q: &Vector<S::N>) -> (&[f64], &[f64])
+    where
+        DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+    {
+        sys.gaps(q, None, &mut self.terms);
+        (&self.zeros, self.terms.h.as_slice())
     }
 }
