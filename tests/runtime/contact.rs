@@ -680,6 +680,21 @@ fn a_urdf_robot_s_collision_spheres_become_contacts() {
     let tip = &model.contacts.spheres[0];
     assert_eq!((tip.name.as_str(), tip.radius), ("tip", 0.05));
     assert_eq!(model.frames[tip.frame].name, "tip#sphere1");
+    // Asked of a robot without spheres, or of a TOML model, it is refused, not ignored.
+    let none = model::from_urdf_str(&arm(""), Some("arm.urdf"), options).unwrap_err();
+    assert!(
+        none.to_string().contains("has no <collision><sphere>"),
+        "{none}"
+    );
+    let spheres_only = UrdfOptions {
+        collision_spheres: true,
+        ..Default::default()
+    };
+    let toml = model::from_file("tests/models/ball.toml", spheres_only).unwrap_err();
+    assert!(
+        toml.to_string().contains("read from URDF models only"),
+        "{toml}"
+    );
     let text = arm(r#"<collision><geometry><sphere radius="-1"/></geometry></collision>"#);
     let err = model::from_urdf_str(&text, Some("arm.urdf"), options)
         .unwrap_err()

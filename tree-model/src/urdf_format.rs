@@ -109,7 +109,7 @@ pub fn from_urdf_str(
     }
     bodies(&mut out, &robot, &reader);
     if options.collision_spheres {
-        collision_spheres(&mut out, &robot, &reader);
+        collision_spheres(&mut out, &robot, &reader)?;
     }
     out.validate(&reader)
 }
@@ -1018,6 +1018,13 @@ pub fn from_file(path: impl AsRef<Path>, options: UrdfOptions) -> Result<Model, 
             None,
         ));
     }
+    if options.collision_spheres {
+        return Err(ModelError::single(
+            Some(shown),
+            "collision spheres are read from URDF models only; a TOML model declares its contacts as [[contact]] tables".into(),
+            None,
+        ));
+    }
     crate::toml_format::from_toml_str(&text, Some(&shown))
 }
 
@@ -1026,7 +1033,21 @@ pub fn from_file(path: impl AsRef<Path>, options: UrdfOptions) -> Result<Model, 
 /// offset (a sphere's orientation is immaterial). Named by the collision's `name`, else by
 /// its link (`link_2` … for a link's second and later spheres). They touch the ground only:
 /// a robot's neighbouring links overlap by design, and self-collision is not modelled.
-fn collision_spheres(out: &mut Frames, robot: &urdf_rs::Robot, reader: &Reader) {
+/// A robot without any is an error: asking for its spheres would otherwise add nothing unsaid.
+fn collision_spheres(
+    out: &mut Frames,
+    robot: &urdf_rs::Robot,
+    reader: &Reader,
+) -> Result<(), ModelError> {
+    if reader.spheres.is_empty() {
+        return Err(reader.fail(
+            format!(
+                "URDF: robot `{}` has no <collision><sphere> to make contacts of; add contact points on its frames instead (--contact FRAME[:RADIUS])",
+                robot.name
+            ),
+            Some(reader.robot_line),
+        ));
+    }
     for (l, link) in robot.links.iter().enumerate() {
         let (Some(f), Some(spheres)) = (out.link_frame[l], reader.spheres.get(&link.name)) else {
             continue;
@@ -1063,4 +1084,5 @@ fn collision_spheres(out: &mut Frames, robot: &urdf_rs::Robot, reader: &Reader) 
             });
         }
     }
+    Ok(())
 }

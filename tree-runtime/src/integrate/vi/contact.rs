@@ -72,6 +72,8 @@ pub(crate) struct ContactStep {
     elements: Vec<Element>,
     /// Elements a hard step found closed though left out, taken in for the rest of it.
     forced: Vec<bool>,
+    /// Whether each element is among `elements` this step.
+    selected: Vec<bool>,
     /// The elements' names, for errors.
     names: Vec<String>,
     /// Number of unknowns of the current step (at most `q₂`, `λ` and every element's).
@@ -139,6 +141,7 @@ impl ContactStep {
         Some(Box::new(ContactStep {
             all: elements.clone(),
             forced: vec![false; elements.len()],
+            selected: vec![false; elements.len()],
             elements,
             names: gaps.into_iter().map(|g| g.name).collect(),
             nz,
@@ -251,9 +254,10 @@ impl ContactStep {
     /// Chooses the elements the step solves for, their unknowns packed from `first`: all of
     /// them when `every` (κ > 0: each carries `κ/φ`), else — hard contact — those a step could
     /// close: a gap at `q₁` or at the predicted `q₂` (in `gaps`) within twice its change over
-    /// the step, those that pressed in the last step, and those found closed before. The rest are open at the step's end (checked)
-    /// and carry no impulse: exactly the complementarity's solution, and their derivatives
-    /// vanish nearby. A robot far from its limits solves for none of them.
+    /// the step, those that pressed in the last step, and those found closed before. The
+    /// rest are open at the step's end (checked) and carry no impulse: exactly the
+    /// complementarity's solution, and their derivatives vanish nearby. A robot far from its
+    /// limits solves for none of them.
     fn select(&mut self, every: bool, first: usize) {
         self.elements.clear();
         let mut base = first;
@@ -261,12 +265,23 @@ impl ContactStep {
             let (before, after) = (self.at_start[e.row], self.gaps.h[e.row]);
             let near = before.min(after) <= 2.0 * (after - before).abs();
             let pressed = self.impulses[e.row] > 0.0;
-            if every || near || pressed || self.forced[e.index] {
+            let take = every || near || pressed || self.forced[e.index];
+            self.selected[e.index] = take;
+            if take {
                 self.elements.push(Element { base, ..e.clone() });
                 base += if e.has_friction() { 7 } else { 2 };
             }
         }
         self.nz = base;
+    }
+
+    /// A step solved with every row open (`gaps` at its end): no impulse, derivatives free of
+    /// contact, the next hard step tried free first.
+    fn open_step(&mut self) {
+        self.impulses.fill(0.0);
+        self.weights.fill(0.0);
+        self.gap_values.copy_from_slice(self.gaps.h.as_slice());
+        (self.free, self.quiet) = (true, true);
     }
 
     /// No impulses yet, and the gaps at `q` (a run's first sample).
@@ -553,10 +568,7 @@ where
             cx.sys.gaps(q_next, None, &mut c.gaps);
         }
         if solved && (c.all.iter()).all(|e| c.gaps.h[e.row] >= 0.0) {
-            c.impulses.fill(0.0);
-            c.weights.fill(0.0);
-            c.gap_values.copy_from_slice(c.gaps.h.as_slice());
-            c.free = true;
+            c.open_step();
             return Ok(iterations);
         }
         q_next.as_mut_slice().copy_from_slice(&c.predicted);
@@ -590,7 +602,6 @@ where
             c.select(self.settings.kappa > 0.0, first);
             let k = if c.elements.is_empty() {
                 // Nothing near: the smooth step, every row open (checked below).
-                c.weights.fill(0.0);
                 let k = self
                     .solve(cx, q1, p1, q_next)
                     .map_err(|(k, e)| (total + k, e))?;
@@ -604,18 +615,13 @@ where
             // Left-out elements closed at the end are taken in, and the step solved again.
             let mut closed = false;
             for e in &c.all {
-                if !c.forced[e.index] && c.gaps.h[e.row] < 0.0 {
-                    let taken = c.elements.iter().any(|a| a.index == e.index);
-                    if !taken {
-                        (c.forced[e.index], closed) = (true, true);
-                    }
+                if !c.selected[e.index] && c.gaps.h[e.row] < 0.0 {
+                    (c.forced[e.index], closed) = (true, true);
                 }
             }
             if !closed {
                 if c.elements.is_empty() {
-                    c.impulses.fill(0.0);
-                    c.gap_values.copy_from_slice(c.gaps.h.as_slice());
-                    (c.quiet, c.free) = (true, true);
+                    c.open_step();
                 }
                 return Ok(total);
             }
