@@ -15,6 +15,9 @@ use tree_mech::model::{self, task_from_str};
 use tree_mech::nalgebra::{DMatrix, DVector};
 use tree_mech::{tree_model, System, TreeSystem};
 
+#[path = "tasks/contact.rs"]
+mod contact;
+
 tree_model!(struct CartPole from "models/cartpole.toml");
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -466,8 +469,8 @@ fn the_contracted_step_hessian_matches_differences_of_the_jacobians() {
         DMatrix::zeros(nu, nx),
     );
     let mut x2 = vec![0.0; nx];
-    d.contracted(1, &x, &u, &v, &mut x2, &mut hxx, &mut huu, &mut hux)
-        .unwrap();
+    let formed = d.contracted(1, &x, &u, &v, &mut x2, &mut hxx, &mut huu, &mut hux);
+    assert!(formed.unwrap(), "a smooth step's curvature is formed");
     // Aᵀv and Bᵀv at (x, u).
     let mut jv = |x: &[f64], u: &[f64]| {
         let (mut a, mut b) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));

@@ -143,14 +143,15 @@ pub fn run(r: Request) -> Result<(), String> {
 fn print_iteration(count: usize, it: &Iteration) -> Result<(), String> {
     if count == 1 {
         say!(
-            "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}  {:>5}  {:>6}",
+            "{:>5}  {:>14}  {:>8}  {:>9}  {:>10}  {:>5}  {:>6}{}",
             "iter",
             "cost",
             "step",
             "μ",
             "max |k|",
             "model",
-            "limits"
+            "limits",
+            if it.kappa > 0.0 { "        κ" } else { "" }
         );
     }
     // The backward pass's model (DDP's full one, or Gauss–Newton) and how it took the limits
@@ -164,8 +165,13 @@ fn print_iteration(count: usize, it: &Iteration) -> Result<(), String> {
         Some(BoxPhase::Clamped) => "clamp",
         Some(BoxPhase::Boxed) => "box",
     };
+    // Through contact, the relaxation the iteration stepped at.
+    let kappa = match it.kappa > 0.0 {
+        true => format!("  {:>7.1e}", it.kappa),
+        false => String::new(),
+    };
     say!(
-        "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}  {model:>5}  {limits:>6}",
+        "{count:>5}  {:>14.8e}  {:>8.4}  {:>9.1e}  {:>10.3e}  {model:>5}  {limits:>6}{kappa}",
         it.cost,
         it.step,
         it.mu,
@@ -418,6 +424,12 @@ fn write_summary_json(
         "controls": plan.controls,
         "frames": frames,
         "solve_seconds": res.solve_seconds,
+        "kappa": plan.task.kappa,
+        "hard_replay": res.hard_replay.as_ref().map(|r| json!({
+            "deviation": r.deviation,
+            "penetration": r.penetration,
+            "failure": r.failure,
+        })),
     });
     write_text(file, &format!("{summary:#}\n"))
 }
@@ -478,6 +490,20 @@ fn print_summary(
         // Ctrl-C (or SIGTERM) during the solve.
         Stop::Interrupted => {
             say!("The solve was interrupted; the best trajectory found is written.")
+        }
+    }
+    if let Some(replay) = &res.hard_replay {
+        let kappas = (task.kappa.iter())
+            .map(|k| format!("{k:e}"))
+            .collect::<Vec<_>>()
+            .join(" → ");
+        say!(
+            "Through contact at κ = {kappas} m·N·s; the plan replayed at hard contact (κ = 0) keeps within {:.3e} of it (largest variable difference), deepest penetration {:.2e} m.",
+            replay.deviation,
+            replay.penetration
+        );
+        if let Some(failure) = &replay.failure {
+            say!("The replay at hard contact stopped: {failure}");
         }
     }
     Ok(())

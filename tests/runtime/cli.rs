@@ -924,6 +924,79 @@ fn an_optimal_plan_replays_in_simulate() {
     );
 }
 
+/// A plan through contact replays at hard contact: the cart-pole's swing-up against its
+/// rail's stops, optimised at κ down to 1e-6, run by `simulate --inputs` (κ = 0, hard), ends
+/// where `optimize` says, and the summary reports the replay it made itself.
+#[test]
+fn a_plan_through_contact_replays_at_hard_contact() {
+    let dir = scratch("rail");
+    let (plan, json, replay) = (
+        dir.join("plan.csv"),
+        dir.join("plan.json"),
+        dir.join("replay.csv"),
+    );
+    let (ok, stdout, stderr) = tree_mech(&[
+        "optimize",
+        "tasks/cartpole-rail.toml",
+        "--quiet",
+        "--out",
+        plan.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("Solved")
+            && stdout.contains("Through contact at κ = 1e-2 → 1e-3 → 1e-4 → 1e-5 → 1e-6 m·N·s"),
+        "{stdout}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(summary["hard_replay"]["deviation"].as_f64().unwrap() < 1e-2);
+    assert!(summary["hard_replay"]["failure"].is_null());
+    let (ok, _, stderr) = tree_mech(&[
+        "simulate",
+        "models/cartpole-rail.toml",
+        "--inputs",
+        plan.to_str().unwrap(),
+        "--q0",
+        "0,3.141592653589793",
+        "--dt",
+        "0.02",
+        "--duration",
+        "3",
+        "--out",
+        replay.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&replay).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let last: Vec<f64> = (text.lines().last().unwrap().split(','))
+        .map(|x| x.parse().unwrap())
+        .collect();
+    let x = last[header.iter().position(|h| *h == "x").unwrap()];
+    assert!(header.contains(&"gap_x.upper"), "{header:?}");
+    let min_gap = (text.lines().skip(1))
+        .flat_map(|row| {
+            let row: Vec<f64> = row.split(',').map(|v| v.parse().unwrap()).collect();
+            (header.iter().enumerate())
+                .filter(|(_, h)| h.starts_with("gap_"))
+                .map(move |(c, _)| row[c])
+                .collect::<Vec<_>>()
+        })
+        .fold(f64::INFINITY, f64::min);
+    assert!(min_gap >= -1e-6, "a stop passed by {min_gap} m");
+    for (i, q) in summary["q_final"].as_array().unwrap().iter().enumerate() {
+        let q = q.as_f64().unwrap();
+        assert!(
+            (last[1 + i] - q).abs() < 1e-2,
+            "variable {i}: {} against the plan's {q}",
+            last[1 + i]
+        );
+    }
+    assert!(x.abs() < 0.02, "the cart ends at {x}");
+}
+
 /// The last CSV row of `simulate tests/models/cart.toml ARGS --out csv`, as numbers.
 fn last_row(csv: &std::path::Path, args: &[&str]) -> Vec<f64> {
     let mut all = vec!["simulate", "tests/models/cart.toml"];

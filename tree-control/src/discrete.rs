@@ -775,7 +775,9 @@ where
         a: &mut DMatrix<f64>,
         bm: &mut DMatrix<f64>,
     ) -> Result<(), SimError> {
-        if !self.is_vi() {
+        // RK4's derivatives come with its step; the contact step's need its own solution
+        // (its impulses, slacks and active rows), so a model with unilateral rows steps again.
+        if !self.is_vi() || self.has_contacts() {
             return self.step(k, x, u, x2, Some((a, bm)));
         }
         a.as_mut_slice().fill(0.0);
@@ -805,7 +807,9 @@ where
     /// The step's second derivatives from knot `k` with `(x, u)` contracted with `v` on
     /// `x₂` (DDP's `V_x'·f_xx` terms) into `hxx` (states²), `huu` (controls²) and `hux`
     /// (controls × states). The VI only; the memory is linear in `(x, u)`, so only `(q₂, p₂)`
-    /// carry curvature. Takes the step first (`x2` receives it).
+    /// carry curvature. Takes the step first (`x2` receives it). `Ok(false)` with the three
+    /// zero when the step went through contact, whose second derivatives are not formed:
+    /// the Gauss–Newton model at that knot (docs/derivations.md §14).
     #[allow(clippy::too_many_arguments)]
     pub fn contracted(
         &mut self,
@@ -817,13 +821,19 @@ where
         hxx: &mut DMatrix<f64>,
         huu: &mut DMatrix<f64>,
         hux: &mut DMatrix<f64>,
-    ) -> Result<(), SimError> {
+    ) -> Result<bool, SimError> {
         if !self.is_vi() {
             return Err(SimError::InvalidInput(
                 "DDP needs the VI's second derivatives: use iLQR with RK4".into(),
             ));
         }
         self.step(k, x, u, x2, None)?;
+        if matches!(&self.method, Stepper::Vi(vi) if vi.through_contact()) {
+            for h in [hxx, huu, hux] {
+                h.as_mut_slice().fill(0.0);
+            }
+            return Ok(false);
+        }
         let (n, inputs) = (self.sys.dof(), self.sys.input_count());
         self.with_step(k, x, u, |method, cx, l, b| {
             let Stepper::Vi(vi) = method else {
@@ -854,8 +864,48 @@ where
                     }
                 }
             }
-            Ok(())
+            Ok(true)
         })
+    }
+
+    /// Whether the model has unilateral rows the VI holds (limits, contacts, slack strings).
+    pub fn has_contacts(&self) -> bool {
+        matches!(&self.method, Stepper::Vi(vi) if vi.has_contacts())
+    }
+
+    /// Sets the contacts' relaxation `κ` of the VI's steps (`φγ = κ`, m·N·s; 0: hard).
+    pub fn set_kappa(&mut self, kappa: f64) -> Result<(), SimError> {
+        if !(kappa.is_finite() && kappa >= 0.0) {
+            return Err(SimError::InvalidInput(format!(
+                "the contacts' relaxation κ must be finite and not negative, got {kappa}"
+            )));
+        }
+        if let Stepper::Vi(vi) = &mut self.method {
+            vi.settings.kappa = kappa;
+        }
+        Ok(())
+    }
+
+    /// The deepest penetration of a unilateral row at the end of the last step (0 without).
+    pub fn penetration(&self) -> f64 {
+        match &self.method {
+            Stepper::Vi(vi) => vi.penetration,
+            Stepper::Rk4(_) => 0.0,
+        }
+    }
+
+    /// How many dynamic variables the state's configuration part `q_d` holds (its first
+    /// entries).
+    pub fn dynamic_count(&self) -> usize {
+        self.layout.dynamic.len()
+    }
+
+    /// The contacts' relaxation `κ` of the VI's steps (0 for RK4).
+    pub fn kappa(&self) -> f64 {
+        match &self.method {
+            Stepper::Vi(vi) => vi.settings.kappa,
+            Stepper::Rk4(_) => 0.0,
+        }
     }
 }
 

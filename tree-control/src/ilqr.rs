@@ -101,10 +101,13 @@ pub struct Iteration {
     /// The largest feed-forward entry `max |k|`.
     pub gradient: f64,
     /// The model the backward pass used: [`Solver::Ddp`]'s full one, or the Gauss–Newton
-    /// model ([`Solver::Ilqr`]: iLQR's, and DDP's where its full model was indefinite).
+    /// model ([`Solver::Ilqr`]: iLQR's, and DDP's where its full model was indefinite or
+    /// every step went through contact).
     pub model: Solver,
     /// With limits, how the pass treated them (`None` without limits).
     pub limits: Option<BoxPhase>,
+    /// The contacts' relaxation `κ` of the steps (0: hard, or no unilateral rows).
+    pub kappa: f64,
 }
 
 /// Why [`solve`] stopped iterating.
@@ -234,8 +237,10 @@ where
     // cap it grows: `max_iterations` is a bound, not a size (4e9 would abort).
     let mut history = Vec::with_capacity(settings.max_iterations.min(HISTORY_RESERVE));
     let has_limits = settings.limits.is_some();
+    let kappa = dynamics.kappa();
     let mut record = |cost: f64, step: f64, mu: f64, gradient: f64, pass: (Solver, BoxPhase)| {
         let it = Iteration {
+            kappa,
             cost,
             step,
             mu,
@@ -423,9 +428,13 @@ where
     };
     let outcome = backward(dynamics, cost, &it.x, &it.u, work, &pass)?;
     if outcome.is_some() || pass.solver != Solver::Ddp {
+        // DDP whose every step went through contact took the Gauss–Newton model throughout.
         return Ok(outcome.map(|outcome| Direction {
+            model: match outcome.curved {
+                0 => Solver::Ilqr,
+                _ => pass.solver,
+            },
             outcome,
-            model: pass.solver,
         }));
     }
     let gauss_newton = Pass {
@@ -762,6 +771,9 @@ struct Outcome {
     gradient: f64,
     /// The cost decrease the local model predicts for the full step (the convergence test).
     decrease: f64,
+    /// Knots whose step's curvature entered (DDP's full model; 0 when every step went
+    /// through contact, or for iLQR).
+    curved: usize,
 }
 
 /// The backward pass: fills the gains and feed-forward terms, within the pass's limits;
@@ -784,7 +796,7 @@ where
     cost.terminal(&work.knot, Some(&mut bw.d));
     bw.vx.copy_from(&bw.d.lx);
     bw.vxx.copy_from(&bw.d.lxx);
-    let (mut gradient, mut decrease) = (0.0f64, 0.0);
+    let (mut gradient, mut decrease, mut curved) = (0.0f64, 0.0, 0);
     for k in (0..n).rev() {
         dynamics.knot(k, x[k].as_slice(), &mut work.knot, true, work.needs)?;
         cost.running(k, &work.knot, &u[k], Some(&mut bw.d));
@@ -804,8 +816,9 @@ where
         tr_mul_into_pair(qxx, qux, &bw.vxx_a, &mut bw.packing);
         bw.quu.copy_from(&bw.d.luu);
         tr_mul_into_symmetric(&mut bw.quu, b, &bw.vxx_b, 1.0, &mut bw.packing);
-        if pass.solver == Solver::Ddp {
-            dynamics.contracted(
+        // Through contact the step's curvature is not formed: Gauss–Newton at that knot.
+        if pass.solver == Solver::Ddp
+            && dynamics.contracted(
                 k,
                 x[k].as_slice(),
                 u[k].as_slice(),
@@ -814,7 +827,9 @@ where
                 &mut bw.hxx,
                 &mut bw.huu,
                 &mut bw.hux,
-            )?;
+            )?
+        {
+            curved += 1;
             bw.qxx += &bw.hxx;
             bw.quu += &bw.huu;
             bw.qux += &bw.hux;
@@ -865,5 +880,9 @@ where
             }
         }
     }
-    Ok(Some(Outcome { gradient, decrease }))
+    Ok(Some(Outcome {
+        gradient,
+        decrease,
+        curved,
+    }))
 }

@@ -27,5 +27,7 @@ pub use ilqr::{
 pub use knot::{Knot, Needs};
 pub use lqr::{dare, tvlqr, Lqr};
 pub use task_cost::TaskCost;
-pub use task_solve::{solve_task, solve_task_until, task_system, TaskOptions, TaskResult};
+pub use task_solve::{
+    solve_task, solve_task_until, task_system, HardReplay, TaskOptions, TaskResult,
+};
 pub use tree_model::{About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver};

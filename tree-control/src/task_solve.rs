@@ -10,7 +10,7 @@ use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
 
 use crate::discrete::DiscreteSystem;
-use crate::ilqr::{solve_until, IlqrSettings, Iteration, Solution, Solver};
+use crate::ilqr::{solve_until, IlqrSettings, Iteration, Solution, Solver, Stop};
 use crate::knot::Knot;
 use crate::knot::Needs;
 use crate::task_cost::TaskCost;
@@ -37,6 +37,21 @@ pub struct TaskResult {
     pub violation: Vec<f64>,
     /// Wall time of the solve.
     pub solve_seconds: f64,
+    /// Through contact: the plan's controls replayed open loop at hard contact (κ = 0).
+    pub hard_replay: Option<HardReplay>,
+}
+
+/// A plan optimised at a relaxation `κ > 0` replayed at hard contact: how far it lands from
+/// where the optimiser said, and how deep anything sank.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HardReplay {
+    /// The largest difference of a dynamic variable between the replay and the plan, over
+    /// every knot (in the variable's units).
+    pub deviation: f64,
+    /// The deepest penetration of a unilateral row at any knot of the replay.
+    pub penetration: f64,
+    /// The step that could not be taken at hard contact, if any (the replay stops there).
+    pub failure: Option<String>,
 }
 
 /// Settings beyond the task file: what the CLI's options override.
@@ -49,7 +64,7 @@ pub struct TaskOptions {
 }
 
 /// The discretised system of `task` on `sys` (remembering inputs only when a `control_rate`
-/// term reads them).
+/// term reads them; through contact at the task's last relaxation `κ`, the plan's).
 pub fn task_system<S: System>(sys: S, task: &Task) -> Result<DiscreteSystem<S>, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -57,7 +72,10 @@ where
     let dynamics = match task.integrator {
         TaskIntegrator::Vi => DiscreteSystem::vi(
             sys,
-            ViSettings::default(),
+            ViSettings {
+                kappa: task.kappa.last().copied().unwrap_or(0.0),
+                ..ViSettings::default()
+            },
             task.dt,
             0.0,
             task.controls.clone(),
@@ -176,7 +194,15 @@ where
     };
     let mut cost = TaskCost::new(task, model)?;
     let start = Instant::now();
-    let solution = solve_until(&mut dynamics, &mut cost, &x0, guess, &settings, report)?;
+    let solution = solve_stages(
+        &mut dynamics,
+        &mut cost,
+        &x0,
+        guess,
+        &settings,
+        task,
+        report,
+    )?;
     let solve_seconds = start.elapsed().as_secs_f64();
     // Read the trajectory back: q, q̇ at every knot, λ of every step.
     let mut knot = Knot::empty();
@@ -204,7 +230,11 @@ where
         }
     }
     lambda.push(lambda.last().cloned().unwrap_or_default());
+    let hard_replay = (!task.kappa.is_empty())
+        .then(|| replay_hard(&mut dynamics, &solution))
+        .transpose()?;
     Ok(TaskResult {
+        hard_replay,
         t: (0..=task.knots).map(|k| k as f64 * task.dt).collect(),
         q,
         dq,
@@ -213,4 +243,122 @@ where
         solution,
         solve_seconds,
     })
+}
+
+/// The solve, once, or through the task's relaxations `κ` largest first, each stage
+/// warm-started from the last one's plan (continuation on the central path: Howell et al.,
+/// "Trajectory optimization with optimization-based dynamics", RA-L 2022): the last stage's
+/// solution, with every stage's iterations in its history (each records its `κ`).
+fn solve_stages<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut TaskCost,
+    x0: &DVector<f64>,
+    guess: Vec<DVector<f64>>,
+    settings: &IlqrSettings,
+    task: &Task,
+    report: &mut dyn FnMut(&Iteration) -> ControlFlow<()>,
+) -> Result<Solution, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let Some((&last, earlier)) = task.kappa.split_last() else {
+        return solve_until(dynamics, cost, x0, guess, settings, report);
+    };
+    let (mut u, mut history) = (guess, Vec::new());
+    dynamics.set_kappa(task.kappa[0])?;
+    for &kappa in earlier {
+        let stage = solve_until(dynamics, cost, x0, u, settings, report)?;
+        history.extend(stage.history.iter().copied());
+        if stage.stop == Stop::Interrupted {
+            // The caller asked to stop: this stage's plan is the answer.
+            let mut solution = Solution { history, ..stage };
+            solution.converged = false;
+            return Ok(solution);
+        }
+        u = Vec::new();
+        let next = task
+            .kappa
+            .iter()
+            .find(|&&k| k < kappa)
+            .copied()
+            .unwrap_or(last);
+        dynamics.set_kappa(next)?;
+        closed_loop(dynamics, x0, &stage, settings, &mut u);
+    }
+    dynamics.set_kappa(last)?;
+    let solution = solve_until(dynamics, cost, x0, u, settings, report)?;
+    history.extend(solution.history.iter().copied());
+    Ok(Solution {
+        history,
+        ..solution
+    })
+}
+
+/// The controls of `plan`'s policy `u = u_k + K_k (x − x_k)` (clamped to the limits) along
+/// its rollout on `dynamics` from `x0` into `u`: the next relaxation's first guess. Open
+/// loop, a plan for one `κ` drifts on another wherever the motion is unstable (a pole
+/// balanced upright); its feedback keeps it near. Where a step fails the plan's own
+/// controls are taken from there on (the solve's first rollout then reports it).
+fn closed_loop<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    x0: &DVector<f64>,
+    plan: &Solution,
+    settings: &IlqrSettings,
+    u: &mut Vec<DVector<f64>>,
+) where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let mut x = x0.clone();
+    let mut x2 = DVector::zeros(x0.len());
+    for (k, planned) in plan.u.iter().enumerate() {
+        let mut uk = planned + &plan.gains[k] * (&x - &plan.x[k]);
+        if let Some((lo, hi)) = &settings.limits {
+            for c in 0..uk.len() {
+                uk[c] = uk[c].clamp(lo[c], hi[c]);
+            }
+        }
+        if dynamics
+            .step(k, x.as_slice(), uk.as_slice(), x2.as_mut_slice(), None)
+            .is_err()
+        {
+            u.extend(plan.u[k..].iter().cloned());
+            return;
+        }
+        u.push(uk);
+        std::mem::swap(&mut x, &mut x2);
+    }
+}
+
+/// The plan's controls replayed open loop at hard contact (κ = 0) from its start: the
+/// largest difference of a dynamic variable from the plan and the deepest penetration
+/// (the dynamics are left at κ = 0).
+fn replay_hard<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    plan: &Solution,
+) -> Result<HardReplay, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    dynamics.set_kappa(0.0)?;
+    let nd = dynamics.dynamic_count();
+    let mut x = plan.x[0].as_slice().to_vec();
+    let mut x2 = vec![0.0; x.len()];
+    let mut replay = HardReplay {
+        deviation: 0.0,
+        penetration: 0.0,
+        failure: None,
+    };
+    for (k, u) in plan.u.iter().enumerate() {
+        if let Err(e) = dynamics.step(k, &x, u.as_slice(), &mut x2, None) {
+            replay.failure = Some(e.to_string());
+            break;
+        }
+        replay.penetration = replay.penetration.max(dynamics.penetration());
+        let planned = &plan.x[k + 1];
+        for r in 0..nd {
+            replay.deviation = replay.deviation.max((x2[r] - planned[r]).abs());
+        }
+        std::mem::swap(&mut x, &mut x2);
+    }
+    Ok(replay)
 }

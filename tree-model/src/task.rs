@@ -13,6 +13,7 @@ use toml::{Spanned, Value};
 use crate::error::{ModelError, Problem, Site};
 use crate::model::Model;
 use crate::source::LineIndex;
+use crate::toml_format::{contacts_of, ContactLines, RawContact, RawGround};
 use crate::urdf_format::{from_file, UrdfOptions};
 
 /// The integrator a task steps with: `vi` (the default, on `(q_d, p_d)`) or `rk4` (on
@@ -145,6 +146,10 @@ pub struct Task {
     /// The line of each control's limits (for errors found later, e.g. a start outside
     /// them), or of `controls`.
     pub limit_lines: Vec<Option<usize>>,
+    /// The contacts' relaxations `κ` the optimiser goes through, largest first (each solve
+    /// warm-starts the next; the plan is the last one's): empty when the model has no
+    /// unilateral rows (docs/derivations.md §14).
+    pub kappa: Vec<f64>,
 }
 
 impl Task {
@@ -184,6 +189,11 @@ struct RawTask {
     terminal: Vec<Spanned<RawCost>>,
     model_limits: Option<bool>,
     limits: Option<BTreeMap<String, Spanned<Vec<f64>>>>,
+    kappa: Option<Spanned<Value>>,
+    enforce_limits: Option<bool>,
+    ground: Option<Spanned<RawGround>>,
+    #[serde(default)]
+    contact: Vec<Spanned<RawContact>>,
 }
 
 #[derive(Deserialize)]
@@ -384,6 +394,7 @@ pub fn task_from_str(
             Some(lines.of(raw.model.span().start)),
         )
     })?;
+    let model = with_task_contacts(model, &raw, &lines, &src)?;
     let mut p = Problems {
         lines: &lines,
         found: Vec::new(),
@@ -399,6 +410,98 @@ pub fn task_from_str(
     }
 }
 
+/// The model with the task's `enforce_limits`, `[ground]` and `[[contact]]` (as a model
+/// file writes them), each problem at its line.
+fn with_task_contacts(
+    model: Model,
+    raw: &RawTask,
+    lines: &LineIndex,
+    src: &Option<String>,
+) -> Result<Model, ModelError> {
+    if raw.enforce_limits.is_none() && raw.ground.is_none() && raw.contact.is_empty() {
+        return Ok(model);
+    }
+    let mut contact_lines = ContactLines::default();
+    let written = (
+        raw.enforce_limits,
+        raw.ground.as_ref(),
+        raw.contact.as_slice(),
+    );
+    let spec = contacts_of(written, lines, &mut contact_lines);
+    model.with_contacts(&spec).map_err(|mut e| {
+        for p in &mut e.problems {
+            p.line = contact_lines.of(&p.site);
+        }
+        e.source_name = src.clone();
+        e
+    })
+}
+
+/// `kappa`: one relaxation or a list, each positive and finite, each smaller than the one
+/// before; required when the model has unilateral rows (their units, m·N·s, are the
+/// model's), refused otherwise.
+fn kappa_of(p: &mut Problems, raw: &RawTask, model: &Model) -> Vec<f64> {
+    let rows = model.gaps().len();
+    let Some(k) = &raw.kappa else {
+        if rows > 0 {
+            p.found.push(Problem {
+                site: Site::Model,
+                message: format!(
+                    "the model has {rows} unilateral rows (limits, contacts, slack strings): name the relaxations the optimiser goes through, largest first, e.g. `kappa = [1e-3, 1e-4, 1e-5]` (φγ in m·N·s)"
+                ),
+                line: None,
+            });
+        }
+        return Vec::new();
+    };
+    if rows == 0 {
+        p.at(
+            k.span(),
+            "`kappa` relaxes unilateral rows, and the model has none (enforce its limits, or add a ground or contacts)".into(),
+        );
+        return Vec::new();
+    }
+    let values: Vec<Option<f64>> = match k.get_ref() {
+        Value::Array(list) => list.iter().map(number).collect(),
+        other => vec![number(other)],
+    };
+    let mut kappa = Vec::new();
+    for (i, v) in values.iter().enumerate() {
+        match *v {
+            Some(x) if x.is_finite() && x > 0.0 && kappa.last().is_none_or(|&l| x < l) => {
+                kappa.push(x)
+            }
+            Some(x) if x.is_finite() && x > 0.0 => p.at(
+                k.span(),
+                format!(
+                    "`kappa` must decrease: entry {} ({x}) is not below the one before",
+                    i + 1
+                ),
+            ),
+            _ => p.at(
+                k.span(),
+                format!(
+                    "`kappa` entry {} must be a positive number (a relaxation φγ in m·N·s)",
+                    i + 1
+                ),
+            ),
+        }
+    }
+    if values.is_empty() {
+        p.at(k.span(), "`kappa` is empty".into());
+    }
+    kappa
+}
+
+/// A TOML number as `f64`.
+fn number(v: &Value) -> Option<f64> {
+    match v {
+        Value::Float(x) => Some(*x),
+        Value::Integer(i) => Some(*i as f64),
+        _ => None,
+    }
+}
+
 fn resolve(
     p: &mut Problems,
     raw: RawTask,
@@ -407,6 +510,14 @@ fn resolve(
     floating_base: bool,
 ) -> Task {
     let settings = settings(p, &raw);
+    let kappa = kappa_of(p, &raw, model);
+    if settings.integrator == TaskIntegrator::Rk4 && !kappa.is_empty() {
+        let span = raw.integrator.as_ref().map_or(0..0, |i| i.span());
+        p.at(
+            span,
+            "a task through contact steps with the VI (`integrator = \"vi\"`): RK4 does not hold unilateral rows".into(),
+        );
+    }
     let (controls, control_lines) = controls_of(p, &raw, model);
     if settings.integrator == TaskIntegrator::Rk4 {
         kinematic_controls_need_the_vi(p, &raw, model, &controls);
@@ -465,6 +576,7 @@ fn resolve(
         terminal,
         limits,
         limit_lines,
+        kappa,
     }
 }
 

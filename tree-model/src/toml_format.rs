@@ -43,7 +43,7 @@ struct RawModel {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawGround {
+pub(crate) struct RawGround {
     height: Option<Spanned<f64>>,
     normal: Option<Spanned<[f64; 3]>>,
     friction: Option<Spanned<f64>>,
@@ -51,7 +51,7 @@ struct RawGround {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawContact {
+pub(crate) struct RawContact {
     name: Option<Spanned<String>>,
     frame: Spanned<String>,
     radius: Option<Spanned<f64>>,
@@ -262,7 +262,11 @@ pub fn from_toml_str(text: &str, source_name: Option<&str>) -> Result<Model, Mod
         springs: springs_of(&raw, &line_index, &mut lines.springs),
         dampers: dampers_of(&raw, &line_index, &mut lines.dampers),
         inputs: inputs_of(&raw, &line_index, &mut lines.inputs),
-        contacts: contacts_of(&raw, &line_index, &mut lines),
+        contacts: contacts_of(
+            (raw.enforce_limits, raw.ground.as_ref(), &raw.contact),
+            &line_index,
+            &mut lines.contact,
+        ),
     };
     validate(&spec).map_err(|mut problems| {
         for p in &mut problems {
@@ -312,8 +316,34 @@ struct Lines {
     springs: Vec<ElementLines>,
     dampers: Vec<ElementLines>,
     inputs: Vec<ElementLines>,
+    contact: ContactLines,
+}
+
+/// Lines of the ground's and each contact's fields (a model's, or a task's additions).
+#[derive(Default)]
+pub(crate) struct ContactLines {
     contacts: Vec<ElementLines>,
     ground: Vec<ElementLines>,
+}
+
+impl ContactLines {
+    /// The line of a problem at a contact or the ground (none elsewhere).
+    pub(crate) fn of(&self, site: &Site) -> Option<usize> {
+        let Site::Element {
+            section,
+            index,
+            field,
+        } = site
+        else {
+            return None;
+        };
+        let lines = match section {
+            Section::Contact => &self.contacts,
+            Section::Ground => &self.ground,
+            _ => return None,
+        };
+        lines.get(*index).map(|l| l.line(*field))
+    }
 }
 
 impl Lines {
@@ -333,8 +363,7 @@ impl Lines {
                     Section::Spring => &self.springs,
                     Section::Damper => &self.dampers,
                     Section::Input => &self.inputs,
-                    Section::Contact => &self.contacts,
-                    Section::Ground => &self.ground,
+                    Section::Contact | Section::Ground => return self.contact.of(site),
                 };
                 Some(lines[*index].line(*field))
             }
@@ -467,10 +496,21 @@ fn variables_of(
     variables
 }
 
+/// `enforce_limits`, `[ground]` and `[[contact]]` as written (a model's or a task's).
+pub(crate) type RawContacts<'a> = (
+    Option<bool>,
+    Option<&'a Spanned<RawGround>>,
+    &'a [Spanned<RawContact>],
+);
+
 /// The ground and the contacts, with the line of each one's fields.
-fn contacts_of(raw: &RawModel, line_index: &LineIndex, lines: &mut Lines) -> ContactsSpec {
+pub(crate) fn contacts_of(
+    (enforce_limits, ground, contact): RawContacts,
+    line_index: &LineIndex,
+    lines: &mut ContactLines,
+) -> ContactsSpec {
     let value = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| *x.get_ref());
-    let ground = raw.ground.as_ref().map(|g| {
+    let ground = ground.map(|g| {
         let mut l = ElementLines::new(line_index, g.span());
         let g = g.get_ref();
         l.field(line_index, "height", &g.height);
@@ -483,7 +523,7 @@ fn contacts_of(raw: &RawModel, line_index: &LineIndex, lines: &mut Lines) -> Con
             friction: value(&g.friction),
         }
     });
-    let contacts = (raw.contact.iter())
+    let contacts = (contact.iter())
         .map(|c| {
             let mut l = ElementLines::new(line_index, c.span());
             let c = c.get_ref();
@@ -503,7 +543,7 @@ fn contacts_of(raw: &RawModel, line_index: &LineIndex, lines: &mut Lines) -> Con
         })
         .collect();
     ContactsSpec {
-        enforce_limits: raw.enforce_limits,
+        enforce_limits,
         ground,
         contacts,
     }

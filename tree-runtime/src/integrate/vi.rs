@@ -1075,6 +1075,18 @@ where
         }
     }
 
+    /// Whether the model has unilateral rows (limits enforced, contacts, slack strings).
+    pub fn has_contacts(&self) -> bool {
+        self.contact.is_some()
+    }
+
+    /// Whether the last step went through contact: solved with unilateral rows in its
+    /// equations (not a free step). Its second derivatives are then not formed
+    /// ([`Self::second_derivatives`]); an optimiser takes the Gauss–Newton model there.
+    pub fn through_contact(&self) -> bool {
+        self.contact.as_ref().is_some_and(|c| !c.free)
+    }
+
     /// Starts the contact rows' record at `q`: no impulse yet, the gaps there.
     pub fn contact_start<S: System<N = N>>(&mut self, sys: &mut S, q: &Vector<N>) {
         if let Some(c) = self.contact.as_mut() {

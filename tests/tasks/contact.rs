@@ -1,0 +1,240 @@
+//! Optimal control through contact (docs/derivations.md §14): the cart-pole swung up against
+//! its rail's end stops with κ continuation, compiled ≡ interpreted, replayed at hard
+//! contact; the cost gradient through an active stop against central differences; DDP takes
+//! the Gauss–Newton model through contact; a task's contact settings and their errors.
+
+use std::path::Path;
+
+use tree_mech::control::{
+    cost_gradient, solve_task, DiscreteSystem, Solver, TaskCost, TaskOptions,
+};
+use tree_mech::integrate::ViSettings;
+use tree_mech::model::{task_from_str, TaskSolver};
+use tree_mech::nalgebra::DVector;
+use tree_mech::{tree_model, TreeSystem};
+
+use super::{read, ROOT};
+
+tree_model!(struct CartPoleRail from "models/cartpole-rail.toml");
+
+/// The rail's end stops, m.
+const RAIL: f64 = 0.3;
+
+#[test]
+fn the_cartpole_swings_up_against_its_rail_stops_and_replays_at_hard_contact() {
+    let (task, m) = read("tasks/cartpole-rail.toml");
+    assert_eq!(task.kappa, vec![1e-2, 1e-3, 1e-4, 1e-5, 1e-6]);
+    let sys = TreeSystem::new(&m).unwrap();
+    let res = solve_task(sys, &task, &m, &TaskOptions::default(), &mut |_| {}).unwrap();
+    assert!(res.solution.converged, "stopped: {:?}", res.solution.stop);
+    // Every stage ran, largest κ first, each iteration recording its own.
+    let mut stages: Vec<f64> = res.solution.history.iter().map(|it| it.kappa).collect();
+    stages.dedup();
+    assert_eq!(stages, task.kappa);
+    let n = task.knots;
+    let (q, dq) = (&res.q[n], &res.dq[n]);
+    assert!(
+        q[0].abs() < 0.02 && q[1].abs() < 0.02 && dq.amax() < 0.05,
+        "ends at q = {q}, q̇ = {dq}"
+    );
+    // The optimum uses the stops: the cart sits at an end (within the relaxation's gap) at
+    // some knot, and never passes one.
+    let reach = res.q.iter().map(|q| q[0].abs()).fold(0.0, f64::max);
+    assert!(
+        reach > RAIL - 1e-3 && reach <= RAIL,
+        "the cart reaches {reach} m"
+    );
+    for u in &res.solution.u {
+        assert!(u[0].abs() <= 20.0 + 1e-12, "push {} beyond ±20 N", u[0]);
+    }
+    // Replayed open loop at hard contact, it keeps to the plan.
+    let replay = res
+        .hard_replay
+        .as_ref()
+        .expect("a contact task is replayed");
+    assert!(replay.failure.is_none(), "{:?}", replay.failure);
+    assert!(
+        replay.deviation < 1e-2,
+        "the replay strays {}",
+        replay.deviation
+    );
+    assert!(
+        replay.penetration <= 1e-6,
+        "penetration {}",
+        replay.penetration
+    );
+    // Compiled: the same iterates. A swing-up amplifies the last bits of each contact solve
+    // (converged to 1e-12, not bit for bit), so the costs part at 1e-9 after ten iterations and
+    // the two solves end at different iteration counts; the first iterations agree.
+    let options = TaskOptions {
+        max_iterations: Some(8),
+        ..TaskOptions::default()
+    };
+    let mut first = task.clone();
+    first.kappa.truncate(1);
+    let sys = TreeSystem::new(&m).unwrap();
+    let a = solve_task(sys, &first, &m, &options, &mut |_| {}).unwrap();
+    let b = solve_task(CartPoleRail, &first, &m, &options, &mut |_| {}).unwrap();
+    assert_eq!(a.solution.history.len(), 8);
+    for (x, y) in a.solution.history.iter().zip(&b.solution.history) {
+        assert!(
+            (x.cost - y.cost).abs() < 1e-10 * x.cost,
+            "{} vs {}",
+            x.cost,
+            y.cost
+        );
+    }
+    for (x, y) in a.solution.u.iter().zip(&b.solution.u) {
+        assert!((x - y).amax() < 1e-8, "{x} vs {y}");
+    }
+}
+
+/// The adjoint gradient of the total cost through the rail's stop against central
+/// differences of tightly converged steps at κ > 0: pushes that drive the cart into its
+/// end and hold it there.
+#[test]
+fn the_cost_gradient_through_an_active_stop_matches_central_differences() {
+    let (mut task, m) = read("tasks/cartpole-rail.toml");
+    task.knots = 30;
+    let kappa = 1e-3;
+    let tight = ViSettings {
+        tolerance: 1e-15,
+        constraint_tolerance: 1e-15,
+        kappa,
+        ..ViSettings::default()
+    };
+    let sys = TreeSystem::new(&m).unwrap();
+    let mut dynamics = DiscreteSystem::vi(sys, tight, task.dt, 0.0, task.controls.clone())
+        .unwrap()
+        .with_input_memory(false);
+    let mut cost = TaskCost::new(&task, &m).unwrap();
+    let (q0, dq0) = (DVector::from_vec(task.q0.clone()), DVector::zeros(2));
+    let x0 = dynamics.state_of(&q0, &dq0, &[]);
+    let u: Vec<DVector<f64>> = (0..task.knots)
+        .map(|k| {
+            DVector::from_element(
+                1,
+                if k < 20 {
+                    15.0
+                } else {
+                    3.0 * (0.5 * k as f64).sin()
+                },
+            )
+        })
+        .collect();
+    let (_, gradient) = cost_gradient(&mut dynamics, &mut cost, &x0, &u).unwrap();
+    // The cart is held at its stop for part of the run (κ/γ ≈ 3 mm off it: the smooth
+    // contact acts at that distance).
+    let mut x = x0.clone();
+    let mut x2 = DVector::zeros(x.len());
+    let mut pressed = 0;
+    for (k, uk) in u.iter().enumerate() {
+        dynamics
+            .step(k, x.as_slice(), uk.as_slice(), x2.as_mut_slice(), None)
+            .unwrap();
+        pressed += usize::from(x2[0] > RAIL - 5e-3);
+        std::mem::swap(&mut x, &mut x2);
+    }
+    assert!(pressed >= 5, "the cart is at its stop for {pressed} knots");
+    // Central differences of steps converged to 1e-15 carry ~1e-11 of the cost's noise over
+    // h: they are held to 1e-6 of the gradient's largest entry.
+    let h = 1e-5;
+    let fd: Vec<f64> = (0..task.knots)
+        .map(|k| {
+            let mut at = |s: f64| {
+                let mut v = u.clone();
+                v[k][0] += s;
+                cost_gradient(&mut dynamics, &mut cost, &x0, &v).unwrap().0
+            };
+            (at(h) - at(-h)) / (2.0 * h)
+        })
+        .collect();
+    let largest = fd.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+    assert!(largest > 1.0, "the test must see a gradient: {largest}");
+    for (k, fd) in fd.iter().enumerate() {
+        assert!(
+            (fd - gradient[k][0]).abs() < 1e-6 * largest,
+            "knot {k}: {} against {fd}",
+            gradient[k][0]
+        );
+    }
+}
+
+/// DDP's second derivatives are not formed through contact: at κ > 0 every step of a model
+/// with unilateral rows goes through it, so every pass is Gauss–Newton (and says so).
+#[test]
+fn ddp_through_contact_takes_the_gauss_newton_model() {
+    let (mut task, m) = read("tasks/cartpole-rail.toml");
+    task.kappa = vec![1e-2];
+    let options = TaskOptions {
+        solver: Some(TaskSolver::Ddp),
+        max_iterations: Some(5),
+    };
+    let sys = TreeSystem::new(&m).unwrap();
+    let res = solve_task(sys, &task, &m, &options, &mut |_| {}).unwrap();
+    assert_eq!(res.solution.history.len(), 5);
+    assert!(res
+        .solution
+        .history
+        .iter()
+        .all(|it| it.model == Solver::Ilqr));
+    assert!(res.solution.cost < res.solution.history[0].cost * 2.0);
+}
+
+/// A task adds a ground, contacts and enforced limits to its model as a model file writes
+/// them; κ is named, decreasing, and only where there is contact; each error at its line.
+#[test]
+fn a_task_says_where_contact_is_and_its_relaxations() {
+    let base = Path::new(ROOT).join("models");
+    let head = "model = \"cartpole.toml\"\ndt = 0.02\nknots = 10\n";
+    let cost = "[[cost]]\nkind = \"control\"\nweight = 1.0\n";
+    let ground =
+        "[ground]\nheight = -0.6\nfriction = 0.5\n[[contact]]\nframe = \"pole\"\nradius = 0.05\n";
+    let text = format!("{head}kappa = [1e-3, 1e-5]\n{cost}{ground}");
+    let (task, m) = task_from_str(&text, Some("t.toml"), &base).unwrap();
+    assert_eq!(task.kappa, vec![1e-3, 1e-5]);
+    // The pole's sphere on the ground, with the ground's friction.
+    assert_eq!(m.gaps().len(), 1);
+    assert_eq!(m.gaps()[0].friction, 0.5);
+    let cases = [
+        (
+            format!("{head}{cost}{ground}"),
+            "name the relaxations the optimiser goes through",
+        ),
+        (
+            format!("{head}kappa = 1e-3\n{cost}"),
+            "t.toml:4: `kappa` relaxes unilateral rows, and the model has none",
+        ),
+        (
+            format!("{head}kappa = [1e-3, 1e-2]\n{cost}{ground}"),
+            "t.toml:4: `kappa` must decrease: entry 2",
+        ),
+        (
+            format!("{head}kappa = [1e-3, -1.0]\n{cost}{ground}"),
+            "`kappa` entry 2 must be a positive number",
+        ),
+        (
+            format!("{head}integrator = \"rk4\"\nkappa = 1e-3\n{cost}{ground}"),
+            "t.toml:4: a task through contact steps with the VI",
+        ),
+        (
+            format!("{head}kappa = 1e-3\n{cost}[[contact]]\nframe = \"hand\"\n"),
+            "t.toml:9: contact `contact1`: unknown frame `hand`",
+        ),
+        (
+            format!(
+                "{head}kappa = 1e-3\n{cost}{ground}[[contact]]\nframe = \"cart\"\nradius = -1.0\n"
+            ),
+            "t.toml:16: contact `contact2`: radius -1",
+        ),
+    ];
+    for (text, want) in cases {
+        let err = task_from_str(&text, Some("t.toml"), &base)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(want),
+            "expected «{want}» in «{err}» for\n{text}"
+        );
+    }
+}
