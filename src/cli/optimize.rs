@@ -425,6 +425,7 @@ fn write_summary_json(
         "frames": frames,
         "solve_seconds": res.solve_seconds,
         "kappa": plan.task.kappa,
+        "continuation": res.continuation,
         "hard_replay": res.hard_replay.as_ref().map(|r| json!({
             "deviation": r.deviation,
             "penetration": r.penetration,
@@ -502,6 +503,9 @@ fn print_summary(
             replay.deviation,
             replay.penetration
         );
+        if let Some(why) = &res.continuation {
+            say!("Not converged: {}.", why.replace("--dt", "the task's `dt`"));
+        }
         if let Some(failure) = &replay.failure {
             say!("The replay at hard contact stopped: {failure}");
         }

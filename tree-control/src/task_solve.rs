@@ -39,6 +39,9 @@ pub struct TaskResult {
     pub solve_seconds: f64,
     /// Through contact: the plan's controls replayed open loop at hard contact (κ = 0).
     pub hard_replay: Option<HardReplay>,
+    /// Through contact, when a relaxation could not be reached: which, why, and the `κ`
+    /// whose plan this is (`None`: the plan is the task's last `κ`'s).
+    pub continuation: Option<String>,
 }
 
 /// A plan optimised at a relaxation `κ > 0` replayed at hard contact: how far it lands from
@@ -194,7 +197,7 @@ where
     };
     let mut cost = TaskCost::new(task, model)?;
     let start = Instant::now();
-    let solution = solve_stages(
+    let (solution, continuation) = solve_stages(
         &mut dynamics,
         &mut cost,
         &x0,
@@ -235,6 +238,7 @@ where
         .transpose()?;
     Ok(TaskResult {
         hard_replay,
+        continuation,
         t: (0..=task.knots).map(|k| k as f64 * task.dt).collect(),
         q,
         dq,
@@ -246,9 +250,12 @@ where
 }
 
 /// The solve, once, or through the task's relaxations `κ` largest first, each stage
-/// warm-started from the last one's plan (continuation on the central path: Howell et al.,
-/// "Trajectory optimization with optimization-based dynamics", RA-L 2022): the last stage's
-/// solution, with every stage's iterations in its history (each records its `κ`).
+/// warm-started from the last one's plan and feedback (continuation on the central path:
+/// Howell et al., "Trajectory optimization with optimization-based dynamics", RA-L 2022):
+/// the last stage's solution, with every stage's iterations in its history (each records
+/// its `κ`). When a stage cannot even start (a step of its first rollout fails), the last
+/// finished stage's plan is the answer, the dynamics are put back at its `κ`, and the
+/// second value says so.
 fn solve_stages<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut TaskCost,
@@ -257,41 +264,58 @@ fn solve_stages<S: System>(
     settings: &IlqrSettings,
     task: &Task,
     report: &mut dyn FnMut(&Iteration) -> ControlFlow<()>,
-) -> Result<Solution, SimError>
+) -> Result<(Solution, Option<String>), SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
-    let Some((&last, earlier)) = task.kappa.split_last() else {
-        return solve_until(dynamics, cost, x0, guess, settings, report);
-    };
-    let (mut u, mut history) = (guess, Vec::new());
-    dynamics.set_kappa(task.kappa[0])?;
-    for &kappa in earlier {
-        let stage = solve_until(dynamics, cost, x0, u, settings, report)?;
-        history.extend(stage.history.iter().copied());
-        if stage.stop == Stop::Interrupted {
-            // The caller asked to stop: this stage's plan is the answer.
-            let mut solution = Solution { history, ..stage };
-            solution.converged = false;
-            return Ok(solution);
-        }
-        u = Vec::new();
-        let next = task
-            .kappa
-            .iter()
-            .find(|&&k| k < kappa)
-            .copied()
-            .unwrap_or(last);
-        dynamics.set_kappa(next)?;
-        closed_loop(dynamics, x0, &stage, settings, &mut u);
+    if task.kappa.is_empty() {
+        return Ok((
+            solve_until(dynamics, cost, x0, guess, settings, report)?,
+            None,
+        ));
     }
-    dynamics.set_kappa(last)?;
-    let solution = solve_until(dynamics, cost, x0, u, settings, report)?;
-    history.extend(solution.history.iter().copied());
-    Ok(Solution {
+    let (mut u, mut history) = (guess, Vec::new());
+    let mut done: Option<(f64, Solution)> = None;
+    for &kappa in &task.kappa {
+        dynamics.set_kappa(kappa)?;
+        if let Some((_, last)) = &done {
+            closed_loop(dynamics, x0, last, settings, &mut u);
+        }
+        let stage = match solve_until(dynamics, cost, x0, std::mem::take(&mut u), settings, report)
+        {
+            Ok(stage) => stage,
+            Err(e) => {
+                let Some((reached, last)) = done else {
+                    return Err(e);
+                };
+                dynamics.set_kappa(reached)?;
+                let why = format!(
+                    "the continuation stopped at κ = {kappa:e}, whose first rollout failed ({e}); the plan is κ = {reached:e}'s"
+                );
+                let solution = Solution {
+                    history,
+                    converged: false,
+                    ..last
+                };
+                return Ok((solution, Some(why)));
+            }
+        };
+        history.extend(stage.history.iter().copied());
+        let interrupted = stage.stop == Stop::Interrupted;
+        done = Some((kappa, stage));
+        if interrupted {
+            // The caller asked to stop: this stage's plan is the answer.
+            break;
+        }
+    }
+    let (reached, last) = done.expect("κ is not empty");
+    let complete = reached == task.kappa[task.kappa.len() - 1];
+    let solution = Solution {
         history,
-        ..solution
-    })
+        converged: last.converged && complete,
+        ..last
+    };
+    Ok((solution, None))
 }
 
 /// The controls of `plan`'s policy `u = u_k + K_k (x − x_k)` (clamped to the limits) along
@@ -308,6 +332,7 @@ fn closed_loop<S: System>(
 ) where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
+    u.clear();
     let mut x = x0.clone();
     let mut x2 = DVector::zeros(x0.len());
     for (k, planned) in plan.u.iter().enumerate() {
