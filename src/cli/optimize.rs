@@ -494,7 +494,10 @@ fn print_summary(
         }
     }
     if let Some(replay) = &res.hard_replay {
-        let kappas = (task.kappa.iter())
+        // The relaxations the solve went through (fewer than the task's when it stopped).
+        let mut went: Vec<f64> = sol.history.iter().map(|it| it.kappa).collect();
+        went.dedup();
+        let kappas = (went.iter())
             .map(|k| format!("{k:e}"))
             .collect::<Vec<_>>()
             .join(" → ");

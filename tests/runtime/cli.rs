@@ -969,21 +969,16 @@ fn a_plan_through_contact_replays_at_hard_contact() {
         replay.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
-    let text = std::fs::read_to_string(&replay).unwrap();
-    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
-    let last: Vec<f64> = (text.lines().last().unwrap().split(','))
-        .map(|x| x.parse().unwrap())
+    let (header, rows) = csv_table(&replay);
+    let last = rows.last().unwrap();
+    let column = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let x = last[column("x")];
+    let gaps: Vec<usize> = (0..header.len())
+        .filter(|&c| header[c].starts_with("gap_"))
         .collect();
-    let x = last[header.iter().position(|h| *h == "x").unwrap()];
-    assert!(header.contains(&"gap_x.upper"), "{header:?}");
-    let min_gap = (text.lines().skip(1))
-        .flat_map(|row| {
-            let row: Vec<f64> = row.split(',').map(|v| v.parse().unwrap()).collect();
-            (header.iter().enumerate())
-                .filter(|(_, h)| h.starts_with("gap_"))
-                .map(move |(c, _)| row[c])
-                .collect::<Vec<_>>()
-        })
+    assert!(gaps.contains(&column("gap_x.upper")), "{header:?}");
+    let min_gap = (rows.iter())
+        .flat_map(|row| gaps.iter().map(|&c| row[c]))
         .fold(f64::INFINITY, f64::min);
     assert!(min_gap >= -1e-6, "a stop passed by {min_gap} m");
     for (i, q) in summary["q_final"].as_array().unwrap().iter().enumerate() {
@@ -995,6 +990,17 @@ fn a_plan_through_contact_replays_at_hard_contact() {
         );
     }
     assert!(x.abs() < 0.02, "the cart ends at {x}");
+}
+
+/// A numeric CSV written by the CLI: its header and its rows as numbers.
+fn csv_table(path: &std::path::Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|row| row.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    (header, rows)
 }
 
 /// The last CSV row of `simulate tests/models/cart.toml ARGS --out csv`, as numbers.
@@ -1430,12 +1436,9 @@ fn contact_is_added_from_the_command_line() {
         flight.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
-    let text = std::fs::read_to_string(&flight).unwrap();
-    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
-    let last: Vec<f64> = (text.lines().last().unwrap().split(','))
-        .map(|x| x.parse().unwrap())
-        .collect();
-    let at = |name: &str| last[header.iter().position(|h| *h == name).unwrap()];
+    let (header, rows) = csv_table(&flight);
+    let last = rows.last().unwrap();
+    let at = |name: &str| last[header.iter().position(|h| h == name).unwrap()];
     assert!((at("gap_ball") - (at("z") - 0.1)).abs() < 1e-12 && at("impulse_ball") == 0.0);
     let (ok, _, stderr) = tree_mech(&["simulate", "tests/models/ball.toml", "--integrator", "rk4"]);
     assert!(

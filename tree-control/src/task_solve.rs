@@ -144,12 +144,52 @@ where
     }
     check_task_memory(task, sys.dof())?;
     let mut dynamics = task_system(sys, task)?;
+    let (x0, guess) = initial_guess(&mut dynamics, task, model)?;
+    let settings = ilqr_settings(task, options);
+    let mut cost = TaskCost::new(task, model)?;
+    let start = Instant::now();
+    let (solution, continuation) = solve_stages(
+        &mut dynamics,
+        &mut cost,
+        &x0,
+        guess,
+        &settings,
+        task,
+        report,
+    )?;
+    let solve_seconds = start.elapsed().as_secs_f64();
+    let plan = read_back(&mut dynamics, task, &solution)?;
+    let hard_replay = (!task.kappa.is_empty())
+        .then(|| replay_hard(&mut dynamics, &solution))
+        .transpose()?;
+    Ok(TaskResult {
+        hard_replay,
+        continuation,
+        t: (0..=task.knots).map(|k| k as f64 * task.dt).collect(),
+        q: plan.q,
+        dq: plan.dq,
+        lambda: plan.lambda,
+        violation: plan.violation,
+        solution,
+        solve_seconds,
+    })
+}
+
+/// The start state and the initial guess: the start held at rest (every input at the
+/// gravity compensation of the start, refused when its limits exclude it), kinematic
+/// controls on their prescription.
+fn initial_guess<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    task: &Task,
+    model: &Model,
+) -> Result<(DVector<f64>, Vec<DVector<f64>>), SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let (mut q0, mut dq0) = (dynamics.sys.zero_vector(), dynamics.sys.zero_vector());
     for i in 0..q0.len() {
         (q0[i], dq0[i]) = (task.q0[i], task.dq0[i]);
     }
-    // The initial guess: hold the start (gravity compensation), kinematic controls on
-    // their prescription.
     let hold = dynamics.gravity_compensation(&q0);
     let nu = task.controls.len();
     for (c, control) in task.controls.iter().enumerate() {
@@ -174,6 +214,13 @@ where
         })
         .collect();
     let x0 = dynamics.state_of(&q0, &dq0, hold.as_slice());
+    Ok((x0, guess))
+}
+
+/// The optimiser's settings: the solver and iteration limit (the options', else the
+/// task's), the controls' box limits.
+fn ilqr_settings(task: &Task, options: &TaskOptions) -> IlqrSettings {
+    let nu = task.controls.len();
     let bounded = task.limits.iter().any(Option::is_some);
     let limits = bounded.then(|| {
         (
@@ -183,7 +230,7 @@ where
             DVector::from_fn(nu, |c, _| task.limits[c].map_or(f64::INFINITY, |l| l[1])),
         )
     });
-    let settings = IlqrSettings {
+    IlqrSettings {
         solver: match options.solver.unwrap_or(task.solver) {
             TaskSolver::Ilqr => Solver::Ilqr,
             TaskSolver::Ddp => Solver::Ddp,
@@ -194,27 +241,38 @@ where
             .unwrap_or(100),
         limits,
         ..IlqrSettings::default()
-    };
-    let mut cost = TaskCost::new(task, model)?;
-    let start = Instant::now();
-    let (solution, continuation) = solve_stages(
-        &mut dynamics,
-        &mut cost,
-        &x0,
-        guess,
-        &settings,
-        task,
-        report,
-    )?;
-    let solve_seconds = start.elapsed().as_secs_f64();
-    // Read the trajectory back: q, q̇ at every knot, λ of every step.
+    }
+}
+
+/// The plan knot by knot: every variable's `q`, `q̇`, the violation, and the `λ` of the
+/// step leaving each knot (the last knot repeats the last step's).
+struct PlanKnots {
+    q: Vec<DVector<f64>>,
+    dq: Vec<DVector<f64>>,
+    lambda: Vec<DVector<f64>>,
+    violation: Vec<f64>,
+}
+
+/// Reads `solution` back knot by knot (each step taken again for its `λ`).
+fn read_back<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    task: &Task,
+    solution: &Solution,
+) -> Result<PlanKnots, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
     let mut knot = Knot::empty();
     let needs = Needs {
         velocity: true,
         ..Needs::default()
     };
-    let (mut q, mut dq, mut lambda, mut violation) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut plan = PlanKnots {
+        q: Vec::new(),
+        dq: Vec::new(),
+        lambda: Vec::new(),
+        violation: Vec::new(),
+    };
     let mut x2 = vec![0.0; dynamics.states()];
     let mut h = ConstraintTerms::zeros(dynamics.sys.constraint_count(), dynamics.sys.dof());
     let (mut qv, mut dqv) = (dynamics.sys.zero_vector(), dynamics.sys.zero_vector());
@@ -224,29 +282,18 @@ where
         qv.as_mut_slice().copy_from_slice(knot.q.as_slice());
         dqv.as_mut_slice().copy_from_slice(knot.dq.as_slice());
         dynamics.sys.constraints(&qv, &dqv, Order::First, &mut h);
-        violation.push(h.violation());
-        q.push(knot.q.clone());
-        dq.push(knot.dq.clone());
+        plan.violation.push(h.violation());
+        plan.q.push(knot.q.clone());
+        plan.dq.push(knot.dq.clone());
         if k < task.knots {
             dynamics.step(k, x, solution.u[k].as_slice(), &mut x2, None)?;
-            lambda.push(DVector::from_column_slice(dynamics.multipliers()));
+            plan.lambda
+                .push(DVector::from_column_slice(dynamics.multipliers()));
         }
     }
-    lambda.push(lambda.last().cloned().unwrap_or_default());
-    let hard_replay = (!task.kappa.is_empty())
-        .then(|| replay_hard(&mut dynamics, &solution))
-        .transpose()?;
-    Ok(TaskResult {
-        hard_replay,
-        continuation,
-        t: (0..=task.knots).map(|k| k as f64 * task.dt).collect(),
-        q,
-        dq,
-        lambda,
-        violation,
-        solution,
-        solve_seconds,
-    })
+    plan.lambda
+        .push(plan.lambda.last().cloned().unwrap_or_default());
+    Ok(plan)
 }
 
 /// The solve, once, or through the task's relaxations `κ` largest first, each stage
