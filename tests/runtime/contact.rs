@@ -776,3 +776,81 @@ fn the_marionette_settles_on_the_floor_as_its_strings_are_lowered() {
         traj.q(end)[2]
     );
 }
+
+/// The limp Solo-12 dropped from a crouch onto the ground with spheres at its feet, knees and
+/// belly (nine contacts, μ = 0.8, and the 36 pairs between them), at hard contact and at
+/// κ = 10⁻⁴ and 10⁻⁶ with Δt = 0.02 s: every step converges (the interior point jammed at
+/// t = 0.2 s before its neighbourhood guard, docs/derivations.md §13), and the robot ends on
+/// its belly sphere, at hard contact at rest with no penetration.
+#[test]
+fn a_limp_quadruped_collapses_onto_its_belly_without_a_jam() {
+    use tree_mech::model::{ContactSpec, ContactsSpec, GroundSpec, UrdfOptions};
+    let options = UrdfOptions {
+        floating_base: true,
+        ..Default::default()
+    };
+    let robot = model::from_urdf_file("models/solo12.urdf", options).unwrap();
+    let sphere = |frame: String, radius: f64| ContactSpec {
+        frame,
+        radius: Some(radius),
+        ..Default::default()
+    };
+    let mut contacts = vec![sphere("base_link".into(), 0.05)];
+    for leg in ["FL", "FR", "HL", "HR"] {
+        contacts.push(sphere(format!("{leg}_FOOT"), 0.016));
+        contacts.push(sphere(format!("{leg}_LOWER_LEG"), 0.02));
+    }
+    let spec = ContactsSpec {
+        ground: Some(GroundSpec {
+            friction: Some(0.8),
+            ..Default::default()
+        }),
+        contacts,
+        ..Default::default()
+    };
+    let model = robot.with_contacts(&spec).unwrap();
+    let mut sys = TreeSystem::new(&model).unwrap();
+    let (mut q0, dq0) = sys.initial_state();
+    // Base 0.1325 m up, hips ±1.2 and knees ∓2.4: crouched, feet on the ground.
+    let crouch = [
+        0.0, 1.2, -2.4, 0.0, 1.2, -2.4, 0.0, -1.2, 2.4, 0.0, -1.2, 2.4,
+    ];
+    q0[2] = 0.1325;
+    q0.as_mut_slice()[6..].copy_from_slice(&crouch);
+    for kappa in [0.0, 1e-4, 1e-6] {
+        let settings = ViSettings {
+            kappa,
+            ..Default::default()
+        };
+        let options = SimOptions::new(Method::Vi(settings), 0.02, 1.0);
+        let traj = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {})
+            .unwrap_or_else(|e| panic!("κ = {kappa:e}: {e}"));
+        let last = traj.len() - 1;
+        let height = traj.q(last)[2];
+        let speed = traj.dq(last).iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        // The gap rows (not the friction rows' tangential positions, `name.t1`, `name.t2`).
+        let gaps: Vec<usize> = (0..traj.unilateral.len())
+            .filter(|&r| {
+                !traj.unilateral[r].ends_with(".t1") && !traj.unilateral[r].ends_with(".t2")
+            })
+            .collect();
+        let deepest = (0..traj.len())
+            .flat_map(|k| gaps.iter().map(move |&r| (k, r)))
+            .map(|(k, r)| traj.gap(k)[r])
+            .fold(f64::INFINITY, f64::min);
+        let lost = traj.energy[0] - traj.energy[last];
+        println!(
+            "κ = {kappa:e}: base at {height}, speed {speed:e}, deepest gap {deepest:e}, \
+             {} subdivided steps, energy lost {lost}",
+            traj.subdivided_steps
+        );
+        assert!(
+            (height - 0.05).abs() < 2e-3,
+            "κ = {kappa:e}: base at {height} m"
+        );
+        assert!(lost > 1.0, "κ = {kappa:e}: energy lost {lost} J");
+        if kappa == 0.0 {
+            assert!(deepest > -1e-9 && speed < 1e-6, "{deepest:e}, {speed:e}");
+        }
+    }
+}

@@ -736,6 +736,7 @@ where
         match self.step_once(cx, q, p, q_next) {
             Err(SimError::NewtonFailed { .. } | SimError::SingularJacobian { .. })
             | Err(SimError::NonFinite { .. } | SimError::StepTooCoarse { .. })
+            | Err(SimError::ContactFailed { .. })
                 if can_split =>
             {
                 if self.split.rows > 0 {

@@ -16,7 +16,11 @@
 //! plus the impulses' `Σ γ D²φ + Σ b·D²τ`), factors it once and solves twice: Mehrotra's
 //! predictor (the affine direction, `κ = 0`) and corrector (centring `σμ`, `σ = (μ_aff/μ)³`,
 //! with the second-order term `Δs_aff Δγ_aff`), each step kept inside the cones by a fraction
-//! 0.99 of the way to their boundary. Hard contact drives the complementarity to the
+//! 0.99 of the way to their boundary (nearer 1 only once the residuals are small) and inside
+//! the central path's wide neighbourhood (no pair's complementarity below 10⁻³ of the mean);
+//! a short step is followed by a pure centring one. Without those two guards an iterate can
+//! reach a cone's boundary far from the solution and jam there, each step shrinking by the
+//! fraction (docs/derivations.md §13). Hard contact drives the complementarity to the
 //! tolerance; a user's `κ > 0` (`ViSettings::kappa`) stops on its central path instead.
 
 use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dim};
@@ -38,6 +42,19 @@ const FRACTION_TO_BOUNDARY: f64 = 0.99;
 /// The largest fraction of the way to a cone's boundary a step goes (never onto it: a point
 /// on the boundary makes the Newton matrix singular).
 const LAST_FRACTION: f64 = 1.0 - 1e-6;
+
+/// The wide neighbourhood of the central path the iterates keep to: after a step every
+/// pair's complementarity (a cone pair's `√(det x det y)`) is at least this fraction of the
+/// mean. Off it, a point nears a cone's boundary with a Newton direction pointing out, and
+/// the fraction to the boundary shrinks towards zero step after step (a jam).
+const NEIGHBOURHOOD: f64 = 1e-3;
+
+/// A step shorter than this fraction of its direction is followed by a centring one
+/// (`σ = 1`, no second-order term), which moves back towards the central path.
+const SHORT_STEP: f64 = 0.1;
+
+/// Halvings of a step kept in the neighbourhood before it is taken as it is.
+const NEIGHBOURHOOD_HALVINGS: usize = 40;
 
 /// The complementarity a fresh step starts from, as a gap in metres (or radians) times the
 /// step's momentum scale.
@@ -92,6 +109,8 @@ pub(crate) struct ContactStep {
     pivots: Vec<usize>,
     affine: Vec<f64>,
     direction: Vec<f64>,
+    /// The last step was short ([`SHORT_STEP`]): the next direction only centres.
+    centre: bool,
     /// The last step's impulses per gap row (γ, then b at tangent rows) and gaps at `q₂`.
     pub(crate) impulses: Vec<f64>,
     pub(crate) gap_values: Vec<f64>,
@@ -155,6 +174,7 @@ impl ContactStep {
             pivots: vec![0; nz],
             affine: vec![0.0; nz],
             direction: vec![0.0; nz],
+            centre: false,
             impulses: vec![0.0; rows],
             gap_values: vec![0.0; rows],
             free: false,
@@ -650,6 +670,7 @@ where
         let scale = self.momentum_scale();
         self.start_contact(c, cx, q_next, scale);
         let kappa = self.settings.kappa;
+        c.centre = false;
         let mut iterations = 0;
         let mut at_floor = false;
         loop {
@@ -697,7 +718,8 @@ where
             lu_factor_packed_unguarded(&mut c.matrix[..nz * nz], nz, &mut c.pivots)
                 .map_err(|k| (iterations, self.singular_unknown(c, cx.sys, k, step, t)))?;
             self.mehrotra(c, scale, kappa);
-            at_floor = self.apply_contact_update(c, q_next, scale);
+            let distance = (m.relative).max(m.violation);
+            at_floor = self.apply_contact_update(c, q_next, scale, distance);
         }
         for (k, w) in c.weights.iter().enumerate() {
             c.impulses[k] = *w;
@@ -921,7 +943,11 @@ where
             c.direction[k] = c.z[k] + alpha * c.affine[k];
         }
         let mu_affine = mean_complementarity(&c.elements, &c.direction);
-        let sigma = (mu_affine / mu).clamp(0.0, 1.0).powi(3);
+        let sigma = if c.centre {
+            1.0
+        } else {
+            (mu_affine / mu).clamp(0.0, 1.0).powi(3)
+        };
         let _ = scale;
         // The corrector: centred at `target`, with the predictor's second-order term — or,
         // once the centring reaches a user's κ, plain Newton onto its central path (the
@@ -930,6 +956,8 @@ where
 
         let (target, second) = if on_path {
             (kappa, 0.0)
+        } else if c.centre {
+            (mu, 0.0)
         } else {
             (sigma * mu, 1.0)
         };
@@ -937,19 +965,24 @@ where
     }
 
     /// Takes the corrector's direction a fraction of the way to the cones' boundary — the
-    /// fraction nearer 1 as the complementarity vanishes, so the last iterations converge
-    /// as Newton's — to `q₂`, `λ` and the contact unknowns. Whether the update of `q₂` was
+    /// fraction nearer 1 as the complementarity and the residuals (`distance`, relative)
+    /// vanish, so the last iterations converge as Newton's — and within the central path's
+    /// neighbourhood, to `q₂`, `λ` and the contact unknowns. Whether the update of `q₂` was
     /// below the rounding of `q`.
     fn apply_contact_update(
         &mut self,
         c: &mut ContactStep,
         q_next: &mut Vector<N>,
         scale: f64,
+        distance: f64,
     ) -> bool {
         let mu = mean_complementarity(&c.elements, &c.z) / scale;
-        let fraction = FRACTION_TO_BOUNDARY.max(1.0 - mu).min(LAST_FRACTION);
+        let fraction = FRACTION_TO_BOUNDARY
+            .max(1.0 - mu.max(distance))
+            .min(LAST_FRACTION);
         let room = step_length(&c.elements, &c.z, &c.direction, 1.0 / fraction);
-        let alpha = (fraction * room).min(1.0);
+        let alpha = within_neighbourhood(c, (fraction * room).min(1.0));
+        c.centre = alpha < SHORT_STEP;
         let nd = self.split.dynamic.len();
         let mut largest: f64 = 0.0;
         for (ci, &i) in self.split.dynamic.iter().enumerate() {
@@ -986,6 +1019,45 @@ where
         };
         SimError::SingularJacobian { step, t, variable }
     }
+}
+
+/// The smallest pair's complementarity over the mean at the unknowns `z` (1: every pair
+/// alike, as on the central path; 0: a pair on its cone's boundary).
+fn centrality(elements: &[Element], z: &[f64]) -> f64 {
+    let mean = mean_complementarity(elements, z);
+    if mean.is_nan() || mean <= 0.0 {
+        return 0.0;
+    }
+    let mut least = f64::INFINITY;
+    for e in elements {
+        least = least.min(z[e.base] * z[e.base + 1]);
+        if e.has_friction() {
+            let (x, y) = cone_points(e, z);
+            least = least.min((cone::det(&x).max(0.0) * cone::det(&y).max(0.0)).sqrt());
+        }
+    }
+    least / mean
+}
+
+/// `alpha` halved until the step along `c.direction` ends within the central path's
+/// neighbourhood ([`NEIGHBOURHOOD`], or no less central than it starts when it starts
+/// outside).
+fn within_neighbourhood(c: &mut ContactStep, alpha: f64) -> f64 {
+    let least = NEIGHBOURHOOD.min(centrality(&c.elements, &c.z));
+    let mut alpha = alpha;
+    for _ in 0..NEIGHBOURHOOD_HALVINGS {
+        for e in &c.elements {
+            let width = if e.has_friction() { 7 } else { 2 };
+            for k in e.base..e.base + width {
+                c.affine[k] = c.z[k] + alpha * c.direction[k];
+            }
+        }
+        if centrality(&c.elements, &c.affine) >= least {
+            break;
+        }
+        alpha *= 0.5;
+    }
+    alpha
 }
 
 /// The corrector's direction into `c.direction` from the factored matrix: every residual
