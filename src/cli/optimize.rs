@@ -426,13 +426,20 @@ fn write_summary_json(
         "solve_seconds": res.solve_seconds,
         "kappa": plan.task.kappa,
         "continuation": res.continuation,
-        "hard_replay": res.hard_replay.as_ref().map(|r| json!({
-            "deviation": r.deviation,
-            "penetration": r.penetration,
-            "failure": r.failure,
-        })),
+        "hard_replay": res.hard_replay.as_ref().map(replay_json),
+        "policy_replay": res.policy_replay.as_ref().map(replay_json),
     });
     write_text(file, &format!("{summary:#}\n"))
+}
+
+/// A replay at hard contact in `--json`.
+fn replay_json(r: &tree_mech::control::HardReplay) -> serde_json::Value {
+    json!({
+        "deviation": r.deviation,
+        "penetration": r.penetration,
+        "failure": r.failure,
+        "q_end": r.end.as_slice(),
+    })
 }
 
 /// `--gains`: the plan and its feedback gains, knot by knot.
@@ -506,6 +513,14 @@ fn print_summary(
             replay.deviation,
             replay.penetration
         );
+        if let Some(policy) = &res.policy_replay {
+            say!(
+                "Its policy (the plan's controls with their feedback gains) at hard contact keeps within {:.3e}, deepest penetration {:.2e} m{}.",
+                policy.deviation,
+                policy.penetration,
+                policy.failure.as_ref().map_or(String::new(), |f| format!("; it stopped: {f}"))
+            );
+        }
         if let Some(why) = &res.continuation {
             say!("Not converged: {}.", why.replace("--dt", "the task's `dt`"));
         }

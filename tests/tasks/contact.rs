@@ -1,7 +1,8 @@
 //! Optimal control through contact (docs/derivations.md §14): the cart-pole swung up against
 //! its rail's end stops with κ continuation, compiled ≡ interpreted, replayed at hard
 //! contact; the cost gradient through an active stop against central differences; DDP takes
-//! the Gauss–Newton model through contact; a task's contact settings and their errors.
+//! the Gauss–Newton model through contact; a task's contact settings and their errors; the
+//! Solo-12 stands up from a crouch on its feet.
 
 use std::path::Path;
 
@@ -58,6 +59,15 @@ fn the_cartpole_swings_up_against_its_rail_stops_and_replays_at_hard_contact() {
         "the replay strays {}",
         replay.deviation
     );
+    // Its policy (the plan's controls with their feedback) at hard contact keeps closer.
+    let policy = res.policy_replay.as_ref().expect("and so is its policy");
+    assert!(policy.failure.is_none(), "{:?}", policy.failure);
+    assert!(
+        policy.deviation < replay.deviation && policy.penetration < 1e-9,
+        "the policy strays {}, sinks {}",
+        policy.deviation,
+        policy.penetration
+    );
     assert!(
         replay.penetration <= 1e-6,
         "penetration {}",
@@ -87,6 +97,64 @@ fn the_cartpole_swings_up_against_its_rail_stops_and_replays_at_hard_contact() {
     for (x, y) in a.solution.u.iter().zip(&b.solution.u) {
         assert!((x - y).amax() < 1e-8, "{x} vs {y}");
     }
+}
+
+/// The Solo-12 rises from a crouch to its base at 0.25 m in 1 s through contact at κ = 1e-6
+/// then 1e-7 (tasks/solo12-stand.toml), no contact schedule given: converged; the base ends
+/// within 5 mm of its height and level; no foot sinks or moves more than 3 mm over the
+/// ground; the torques stay within ±2.7 N·m. The plan's policy (its controls with their
+/// feedback) run at hard contact goes through without sinking and ends standing, the feet
+/// where they stood. Open loop it cannot: a rising robot is unstable (the summary says so).
+#[test]
+fn the_solo12_stands_up_from_a_crouch_on_its_feet() {
+    let (task, m) = read("tasks/solo12-stand.toml");
+    assert_eq!(task.kappa, vec![1e-6, 1e-7]);
+    let sys = TreeSystem::new(&m).unwrap();
+    let res = solve_task(sys, &task, &m, &TaskOptions::default(), &mut |_| {}).unwrap();
+    assert!(res.solution.converged, "stopped: {:?}", res.solution.stop);
+    let feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+        .map(|f| m.frames.iter().position(|frame| frame.name == f).unwrap());
+    let start = m.origins(res.q[0].as_slice());
+    // How far the feet moved over the ground at `q`, and the lowest foot centre.
+    let feet_at = |q: &[f64]| {
+        let o = m.origins(q);
+        let slip = (feet.iter())
+            .map(|&f| (o[f][0] - start[f][0]).hypot(o[f][1] - start[f][1]))
+            .fold(0.0, f64::max);
+        let lowest = feet.iter().map(|&f| o[f][2]).fold(f64::INFINITY, f64::min);
+        (slip, lowest)
+    };
+    let radius = 0.016;
+    for (k, q) in res.q.iter().enumerate() {
+        let (slip, lowest) = feet_at(q.as_slice());
+        assert!(
+            slip < 3e-3 && lowest > radius - 1e-6,
+            "knot {k}: feet moved {slip} m, lowest at {lowest} m"
+        );
+    }
+    let end = &res.q[task.knots];
+    assert!(
+        (end[2] - 0.25).abs() < 5e-3 && end[4].abs() < 0.02 && end[5].abs() < 0.02,
+        "the base ends at z = {}, pitch {}, roll {}",
+        end[2],
+        end[4],
+        end[5]
+    );
+    for u in &res.solution.u {
+        assert!(u.amax() <= 2.7 + 1e-12, "a torque beyond ±2.7 N·m: {u}");
+    }
+    let policy = res
+        .policy_replay
+        .as_ref()
+        .expect("a contact task's policy is replayed");
+    assert!(policy.failure.is_none(), "{:?}", policy.failure);
+    assert!(policy.penetration < 1e-6, "sinks {}", policy.penetration);
+    let (slip, lowest) = feet_at(policy.end.as_slice());
+    assert!(
+        (policy.end[2] - 0.25).abs() < 1e-2 && slip < 5e-3 && lowest > radius - 1e-6,
+        "the policy at hard contact ends with the base at {} m, the feet moved {slip} m",
+        policy.end[2]
+    );
 }
 
 /// The adjoint gradient of the total cost through the rail's stop against central

@@ -24,7 +24,15 @@ use tree_runtime::linearize::{
 };
 use tree_runtime::SimError;
 use tree_runtime::StepContext;
-use tree_runtime::{Order, System, Terms, Vector};
+use tree_runtime::{ConstraintTerms, Order, System, Terms, Vector};
+
+/// A unilateral row within this gap (m or rad) of closing touches, for
+/// [`DiscreteSystem::holding_inputs`].
+const TOUCH: f64 = 1e-3;
+
+/// The weight ε of the contact forces against the inputs in
+/// [`DiscreteSystem::holding_inputs`]: small, so the contacts carry what they can.
+const FORCE_WEIGHT: f64 = 1e-3;
 
 /// The discretisation.
 enum Stepper<N: nalgebra::Dim>
@@ -429,6 +437,59 @@ where
                 Control::Kinematic(_) => 0.0,
             }
         })
+    }
+
+    /// The unilateral rows that touch at `q` (gap within [`TOUCH`]; a frictional contact's
+    /// tangent rows with its gap row), and every row's terms there.
+    pub(crate) fn touching(&mut self, q: &Vector<S::N>) -> (Vec<usize>, ConstraintTerms) {
+        let gaps = self.sys.unilateral();
+        let rows: usize = gaps.iter().map(|g| g.rows()).sum();
+        let mut terms = ConstraintTerms::zeros(rows, q.len());
+        self.sys.gaps(q, None, &mut terms);
+        let (mut touching, mut row) = (Vec::new(), 0);
+        for g in &gaps {
+            if terms.h[row] <= TOUCH {
+                touching.extend(row..row + g.rows());
+            }
+            row += g.rows();
+        }
+        (touching, terms)
+    }
+
+    /// The inputs that hold `q` at rest where the model touches something: the generalized
+    /// force `G = −∂L/∂q` at `q̇ = 0` balanced by the inputs `B u` and by the forces `Aᵀf` of
+    /// the unilateral rows that touch at `q` (gap within [`TOUCH`]; a frictional contact's
+    /// tangent rows with it) — `B u + Aᵀ f = G` with the least inputs, then the least forces
+    /// (`min ‖u‖² + ε²‖f‖²`, ε = [`FORCE_WEIGHT`]); the equilibrium in least squares where
+    /// none holds exactly. A legged robot crouched on the ground is held by its feet as well
+    /// as its motors, where [`Self::gravity_compensation`] holds its legs up as if they hung.
+    /// Without touching rows, that compensation. The friction cones are not imposed.
+    pub(crate) fn holding_inputs(&mut self, q: &Vector<S::N>) -> DVector<f64> {
+        let (touching, terms) = self.touching(q);
+        let hold = self.gravity_compensation(q);
+        if touching.is_empty() {
+            return hold;
+        }
+        let (n, nu) = (q.len(), self.layout.controls.len());
+        let zero = self.sys.zero_vector();
+        self.sys
+            .lagrangian(q, &zero, Order::First, &mut self.buf.terms);
+        let g = DVector::from_fn(n, |i, _| -self.buf.terms.dl_dq[i]);
+        let mut c = DMatrix::zeros(n, nu + touching.len());
+        for (k, control) in self.layout.controls.iter().enumerate() {
+            if let Control::Input(input) = *control {
+                c[(self.sys.input_variable(input), k)] = 1.0;
+            }
+        }
+        for (j, &r) in touching.iter().enumerate() {
+            for i in 0..n {
+                c[(i, nu + j)] = terms.dh[(r, i)] / FORCE_WEIGHT;
+            }
+        }
+        match c.svd(true, true).solve(&g, 1e-12) {
+            Ok(x) => DVector::from_fn(nu, |k, _| x[k]),
+            Err(_) => hold,
+        }
     }
 
     /// What costs see at knot `k` of state `x` (with `derivatives`, also the Jacobians);
@@ -940,5 +1001,80 @@ fn memory_jacobians(l: &Layout, dt: f64, a: &mut DMatrix<f64>, bm: &mut DMatrix<
             bm[(at + 1, c)] = 1.0 / dt;
             a[(at + 1, at)] = -1.0 / dt;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tree_model::{ContactSpec, ContactsSpec, GroundSpec};
+    use tree_runtime::TreeSystem;
+
+    /// The Solo-12 crouched on its four feet (μ = 0.8): the inputs that hold it through its
+    /// contacts balance gravity with the feet's forces and keep it crouched for 0.2 s at hard
+    /// contact, where the plain gravity compensation (each leg held up as if it hung) lets it
+    /// fold within that time.
+    #[test]
+    fn a_crouched_quadruped_is_held_by_its_feet_and_its_motors() {
+        let options = tree_model::UrdfOptions {
+            floating_base: true,
+            ..Default::default()
+        };
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/solo12.urdf");
+        let robot = tree_model::from_urdf_file(path, options).unwrap();
+        let contacts = ["FL", "FR", "HL", "HR"].map(|leg| ContactSpec {
+            frame: format!("{leg}_FOOT"),
+            radius: Some(0.016),
+            collide: Some(false),
+            ..Default::default()
+        });
+        let spec = ContactsSpec {
+            ground: Some(GroundSpec {
+                friction: Some(0.8),
+                ..Default::default()
+            }),
+            contacts: contacts.to_vec(),
+            ..Default::default()
+        };
+        let model = robot.with_contacts(&spec).unwrap();
+        let sys = TreeSystem::new(&model).unwrap();
+        let controls = (0..12).map(Control::Input).collect();
+        let mut d = DiscreteSystem::vi(sys, ViSettings::default(), 0.005, 0.0, controls).unwrap();
+        let mut q0 = d.sys.zero_vector();
+        let crouch = [
+            0.0, 1.2, -2.4, 0.0, 1.2, -2.4, 0.0, -1.2, 2.4, 0.0, -1.2, 2.4,
+        ];
+        q0[2] = 0.1325;
+        q0.as_mut_slice()[6..].copy_from_slice(&crouch);
+        let dq0 = d.sys.zero_vector();
+        // How far the crouch goes in 0.2 s under constant inputs `u`.
+        let drift = |d: &mut DiscreteSystem<TreeSystem>, u: &DVector<f64>| {
+            let mut x = d.state_of(&q0, &dq0, u.as_slice());
+            let mut x2 = x.clone();
+            let mut largest: f64 = 0.0;
+            for k in 0..40 {
+                d.step(k, x.as_slice(), u.as_slice(), x2.as_mut_slice(), None)
+                    .unwrap();
+                std::mem::swap(&mut x, &mut x2);
+                for i in 0..18 {
+                    largest = largest.max((x[i] - q0[i]).abs());
+                }
+            }
+            largest
+        };
+        let (touching, _) = d.touching(&q0);
+        assert_eq!(
+            touching.len(),
+            12,
+            "four feet, each a gap and two tangent rows"
+        );
+        let held = d.holding_inputs(&q0);
+        let hanging = d.gravity_compensation(&q0);
+        let (kept, folded) = (drift(&mut d, &held), drift(&mut d, &hanging));
+        println!("held: {kept:e}; gravity compensation: {folded:e}");
+        assert!(
+            kept < 1e-2 && folded > 0.5,
+            "held: {kept} rad or m off the crouch; gravity compensation: {folded}"
+        );
     }
 }

@@ -6,9 +6,10 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
+use nalgebra::{allocator::Allocator, DMatrix, DVector, DefaultAllocator};
 use tree_model::{Control, Model, Task, TaskIntegrator, TaskSolver};
 
+use crate::cost::{Cost, Derivatives};
 use crate::discrete::DiscreteSystem;
 use crate::ilqr::{solve_until, IlqrSettings, Iteration, Solution, Solver, Stop};
 use crate::knot::Knot;
@@ -17,7 +18,7 @@ use crate::task_cost::TaskCost;
 use tree_runtime::dynamics::{ModelMotions, Prescription};
 use tree_runtime::integrate::ViSettings;
 use tree_runtime::SimError;
-use tree_runtime::{ConstraintTerms, Order, System};
+use tree_runtime::{ConstraintTerms, Order, System, Vector};
 
 /// A solved task: the solver's result and the trajectory at every knot.
 #[derive(Clone, Debug, PartialEq)]
@@ -39,6 +40,10 @@ pub struct TaskResult {
     pub solve_seconds: f64,
     /// Through contact: the plan's controls replayed open loop at hard contact (κ = 0).
     pub hard_replay: Option<HardReplay>,
+    /// Through contact: the plan's policy `u = u_k + K_k (x − x_k)` (clamped to the limits)
+    /// run at hard contact — what a controller executing the plan meets where the motion
+    /// is unstable (a robot rising on its feet), which open loop it cannot follow.
+    pub policy_replay: Option<HardReplay>,
     /// Through contact, when a relaxation could not be reached: which, why, and the `κ`
     /// whose plan this is (`None`: the plan is the task's last `κ`'s).
     pub continuation: Option<String>,
@@ -55,6 +60,8 @@ pub struct HardReplay {
     pub penetration: f64,
     /// The step that could not be taken at hard contact, if any (the replay stops there).
     pub failure: Option<String>,
+    /// Every variable's value where the replay ended (the last knot it reached).
+    pub end: DVector<f64>,
 }
 
 /// Settings beyond the task file: what the CLI's options override.
@@ -159,11 +166,16 @@ where
     )?;
     let solve_seconds = start.elapsed().as_secs_f64();
     let plan = read_back(&mut dynamics, task, &solution)?;
-    let hard_replay = (!task.kappa.is_empty())
-        .then(|| replay_hard(&mut dynamics, &solution))
-        .transpose()?;
+    let (hard_replay, policy_replay) = if task.kappa.is_empty() {
+        (None, None)
+    } else {
+        let open = replay_hard(&mut dynamics, &solution, None)?;
+        let policy = replay_hard(&mut dynamics, &solution, Some(&settings))?;
+        (Some(open), Some(policy))
+    };
     Ok(TaskResult {
         hard_replay,
+        policy_replay,
         continuation,
         t: (0..=task.knots).map(|k| k as f64 * task.dt).collect(),
         q: plan.q,
@@ -190,7 +202,7 @@ where
     for i in 0..q0.len() {
         (q0[i], dq0[i]) = (task.q0[i], task.dq0[i]);
     }
-    let hold = dynamics.gravity_compensation(&q0);
+    let hold = dynamics.holding_inputs(&q0);
     let nu = task.controls.len();
     for (c, control) in task.controls.iter().enumerate() {
         if let (Control::Input(_), Some([lo, hi])) = (control, task.limits[c]) {
@@ -325,8 +337,26 @@ where
     let mut done: Option<(f64, Solution)> = None;
     for &kappa in &task.kappa {
         dynamics.set_kappa(kappa)?;
-        if let Some((_, last)) = &done {
-            closed_loop(dynamics, x0, last, settings, &mut u);
+        match &done {
+            Some((_, last)) => {
+                closed_loop(
+                    dynamics,
+                    x0,
+                    (&last.x, &last.u, &last.gains),
+                    settings,
+                    &mut u,
+                );
+            }
+            None => {
+                // Held by feedback where that runs through, else the guess open loop.
+                let mut q0 = dynamics.sys.zero_vector();
+                q0.as_mut_slice().copy_from_slice(&task.q0);
+                let (x, gains) = held_start(dynamics, cost, (&q0, x0), &u, task.dt)?;
+                let open = u.clone();
+                if !closed_loop(dynamics, x0, (&x, &open, &gains), settings, &mut u) {
+                    u = open;
+                }
+            }
         }
         let stage = match solve_until(dynamics, cost, x0, std::mem::take(&mut u), settings, report)
         {
@@ -365,25 +395,85 @@ where
     Ok((solution, None))
 }
 
-/// The controls of `plan`'s policy `u = u_k + K_k (x − x_k)` (clamped to the limits) along
+/// A held start's states and feedback gains, knot by knot ([`held_start`]).
+type HeldStart = (Vec<DVector<f64>>, Vec<DMatrix<f64>>);
+
+/// A plan's states, controls and feedback gains at knots `0 … N−1` (and the last state).
+type Policy<'a> = (&'a [DVector<f64>], &'a [DVector<f64>], &'a [DMatrix<f64>]);
+
+/// The first relaxation's plan where the start touches something (a robot standing or
+/// crouched on the ground): its first guess (the inputs that hold the start,
+/// [`DiscreteSystem::holding_inputs`]) with the feedback of the time-varying LQR about the
+/// start held — the step linearised at `(x₀, u₀)` and the task's
+/// own running and terminal curvature at `x₀`. A crouched robot on its feet is an unstable
+/// equilibrium: open loop, its held start splays within a few tenths of a second into
+/// motions the contact step cannot follow; with this feedback the first rollout stays near
+/// the start. The states (each `x₀`) and the gains (`−K_k`; zero where nothing touches).
+fn held_start<S: System>(
+    dynamics: &mut DiscreteSystem<S>,
+    cost: &mut TaskCost,
+    (q0, x0): (&Vector<S::N>, &DVector<f64>),
+    guess: &[DVector<f64>],
+    dt: f64,
+) -> Result<HeldStart, SimError>
+where
+    DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
+{
+    let (nx, nu, n) = (x0.len(), dynamics.controls(), guess.len());
+    let states = vec![x0.clone(); n + 1];
+    if dynamics.touching(q0).0.is_empty() || n == 0 {
+        return Ok((states, vec![DMatrix::zeros(nu, nx); n]));
+    }
+    let (mut a, mut b) = (DMatrix::zeros(nx, nx), DMatrix::zeros(nx, nu));
+    let mut x2 = vec![0.0; nx];
+    dynamics.step(
+        0,
+        x0.as_slice(),
+        guess[0].as_slice(),
+        &mut x2,
+        Some((&mut a, &mut b)),
+    )?;
+    let needs = cost.needs();
+    let mut knot = Knot::empty();
+    let mut d = Derivatives::zeros(nx, nu);
+    dynamics.knot(0, x0.as_slice(), &mut knot, true, needs)?;
+    cost.running(0, &knot, &guess[0], Some(&mut d));
+    // Every configuration entry held as firmly, per step, as the task's running cost holds
+    // its most-weighted one per second (its weight w: `ℓ_xx = Δt w`): a task weighting only
+    // the base's pose would leave the legs free to splay.
+    let (mut q, r) = (d.lxx.clone(), d.luu.clone());
+    let nd = dynamics.dynamic_count();
+    let firmest = (0..nd).map(|i| q[(i, i)]).fold(0.0, f64::max) / dt;
+    for i in 0..nd {
+        q[(i, i)] += firmest;
+    }
+    dynamics.knot(n, x0.as_slice(), &mut knot, true, needs)?;
+    cost.terminal(&knot, Some(&mut d));
+    let lqr = crate::lqr::tvlqr(&vec![a; n], &vec![b; n], &q, &r, &d.lxx)?;
+    Ok((states, lqr.into_iter().map(|l| -l.k).collect()))
+}
+
+/// The controls of a plan's policy `u = u_k + K_k (x − x_k)` (clamped to the limits) along
 /// its rollout on `dynamics` from `x0` into `u`: the next relaxation's first guess. Open
 /// loop, a plan for one `κ` drifts on another wherever the motion is unstable (a pole
 /// balanced upright); its feedback keeps it near. Where a step fails the plan's own
-/// controls are taken from there on (the solve's first rollout then reports it).
+/// controls are taken from there on (the solve's first rollout then reports it). Whether
+/// every step went through.
 fn closed_loop<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     x0: &DVector<f64>,
-    plan: &Solution,
+    (states, controls, gains): Policy,
     settings: &IlqrSettings,
     u: &mut Vec<DVector<f64>>,
-) where
+) -> bool
+where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     u.clear();
     let mut x = x0.clone();
     let mut x2 = DVector::zeros(x0.len());
-    for (k, planned) in plan.u.iter().enumerate() {
-        let mut uk = planned + &plan.gains[k] * (&x - &plan.x[k]);
+    for (k, planned) in controls.iter().enumerate() {
+        let mut uk = planned + &gains[k] * (&x - &states[k]);
         if let Some((lo, hi)) = &settings.limits {
             for c in 0..uk.len() {
                 uk[c] = uk[c].clamp(lo[c], hi[c]);
@@ -393,20 +483,23 @@ fn closed_loop<S: System>(
             .step(k, x.as_slice(), uk.as_slice(), x2.as_mut_slice(), None)
             .is_err()
         {
-            u.extend(plan.u[k..].iter().cloned());
-            return;
+            u.extend(controls[k..].iter().cloned());
+            return false;
         }
         u.push(uk);
         std::mem::swap(&mut x, &mut x2);
     }
+    true
 }
 
-/// The plan's controls replayed open loop at hard contact (κ = 0) from its start: the
+/// The plan replayed at hard contact (κ = 0) from its start — its controls open loop, or
+/// with `feedback` its policy `u_k + K_k (x − x_k)` clamped to those settings' limits: the
 /// largest difference of a dynamic variable from the plan and the deepest penetration
 /// (the dynamics are left at κ = 0).
 fn replay_hard<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     plan: &Solution,
+    feedback: Option<&IlqrSettings>,
 ) -> Result<HardReplay, SimError>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
@@ -419,8 +512,21 @@ where
         deviation: 0.0,
         penetration: 0.0,
         failure: None,
+        end: DVector::zeros(0),
     };
-    for (k, u) in plan.u.iter().enumerate() {
+    let mut reached = 0;
+    let mut u = DVector::zeros(dynamics.controls());
+    for k in 0..plan.u.len() {
+        u.copy_from(&plan.u[k]);
+        if let Some(settings) = feedback {
+            let dx = DVector::from_fn(x.len(), |i, _| x[i] - plan.x[k][i]);
+            u.gemv(1.0, &plan.gains[k], &dx, 1.0);
+            if let Some((lo, hi)) = &settings.limits {
+                for c in 0..u.len() {
+                    u[c] = u[c].clamp(lo[c], hi[c]);
+                }
+            }
+        }
         if let Err(e) = dynamics.step(k, &x, u.as_slice(), &mut x2, None) {
             replay.failure = Some(e.to_string());
             break;
@@ -431,6 +537,10 @@ where
             replay.deviation = replay.deviation.max((x2[r] - planned[r]).abs());
         }
         std::mem::swap(&mut x, &mut x2);
+        reached = k + 1;
     }
+    let mut knot = Knot::empty();
+    dynamics.knot(reached, &x, &mut knot, false, Needs::default())?;
+    replay.end = knot.q.clone();
     Ok(replay)
 }
