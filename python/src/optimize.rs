@@ -7,7 +7,7 @@ use numpy::ndarray::Array3;
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use tree_mech::control::{solve_task_until, Task, TaskOptions, TaskResult, TaskSolver};
+use tree_mech::control::{solve_task_until, HardReplay, Task, TaskOptions, TaskResult, TaskSolver};
 use tree_mech::model;
 use tree_mech::nalgebra::DVector;
 use tree_mech::TreeSystem;
@@ -104,7 +104,35 @@ fn solution_dict<'py>(
         "cost_history",
         sol.history.iter().map(|h| h.cost).collect::<Vec<_>>(),
     )?;
+    contact_items(py, task, res, &out)?;
     Ok(out)
+}
+
+/// Through contact: the task's relaxations, each iteration's, why a continuation stopped,
+/// and the plan replayed at hard contact open loop and with its feedback (`None` without
+/// contact).
+fn contact_items(
+    py: Python<'_>,
+    task: &Task,
+    res: &TaskResult,
+    out: &Bound<'_, PyDict>,
+) -> PyResult<()> {
+    out.set_item("kappa", task.kappa.clone())?;
+    let history = res.solution.history.iter().map(|h| h.kappa);
+    out.set_item("kappa_history", history.collect::<Vec<_>>())?;
+    out.set_item("continuation", res.continuation.clone())?;
+    let replay = |r: &Option<HardReplay>| -> PyResult<Option<Bound<'_, PyDict>>> {
+        let Some(r) = r else { return Ok(None) };
+        let d = PyDict::new(py);
+        d.set_item("deviation", r.deviation)?;
+        d.set_item("penetration", r.penetration)?;
+        d.set_item("failure", r.failure.clone())?;
+        d.set_item("q_end", vector(py, r.end.as_slice()))?;
+        Ok(Some(d))
+    };
+    out.set_item("hard_replay", replay(&res.hard_replay)?)?;
+    out.set_item("policy_replay", replay(&res.policy_replay)?)?;
+    Ok(())
 }
 
 /// The task solved without the GIL: after every iteration Ctrl-C is checked and

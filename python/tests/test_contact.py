@@ -1,6 +1,7 @@
 """Contact from Python: a model with a ground and a contact sphere simulates on the VI, its
 impulses and gaps come back as arrays, smooth contact (κ) rests on its central path, and RK4
-runs until a contact closes, then stops with the runtime's sentence."""
+runs until a contact closes, then stops with the runtime's sentence; a plan through contact
+reports its relaxations and its replays at hard contact."""
 import pathlib
 
 import numpy as np
@@ -48,3 +49,25 @@ def test_smooth_contact_rests_on_its_central_path():
     with pytest.raises((ValueError, tm.SimulationError), match="relaxation κ must be finite"):
         m.simulate(duration=0.1, dt=dt, kappa=-1.0)
 
+
+
+def test_a_plan_through_contact_reports_its_relaxations_and_replays():
+    res = tm.optimize(str(ROOT / "tasks/cartpole-rail.toml"))
+    assert res["converged"]
+    assert res["kappa"] == [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]
+    stages = [k for i, k in enumerate(res["kappa_history"])
+              if i == 0 or k != res["kappa_history"][i - 1]]
+    assert stages == res["kappa"] and res["continuation"] is None
+    # Open loop at hard contact it keeps within 2.4e-3 of the plan; with its feedback closer.
+    hard, policy = res["hard_replay"], res["policy_replay"]
+    assert hard["failure"] is None and policy["failure"] is None
+    assert policy["deviation"] < hard["deviation"] < 1e-2
+    assert hard["penetration"] < 1e-9 and hard["q_end"].shape == (2,)
+    np.testing.assert_allclose(policy["q_end"], res["q_final"], atol=1e-3)
+
+
+def test_a_plan_without_contact_has_no_replays():
+    res = tm.optimize(str(ROOT / "tasks/cartpole-swingup.toml"), max_iterations=2)
+    assert res["kappa"] == [] and res["kappa_history"] == [0.0, 0.0]
+    assert res["hard_replay"] is None and res["policy_replay"] is None
+    assert res["continuation"] is None

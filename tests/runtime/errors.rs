@@ -479,3 +479,38 @@ fn a_newton_failure_at_a_gimbal_lock_says_so() {
         "{err}"
     );
 }
+
+/// A limit that holds a joint at a gimbal lock: the fixed-base human collapsing onto its
+/// enforced limits reaches `hip_X`'s upper limit, π/2, where its hip's outer revolutes line
+/// up; the contact step fails and says the mass matrix is nearly singular there, naming a
+/// hip variable, instead of sending the user to a shorter step (derivations §13).
+#[test]
+fn a_contact_failure_at_a_gimbal_lock_says_so() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/robots/example-robot-data/human_description/robots/human.urdf");
+    let robot =
+        tree_mech::model::from_file(path, tree_mech::model::UrdfOptions::default()).unwrap();
+    let limits = tree_mech::model::ContactsSpec {
+        enforce_limits: Some(true),
+        ..Default::default()
+    };
+    let mut sys = tree_mech::TreeSystem::new(&robot.with_contacts(&limits).unwrap()).unwrap();
+    let (q0, dq0) = sys.initial_state();
+    let options = SimOptions {
+        method: Method::Vi(ViSettings::default()),
+        dt: 1e-3,
+        duration: 1.0,
+        ..Default::default()
+    };
+    let err = simulate(&mut sys, &q0, &dq0, &options, &mut NoForce, &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("the contact step did not converge")
+            && err.contains("the mass matrix is nearly singular here (its pivot at `")
+            && err.contains("_hip_")
+            && err.contains("gimbal lock")
+            && !err.contains("lower --dt"),
+        "{err}"
+    );
+}

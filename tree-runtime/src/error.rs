@@ -93,6 +93,9 @@ pub enum SimError {
         residual: f64,
         /// The largest complementarity (relative) at the end.
         complementarity: f64,
+        /// Where the mass matrix at the step's start is nearly singular (as for
+        /// [`SimError::NewtonFailed`]): a limit holding a joint at a gimbal lock.
+        singular: Option<(String, f64)>,
     },
     /// A smooth integrator (RK4, rk45) closed a unilateral row it cannot enforce.
     Unenforced {
@@ -265,10 +268,19 @@ impl fmt::Display for Detail<'_> {
                     None => f.write_str(": the step may be too long for the motion here; lower --dt"),
                 }
             }
-            SimError::ContactFailed { iterations, contact, gap, residual, complementarity, .. } => write!(
-                f,
-                "the contact step did not converge in {iterations} iterations: `{contact}` is furthest (gap {gap:e}, relative residual {residual:e}, complementarity {complementarity:e}); the step may be too long for the impact, lower --dt"
-            ),
+            SimError::ContactFailed { iterations, contact, gap, residual, complementarity, singular, .. } => {
+                write!(
+                    f,
+                    "the contact step did not converge in {iterations} iterations: `{contact}` is furthest (gap {gap:e}, relative residual {residual:e}, complementarity {complementarity:e})"
+                )?;
+                match singular {
+                    Some((variable, ratio)) => write!(
+                        f,
+                        "; the mass matrix is nearly singular here (its pivot at `{variable}` is {ratio:.1e} of its diagonal entry), two variables moving alike — rotations whose axes line up (a gimbal lock), which a limit or contact may hold it at; a shorter step will not pass it"
+                    ),
+                    None => f.write_str("; the step may be too long for the impact, lower --dt"),
+                }
+            }
             SimError::Unenforced { element, gap, integrator, .. } => write!(
                 f,
                 "`{element}` closed (gap {gap:.3e}): {integrator} integrates the smooth equations of motion and cannot enforce a limit, a contact or a taut string, only the variational integrator does; use the VI (--integrator vi), or drop the element (--no-limits or enforce_limits = false for a limit; no [ground], [[contact]] or slack string)"

@@ -118,7 +118,12 @@ def optimize(
     directory). Returns a dict: ``converged``, ``iterations``, ``cost``, ``q_final``,
     ``dq_final``, ``frames`` (final positions of the frames the costs name),
     ``solve_seconds``, and the trajectory ``t``, ``q``, ``dq``, ``u``, ``lam``, the states
-    ``x``, the gains ``K`` (knots, controls, states) and ``feedforward``. After every
+    ``x``, the gains ``K`` (knots, controls, states) and ``feedforward``; through contact
+    also ``kappa`` (the task's relaxations), ``kappa_history`` (each iteration's),
+    ``continuation`` (why a smaller relaxation could not be started, else None),
+    ``hard_replay`` and ``policy_replay`` (the plan at hard contact open loop and with its
+    feedback: ``deviation``, ``penetration``, ``failure``, ``q_end``; None without
+    contact). After every
     iteration ``progress(iteration, cost)``, if given, is called and Ctrl-C honoured; an
     exception from either ends the solve and is raised."""
     if isinstance(task, Mapping):

@@ -710,6 +710,25 @@ where
                 violation,
                 singular: nearly_singular(cx.sys, q),
             },
+            SimError::ContactFailed {
+                step,
+                t,
+                iterations,
+                contact,
+                gap,
+                residual,
+                complementarity,
+                ..
+            } => SimError::ContactFailed {
+                step,
+                t,
+                iterations,
+                contact,
+                gap,
+                residual,
+                complementarity,
+                singular: nearly_singular(cx.sys, q),
+            },
             e => e,
         })
     }

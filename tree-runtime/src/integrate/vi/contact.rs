@@ -709,6 +709,7 @@ where
                         gap: c.gaps.h[e.row],
                         residual: m.relative,
                         complementarity: m.complementarity,
+                        singular: None,
                     },
                 ));
             }
