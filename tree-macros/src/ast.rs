@@ -8,6 +8,7 @@ use syn::{braced, bracketed, parenthesized, Ident, LitStr, Token, Visibility};
 mod kw {
     syn::custom_keyword!(from);
     syn::custom_keyword!(floating_base);
+    syn::custom_keyword!(contacts);
     syn::custom_keyword!(lean);
     syn::custom_keyword!(gravity);
     syn::custom_keyword!(frame);
@@ -34,6 +35,9 @@ pub struct Input {
     /// `lean` / `lean = false` after a file's path: whether the model is compiled lean
     /// (`expand::LEAN_ABOVE`); `None` decides by its size.
     pub lean: Option<bool>,
+    /// `contacts from "file.toml"` after a file's path: the ground, contacts and enforced
+    /// limits that TOML file writes (a task file's, say), added to the model.
+    pub contacts: Option<LitStr>,
 }
 
 pub enum Source {
@@ -218,7 +222,7 @@ impl Parse for Input {
         if input.peek(kw::from) {
             input.parse::<kw::from>()?;
             let path: LitStr = input.parse()?;
-            let (mut floating_base, mut lean) = (false, None);
+            let (mut floating_base, mut lean, mut contacts) = (false, None, None);
             while input.peek(Token![,]) {
                 input.parse::<Token![,]>()?;
                 let lookahead = input.lookahead1();
@@ -233,6 +237,10 @@ impl Parse for Input {
                         value = input.parse::<syn::LitBool>()?.value;
                     }
                     lean = Some(value);
+                } else if lookahead.peek(kw::contacts) {
+                    input.parse::<kw::contacts>()?;
+                    input.parse::<kw::from>()?;
+                    contacts = Some(input.parse::<LitStr>()?);
                 } else {
                     return Err(lookahead.error());
                 }
@@ -247,6 +255,7 @@ impl Parse for Input {
                 name,
                 source: Source::File(path, floating_base),
                 lean,
+                contacts,
             });
         }
         input.parse::<Token![;]>()?;
@@ -297,6 +306,7 @@ impl Parse for Input {
             name,
             source: Source::Inline(model),
             lean: None,
+            contacts: None,
         })
     }
 }

@@ -557,6 +557,8 @@ pub(crate) struct Loaded {
     /// A file model's full path and the path as written.
     file: Option<(String, String)>,
     floating_base: bool,
+    /// The contacts file's (`contacts from "…"`) full path and the path as written.
+    contacts: Option<(String, String)>,
 }
 
 /// Reads the model from its file or lowers the inline syntax (a compile error at the token
@@ -564,12 +566,19 @@ pub(crate) struct Loaded {
 fn load(input: &Input) -> syn::Result<Loaded> {
     Ok(match &input.source {
         Source::File(path, floating_base) => {
-            let (model, full) = lower::from_file(path, *floating_base)?;
+            let (mut model, full) = lower::from_file(path, *floating_base)?;
+            let mut contacts = None;
+            if let Some(file) = &input.contacts {
+                let (with, full) = lower::with_contacts_from(model, file)?;
+                model = with;
+                contacts = Some((full.to_string_lossy().into_owned(), file.value()));
+            }
             Loaded {
                 model,
                 spec: None,
                 file: Some((full.to_string_lossy().into_owned(), path.value())),
                 floating_base: *floating_base,
+                contacts,
             }
         }
         Source::Inline(inline) => {
@@ -579,6 +588,7 @@ fn load(input: &Input) -> syn::Result<Loaded> {
                 spec: Some(spec),
                 file: None,
                 floating_base: false,
+                contacts: None,
             }
         }
     })
@@ -782,11 +792,18 @@ fn inherent_impl(
     let input_names: Vec<&str> = model.inputs.iter().map(|u| u.name.as_str()).collect();
     let input_variables: Vec<usize> = model.inputs.iter().map(|u| u.variable).collect();
     let statements = programs.full.statements;
-    let constructor = model_constructor(
+    let mut constructor = model_constructor(
         loaded.spec.as_ref(),
         (loaded.file.as_ref()).map(|(p, s)| (p.as_str(), s.as_str())),
         loaded.floating_base,
     );
+    if let Some((path, shown)) = &loaded.contacts {
+        constructor = quote! {
+            #constructor
+                .with_contacts_from_toml_str(include_str!(#path), Some(#shown))
+                .expect("the contacts were validated when the model was compiled")
+        };
+    }
     let functions = programs.functions();
     let lean = programs.duals.is_none();
     let interpreted = lean.then(interpreted_twin);

@@ -45,11 +45,14 @@ use syn::parse_macro_input;
 /// ```ignore
 /// tree_mech::tree_model!(pub struct Humanoid from "models/humanoid.toml");
 /// tree_mech::tree_model!(pub struct Solo from "models/solo12.urdf", floating_base);
+/// tree_mech::tree_model!(pub struct SoloStand from "models/solo12.urdf", floating_base,
+///     contacts from "tasks/solo12-stand.toml");
 /// ```
 ///
 /// The path is relative to the calling crate's `Cargo.toml`; TOML or URDF by extension
 /// (`floating_base` adds `root_x root_y root_z root_yaw root_pitch root_roll` under a URDF
-/// robot's root link). The same reader and validator as the runtime; editing the file
+/// robot's root link; `contacts from` adds the ground, contacts and enforced limits a TOML
+/// file — a task's, say — writes). The same reader and validator as the runtime; editing the file
 /// rebuilds. A file's errors are compile errors naming `file:line`.
 ///
 /// # Inline

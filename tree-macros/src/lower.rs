@@ -45,13 +45,41 @@ pub fn is_urdf(path: &str) -> bool {
 /// A model read from a file (TOML, or URDF by extension, with a floating base when asked):
 /// the model and the absolute path, so the expansion can make cargo rebuild when the file
 /// changes.
-pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, PathBuf)> {
-    let written = path.value();
+/// A path as written in the macro, from the crate's root (its `CARGO_MANIFEST_DIR`).
+fn from_crate_root(written: &str) -> PathBuf {
     let base = std::env::var_os("CARGO_MANIFEST_DIR_OVERRIDE")
         .or_else(|| std::env::var_os("CARGO_MANIFEST_DIR"))
         .map(PathBuf::from)
         .unwrap_or_default();
-    let full = base.join(&written);
+    base.join(written)
+}
+
+/// `model` with the contact tables of the TOML file at `path` (`contacts from "…"`), and
+/// that file's full path; a mistake in it is a compile error at the path, with its line.
+pub fn with_contacts_from(model: Model, path: &LitStr) -> syn::Result<(Model, PathBuf)> {
+    let written = path.value();
+    let full = from_crate_root(&written);
+    let text = std::fs::read_to_string(&full).map_err(|e| {
+        syn::Error::new(
+            path.span(),
+            format!("cannot read contacts file `{written}`: {e}"),
+        )
+    })?;
+    let model = model
+        .with_contacts_from_toml_str(&text, Some(&written))
+        .map_err(|e| {
+            let mut errors = Errors::default();
+            for line in e.to_string().lines() {
+                errors.push(path.span(), line);
+            }
+            errors.0.expect("a model error has at least one problem")
+        })?;
+    Ok((model, full))
+}
+
+pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, PathBuf)> {
+    let written = path.value();
+    let full = from_crate_root(&written);
     let text = std::fs::read_to_string(&full).map_err(|e| {
         syn::Error::new(
             path.span(),

@@ -319,6 +319,49 @@ struct Lines {
     contact: ContactLines,
 }
 
+/// The contact tables a TOML file writes — `enforce_limits`, `[ground]`, `[[contact]]`, as a
+/// model or a task file writes them; its other keys are not read.
+#[derive(Deserialize)]
+struct ContactTables {
+    enforce_limits: Option<bool>,
+    ground: Option<Spanned<RawGround>>,
+    #[serde(default)]
+    contact: Vec<Spanned<RawContact>>,
+}
+
+impl Model {
+    /// This model with the ground, contacts and enforced limits a TOML text writes (a task
+    /// file's, say: `tree_model!`'s `contacts from "tasks/solo12-stand.toml"` on a URDF
+    /// robot), each mistake at its line of that text.
+    pub fn with_contacts_from_toml_str(
+        self,
+        text: &str,
+        source_name: Option<&str>,
+    ) -> Result<Model, ModelError> {
+        let src = source_name.map(str::to_string);
+        let lines = LineIndex::new(text);
+        let raw: ContactTables = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| lines.of(s.start));
+            let msg = e.message().trim().to_string();
+            ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
+        })?;
+        let mut contact_lines = ContactLines::default();
+        let written = (
+            raw.enforce_limits,
+            raw.ground.as_ref(),
+            raw.contact.as_slice(),
+        );
+        let spec = contacts_of(written, &lines, &mut contact_lines);
+        self.with_contacts(&spec).map_err(|mut e| {
+            for p in &mut e.problems {
+                p.line = contact_lines.of(&p.site);
+            }
+            e.source_name = src;
+            e
+        })
+    }
+}
+
 /// Lines of the ground's and each contact's fields (a model's, or a task's additions).
 #[derive(Default)]
 pub(crate) struct ContactLines {
