@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use tree_mech::control::{
-    cost_gradient, solve_task, DiscreteSystem, Solver, TaskCost, TaskOptions,
+    cost_gradient, solve_task, DiscreteSystem, Solver, TaskCost, TaskOptions, TaskResult,
 };
 use tree_mech::integrate::ViSettings;
 use tree_mech::model::{task_from_str, TaskSolver};
@@ -88,18 +88,7 @@ fn the_cartpole_swings_up_against_its_rail_stops_and_replays_at_hard_contact() {
     let sys = TreeSystem::new(&m).unwrap();
     let a = solve_task(sys, &first, &m, &options, &mut |_| {}).unwrap();
     let b = solve_task(CartPoleRail, &first, &m, &options, &mut |_| {}).unwrap();
-    assert_eq!(a.solution.history.len(), 8);
-    for (x, y) in a.solution.history.iter().zip(&b.solution.history) {
-        assert!(
-            (x.cost - y.cost).abs() < 1e-10 * x.cost,
-            "{} vs {}",
-            x.cost,
-            y.cost
-        );
-    }
-    for (x, y) in a.solution.u.iter().zip(&b.solution.u) {
-        assert!((x - y).amax() < 1e-8, "{x} vs {y}");
-    }
+    assert_same_iterates(&a, &b, 8);
 }
 
 /// The Solo-12 rises from a crouch to its base at 0.25 m in 1 s through contact at κ = 1e-6
@@ -177,7 +166,13 @@ fn the_solo12_stand_up_compiled_iterates_as_interpreted() {
     let sys = TreeSystem::new(&m).unwrap();
     let a = solve_task(sys, &first, &m, &options, &mut |_| {}).unwrap();
     let b = solve_task(SoloStand, &first, &m, &options, &mut |_| {}).unwrap();
-    assert_eq!(a.solution.history.len(), 5);
+    assert_same_iterates(&a, &b, 5);
+}
+
+/// Two solves (interpreted `a`, compiled `b`) take the same `iterations`: each iteration's
+/// cost to 1e-10 relative, the controls to 1e-8.
+fn assert_same_iterates(a: &TaskResult, b: &TaskResult, iterations: usize) {
+    assert_eq!(a.solution.history.len(), iterations);
     for (x, y) in a.solution.history.iter().zip(&b.solution.history) {
         assert!(
             (x.cost - y.cost).abs() < 1e-10 * x.cost,

@@ -57,35 +57,38 @@ fn from_crate_root(written: &str) -> PathBuf {
 /// `model` with the contact tables of the TOML file at `path` (`contacts from "…"`), and
 /// that file's full path; a mistake in it is a compile error at the path, with its line.
 pub fn with_contacts_from(model: Model, path: &LitStr) -> syn::Result<(Model, PathBuf)> {
-    let written = path.value();
-    let full = from_crate_root(&written);
-    let text = std::fs::read_to_string(&full).map_err(|e| {
-        syn::Error::new(
-            path.span(),
-            format!("cannot read contacts file `{written}`: {e}"),
-        )
-    })?;
+    let (written, full, text) = read_file(path, "contacts")?;
     let model = model
         .with_contacts_from_toml_str(&text, Some(&written))
-        .map_err(|e| {
-            let mut errors = Errors::default();
-            for line in e.to_string().lines() {
-                errors.push(path.span(), line);
-            }
-            errors.0.expect("a model error has at least one problem")
-        })?;
+        .map_err(|e| at_path(path, &e))?;
     Ok((model, full))
 }
 
-pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, PathBuf)> {
+/// The file at `path` (as written, in full, its text); unreadable, a compile error at the
+/// path naming `what` file it is.
+fn read_file(path: &LitStr, what: &str) -> syn::Result<(String, PathBuf, String)> {
     let written = path.value();
     let full = from_crate_root(&written);
     let text = std::fs::read_to_string(&full).map_err(|e| {
         syn::Error::new(
             path.span(),
-            format!("cannot read model file `{written}`: {e}"),
+            format!("cannot read {what} file `{written}`: {e}"),
         )
     })?;
+    Ok((written, full, text))
+}
+
+/// A model error as compile errors at the file's path, one per line of its message.
+fn at_path(path: &LitStr, e: &tree_model::ModelError) -> syn::Error {
+    let mut errors = Errors::default();
+    for line in e.to_string().lines() {
+        errors.push(path.span(), line);
+    }
+    errors.0.expect("a model error has at least one problem")
+}
+
+pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, PathBuf)> {
+    let (written, full, text) = read_file(path, "model")?;
     let model = if is_urdf(&written) {
         let options = tree_model::UrdfOptions {
             floating_base,
@@ -100,13 +103,7 @@ pub fn from_file(path: &LitStr, floating_base: bool) -> syn::Result<(Model, Path
     } else {
         tree_model::from_toml_str(&text, Some(&written))
     };
-    let model = model.map_err(|e| {
-        let mut errors = Errors::default();
-        for line in e.to_string().lines() {
-            errors.push(path.span(), line);
-        }
-        errors.0.expect("a model error has at least one problem")
-    })?;
+    let model = model.map_err(|e| at_path(path, &e))?;
     Ok((model, full))
 }
 

@@ -13,7 +13,7 @@ use toml::{Spanned, Value};
 use crate::error::{ModelError, Problem, Site};
 use crate::model::Model;
 use crate::source::LineIndex;
-use crate::toml_format::{contacts_of, ContactLines, RawContact, RawGround};
+use crate::toml_format::{toml_error, with_written_contacts, RawContact, RawGround};
 use crate::urdf_format::{from_file, UrdfOptions};
 
 /// The integrator a task steps with: `vi` (the default, on `(q_d, p_d)`) or `rk4` (on
@@ -370,11 +370,7 @@ pub fn task_from_str(
 ) -> Result<(Task, Model), ModelError> {
     let src = source_name.map(str::to_string);
     let lines = LineIndex::new(text);
-    let raw: RawTask = toml::from_str(text).map_err(|e| {
-        let line = e.span().map(|s| lines.of(s.start));
-        let msg = e.message().trim().to_string();
-        ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
-    })?;
+    let raw: RawTask = toml::from_str(text).map_err(|e| toml_error(&e, &lines, &src))?;
     let model_path = base.join(raw.model.get_ref());
     let floating_base = raw.floating_base.unwrap_or(false);
     let model = from_file(
@@ -421,20 +417,12 @@ fn with_task_contacts(
     if raw.enforce_limits.is_none() && raw.ground.is_none() && raw.contact.is_empty() {
         return Ok(model);
     }
-    let mut contact_lines = ContactLines::default();
     let written = (
         raw.enforce_limits,
         raw.ground.as_ref(),
         raw.contact.as_slice(),
     );
-    let spec = contacts_of(written, lines, &mut contact_lines);
-    model.with_contacts(&spec).map_err(|mut e| {
-        for p in &mut e.problems {
-            p.line = contact_lines.of(&p.site);
-        }
-        e.source_name = src.clone();
-        e
-    })
+    with_written_contacts(model, written, lines, src)
 }
 
 /// `kappa`: one relaxation or a list, each positive and finite, each smaller than the one

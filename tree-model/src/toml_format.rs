@@ -340,26 +340,44 @@ impl Model {
     ) -> Result<Model, ModelError> {
         let src = source_name.map(str::to_string);
         let lines = LineIndex::new(text);
-        let raw: ContactTables = toml::from_str(text).map_err(|e| {
-            let line = e.span().map(|s| lines.of(s.start));
-            let msg = e.message().trim().to_string();
-            ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
-        })?;
-        let mut contact_lines = ContactLines::default();
+        let raw: ContactTables = toml::from_str(text).map_err(|e| toml_error(&e, &lines, &src))?;
         let written = (
             raw.enforce_limits,
             raw.ground.as_ref(),
             raw.contact.as_slice(),
         );
-        let spec = contacts_of(written, &lines, &mut contact_lines);
-        self.with_contacts(&spec).map_err(|mut e| {
-            for p in &mut e.problems {
-                p.line = contact_lines.of(&p.site);
-            }
-            e.source_name = src;
-            e
-        })
+        with_written_contacts(self, written, &lines, &src)
     }
+}
+
+/// A TOML syntax or shape error as a model error at its line.
+pub(crate) fn toml_error(
+    e: &toml::de::Error,
+    lines: &LineIndex,
+    src: &Option<String>,
+) -> ModelError {
+    let line = e.span().map(|s| lines.of(s.start));
+    let msg = e.message().trim().to_string();
+    ModelError::single(src.clone(), format!("TOML error: {msg}"), line)
+}
+
+/// `model` with the contact tables as written (a task's or a contacts file's), each
+/// mistake at its line.
+pub(crate) fn with_written_contacts(
+    model: Model,
+    written: RawContacts,
+    lines: &LineIndex,
+    src: &Option<String>,
+) -> Result<Model, ModelError> {
+    let mut contact_lines = ContactLines::default();
+    let spec = contacts_of(written, lines, &mut contact_lines);
+    model.with_contacts(&spec).map_err(|mut e| {
+        for p in &mut e.problems {
+            p.line = contact_lines.of(&p.site);
+        }
+        e.source_name = src.clone();
+        e
+    })
 }
 
 /// Lines of the ground's and each contact's fields (a model's, or a task's additions).

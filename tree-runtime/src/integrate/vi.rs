@@ -694,42 +694,14 @@ where
         let (t, dt) = (cx.t, cx.dt);
         let result = self.advance(cx, q, p, q_next, 0);
         (cx.t, cx.dt) = (t, dt);
-        result.map_err(|e| match e {
-            SimError::NewtonFailed {
-                step,
-                t,
-                iterations,
-                residual,
-                violation,
-                ..
-            } => SimError::NewtonFailed {
-                step,
-                t,
-                iterations,
-                residual,
-                violation,
-                singular: nearly_singular(cx.sys, q),
-            },
-            SimError::ContactFailed {
-                step,
-                t,
-                iterations,
-                contact,
-                gap,
-                residual,
-                complementarity,
-                ..
-            } => SimError::ContactFailed {
-                step,
-                t,
-                iterations,
-                contact,
-                gap,
-                residual,
-                complementarity,
-                singular: nearly_singular(cx.sys, q),
-            },
-            e => e,
+        // A failure where the mass matrix is nearly singular names that cause.
+        result.map_err(|mut e| {
+            if let SimError::NewtonFailed { singular, .. }
+            | SimError::ContactFailed { singular, .. } = &mut e
+            {
+                *singular = nearly_singular(cx.sys, q);
+            }
+            e
         })
     }
 
