@@ -424,16 +424,20 @@ where
         x
     }
 
-    /// The inputs that hold configuration `q` at rest against gravity and springs, per
-    /// control (`u = −∂L/∂q` at `q̇ = 0` on each input's variable; zero for kinematic
-    /// controls).
-    pub(crate) fn gravity_compensation(&mut self, q: &Vector<S::N>) -> DVector<f64> {
+    /// `G = −∂L/∂q` at `(q, q̇ = 0)`: the generalized force that holds `q` at rest.
+    fn generalized_gravity(&mut self, q: &Vector<S::N>) -> DVector<f64> {
         let zero = self.sys.zero_vector();
         let terms = &mut self.buf.terms;
         self.sys.lagrangian(q, &zero, Order::First, terms);
+        DVector::from_fn(q.len(), |i, _| -terms.dl_dq[i])
+    }
+
+    /// A generalized force's entries on each control's input variable (zero for kinematic
+    /// controls).
+    fn per_input(&self, g: &DVector<f64>) -> DVector<f64> {
         DVector::from_fn(self.layout.controls.len(), |c, _| {
             match self.layout.controls[c] {
-                Control::Input(k) => -terms.dl_dq[self.sys.input_variable(k)],
+                Control::Input(k) => g[self.sys.input_variable(k)],
                 Control::Kinematic(_) => 0.0,
             }
         })
@@ -462,19 +466,17 @@ where
     /// tangent rows with it) — `B u + Aᵀ f = G` with the least inputs, then the least forces
     /// (`min ‖u‖² + ε²‖f‖²`, ε = [`FORCE_WEIGHT`]); the equilibrium in least squares where
     /// none holds exactly. A legged robot crouched on the ground is held by its feet as well
-    /// as its motors, where [`Self::gravity_compensation`] holds its legs up as if they hung.
-    /// Without touching rows, that compensation. The friction cones are not imposed.
+    /// as its motors, where the plain gravity compensation (`G` on each input's own row)
+    /// holds its legs up as if they hung. Without touching rows, that compensation. The
+    /// friction cones are not imposed.
     pub(crate) fn holding_inputs(&mut self, q: &Vector<S::N>) -> DVector<f64> {
         let (touching, terms) = self.touching(q);
-        let hold = self.gravity_compensation(q);
+        let g = self.generalized_gravity(q);
+        let hold = self.per_input(&g);
         if touching.is_empty() {
             return hold;
         }
         let (n, nu) = (q.len(), self.layout.controls.len());
-        let zero = self.sys.zero_vector();
-        self.sys
-            .lagrangian(q, &zero, Order::First, &mut self.buf.terms);
-        let g = DVector::from_fn(n, |i, _| -self.buf.terms.dl_dq[i]);
         let mut c = DMatrix::zeros(n, nu + touching.len());
         for (k, control) in self.layout.controls.iter().enumerate() {
             if let Control::Input(input) = *control {
@@ -1069,7 +1071,8 @@ mod tests {
             "four feet, each a gap and two tangent rows"
         );
         let held = d.holding_inputs(&q0);
-        let hanging = d.gravity_compensation(&q0);
+        let g = d.generalized_gravity(&q0);
+        let hanging = d.per_input(&g);
         let (kept, folded) = (drift(&mut d, &held), drift(&mut d, &hanging));
         println!("held: {kept:e}; gravity compensation: {folded:e}");
         assert!(

@@ -1042,7 +1042,7 @@ fn centrality(elements: &[Element], z: &[f64]) -> f64 {
 
 /// `alpha` halved until the step along `c.direction` ends within the central path's
 /// neighbourhood ([`NEIGHBOURHOOD`], or no less central than it starts when it starts
-/// outside).
+/// outside). The trial points go into `c.affine`, free once the corrector is formed.
 fn within_neighbourhood(c: &mut ContactStep, alpha: f64) -> f64 {
     let least = NEIGHBOURHOOD.min(centrality(&c.elements, &c.z));
     let mut alpha = alpha;
