@@ -331,6 +331,91 @@ impl Model {
         }
         Model::of(m)
     }
+
+    /// A copy with contact added, as the command line's `--ground`, `--friction`,
+    /// `--contact` and `--limits` add it: `ground` the height of the plane under the world
+    /// (replacing the model's own), with `friction` μ and `normal` (default +z); `contacts`
+    /// spheres on frames, each `"FRAME"`, `"FRAME:RADIUS"` or a dict with `frame` and any of
+    /// `radius`, `friction`, `collide`, `name` (docs/model-format.md, "Contact"); `limits`
+    /// True or False to enforce the variables' limits or not, whatever the model says.
+    #[pyo3(signature = (ground=None, friction=None, normal=None, contacts=None, limits=None))]
+    fn with_contacts(
+        &self,
+        py: Python<'_>,
+        ground: Option<f64>,
+        friction: Option<f64>,
+        normal: Option<[f64; 3]>,
+        contacts: Option<Vec<Bound<'_, PyAny>>>,
+        limits: Option<bool>,
+    ) -> PyResult<Model> {
+        let ground = (ground.is_some() || friction.is_some() || normal.is_some()).then_some(
+            model::GroundSpec {
+                height: ground,
+                normal,
+                friction,
+            },
+        );
+        let contacts = (contacts.iter().flatten())
+            .enumerate()
+            .map(|(k, c)| contact_spec(k, c))
+            .collect::<PyResult<Vec<_>>>()?;
+        let spec = model::ContactsSpec {
+            enforce_limits: limits,
+            ground,
+            contacts,
+        };
+        let m = (self.model.with_contacts(&spec)).map_err(|e| model_error(py, &e))?;
+        Model::of(m)
+    }
+}
+
+/// Contact `k` of [`Model::with_contacts`]: `"FRAME"`, `"FRAME:RADIUS"` or a dict.
+fn contact_spec(k: usize, c: &Bound<'_, PyAny>) -> PyResult<model::ContactSpec> {
+    if let Ok(text) = c.extract::<String>() {
+        let (frame, radius) = match text.split_once(':') {
+            Some((f, r)) => {
+                let radius = r.trim().parse::<f64>().map_err(|_| {
+                    bad(format!(
+                        "contacts[{k}] = {text:?}: the radius after `:` must be a number"
+                    ))
+                })?;
+                (f, Some(radius))
+            }
+            None => (text.as_str(), None),
+        };
+        return Ok(model::ContactSpec {
+            frame: frame.trim().to_string(),
+            radius,
+            ..Default::default()
+        });
+    }
+    let dict = c.cast::<PyDict>().map_err(|_| {
+        bad(format!(
+            "contacts[{k}] must be \"FRAME\", \"FRAME:RADIUS\" or a dict with `frame`"
+        ))
+    })?;
+    let mut spec = model::ContactSpec::default();
+    for (key, value) in dict.iter() {
+        let key: String = key.extract()?;
+        let wrong = |what: &str| bad(format!("contacts[{k}][{key:?}] must be {what}"));
+        match key.as_str() {
+            "frame" => spec.frame = value.extract().map_err(|_| wrong("a frame's name"))?,
+            "name" => spec.name = Some(value.extract().map_err(|_| wrong("a string"))?),
+            "radius" => spec.radius = Some(value.extract().map_err(|_| wrong("a number"))?),
+            "friction" => spec.friction = Some(value.extract().map_err(|_| wrong("a number"))?),
+            "collide" => spec.collide = Some(value.extract().map_err(|_| wrong("True or False"))?),
+            _ => {
+                return Err(bad(format!(
+                    "contacts[{k}] has `{key}`: a contact takes frame, radius, friction, \
+                     collide and name"
+                )))
+            }
+        }
+    }
+    if spec.frame.is_empty() {
+        return Err(bad(format!("contacts[{k}] names no `frame`")));
+    }
+    Ok(spec)
 }
 
 /// The kinematic variables' motion at one state: the model's prescription at `t`, or the

@@ -71,3 +71,29 @@ def test_a_plan_without_contact_has_no_replays():
     assert res["kappa"] == [] and res["kappa_history"] == [0.0, 0.0]
     assert res["hard_replay"] is None and res["policy_replay"] is None
     assert res["continuation"] is None
+
+
+def test_a_ground_and_contacts_are_added_from_python():
+    # The ball's model without its ground and sphere: a point mass over nothing.
+    text = pathlib.Path(BALL).read_text().split("[ground]")[0]
+    free = tm.loads(text)
+    assert free.simulate(duration=0.6, dt=1e-3).q[-1, 2] < 0.0
+    for contact in ["ball:0.1", {"frame": "ball", "radius": 0.1, "name": "ball"}]:
+        m = free.with_contacts(ground=0.0, friction=0.5, contacts=[contact])
+        traj = m.simulate(duration=1.0, dt=1e-3)
+        assert traj.unilateral[0] in ("ball", "contact1")
+        # As the model that writes them: lands at √(2h/g), rests at its radius.
+        landed = np.argmax(traj.gap[:, 0] < 1e-9)
+        assert traj.t[landed] == pytest.approx((2.0 / 9.81) ** 0.5, abs=2e-3)
+        assert traj.q[-1, 2] == pytest.approx(0.1, abs=1e-9)
+    # A lifted ground: the ball rests on it.
+    m = free.with_contacts(ground=0.25, contacts=["ball:0.1"])
+    assert m.simulate(duration=1.0, dt=1e-3).q[-1, 2] == pytest.approx(0.35, abs=1e-9)
+    with pytest.raises(tm.ModelError, match="no_such_frame"):
+        free.with_contacts(ground=0.0, contacts=["no_such_frame"])
+    with pytest.raises(tm.ModelError, match="radius"):
+        free.with_contacts(contacts=[{"frame": "ball", "radius": -1.0}])
+    with pytest.raises(ValueError, match=r"contacts\[0\] has `size`"):
+        free.with_contacts(contacts=[{"frame": "ball", "size": 1.0}])
+    with pytest.raises(ValueError, match="must be a number"):
+        free.with_contacts(contacts=["ball:big"])

@@ -535,6 +535,72 @@ fn lu_core_factor(
 /// matrix is singular there.
 const LOST: f64 = 1e-14;
 
+/// Solves `S y = b` for symmetric positive semi-definite `S` (`n × n`, row-major in
+/// `s[..n²]`, overwritten) whose rows may be linearly dependent — the Gram matrix `A M⁻¹ Aᵀ`
+/// of redundant contact rows (eight corners of a box on the ground: 24 rows on 6 degrees of
+/// freedom). Cholesky with diagonal pivoting: a pivot below `relative` times the largest
+/// diagonal ends the factorisation, and the rows left are dependent on those taken; their
+/// `y` is 0. For `b` in `S`'s range (`b = A v`) this `y` solves `S y = b` exactly, and
+/// `Aᵀ y` is the unique projection. `order` (`n` long) receives the pivots' order; `b`
+/// becomes `y`. Returns the rank.
+pub(crate) fn semidefinite_solve(
+    s: &mut [f64],
+    n: usize,
+    order: &mut [usize],
+    b: &mut [f64],
+    relative: f64,
+) -> usize {
+    let at = |i: usize, j: usize| i * n + j;
+    for (k, o) in order[..n].iter_mut().enumerate() {
+        *o = k;
+    }
+    let largest = (0..n).map(|i| s[at(i, i)]).fold(0.0, f64::max);
+    let mut rank = 0;
+    while rank < n {
+        let k = rank;
+        let p = (k..n)
+            .max_by(|&a, &c| s[at(order[a], order[a])].total_cmp(&s[at(order[c], order[c])]))
+            .expect("k < n");
+        let i = order[p];
+        let d = s[at(i, i)];
+        if d.is_nan() || d <= relative * largest {
+            break;
+        }
+        order.swap(k, p);
+        let l = d.sqrt();
+        s[at(i, i)] = l;
+        for &j in &order[k + 1..n] {
+            s[at(j, i)] /= l;
+        }
+        // Update the trailing block (its lower triangle and diagonal; row-major at (j, m)).
+        for a in k + 1..n {
+            let j = order[a];
+            for &m in &order[k + 1..=a] {
+                s[at(j, m)] -= s[at(j, i)] * s[at(m, i)];
+                s[at(m, j)] = s[at(j, m)];
+            }
+        }
+        rank += 1;
+    }
+    // L z = b on the pivots taken, then Lᵀ y = z; the dependent rows' y is 0.
+    for k in 0..rank {
+        let i = order[k];
+        let sum: f64 = (0..k).map(|l| s[at(i, order[l])] * b[order[l]]).sum();
+        b[i] = (b[i] - sum) / s[at(i, i)];
+    }
+    for &i in &order[rank..n] {
+        b[i] = 0.0;
+    }
+    for k in (0..rank).rev() {
+        let i = order[k];
+        let sum: f64 = (k + 1..rank)
+            .map(|l| s[at(order[l], i)] * b[order[l]])
+            .sum();
+        b[i] = (b[i] - sum) / s[at(i, i)];
+    }
+    rank
+}
+
 /// [`lu_factor_packed`] that refuses only a zero or non-finite pivot: for an interior
 /// point's Newton matrix, ill-conditioned by design near the solution (an impulse and its
 /// gap tending to zero together), whose direction is still accurate where it matters.
@@ -676,6 +742,42 @@ fn pivot_column(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Redundant rows (24 rows of rank 6, as a box's eight frictional corners): the pivoted
+    /// solve finds the rank, and its `y` solves `S y = b` for `b` in the range.
+    #[test]
+    fn a_semidefinite_gram_matrix_of_dependent_rows_is_solved_on_its_range() {
+        let (r, n) = (24, 6);
+        let base: Vec<f64> = (0..n * n)
+            .map(|x| (x as f64 * 0.71).sin() + if x % 7 == 0 { 2.0 } else { 0.0 })
+            .collect();
+        // Row k of A: a combination of the n base rows.
+        let a: Vec<f64> = (0..r * n)
+            .map(|x| {
+                let (k, j) = (x / n, x % n);
+                (0..n)
+                    .map(|b| (((k * n + b) * (k * n + b)) as f64 * 0.013).sin() * base[b * n + j])
+                    .sum()
+            })
+            .collect();
+        let gram = |i: usize, j: usize| (0..n).map(|c| a[i * n + c] * a[j * n + c]).sum::<f64>();
+        let s0: Vec<f64> = (0..r * r).map(|x| gram(x / r, x % r)).collect();
+        let v: Vec<f64> = (0..n).map(|j| 1.0 + j as f64).collect();
+        let b0: Vec<f64> = (0..r)
+            .map(|i| (0..n).map(|c| a[i * n + c] * v[c]).sum())
+            .collect();
+        let (mut s, mut y, mut order) = (s0.clone(), b0.clone(), vec![0; r]);
+        assert_eq!(semidefinite_solve(&mut s, r, &mut order, &mut y, 1e-10), n);
+        let scale = b0.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for i in 0..r {
+            let sy: f64 = (0..r).map(|j| s0[i * r + j] * y[j]).sum();
+            assert!(
+                (sy - b0[i]).abs() < 1e-9 * scale,
+                "row {i}: {sy} against {}",
+                b0[i]
+            );
+        }
+    }
 
     /// The Cholesky solve by rows gives, bit for bit, what one solve per right-hand side
     /// gives, and `A X = B` holds.

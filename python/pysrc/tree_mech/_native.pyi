@@ -193,6 +193,14 @@ class Model:
         constants: Optional[dict[str, float]] = None,
         gravity: Optional[Sequence[float]] = None,
     ) -> "Model": ...
+    def with_contacts(
+        self,
+        ground: Optional[float] = None,
+        friction: Optional[float] = None,
+        normal: Optional[Sequence[float]] = None,
+        contacts: Optional[Sequence[Union[str, dict[str, Any]]]] = None,
+        limits: Optional[bool] = None,
+    ) -> "Model": ...
 
 @final
 class Stepper:

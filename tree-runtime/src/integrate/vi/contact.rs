@@ -30,7 +30,7 @@ use crate::cone::{self, Point};
 use crate::context::StepContext;
 use crate::dynamics::{GeneralizedForce, Prescription};
 use crate::error::SimError;
-use crate::linalg::{lu_factor_packed_unguarded, lu_solve_packed};
+use crate::linalg::{lu_factor_packed_unguarded, lu_solve_packed, semidefinite_solve};
 use crate::system::{ConstraintTerms, System, Vector};
 
 /// Iterations a contact step may take before it fails.
@@ -386,6 +386,10 @@ impl ContactStep {
     }
 }
 
+/// Below this fraction of the largest diagonal a held row's pivot in the velocity
+/// projection's Gram matrix marks it dependent on the rows taken before it.
+const DEPENDENT: f64 = 1e-10;
+
 impl ContactStep {
     /// The velocity at the last step's end made consistent with the contacts in force
     /// (docs/derivations.md §13): among the elements closed at `q₂` (gap within `closed`) and
@@ -450,15 +454,14 @@ impl ContactStep {
                     .sum();
             }
         }
-        if lu_factor_packed_unguarded(&mut self.small[..r * r], r, &mut self.small_pivots).is_err()
-        {
-            return;
-        }
-        lu_solve_packed(
-            &self.small[..r * r],
+        // The held rows may be dependent (a box's eight corners sticking: 24 rows on 6
+        // degrees of freedom); S's pivoted factor takes a basis of them.
+        semidefinite_solve(
+            &mut self.small[..r * r],
             r,
-            &self.small_pivots,
+            &mut self.small_pivots,
             &mut self.rhs[..r],
+            DEPENDENT,
         );
         for k in 0..r {
             let (x, y) = (&self.solved[k * nd..(k + 1) * nd], self.rhs[k]);
