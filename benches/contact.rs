@@ -8,7 +8,8 @@
 //! on the ground. It also times a linearised contact step of the Solo-12 (the step's `A`,
 //! `B` through its four foot contacts at κ = 10⁻⁶), what MuJoCo's `mjd_transitionFD` gives.
 //!
-//! Run: `cargo bench --bench contact` (a table); `-- --json` prints one JSON object a row.
+//! Run: `cargo bench --bench contact` (a table); `-- --json` prints one JSON object a row;
+//! words choose cases: `-- solo` (the drop and the linearised step), `-- balls`, `-- slope`.
 
 use std::time::Instant;
 
@@ -51,13 +52,8 @@ struct Run {
 /// The inputs from a step's start state `(q, q̇)`, into `u`.
 type Policy = dyn FnMut(&[f64], &[f64], &mut [f64]);
 
-/// Runs `sys` from `(q0, 0)` for `steps`, the inputs from `policy(q, q̇)` at each step's start.
-fn run<S: System>(
-    sys: S,
-    q0: &[f64],
-    steps: usize,
-    policy: &mut Policy,
-) -> Run
+/// Runs `sys` from `q0` (at the model's velocities) for `steps`, the inputs from `policy(q, q̇)` at each step's start.
+fn run<S: System>(sys: S, q0: &[f64], steps: usize, policy: &mut Policy) -> Run
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
@@ -272,33 +268,48 @@ where
 }
 
 fn main() {
-    let json = std::env::args().any(|a| a == "--json");
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let json = args.iter().any(|a| a == "--json");
+    // Words (not flags) choose the cases whose names contain one: `-- solo balls`.
+    let words: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
+    let wanted = |case: &str| words.is_empty() || words.iter().any(|w| case.contains(w.as_str()));
     let mut rows = Vec::new();
-    let (m, sys) = interpreted("tests/models/ball.toml");
-    rows.push(ball(Ball, &m, "compiled"));
-    rows.push(ball(sys, &m, "interpreted"));
-    let (m, sys) = interpreted("tests/models/box.toml");
-    rows.push(slide(Cube, &m, "compiled"));
-    rows.push(slide(sys, &m, "interpreted"));
-    let (m, sys) = interpreted("benches/models/slope-0.3.toml");
-    rows.push(slope(Sticks, &m, 0.3, "compiled"));
-    rows.push(slope(sys, &m, 0.3, "interpreted"));
-    let (m, sys) = interpreted("benches/models/slope-0.6.toml");
-    rows.push(slope(Slides, &m, 0.6, "compiled"));
-    rows.push(slope(sys, &m, 0.6, "interpreted"));
+    if wanted("ball drop") {
+        let (m, sys) = interpreted("tests/models/ball.toml");
+        rows.push(ball(Ball, &m, "compiled"));
+        rows.push(ball(sys, &m, "interpreted"));
+    }
+    if wanted("box slide") {
+        let (m, sys) = interpreted("tests/models/box.toml");
+        rows.push(slide(Cube, &m, "compiled"));
+        rows.push(slide(sys, &m, "interpreted"));
+    }
+    if wanted("slope") {
+        let (m, sys) = interpreted("benches/models/slope-0.3.toml");
+        rows.push(slope(Sticks, &m, 0.3, "compiled"));
+        rows.push(slope(sys, &m, 0.3, "interpreted"));
+        let (m, sys) = interpreted("benches/models/slope-0.6.toml");
+        rows.push(slope(Slides, &m, 0.6, "compiled"));
+        rows.push(slope(sys, &m, 0.6, "interpreted"));
+    }
     let m = Solo::model();
-    rows.push(solo(Solo, &m, "compiled"));
-    rows.push(solo(TreeSystem::new(&m).unwrap(), &m, "interpreted"));
-    let (m, sys) = interpreted("benches/models/balls-27.toml");
-    rows.push(balls(Balls, &m, "compiled"));
-    rows.push(balls(sys, &m, "interpreted"));
-    let m = Solo::model();
-    let compiled = linearised_step(Solo, &m);
-    let interp = linearised_step(TreeSystem::new(&m).unwrap(), &m);
-    report(&rows, json, [compiled, interp]);
+    if wanted("solo drop") {
+        rows.push(solo(Solo, &m, "compiled"));
+        rows.push(solo(TreeSystem::new(&m).unwrap(), &m, "interpreted"));
+    }
+    if wanted("balls") {
+        let (m, sys) = interpreted("benches/models/balls-27.toml");
+        rows.push(balls(Balls, &m, "compiled"));
+        rows.push(balls(sys, &m, "interpreted"));
+    }
+    let linearised = wanted("solo linearised").then(|| {
+        let compiled = linearised_step(Solo, &m);
+        [compiled, linearised_step(TreeSystem::new(&m).unwrap(), &m)]
+    });
+    report(&rows, json, linearised);
 }
 
-fn report(rows: &[Row], json: bool, linearised: [f64; 2]) {
+fn report(rows: &[Row], json: bool, linearised: Option<[f64; 2]>) {
     if json {
         for r in rows {
             let v = serde_json::json!({
@@ -308,7 +319,10 @@ fn report(rows: &[Row], json: bool, linearised: [f64; 2]) {
             });
             println!("{v}");
         }
-        for (path, us) in ["compiled", "interpreted"].iter().zip(linearised) {
+        for (path, us) in ["compiled", "interpreted"]
+            .iter()
+            .zip(linearised.iter().flatten())
+        {
             println!(
                 "{}",
                 serde_json::json!({"case": "Solo-12 linearised contact step (µs)", "path": path, "microseconds": us})
@@ -332,8 +346,9 @@ fn report(rows: &[Row], json: bool, linearised: [f64; 2]) {
             r.steps_per_second
         );
     }
-    println!(
-        "Solo-12 linearised contact step (x₂, A, B at κ = 1e-6): compiled {:.1} µs, interpreted {:.1} µs",
-        linearised[0], linearised[1]
-    );
+    if let Some([compiled, interpreted]) = linearised {
+        println!(
+            "Solo-12 linearised contact step (x₂, A, B at κ = 1e-6): compiled {compiled:.1} µs, interpreted {interpreted:.1} µs"
+        );
+    }
 }

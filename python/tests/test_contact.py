@@ -97,3 +97,22 @@ def test_a_ground_and_contacts_are_added_from_python():
         free.with_contacts(contacts=[{"frame": "ball", "size": 1.0}])
     with pytest.raises(ValueError, match="must be a number"):
         free.with_contacts(contacts=["ball:big"])
+
+
+def test_readme_s_solo12_with_contacts_lands_on_its_feet():
+    # README's "From Python" contact line, as written there.
+    m = tm.load(str(ROOT / "models/solo12.urdf"), floating_base=True).with_contacts(
+        ground=0.0, friction=0.8,
+        contacts=["FL_FOOT:0.016", "FR_FOOT:0.016", "HL_FOOT:0.016", "HR_FOOT:0.016"])
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert 'contacts=["FL_FOOT:0.016", "FR_FOOT:0.016", "HL_FOOT:0.016", "HR_FOOT:0.016"]' in readme
+    q0 = np.zeros(18)
+    q0[6:] = [0.0, 0.8, -1.6, 0.0, 0.8, -1.6, 0.0, -0.8, 1.6, 0.0, -0.8, 1.6]
+    q0[2] = 0.3
+    traj = m.simulate(duration=0.5, dt=1e-3, q0=q0)
+    feet = [traj.unilateral.index(f) for f in ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]]
+    # Added spheres touch each other too (a pair row each), as written in a model.
+    assert "FL_FOOT|FR_FOOT" in traj.unilateral
+    # It falls limp onto its feet: no foot sphere into the ground, and some land.
+    assert traj.gap[:, feet].min() > -1e-9
+    assert (traj.gap[-1, feet] < 1e-9).any()
