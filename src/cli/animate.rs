@@ -11,6 +11,7 @@ use tree_mech::model::{tangents, ConstraintKind, Joint, Model, Rounded, SpringKi
 use tree_mech::runtime::{Pose, Seconds};
 
 use super::bodies::{BodyBox, Rail};
+use super::forces::Arrow;
 use super::output::{drawing_error, OutputFile, Sentence};
 use super::plot::FONT;
 
@@ -49,6 +50,8 @@ const RAIL: RGBColor = RGBColor(150, 150, 160);
 const TARGET: RGBColor = RGBColor(220, 0, 120);
 const GROUND: RGBColor = RGBColor(150, 120, 90);
 const CONTACT: RGBColor = RGBColor(0, 150, 170);
+/// Contact forces: a corner of the palette's colour cube, so drawn exactly.
+const FORCE: RGBColor = RGBColor(255, 102, 0);
 
 impl Figure {
     fn of(model: &Model) -> Figure {
@@ -295,9 +298,10 @@ pub fn write_gif(
     frames: &[Vec<Pose>],
     out: &OutputFile,
     mode: CameraMode,
-    targets: &[[f64; 3]],
+    overlay: &Overlay,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(), String> {
+    let targets = overlay.targets;
     let spacing = match times {
         [first, .., last] => (last - first) / (times.len() - 1) as f64,
         _ => 1.0 / FPS,
@@ -338,6 +342,8 @@ pub fn write_gif(
             targets,
             root: (mode == CameraMode::Track).then_some(view.root),
             model,
+            arrows: overlay.arrows.get(k).map_or(&[], |a| a.as_slice()),
+            largest_force: overlay.largest_force(),
         };
         let rgb = render(&scene, times[k], &frames[k])?;
         let indices: Vec<u8> = rgb
@@ -433,6 +439,23 @@ fn palette_index(c: [u8; 3]) -> u8 {
     (NAMED.len() + 36 * q(c[0]) + 6 * q(c[1]) + q(c[2])) as u8
 }
 
+/// What an animation draws beyond the model: the points a task aims for, and each picture's
+/// contact forces (`--forces`; none when empty).
+#[derive(Default)]
+pub struct Overlay<'a> {
+    pub targets: &'a [[f64; 3]],
+    pub arrows: &'a [Vec<Arrow>],
+}
+
+impl Overlay<'_> {
+    /// The largest force over the run: the arrows' common scale.
+    fn largest_force(&self) -> f64 {
+        (self.arrows.iter().flatten())
+            .map(|a| dot(a.force, a.force).sqrt())
+            .fold(0.0, f64::max)
+    }
+}
+
 /// What every picture of one animation shares.
 struct Scene<'a> {
     figure: &'a Figure,
@@ -446,6 +469,9 @@ struct Scene<'a> {
     /// The frame a tracking camera follows (its height is captioned).
     root: Option<usize>,
     model: &'a Model,
+    /// This picture's contact forces, and the run's largest (drawn a quarter of the view).
+    arrows: &'a [Arrow],
+    largest_force: f64,
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
@@ -499,6 +525,7 @@ fn draw_frame(root: &Area, scene: &Scene, t: f64, poses: &[Pose]) -> Result<(), 
     let extent = (0..3)
         .map(|i| scene.hi[i] - scene.lo[i])
         .fold(1e-3, f64::max);
+    draw_arrows(scene, extent, &line)?;
     for &p in scene.targets {
         let arm = 0.04 * extent;
         for i in 0..3 {
@@ -591,6 +618,36 @@ fn draw_spheres(root: &Area, scene: &Scene, poses: &[Pose]) -> Result<(), String
             .max(2.0) as i32;
         root.draw(&Circle::new(at, r, CONTACT.stroke_width(2)))
             .map_err(|x| drawing_error(&x))?;
+    }
+    Ok(())
+}
+
+/// The contact forces as arrows from their points, the run's largest a quarter of the view
+/// (`extent`) long, each with a head of two strokes.
+fn draw_arrows(
+    scene: &Scene,
+    extent: f64,
+    line: &dyn Fn([f64; 3], [f64; 3], ShapeStyle) -> Result<(), String>,
+) -> Result<(), String> {
+    if scene.largest_force <= 0.0 {
+        return Ok(());
+    }
+    let scale = 0.25 * extent / scene.largest_force;
+    for a in scene.arrows {
+        let v = a.force.map(|x| scale * x);
+        let length = dot(v, v).sqrt();
+        if length < 1e-3 * extent {
+            continue;
+        }
+        let tip = [0, 1, 2].map(|i| a.at[i] + v[i]);
+        line(a.at, tip, FORCE.stroke_width(3))?;
+        // The head: two strokes back from the tip, in a plane holding the arrow.
+        let back = v.map(|x| -0.25 * x);
+        let [side, _] = tangents(&unit(v));
+        for s in [-1.0, 1.0] {
+            let end = [0, 1, 2].map(|i| tip[i] + back[i] + s * 0.12 * length * side[i]);
+            line(tip, end, FORCE.stroke_width(3))?;
+        }
     }
     Ok(())
 }
@@ -720,6 +777,8 @@ mod tests {
                 targets: &[],
                 root: None,
                 model: &model,
+                arrows: &[],
+                largest_force: 0.0,
             };
             let rgb = render(&scene, 0.0, &poses).unwrap();
             let of = |c: RGBColor| {
@@ -735,6 +794,51 @@ mod tests {
             "ground {ground} px, rings {rings} px"
         );
         assert_eq!(count("models/marionette.toml"), (0, 0));
+    }
+
+    /// `--forces`: the ball resting on the ground with an impulse draws an arrow in the
+    /// force colour; with no impulse, none.
+    #[test]
+    fn contact_forces_are_drawn_as_arrows() {
+        let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/ball.toml");
+        let model = tree_mech::model::from_toml_file(path).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let (mut q0, _) = sys.initial_state();
+        q0[2] = 0.1;
+        let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
+        sys.poses(&q0, &mut poses);
+        let figure = Figure::of(&model);
+        let frames = vec![poses.clone()];
+        let view = View::of(&figure, &model, &frames, &[], CameraMode::Fixed);
+        let (lo, hi) = view.at(&poses);
+        let camera = Camera::framing(lo, hi);
+        let count = |impulse: [f64; 3]| {
+            let arrows = crate::cli::forces::arrows(&model, &poses, &impulse);
+            let overlay = Overlay {
+                arrows: std::slice::from_ref(&arrows),
+                ..Default::default()
+            };
+            let scene = Scene {
+                figure: &figure,
+                camera: &camera,
+                lo,
+                hi,
+                rails: &[],
+                targets: &[],
+                root: None,
+                model: &model,
+                arrows: &arrows,
+                largest_force: overlay.largest_force(),
+            };
+            let rgb = render(&scene, 0.0, &poses).unwrap();
+            (rgb.chunks_exact(3))
+                .filter(|p| *p == [FORCE.0, FORCE.1, FORCE.2])
+                .count()
+        };
+        let drawn = count([9.81e-3, 0.0, 0.0]);
+        assert!(drawn > 30, "{drawn} px of arrow");
+        assert_eq!(count([0.0; 3]), 0);
     }
 
     #[test]

@@ -13,6 +13,7 @@ mod animate;
 mod bodies;
 mod check;
 mod eval;
+mod forces;
 pub mod interrupt;
 mod linearize;
 mod optimize;

@@ -370,7 +370,18 @@ fn write_animation(
     let times: Vec<f64> = knots.iter().map(|&k| res.t[k]).collect();
     let fixed = animate::CameraMode::Fixed;
     let targets = frame_targets(plan.task, &poses[0]);
-    animate::write_gif(model, &times, &poses, file, fixed, &targets, &mut |_, _| {})
+    animate::write_gif(
+        model,
+        &times,
+        &poses,
+        file,
+        fixed,
+        &animate::Overlay {
+            targets: &targets,
+            ..Default::default()
+        },
+        &mut |_, _| {},
+    )
 }
 
 /// Where the task's frame terms aim, in the world (an offset target from its frame's start

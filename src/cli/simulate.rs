@@ -17,7 +17,7 @@ use tree_mech::{NoForce, PaperEvaluation, PaperSystem, SimError, System, Traject
 
 use super::interrupt;
 use super::output::OutputFile;
-use super::{animate, integrator_arg, parse_list, parse_vector, plot, ForcingArg, Source};
+use super::{animate, forces, integrator_arg, parse_list, parse_vector, plot, ForcingArg, Source};
 
 /// What `simulate` was asked for: its command-line arguments.
 #[derive(clap::Args)]
@@ -61,6 +61,11 @@ pub struct Args {
     /// free body's torso) at the same scale.
     #[arg(long, value_enum, default_value = "fixed")]
     camera: CameraArg,
+    /// With --animate: draw each contact's force as an arrow at its point (a ground
+    /// contact's push and friction, two spheres' push, a slack string's pull), the run's
+    /// largest a quarter of the view long.
+    #[arg(long)]
+    forces: bool,
     /// VI quadrature point α (½ is second order).
     #[arg(long, default_value_t = 0.5)]
     alpha: f64,
@@ -143,6 +148,7 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
         plot,
         animate,
         camera,
+        forces,
         alpha,
         newton_tol,
         kappa,
@@ -189,6 +195,21 @@ pub fn run(args: Args, source: &Source) -> Result<(), String> {
             CameraArg::Track => animate::CameraMode::Track,
         };
         let model = source.model(&model)?;
+        if forces && outputs.animate.is_none() {
+            return Err(
+                "--forces draws the contact forces on the animation: give --animate \
+                        FILE.gif too"
+                    .into(),
+            );
+        }
+        if forces && model.gaps().is_empty() {
+            return Err(format!(
+                "--forces: `{}` has no contacts, limits or slack strings whose forces could be \
+                 drawn",
+                model.name
+            ));
+        }
+        outputs.forces = forces;
         outputs.inputs = input_schedule(&model, u.as_deref(), inputs.as_deref())?;
         outputs.start = [q0, dq0];
         let paper = |mode| PaperSystem::new(&model, mode).map_err(|e| e.to_string());
@@ -247,6 +268,8 @@ struct Outputs {
     animate: Option<OutputFile>,
     /// The animation's camera.
     camera: animate::CameraMode,
+    /// Whether the animation draws the contact forces.
+    forces: bool,
     /// The inputs over the run.
     inputs: InputSchedule,
     /// `--q0`, `--dq0` as given (None: the model's).
@@ -283,6 +306,7 @@ impl Outputs {
             plot,
             animate,
             camera: animate::CameraMode::default(),
+            forces: false,
             inputs: InputSchedule::default(),
             start: [None, None],
         })
@@ -417,15 +441,23 @@ fn note_a_large_csv(file: &OutputFile, options: &SimOptions, n: usize, rows_of_h
 }
 
 /// What a run keeps beside the CSV as it goes: the plot's samples (every `thin`-th), the
-/// animation's configurations (one every `frame_interval` of simulated time), the energy at
+/// animation's frames (one every `frame_interval` of simulated time), the energy at
 /// the start and the end, and the progress bar.
+/// The animation's samples: their times, configurations and unilateral rows' impulses.
+#[derive(Default)]
+struct Frames {
+    times: Vec<f64>,
+    q: Vec<Vec<f64>>,
+    impulse: Vec<Vec<f64>>,
+}
+
 struct Record {
     bar: ProgressBar,
     duration: f64,
     last_tick: u64,
     picture: Option<Trajectory>,
     thin: usize,
-    frames: Option<(Vec<f64>, Vec<Vec<f64>>)>,
+    frames: Option<Frames>,
     frame_interval: f64,
     samples: usize,
     e0: f64,
@@ -455,7 +487,7 @@ impl Record {
             last_tick: 0,
             picture,
             thin: (recorded / PLOT_SAMPLES as f64).ceil().max(1.0) as usize,
-            frames: outputs.animate.as_ref().map(|_| (Vec::new(), Vec::new())),
+            frames: outputs.animate.as_ref().map(|_| Frames::default()),
             // Fewer frames a second for long runs; poses are computed after the run.
             frame_interval: (1.0 / animate::FPS).max(options.duration / animate::MAX_FRAMES as f64),
             samples: 0,
@@ -473,11 +505,12 @@ impl Record {
                 picture.push(sample);
             }
         }
-        if let Some((times, q)) = self.frames.as_mut() {
-            let next_frame = times.len() as f64 * self.frame_interval;
+        if let Some(f) = self.frames.as_mut() {
+            let next_frame = f.times.len() as f64 * self.frame_interval;
             if sample.t >= next_frame - 1e-9 * self.frame_interval {
-                times.push(sample.t);
-                q.push(sample.q.to_vec());
+                f.times.push(sample.t);
+                f.q.push(sample.q.to_vec());
+                f.impulse.push(sample.impulse.to_vec());
             }
         }
         self.samples += 1;
@@ -506,15 +539,21 @@ fn draw<S: System<N = Dyn>>(
     if let (Some(path), Some(picture)) = (&outputs.plot, &record.picture) {
         plot::plot(picture, model, path)?;
     }
-    let (Some(path), Some((frame_times, frame_q))) = (&outputs.animate, &record.frames) else {
+    let (Some(path), Some(frames)) = (&outputs.animate, &record.frames) else {
         return Ok(());
     };
-    let mut poses = Vec::with_capacity(frame_q.len());
-    for q in frame_q {
+    let mut poses = Vec::with_capacity(frames.q.len());
+    for q in &frames.q {
         let mut frame = vec![tree_mech::runtime::Pose::IDENTITY; sys.frame_count()];
         sys.poses(&Vector::<Dyn>::from_column_slice(q), &mut frame);
         poses.push(frame);
     }
+    let arrows: Vec<Vec<forces::Arrow>> = match outputs.forces {
+        true => (poses.iter().zip(&frames.impulse))
+            .map(|(p, impulse)| forces::arrows(model, p, impulse))
+            .collect(),
+        false => Vec::new(),
+    };
     let bar = ProgressBar::new(poses.len() as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} GIF frames  ({elapsed})")
@@ -524,11 +563,14 @@ fn draw<S: System<N = Dyn>>(
     let camera = outputs.camera;
     animate::write_gif(
         model,
-        frame_times,
+        &frames.times,
         &poses,
         path,
         camera,
-        &[],
+        &animate::Overlay {
+            arrows: &arrows,
+            ..Default::default()
+        },
         &mut |k, _| {
             if encoding.elapsed().as_millis() > 300 {
                 bar.set_position(k as u64);

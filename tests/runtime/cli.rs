@@ -1498,3 +1498,35 @@ fn linearize_goes_through_contact_with_a_step_only() {
         "{stderr}"
     );
 }
+
+/// `--forces` draws a run's contact forces on its animation, and says what is missing
+/// when there is no animation or nothing to draw.
+#[test]
+fn simulate_draws_contact_forces_as_arrows_when_asked() {
+    let dir = scratch("forces");
+    let gif = dir.join("ball.gif");
+    let g = gif.to_str().unwrap();
+    let ball = ["simulate", "tests/models/ball.toml", "--duration", "0.6"];
+    let (ok, stdout, stderr) = tree_mech(&[&ball[..], &["--animate", g, "--forces"]].concat());
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("Animation: "), "{stdout}");
+    // The last picture: the ball resting, its ground's push as an orange arrow.
+    let bytes = std::fs::read(&gif).unwrap();
+    let mut decoder = gif::DecodeOptions::new();
+    decoder.set_color_output(gif::ColorOutput::RGBA);
+    let mut decoder = decoder.read_info(std::io::Cursor::new(&bytes)).unwrap();
+    let mut last = Vec::new();
+    while let Some(frame) = decoder.read_next_frame().unwrap() {
+        last = frame.buffer.to_vec();
+    }
+    let orange = last
+        .chunks_exact(4)
+        .filter(|p| p[..3] == [255, 102, 0])
+        .count();
+    assert!(orange > 30, "{orange} px of arrow");
+    let (ok, _, stderr) = tree_mech(&[&ball[..], &["--forces"]].concat());
+    assert!(!ok && stderr.contains("give --animate"), "{stderr}");
+    let pendulum = ["simulate", "models/pendulum.toml", "--duration", "0.1"];
+    let (ok, _, stderr) = tree_mech(&[&pendulum[..], &["--animate", g, "--forces"]].concat());
+    assert!(!ok && stderr.contains("has no contacts"), "{stderr}");
+}

@@ -860,3 +860,28 @@ fn a_limp_quadruped_collapses_onto_its_belly_without_a_jam() {
         }
     }
 }
+
+/// Resting contact goes by its last mode (tree-runtime `vi/contact/mode.rs`): a ball at rest
+/// on the ground (pressing and sticking: its gap and both tangent rows as equations) takes
+/// one Newton update a step where the interior point took three, and its impulse is the
+/// exact statics, `m g Δt`, its gap zero.
+#[test]
+fn resting_contact_is_solved_in_its_mode_in_one_update_a_step() {
+    let ball = load("tests/models/ball.toml");
+    let mut sys = TreeSystem::new(&ball).unwrap();
+    let (mut q0, dq0) = sys.initial_state();
+    q0[2] = 0.1;
+    let steps = 500;
+    let traj = run_from(&mut sys, &q0, &dq0, 1e-3, steps as f64 * 1e-3);
+    let per_step = traj.newton_iterations as f64 / steps as f64;
+    eprintln!("ball at rest: {per_step} Newton iterations a step");
+    assert!(per_step <= 1.1, "{per_step} Newton iterations a step");
+    let last = traj.len() - 1;
+    let gamma = traj.impulse(last)[0];
+    assert!((gamma - 9.81e-3).abs() <= 1e-12 * 9.81e-3, "γ = {gamma}");
+    assert!(
+        traj.gap(last)[0].abs() <= 1e-12,
+        "gap {}",
+        traj.gap(last)[0]
+    );
+}

@@ -30,7 +30,11 @@ use crate::cone::{self, Point};
 use crate::context::StepContext;
 use crate::dynamics::{GeneralizedForce, Prescription};
 use crate::error::SimError;
-use crate::linalg::{lu_factor_packed_unguarded, lu_solve_packed, semidefinite_solve};
+use crate::linalg::{
+    lu_factor_packed, lu_factor_packed_unguarded, lu_solve_packed, semidefinite_solve,
+};
+
+mod mode;
 use crate::system::{ConstraintTerms, System, Vector};
 
 /// Iterations a contact step may take before it fails.
@@ -95,6 +99,10 @@ pub(crate) struct ContactStep {
     names: Vec<String>,
     /// Number of unknowns of the current step (at most `q₂`, `λ` and every element's).
     nz: usize,
+    /// The last step's mode as this step's rows ([`mode`]), their unknowns packed after
+    /// `q₂` and `λ`, and how many unknowns that makes.
+    mode: Vec<Element>,
+    mode_nz: usize,
     /// φ, Dφ and the weighted Hessian at the current `q₂`.
     gaps: ConstraintTerms,
     /// Every gap row's value at `q₁` (the tangent rows' `τ(q₁)`) and its derivative.
@@ -164,6 +172,8 @@ impl ContactStep {
             elements,
             names: gaps.into_iter().map(|g| g.name).collect(),
             nz,
+            mode: Vec::with_capacity(rows),
+            mode_nz: 0,
             gaps: ConstraintTerms::zeros(rows, sys.dof()),
             at_start: vec![0.0; rows],
             dh_start: DMatrix::zeros(rows, sys.dof()),
@@ -541,7 +551,17 @@ where
             .take()
             .expect("a contact step has its workspace");
         let mut tried = 0;
-        let result = match self.free_step(&mut c, cx, q1, p1, q_next) {
+        let free_or_mode = match self.free_step(&mut c, cx, q1, p1, q_next) {
+            Ok(iterations) => Ok(iterations),
+            Err(free) => {
+                let mode = self.mode_step(&mut c, cx, q1, p1, q_next);
+                self.contact_iterations += match mode {
+                    Ok(k) | Err(k) => k,
+                };
+                mode.map(|k| k + free).map_err(|k| k + free)
+            }
+        };
+        let result = match free_or_mode {
             Ok(iterations) => Ok(iterations),
             Err(iterations) => {
                 tried = iterations;
@@ -776,22 +796,16 @@ where
         }
     }
 
-    /// The residual of every equation at the current unknowns into `c.residual`, the
-    /// complementarity rows against `target` (`κ`'s or the centring's), and the measures.
-    fn contact_residual(
-        &mut self,
-        c: &mut ContactStep,
-        scale: f64,
-        kappa: f64,
-        target: f64,
-    ) -> Measures {
+    /// The dynamic rows with the impulses, `r_d + Nᵀγ + Tᵀb` (the gap rows' weights), and
+    /// the bilateral rows `h(q₂)` into `c.residual`: the dynamic rows' residual relative to
+    /// their momentum scale (impulses' terms included) and the largest violation.
+    fn impulse_rows(&mut self, c: &mut ContactStep) -> (f64, f64) {
         let (dynamic, nd, m) = (
             &self.split.dynamic,
             self.split.dynamic.len(),
             self.split.rows,
         );
         let g = &c.gaps;
-        // r_d + Nᵀγ + Tᵀb, and each row's momentum scale with the impulses' terms.
         let mut largest: f64 = 0.0;
         for (ci, &i) in dynamic.iter().enumerate() {
             let (mut x, mut s) = (self.residual[i], self.row_scale[i]);
@@ -813,6 +827,20 @@ where
             c.residual[nd + r] = self.constraint_terms.h[r];
             violation = violation.max(self.constraint_terms.h[r].abs());
         }
+        (relative, violation)
+    }
+
+    /// The residual of every equation at the current unknowns into `c.residual`, the
+    /// complementarity rows against `target` (`κ`'s or the centring's), and the measures.
+    fn contact_residual(
+        &mut self,
+        c: &mut ContactStep,
+        scale: f64,
+        kappa: f64,
+        target: f64,
+    ) -> Measures {
+        let (relative, mut violation) = self.impulse_rows(c);
+        let g = &c.gaps;
         let (mut complementarity, mut worst, mut worst_value): (f64, usize, f64) = (0.0, 0, -1.0);
         for (k, e) in c.elements.iter().enumerate() {
             let (b, z) = (e.base, &c.z);
@@ -854,16 +882,17 @@ where
         }
     }
 
-    /// The Newton matrix of every equation in the unknowns, column-major, into `c.matrix`.
-    fn contact_matrix(&self, c: &mut ContactStep) {
-        let (dynamic, nd, m, nz) = (
+    /// The Newton matrix's `q₂` and `λ` block into `c.matrix` (`nz` unknowns, column-major,
+    /// the rest zeroed): the VI's Jacobian plus the impulses' `Σ w D²φ` in the dynamic rows,
+    /// the bilateral rows and their multipliers' columns.
+    fn smooth_block(&self, c: &mut ContactStep, nz: usize) {
+        let (dynamic, nd, m) = (
             &self.split.dynamic,
             self.split.dynamic.len(),
             self.split.rows,
-            c.nz,
         );
         let (g, k) = (&c.gaps, &mut c.matrix);
-        k.fill(0.0);
+        k[..nz * nz].fill(0.0);
         let n = self.jacobian.nrows();
         let jac = self.jacobian.as_slice();
         let w = &g.weighted_d2h;
@@ -880,6 +909,13 @@ where
                 k[(nd + r) * nz + ci] = self.dt * self.dh1[(r, i)];
             }
         }
+    }
+
+    /// The Newton matrix of every equation in the unknowns, column-major, into `c.matrix`.
+    fn contact_matrix(&self, c: &mut ContactStep) {
+        let (dynamic, nz) = (&self.split.dynamic, c.nz);
+        self.smooth_block(c, nz);
+        let (g, k) = (&c.gaps, &mut c.matrix);
         let z = &c.z;
         for e in &c.elements {
             let b = e.base;
