@@ -861,12 +861,14 @@ fn a_limp_quadruped_collapses_onto_its_belly_without_a_jam() {
     }
 }
 
-/// Resting contact goes by its last mode (tree-runtime `vi/contact/mode.rs`): a ball at rest
-/// on the ground (pressing and sticking: its gap and both tangent rows as equations) takes
-/// one Newton update a step where the interior point took three, and its impulse is the
-/// exact statics, `m g Δt`, its gap zero.
+/// Resting and sliding contact go by their last mode (tree-runtime `vi/contact/mode.rs`): a
+/// ball at rest on the ground (pressing and sticking: its gap and both tangent rows as
+/// equations) takes one Newton update a step where the interior point took three, and its
+/// impulse is the exact statics, `m g Δt`, its gap zero; the box sliding on four corners
+/// (dependent rows; friction on the cone's edge) takes under two a step where the interior
+/// point took eight, and still stops where Coulomb says.
 #[test]
-fn resting_contact_is_solved_in_its_mode_in_one_update_a_step() {
+fn resting_and_sliding_contact_are_solved_in_their_mode() {
     let ball = load("tests/models/ball.toml");
     let mut sys = TreeSystem::new(&ball).unwrap();
     let (mut q0, dq0) = sys.initial_state();
@@ -884,4 +886,12 @@ fn resting_contact_is_solved_in_its_mode_in_one_update_a_step() {
         "gap {}",
         traj.gap(last)[0]
     );
+    let cube = load("tests/models/box.toml");
+    let traj = run(&cube, 1e-3, 0.4);
+    let per_step = traj.newton_iterations as f64 / 400.0;
+    eprintln!("box sliding: {per_step} Newton iterations a step");
+    assert!(per_step <= 2.0, "{per_step} Newton iterations a step");
+    let x = traj.q(traj.len() - 1)[0];
+    let distance = 1.0 / (2.0 * 0.5 * 9.81);
+    assert!((x - distance).abs() <= 1e-6 * distance, "stopped at {x}");
 }

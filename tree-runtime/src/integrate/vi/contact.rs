@@ -102,6 +102,8 @@ pub(crate) struct ContactStep {
     /// The last step's mode as this step's rows ([`mode`]), their unknowns packed after
     /// `q₂` and `λ`, and how many unknowns that makes.
     mode: Vec<Element>,
+    /// Whether each mode element slides (its friction on the cone's edge).
+    sliding: Vec<bool>,
     mode_nz: usize,
     /// φ, Dφ and the weighted Hessian at the current `q₂`.
     gaps: ConstraintTerms,
@@ -173,6 +175,7 @@ impl ContactStep {
             names: gaps.into_iter().map(|g| g.name).collect(),
             nz,
             mode: Vec::with_capacity(rows),
+            sliding: Vec::with_capacity(rows),
             mode_nz: 0,
             gaps: ConstraintTerms::zeros(rows, sys.dof()),
             at_start: vec![0.0; rows],

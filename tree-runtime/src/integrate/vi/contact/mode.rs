@@ -9,11 +9,11 @@
 //! kept only when it solves the complementarity problem the interior point solves — every
 //! `γ ≥ 0`, every sticking `‖b‖ ≤ μγ` (so `b·δ` is minimal over the cone at `δ = 0`), every
 //! other gap open at `q₂` — and then it is that problem's solution with the closed gaps at
-//! zero; otherwise the interior point solves the step from the same prediction. A mode with
-//! a sliding contact is not tried (its friction is not a linear row). Dependent rows (a box
-//! sticking on its four lower corners: 12 rows on 6 degrees of freedom, impulses not
-//! unique) make the mode's matrix singular: its factor fails, and the interior point solves
-//! the step.
+//! zero; otherwise the interior point solves the step from the same prediction. A contact
+//! that slid (its friction at the cone's edge) is tried sliding: `b = −μγ δ/‖δ‖`, kept while
+//! `δ` does not vanish (one about to stop goes to the interior point). The rows bordering
+//! the matrix are regularised so that dependent ones (a box's four lower corners, 12 rows on
+//! 6 degrees of freedom, impulses not unique) do not make it singular ([`REGULARISATION`]).
 
 use super::*;
 
@@ -23,24 +23,35 @@ const MODE_ITERATIONS: usize = 6;
 /// A friction impulse beyond this fraction of its cone (`‖b‖ ≥ STICKING μγ`) is sliding.
 const STICKING: f64 = 1.0 - 1e-6;
 
+/// A sliding element's displacement must exceed this many constraint tolerances for its
+/// direction to mean anything (a contact about to stop goes to the interior point).
+const SLIP_FLOOR: f64 = 1e3;
+
+/// The mode's rows bordering the Newton matrix are regularised by `−ε` on their diagonal,
+/// `ε` this fraction of the inverse of the matrix's largest diagonal entry: the equations are
+/// solved exactly (the residual has no `ε`), but dependent rows — a box's four lower corners
+/// on the ground, 12 rows on 6 degrees of freedom — no longer make the matrix singular, and
+/// their impulses, not unique, move least from the last step's.
+const REGULARISATION: f64 = 1e-10;
+
 impl ContactStep {
     /// The last step's mode as this step's rows: each element that pressed (`γ` above
-    /// `negligible`), its unknowns packed from `first` (`γ`, then `b` when it has friction);
-    /// `false` when none pressed or one slid.
+    /// `negligible`), its unknowns packed from `first` (`γ`, then `b` when it has friction),
+    /// sliding when its friction was at the cone's edge; `false` when none pressed.
     fn choose_mode(&mut self, first: usize, negligible: f64) -> bool {
         self.mode.clear();
+        self.sliding.clear();
         let mut base = first;
         for e in &self.all {
             let gamma = self.impulses[e.row];
             if gamma <= negligible {
                 continue;
             }
-            if e.has_friction() {
+            let slid = e.has_friction() && {
                 let b = self.impulses[e.row + 1].hypot(self.impulses[e.row + 2]);
-                if b >= STICKING * e.friction * gamma {
-                    return false;
-                }
-            }
+                b >= STICKING * e.friction * gamma
+            };
+            self.sliding.push(slid);
             self.mode.push(Element { base, ..e.clone() });
             base += if e.has_friction() { 3 } else { 1 };
         }
@@ -48,14 +59,30 @@ impl ContactStep {
         !self.mode.is_empty()
     }
 
+    /// A mode element's displacement over the step `δ = τ(q₂) − τ(q₁)`, its length and
+    /// direction (zero for a vanishing `δ`).
+    fn slip(&self, e: &Element) -> ([f64; 2], f64, [f64; 2]) {
+        let r = e.row + 1;
+        let d = [0, 1].map(|t| self.gaps.h[r + t] - self.at_start[r + t]);
+        let n = d[0].hypot(d[1]);
+        let u = if n > 0.0 { d.map(|x| x / n) } else { [0.0; 2] };
+        (d, n, u)
+    }
+
     /// Whether the mode's solution solves the complementarity problem: impulses pressing and
-    /// inside their cones, every other element's gap open at `q₂`.
-    fn mode_holds(&self) -> bool {
+    /// inside their cones (a sliding one on its edge against a displacement that did not
+    /// vanish), every other element's gap open at `q₂`.
+    fn mode_holds(&self, slip_floor: f64) -> bool {
         let w = &self.weights;
-        let inside = self.mode.iter().all(|e| {
+        let inside = self.mode.iter().zip(&self.sliding).all(|(e, &sliding)| {
             let gamma = w[e.row];
+            let b = || w[e.row + 1].hypot(w[e.row + 2]);
             gamma >= 0.0
-                && (!e.has_friction() || w[e.row + 1].hypot(w[e.row + 2]) <= e.friction * gamma)
+                && match (e.has_friction(), sliding) {
+                    (false, _) => true,
+                    (true, false) => b() <= e.friction * gamma,
+                    (true, true) => self.slip(e).1 > slip_floor,
+                }
         });
         let open = (self.all.iter())
             .filter(|e| !self.mode.iter().any(|m| m.index == e.index))
@@ -138,7 +165,7 @@ where
             lu_solve_packed(&c.matrix[..nz * nz], nz, &c.pivots, &mut c.direction[..nz]);
             self.apply_mode_update(c, q_next);
         };
-        if converged && c.mode_holds() {
+        if converged && c.mode_holds(SLIP_FLOOR * self.settings.constraint_tolerance) {
             c.impulses.copy_from_slice(&c.weights);
             c.gap_values.copy_from_slice(c.gaps.h.as_slice());
             c.quiet = (c.mode.iter()).all(|e| c.weights[e.row] <= negligible);
@@ -150,39 +177,75 @@ where
     }
 
     /// The mode's equations into `c.residual`: the dynamic rows with the impulses, the
-    /// bilateral rows, each mode element's gap and (sticking) its tangential displacement.
-    /// The dynamic rows' relative residual and the largest violation.
+    /// bilateral rows, each mode element's gap and its friction's — a sticking one's
+    /// displacement `δ = 0`, a sliding one's `b + μγ δ/‖δ‖ = 0`. The relative residual (the
+    /// dynamic rows', and a sliding friction's relative to `μγ`) and the largest violation.
     fn mode_residual(&mut self, c: &mut ContactStep) -> (f64, f64) {
-        let (relative, mut violation) = self.impulse_rows(c);
-        let g = &c.gaps;
-        for e in &c.mode {
-            c.residual[e.base] = g.h[e.row];
-            violation = violation.max(g.h[e.row].abs());
-            if e.has_friction() {
-                for t in 0..2 {
-                    let r = e.row + 1 + t;
-                    let d = g.h[r] - c.at_start[r];
-                    c.residual[e.base + 1 + t] = d;
-                    violation = violation.max(d.abs());
+        let (mut relative, mut violation) = self.impulse_rows(c);
+        for (e, &sliding) in c.mode.iter().zip(&c.sliding) {
+            let phi = c.gaps.h[e.row];
+            c.residual[e.base] = phi;
+            violation = violation.max(phi.abs());
+            if !e.has_friction() {
+                continue;
+            }
+            let (d, _, u) = c.slip(e);
+            let w = &c.weights;
+            for t in 0..2 {
+                if sliding {
+                    let limit = e.friction * w[e.row];
+                    let x = w[e.row + 1 + t] + limit * u[t];
+                    c.residual[e.base + 1 + t] = x;
+                    relative = relative.max(x.abs() / limit.abs().max(f64::MIN_POSITIVE));
+                } else {
+                    c.residual[e.base + 1 + t] = d[t];
+                    violation = violation.max(d[t].abs());
                 }
             }
         }
         (relative, violation)
     }
 
-    /// The mode's Newton matrix into `c.matrix`: the smooth block, and each mode row `N` or
-    /// `T` beside its impulse's column.
+    /// The mode's Newton matrix into `c.matrix`: the smooth block; each gap and sticking row
+    /// `N` or `T` beside its impulse's column, regularised ([`REGULARISATION`]); a sliding
+    /// friction's rows `∂(b + μγ û)/∂(q₂, γ, b)` with `∂û/∂δ = (I − ûûᵀ)/‖δ‖`.
     fn mode_matrix(&self, c: &mut ContactStep) {
         let (dynamic, nz) = (&self.split.dynamic, c.mode_nz);
         self.smooth_block(c, nz);
-        let (g, k) = (&c.gaps, &mut c.matrix);
-        for e in &c.mode {
+        let largest = (0..dynamic.len())
+            .map(|ci| c.matrix[ci * nz + ci].abs())
+            .fold(f64::MIN_POSITIVE, f64::max);
+        let epsilon = REGULARISATION / largest;
+        for (e, &sliding) in c.mode.iter().zip(&c.sliding) {
             let rows = if e.has_friction() { 3 } else { 1 };
+            let (_, n, u) = match e.has_friction() {
+                true => c.slip(e),
+                false => ([0.0; 2], 0.0, [0.0; 2]),
+            };
+            let (g, k) = (&c.gaps, &mut c.matrix);
             for t in 0..rows {
                 let at = e.base + t;
                 for (ci, &i) in dynamic.iter().enumerate() {
                     k[at * nz + ci] = g.dh[(e.row + t, i)];
-                    k[ci * nz + at] = g.dh[(e.row + t, i)];
+                }
+                if t == 0 || !sliding {
+                    for (ci, &i) in dynamic.iter().enumerate() {
+                        k[ci * nz + at] = g.dh[(e.row + t, i)];
+                    }
+                    k[at * nz + at] = -epsilon;
+                    continue;
+                }
+                // b_t + μγ û_t: by b_t, by γ, and by q₂ through δ.
+                let (s, limit) = (t - 1, e.friction * c.weights[e.row]);
+                k[at * nz + at] = 1.0;
+                k[e.base * nz + at] = e.friction * u[s];
+                for (ci, &i) in dynamic.iter().enumerate() {
+                    let mut x = 0.0;
+                    for r in 0..2 {
+                        let projector = f64::from(u8::from(r == s)) - u[s] * u[r];
+                        x += projector * g.dh[(e.row + 1 + r, i)];
+                    }
+                    k[ci * nz + at] = limit * x / n.max(f64::MIN_POSITIVE);
                 }
             }
         }
