@@ -121,8 +121,13 @@ where
         }
         c.predicted.copy_from_slice(q_next.as_slice());
         c.saved_lambda.copy_from_slice(self.lambda.as_slice());
-        cx.sys.gaps(q1, None, &mut c.gaps);
-        c.at_start.copy_from_slice(c.gaps.h.as_slice());
+        // The gaps at q₁: the last step's at its end, where it ended here.
+        if self.contact_at == *q1 {
+            c.at_start.copy_from_slice(&c.gap_values);
+        } else {
+            cx.sys.gaps(q1, None, &mut c.gaps);
+            c.at_start.copy_from_slice(c.gaps.h.as_slice());
+        }
         // The last impulses as the mode's first guess, every other row's zero.
         c.weights.fill(0.0);
         for e in &c.mode {
@@ -131,40 +136,7 @@ where
                 c.weights[r] = c.impulses[r];
             }
         }
-        let mut iterations = 0;
-        let converged = loop {
-            if iterations > 0 {
-                self.evaluate_residual(cx, q1, p1, q_next, true);
-            }
-            cx.sys.gaps(q_next, Some(&c.weights), &mut c.gaps);
-            let (relative, violation) = self.mode_residual(c);
-            if !(relative.is_finite() && violation.is_finite()) {
-                break false;
-            }
-            // At least one update, as the interior point takes: a warm start within the
-            // tolerance is still a tolerance away, and one Newton update squares that.
-            if iterations > 0
-                && relative <= self.settings.tolerance
-                && violation <= self.settings.constraint_tolerance
-            {
-                break true;
-            }
-            if iterations >= MODE_ITERATIONS {
-                break false;
-            }
-            iterations += 1;
-            self.form_jacobian();
-            self.mode_matrix(c);
-            let nz = c.mode_nz;
-            if lu_factor_packed(&mut c.matrix[..nz * nz], nz, &mut c.pivots).is_err() {
-                break false;
-            }
-            for k in 0..nz {
-                c.direction[k] = -c.residual[k];
-            }
-            lu_solve_packed(&c.matrix[..nz * nz], nz, &c.pivots, &mut c.direction[..nz]);
-            self.apply_mode_update(c, q_next);
-        };
+        let (converged, iterations) = self.mode_newton(c, cx, q1, p1, q_next);
         if converged && c.mode_holds(SLIP_FLOOR * self.settings.constraint_tolerance) {
             c.impulses.copy_from_slice(&c.weights);
             c.gap_values.copy_from_slice(c.gaps.h.as_slice());
@@ -174,6 +146,53 @@ where
         q_next.as_mut_slice().copy_from_slice(&c.predicted);
         self.lambda.as_mut_slice().copy_from_slice(&c.saved_lambda);
         Err(iterations)
+    }
+
+    /// Newton on the mode's equations from the prediction, the second-order terms there
+    /// already evaluated: whether it converged, and the updates taken (at least one: a warm
+    /// start within the tolerance is still a tolerance away, and one update squares that).
+    /// Each check after an update is of first order (no Jacobian, no gap Hessians); the
+    /// second-order terms are evaluated only when another update follows.
+    fn mode_newton<S, F, P>(
+        &mut self,
+        c: &mut ContactStep,
+        cx: &mut StepContext<S, F, P>,
+        q1: &Vector<N>,
+        p1: &Vector<N>,
+        q_next: &mut Vector<N>,
+    ) -> (bool, usize)
+    where
+        S: System<N = N>,
+        F: GeneralizedForce<N>,
+    {
+        let (tol, constraint_tol) = (self.settings.tolerance, self.settings.constraint_tolerance);
+        cx.sys.gaps(q_next, Some(&c.weights), &mut c.gaps);
+        for iterations in 1..=MODE_ITERATIONS {
+            let (relative, violation) = self.mode_residual(c);
+            if !(relative.is_finite() && violation.is_finite()) {
+                return (false, iterations - 1);
+            }
+            self.form_jacobian();
+            self.mode_matrix(c);
+            let nz = c.mode_nz;
+            if lu_factor_packed(&mut c.matrix[..nz * nz], nz, &mut c.pivots).is_err() {
+                return (false, iterations - 1);
+            }
+            for k in 0..nz {
+                c.direction[k] = -c.residual[k];
+            }
+            lu_solve_packed(&c.matrix[..nz * nz], nz, &c.pivots, &mut c.direction[..nz]);
+            self.apply_mode_update(c, q_next);
+            self.evaluate_residual(cx, q1, p1, q_next, false);
+            cx.sys.gaps(q_next, None, &mut c.gaps);
+            let (relative, violation) = self.mode_residual(c);
+            if relative <= tol && violation <= constraint_tol {
+                return (true, iterations);
+            }
+            self.evaluate_residual(cx, q1, p1, q_next, true);
+            cx.sys.gaps(q_next, Some(&c.weights), &mut c.gaps);
+        }
+        (false, MODE_ITERATIONS)
     }
 
     /// The mode's equations into `c.residual`: the dynamic rows with the impulses, the
