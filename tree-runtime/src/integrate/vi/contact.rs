@@ -31,7 +31,8 @@ use crate::context::StepContext;
 use crate::dynamics::{GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::linalg::{
-    lu_factor_packed, lu_factor_packed_unguarded, lu_solve_packed, semidefinite_solve,
+    cholesky_backward, cholesky_factor_packed, cholesky_forward, lu_factor_packed,
+    lu_factor_packed_unguarded, lu_solve_packed, semidefinite_solve,
 };
 
 mod mode;
@@ -132,11 +133,11 @@ pub(crate) struct ContactStep {
     /// The predicted `q₂` and the `λ` a free attempt started from, to start again from.
     predicted: Vec<f64>,
     saved_lambda: Vec<f64>,
-    /// The velocity projection's workspace: the rows held, `M_dd`'s factor, `M_dd⁻¹Aᵀ`, the
-    /// small system.
+    /// The velocity projection's workspace: the rows held, `M_dd`'s Cholesky factor `L`,
+    /// `L⁻¹Aᵀ` by rows, the small system, the velocity change.
     held: Vec<usize>,
     mass: Vec<f64>,
-    mass_pivots: Vec<usize>,
+    velocity: Vec<f64>,
     solved: Vec<f64>,
     small: Vec<f64>,
     small_pivots: Vec<usize>,
@@ -196,7 +197,7 @@ impl ContactStep {
             saved_lambda: vec![0.0; m],
             held: Vec::with_capacity(rows),
             mass: vec![0.0; nd * nd],
-            mass_pivots: vec![0; nd],
+            velocity: vec![0.0; nd],
             solved: vec![0.0; nd * rows],
             small: vec![0.0; rows * rows],
             small_pivots: vec![0; rows],
@@ -422,7 +423,7 @@ impl ContactStep {
         let g = &self.gaps;
         let row_speed = |r: usize, dq: &[f64]| (0..n).map(|j| g.dh[(r, j)] * dq[j]).sum::<f64>();
         self.held.clear();
-        for e in &self.elements {
+        for e in &self.all {
             let (gamma, gap) = (self.impulses[e.row], self.gap_values[e.row]);
             if gamma <= 0.0 || gap > closed || row_speed(e.row, dq) >= 0.0 {
                 continue;
@@ -445,26 +446,26 @@ impl ContactStep {
                 self.mass[cj * nd + ci] = mass[j * n + i];
             }
         }
-        if lu_factor_packed_unguarded(&mut self.mass, nd, &mut self.mass_pivots).is_err() {
+        if cholesky_factor_packed(&mut self.mass, nd).is_err() {
             return;
         }
-        // X = M_dd⁻¹ Aᵀ, S = A X, y = S⁻¹ A q̇, q̇_d −= X y.
+        // With M_dd = L Lᵀ: Y = L⁻¹Aᵀ, S = A M⁻¹ Aᵀ = YᵀY, y = S⁻¹ A q̇, q̇_d −= L⁻ᵀ (Y y).
         for (k, &row) in self.held.iter().enumerate() {
             let x = &mut self.solved[k * nd..(k + 1) * nd];
             for (ci, &i) in dynamic.iter().enumerate() {
                 x[ci] = g.dh[(row, i)];
             }
-            lu_solve_packed(&self.mass, nd, &self.mass_pivots, x);
+            cholesky_forward(&self.mass, nd, x);
             self.rhs[k] = row_speed(row, dq);
         }
-        for (a, &row) in self.held.iter().enumerate() {
-            for k in 0..r {
-                let x = &self.solved[k * nd..(k + 1) * nd];
-                self.small[k * r + a] = dynamic
-                    .iter()
-                    .enumerate()
-                    .map(|(ci, &i)| g.dh[(row, i)] * x[ci])
-                    .sum();
+        for a in 0..r {
+            for k in 0..=a {
+                let (ya, yk) = (
+                    &self.solved[a * nd..(a + 1) * nd],
+                    &self.solved[k * nd..(k + 1) * nd],
+                );
+                let s: f64 = ya.iter().zip(yk).map(|(x, y)| x * y).sum();
+                (self.small[k * r + a], self.small[a * r + k]) = (s, s);
             }
         }
         // The held rows may be dependent (a box's eight corners sticking: 24 rows on 6
@@ -476,11 +477,17 @@ impl ContactStep {
             &mut self.rhs[..r],
             DEPENDENT,
         );
+        let v = &mut self.velocity[..nd];
+        v.fill(0.0);
         for k in 0..r {
             let (x, y) = (&self.solved[k * nd..(k + 1) * nd], self.rhs[k]);
-            for (ci, &i) in dynamic.iter().enumerate() {
-                dq[i] -= x[ci] * y;
+            for (vi, xi) in v.iter_mut().zip(x) {
+                *vi += xi * y;
             }
+        }
+        cholesky_backward(&self.mass, nd, v);
+        for (ci, &i) in dynamic.iter().enumerate() {
+            dq[i] -= v[ci];
         }
     }
 }
