@@ -751,91 +751,71 @@ mod tests {
         }
     }
 
+    /// One picture of the model at `path` (from the repository's root) in its start pose, or
+    /// with `z` its third variable, with `arrows` for its contact forces (`impulse` of its
+    /// unilateral rows): how many pixels have each of `colours`.
+    fn pixels(path: &str, z: Option<f64>, impulse: &[f64], colours: &[RGBColor]) -> Vec<usize> {
+        let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+        let path = format!("{}/{path}", env!("CARGO_MANIFEST_DIR"));
+        let model = tree_mech::model::from_toml_file(path).unwrap();
+        let mut sys = TreeSystem::new(&model).unwrap();
+        let (mut q0, _) = sys.initial_state();
+        if let Some(z) = z {
+            q0[2] = z;
+        }
+        let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
+        sys.poses(&q0, &mut poses);
+        let arrows = crate::cli::forces::arrows(&model, &poses, impulse);
+        let overlay = Overlay {
+            arrows: std::slice::from_ref(&arrows),
+            ..Default::default()
+        };
+        let figure = Figure::of(&model);
+        let frames = vec![poses.clone()];
+        let view = View::of(&figure, &model, &frames, &[], CameraMode::Fixed);
+        let (lo, hi) = view.at(&poses);
+        let camera = Camera::framing(lo, hi);
+        let scene = Scene {
+            figure: &figure,
+            camera: &camera,
+            lo,
+            hi,
+            rails: &[],
+            targets: &[],
+            root: None,
+            model: &model,
+            arrows: &arrows,
+            largest_force: overlay.largest_force(),
+        };
+        let rgb = render(&scene, 0.0, &poses).unwrap();
+        (colours.iter())
+            .map(|c| {
+                (rgb.chunks_exact(3))
+                    .filter(|p| *p == [c.0, c.1, c.2])
+                    .count()
+            })
+            .collect()
+    }
+
     /// A model's ground is drawn as a grid in its own colour and its contact spheres as rings;
     /// without them, neither colour appears.
     #[test]
     fn the_ground_and_the_contact_spheres_are_drawn() {
-        let _ = register_font("sans-serif", FontStyle::Normal, FONT);
-        let count = |path: &str| {
-            let path = format!("{}/{path}", env!("CARGO_MANIFEST_DIR"));
-            let model = tree_mech::model::from_toml_file(path).unwrap();
-            let mut sys = TreeSystem::new(&model).unwrap();
-            let (q0, _) = sys.initial_state();
-            let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
-            sys.poses(&q0, &mut poses);
-            let figure = Figure::of(&model);
-            let frames = vec![poses.clone()];
-            let view = View::of(&figure, &model, &frames, &[], CameraMode::Fixed);
-            let (lo, hi) = view.at(&poses);
-            let camera = Camera::framing(lo, hi);
-            let scene = Scene {
-                figure: &figure,
-                camera: &camera,
-                lo,
-                hi,
-                rails: &[],
-                targets: &[],
-                root: None,
-                model: &model,
-                arrows: &[],
-                largest_force: 0.0,
-            };
-            let rgb = render(&scene, 0.0, &poses).unwrap();
-            let of = |c: RGBColor| {
-                rgb.chunks_exact(3)
-                    .filter(|p| *p == [c.0, c.1, c.2])
-                    .count()
-            };
-            (of(GROUND), of(CONTACT))
-        };
-        let (ground, rings) = count("models/marionette-floor.toml");
+        let count = |path: &str| pixels(path, None, &[], &[GROUND, CONTACT]);
+        let floor = count("models/marionette-floor.toml");
         assert!(
-            ground > 50 && rings > 100,
-            "ground {ground} px, rings {rings} px"
+            floor[0] > 50 && floor[1] > 100,
+            "ground and rings {floor:?} px"
         );
-        assert_eq!(count("models/marionette.toml"), (0, 0));
+        assert_eq!(count("models/marionette.toml"), [0, 0]);
     }
 
     /// `--forces`: the ball resting on the ground with an impulse draws an arrow in the
     /// force colour; with no impulse, none.
     #[test]
     fn contact_forces_are_drawn_as_arrows() {
-        let _ = register_font("sans-serif", FontStyle::Normal, FONT);
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/models/ball.toml");
-        let model = tree_mech::model::from_toml_file(path).unwrap();
-        let mut sys = TreeSystem::new(&model).unwrap();
-        let (mut q0, _) = sys.initial_state();
-        q0[2] = 0.1;
-        let mut poses = vec![Pose::IDENTITY; sys.frame_count()];
-        sys.poses(&q0, &mut poses);
-        let figure = Figure::of(&model);
-        let frames = vec![poses.clone()];
-        let view = View::of(&figure, &model, &frames, &[], CameraMode::Fixed);
-        let (lo, hi) = view.at(&poses);
-        let camera = Camera::framing(lo, hi);
-        let count = |impulse: [f64; 3]| {
-            let arrows = crate::cli::forces::arrows(&model, &poses, &impulse);
-            let overlay = Overlay {
-                arrows: std::slice::from_ref(&arrows),
-                ..Default::default()
-            };
-            let scene = Scene {
-                figure: &figure,
-                camera: &camera,
-                lo,
-                hi,
-                rails: &[],
-                targets: &[],
-                root: None,
-                model: &model,
-                arrows: &arrows,
-                largest_force: overlay.largest_force(),
-            };
-            let rgb = render(&scene, 0.0, &poses).unwrap();
-            (rgb.chunks_exact(3))
-                .filter(|p| *p == [FORCE.0, FORCE.1, FORCE.2])
-                .count()
-        };
+        let count =
+            |impulse: [f64; 3]| pixels("tests/models/ball.toml", Some(0.1), &impulse, &[FORCE])[0];
         let drawn = count([9.81e-3, 0.0, 0.0]);
         assert!(drawn > 30, "{drawn} px of arrow");
         assert_eq!(count([0.0; 3]), 0);

@@ -309,6 +309,18 @@ impl ContactStep {
         self.nz = base;
     }
 
+    /// Keeps the predicted `q₂` and `λ` a solve starts from, to start again from.
+    fn save_prediction(&mut self, q: &[f64], lambda: &[f64]) {
+        self.predicted.copy_from_slice(q);
+        self.saved_lambda.copy_from_slice(lambda);
+    }
+
+    /// Puts back the predicted `q₂` and `λ` after a solve that was not kept.
+    fn restore_prediction(&self, q: &mut [f64], lambda: &mut [f64]) {
+        q.copy_from_slice(&self.predicted);
+        lambda.copy_from_slice(&self.saved_lambda);
+    }
+
     /// A step solved with every row open (`gaps` at its end): no impulse, derivatives free of
     /// contact, the next hard step tried free first.
     fn open_step(&mut self) {
@@ -611,8 +623,7 @@ where
         if self.settings.kappa > 0.0 || !c.quiet {
             return Err(0);
         }
-        c.predicted.copy_from_slice(q_next.as_slice());
-        c.saved_lambda.copy_from_slice(self.lambda.as_slice());
+        c.save_prediction(q_next.as_slice(), self.lambda.as_slice());
         let (iterations, solved) = match self.solve(cx, q1, p1, q_next) {
             Ok(k) => (k, true),
             Err((k, _)) => (k, false),
@@ -624,8 +635,7 @@ where
             c.open_step();
             return Ok(iterations);
         }
-        q_next.as_mut_slice().copy_from_slice(&c.predicted);
-        self.lambda.as_mut_slice().copy_from_slice(&c.saved_lambda);
+        c.restore_prediction(q_next.as_mut_slice(), self.lambda.as_mut_slice());
         Err(iterations)
     }
 
@@ -645,8 +655,7 @@ where
         cx.sys.gaps(q1, None, &mut c.gaps);
         c.at_start.copy_from_slice(c.gaps.h.as_slice());
         c.dh_start.copy_from(&c.gaps.dh);
-        c.predicted.copy_from_slice(q_next.as_slice());
-        c.saved_lambda.copy_from_slice(self.lambda.as_slice());
+        c.save_prediction(q_next.as_slice(), self.lambda.as_slice());
         c.forced.fill(false);
         let first = self.split.dynamic.len() + self.split.rows;
         let mut total = 0;
@@ -678,8 +687,7 @@ where
                 }
                 return Ok(total);
             }
-            q_next.as_mut_slice().copy_from_slice(&c.predicted);
-            self.lambda.as_mut_slice().copy_from_slice(&c.saved_lambda);
+            c.restore_prediction(q_next.as_mut_slice(), self.lambda.as_mut_slice());
         }
     }
 

@@ -119,8 +119,7 @@ where
         if !c.choose_mode(first, negligible) {
             return Err(0);
         }
-        c.predicted.copy_from_slice(q_next.as_slice());
-        c.saved_lambda.copy_from_slice(self.lambda.as_slice());
+        c.save_prediction(q_next.as_slice(), self.lambda.as_slice());
         // The gaps at q₁: the last step's at its end, where it ended here.
         if self.contact_at == *q1 {
             c.at_start.copy_from_slice(&c.gap_values);
@@ -143,8 +142,7 @@ where
             c.quiet = (c.mode.iter()).all(|e| c.weights[e.row] <= negligible);
             return Ok(iterations);
         }
-        q_next.as_mut_slice().copy_from_slice(&c.predicted);
-        self.lambda.as_mut_slice().copy_from_slice(&c.saved_lambda);
+        c.restore_prediction(q_next.as_mut_slice(), self.lambda.as_mut_slice());
         Err(iterations)
     }
 
