@@ -331,3 +331,27 @@ fn a_stepper_allocates_nothing_a_step() {
         assert_eq!(n, 0, "{method:?}: {n} allocations in 20 steps");
     }
 }
+
+/// Contact steps allocate nothing after the first: the ball's fall, landing (interior point)
+/// and rest (its mode), the box sliding (sliding mode), stopping (interior point) and at rest
+/// on its four corners (dependent rows in the mode), with the velocity reported each step.
+#[test]
+fn contact_steps_allocate_nothing() {
+    use tree_mech::integrate::{Method, Stepper};
+    for (file, steps) in [("ball.toml", 800), ("box.toml", 400)] {
+        let path = format!("{}/tests/models/{file}", env!("CARGO_MANIFEST_DIR"));
+        let m = tree_mech::model::from_toml_file(path).unwrap();
+        let sys = TreeSystem::new(&m).unwrap();
+        let (q0, dq0) = sys.initial_state();
+        let vi = Method::Vi(ViSettings::default());
+        let mut s = Stepper::new(sys, vi, 1e-3, q0.as_slice(), dq0.as_slice()).unwrap();
+        s.step(&[]).unwrap();
+        let n = allocations(|| {
+            for _ in 1..steps {
+                s.step(&[]).unwrap();
+                std::hint::black_box(s.energy());
+            }
+        });
+        assert_eq!(n, 0, "{file}: {n} allocations in {steps} steps");
+    }
+}

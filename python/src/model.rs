@@ -372,22 +372,7 @@ impl Model {
 /// Contact `k` of [`Model::with_contacts`]: `"FRAME"`, `"FRAME:RADIUS"` or a dict.
 fn contact_spec(k: usize, c: &Bound<'_, PyAny>) -> PyResult<model::ContactSpec> {
     if let Ok(text) = c.extract::<String>() {
-        let (frame, radius) = match text.split_once(':') {
-            Some((f, r)) => {
-                let radius = r.trim().parse::<f64>().map_err(|_| {
-                    bad(format!(
-                        "contacts[{k}] = {text:?}: the radius after `:` must be a number"
-                    ))
-                })?;
-                (f, Some(radius))
-            }
-            None => (text.as_str(), None),
-        };
-        return Ok(model::ContactSpec {
-            frame: frame.trim().to_string(),
-            radius,
-            ..Default::default()
-        });
+        return model::ContactSpec::parse(&text).map_err(|e| bad(format!("contacts[{k}]: {e}")));
     }
     let dict = c.cast::<PyDict>().map_err(|_| {
         bad(format!(

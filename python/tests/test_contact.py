@@ -81,7 +81,8 @@ def test_a_ground_and_contacts_are_added_from_python():
     for contact in ["ball:0.1", {"frame": "ball", "radius": 0.1, "name": "ball"}]:
         m = free.with_contacts(ground=0.0, friction=0.5, contacts=[contact])
         traj = m.simulate(duration=1.0, dt=1e-3)
-        assert traj.unilateral[0] in ("ball", "contact1")
+        # Named after its frame (the dict names it so too).
+        assert traj.unilateral[:3] == ["ball", "ball.t1", "ball.t2"]
         # As the model that writes them: lands at √(2h/g), rests at its radius.
         landed = np.argmax(traj.gap[:, 0] < 1e-9)
         assert traj.t[landed] == pytest.approx((2.0 / 9.81) ** 0.5, abs=2e-3)
@@ -95,8 +96,12 @@ def test_a_ground_and_contacts_are_added_from_python():
         free.with_contacts(contacts=[{"frame": "ball", "radius": -1.0}])
     with pytest.raises(ValueError, match=r"contacts\[0\] has `size`"):
         free.with_contacts(contacts=[{"frame": "ball", "size": 1.0}])
-    with pytest.raises(ValueError, match="must be a number"):
+    with pytest.raises(ValueError, match=r"contacts\[0\]: contact `ball:big`: the radius after `:` must be a number \(metres\), got `big`"):
         free.with_contacts(contacts=["ball:big"])
+    with pytest.raises(tm.ModelError, match="friction"):
+        free.with_contacts(ground=0.0, friction=-0.5)
+    with pytest.raises(tm.ModelError, match="height"):
+        free.with_contacts(ground=float("nan"))
 
 
 def test_readme_s_solo12_with_contacts_lands_on_its_feet():

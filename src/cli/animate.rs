@@ -330,6 +330,7 @@ pub fn write_gif(
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .clamp(1, 8);
+    let largest_force = overlay.largest_force();
     let picture = |k: usize| -> Result<gif::Frame<'static>, String> {
         let (lo, hi) = view.at(&frames[k]);
         let camera = Camera::framing(lo, hi);
@@ -343,7 +344,7 @@ pub fn write_gif(
             root: (mode == CameraMode::Track).then_some(view.root),
             model,
             arrows: overlay.arrows.get(k).map_or(&[], |a| a.as_slice()),
-            largest_force: overlay.largest_force(),
+            largest_force,
         };
         let rgb = render(&scene, times[k], &frames[k])?;
         let indices: Vec<u8> = rgb

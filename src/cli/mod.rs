@@ -123,7 +123,7 @@ impl Cli {
                 &self.contact,
                 self.limits,
                 self.no_limits,
-            ),
+            )?,
         };
         match self.command {
             Command::Simulate(args) => simulate::run(args, &source),
@@ -155,15 +155,14 @@ pub struct Source {
 }
 
 /// The contact the command line adds: `--ground [HEIGHT]` with `--friction`, each
-/// `--contact FRAME[:RADIUS]`, `--limits` / `--no-limits`. A radius that is not a number is
-/// kept as NaN, which the model's validation refuses with its sentence.
+/// `--contact FRAME[:RADIUS]` ([`model::ContactSpec::parse`]), `--limits` / `--no-limits`.
 fn contacts_of(
     ground: Option<f64>,
     friction: Option<f64>,
     contacts: &[String],
     limits: bool,
     no_limits: bool,
-) -> model::ContactsSpec {
+) -> Result<model::ContactsSpec, String> {
     let ground = match (ground, friction) {
         (None, None) => None,
         (height, friction) => Some(model::GroundSpec {
@@ -172,25 +171,14 @@ fn contacts_of(
             normal: None,
         }),
     };
-    let contacts = contacts
-        .iter()
-        .map(|c| {
-            let (frame, radius) = match c.split_once(':') {
-                Some((f, r)) => (f, Some(r.trim().parse::<f64>().unwrap_or(f64::NAN))),
-                None => (c.as_str(), None),
-            };
-            model::ContactSpec {
-                frame: frame.trim().to_string(),
-                radius,
-                ..Default::default()
-            }
-        })
-        .collect();
-    model::ContactsSpec {
+    let contacts = (contacts.iter())
+        .map(|c| model::ContactSpec::parse(c).map_err(|e| format!("--contact: {e}")))
+        .collect::<Result<_, _>>()?;
+    Ok(model::ContactsSpec {
         enforce_limits: (limits || no_limits).then_some(limits),
         ground,
         contacts,
-    }
+    })
 }
 
 impl Source {

@@ -1452,7 +1452,7 @@ fn contact_is_added_from_the_command_line() {
     );
     let (ok, _, stderr) = tree_mech(&["check", "tests/models/ball.toml", "--contact", "by:wide"]);
     assert!(
-        !ok && stderr.contains("radius NaN must be finite"),
+        !ok && stderr.contains("--contact: contact `by:wide`: the radius after `:` must be a number (metres), got `wide`"),
         "{stderr}"
     );
     let (ok, _, stderr) = tree_mech(&["check", "tests/models/ball.toml", "--contact", "nowhere"]);

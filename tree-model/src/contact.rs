@@ -47,6 +47,36 @@ pub struct ContactSpec {
     pub collide: Option<bool>,
 }
 
+impl ContactSpec {
+    /// A contact as the command line's `--contact` and Python's `with_contacts` write it:
+    /// `FRAME` (a point) or `FRAME:RADIUS`, named after its frame; the rest as a model says.
+    ///
+    /// ```
+    /// let c = tree_model::ContactSpec::parse("FL_FOOT:0.016").unwrap();
+    /// assert_eq!((c.frame.as_str(), c.radius), ("FL_FOOT", Some(0.016)));
+    /// assert!(tree_model::ContactSpec::parse("FL_FOOT:wide").is_err());
+    /// ```
+    pub fn parse(text: &str) -> Result<ContactSpec, String> {
+        let (frame, radius) = match text.split_once(':') {
+            Some((f, r)) => {
+                let radius = r.trim().parse::<f64>().map_err(|_| {
+                    format!(
+                        "contact `{text}`: the radius after `:` must be a number (metres), got `{}`",
+                        r.trim()
+                    )
+                })?;
+                (f, Some(radius))
+            }
+            None => (text, None),
+        };
+        Ok(ContactSpec {
+            frame: frame.trim().to_string(),
+            radius,
+            ..Default::default()
+        })
+    }
+}
+
 /// The half-space `n·x ≥ height` under the world.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ground {

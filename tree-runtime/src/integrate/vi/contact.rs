@@ -82,6 +82,15 @@ impl Element {
     fn has_friction(&self) -> bool {
         self.friction > 0.0
     }
+
+    /// Its gap rows: the gap, and the two tangent rows with friction.
+    fn rows(&self) -> usize {
+        if self.has_friction() {
+            3
+        } else {
+            1
+        }
+    }
 }
 
 /// The contact step's workspace (allocated once; nothing per step).
@@ -105,6 +114,8 @@ pub(crate) struct ContactStep {
     mode: Vec<Element>,
     /// Whether each mode element slides (its friction on the cone's edge).
     sliding: Vec<bool>,
+    /// Whether each element of the model is in the mode.
+    in_mode: Vec<bool>,
     mode_nz: usize,
     /// φ, Dφ and the weighted Hessian at the current `q₂`.
     gaps: ConstraintTerms,
@@ -168,17 +179,23 @@ impl ContactStep {
             base += if g.friction > 0.0 { 7 } else { 2 };
         }
         let (rows, nz) = (row, base);
+        let count = elements.len();
+        // Sized here, so the first contact step allocates nothing either: the weighted
+        // Hessian of the gaps and the weights it keeps.
+        let mut gap_terms = ConstraintTerms::zeros(rows, sys.dof());
+        gap_terms.weigh(&vec![0.0; rows], true);
         Some(Box::new(ContactStep {
             all: elements.clone(),
-            forced: vec![false; elements.len()],
-            selected: vec![false; elements.len()],
+            forced: vec![false; count],
+            selected: vec![false; count],
             elements,
             names: gaps.into_iter().map(|g| g.name).collect(),
             nz,
             mode: Vec::with_capacity(rows),
             sliding: Vec::with_capacity(rows),
+            in_mode: vec![false; count],
             mode_nz: 0,
-            gaps: ConstraintTerms::zeros(rows, sys.dof()),
+            gaps: gap_terms,
             at_start: vec![0.0; rows],
             dh_start: DMatrix::zeros(rows, sys.dof()),
             weights: vec![0.0; rows],
@@ -377,7 +394,7 @@ impl ContactStep {
             lu_factor_packed_unguarded(&mut out.local[..size * size], size, &mut out.pivots)
                 .map_err(|_| e.index)?;
             // dv = G⁻¹ (e_gap dφ + e_fric,k dδ_k): columns φ, δ₁, δ₂.
-            let columns = if e.has_friction() { 3 } else { 1 };
+            let columns = e.rows();
             for col in 0..columns {
                 let rhs = &mut out.sensitivity[col * 7..col * 7 + size];
                 rhs.fill(0.0);

@@ -44,6 +44,7 @@ impl ContactStep {
         let mut base = first;
         for e in &self.all {
             let gamma = self.impulses[e.row];
+            self.in_mode[e.index] = gamma > negligible;
             if gamma <= negligible {
                 continue;
             }
@@ -53,7 +54,7 @@ impl ContactStep {
             };
             self.sliding.push(slid);
             self.mode.push(Element { base, ..e.clone() });
-            base += if e.has_friction() { 3 } else { 1 };
+            base += e.rows();
         }
         self.mode_nz = base;
         !self.mode.is_empty()
@@ -85,7 +86,7 @@ impl ContactStep {
                 }
         });
         let open = (self.all.iter())
-            .filter(|e| !self.mode.iter().any(|m| m.index == e.index))
+            .filter(|e| !self.in_mode[e.index])
             .all(|e| self.gaps.h[e.row] >= 0.0);
         inside && open
     }
@@ -110,7 +111,13 @@ where
         S: System<N = N>,
         F: GeneralizedForce<N>,
     {
-        if self.settings.kappa > 0.0 || self.settings.derivatives || c.free {
+        // Nothing pressed in the last step (a landing's first contact step): no mode, and
+        // no evaluation spent on finding that out.
+        if self.settings.kappa > 0.0
+            || self.settings.derivatives
+            || c.free
+            || c.impulses.iter().all(|&x| x == 0.0)
+        {
             return Err(0);
         }
         let first = self.split.dynamic.len() + self.split.rows;
@@ -130,8 +137,7 @@ where
         // The last impulses as the mode's first guess, every other row's zero.
         c.weights.fill(0.0);
         for e in &c.mode {
-            let rows = if e.has_friction() { 3 } else { 1 };
-            for r in e.row..e.row + rows {
+            for r in e.row..e.row + e.rows() {
                 c.weights[r] = c.impulses[r];
             }
         }
@@ -234,7 +240,7 @@ where
             .fold(f64::MIN_POSITIVE, f64::max);
         let epsilon = REGULARISATION / largest;
         for (e, &sliding) in c.mode.iter().zip(&c.sliding) {
-            let rows = if e.has_friction() { 3 } else { 1 };
+            let rows = e.rows();
             let (_, n, u) = match e.has_friction() {
                 true => c.slip(e),
                 false => ([0.0; 2], 0.0, [0.0; 2]),
@@ -278,8 +284,7 @@ where
             self.lambda[r] += c.direction[nd + r];
         }
         for e in &c.mode {
-            let rows = if e.has_friction() { 3 } else { 1 };
-            for t in 0..rows {
+            for t in 0..e.rows() {
                 c.weights[e.row + t] += c.direction[e.base + t];
             }
         }
