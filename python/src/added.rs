@@ -7,6 +7,7 @@ use std::cell::RefCell;
 use std::sync::Arc;
 
 use pyo3::prelude::*;
+use pyo3::types::PyList;
 use tree_mech::kernel::Output;
 use tree_mech::runtime::{AddedTerms, Ask};
 use tree_mech::Order;
@@ -15,7 +16,8 @@ use crate::arrays::vector;
 use crate::errors::bad;
 use crate::model::Model;
 
-/// A Python callable `terms(kind, order, q, dq, along)` with the rows it adds. `kind` is
+/// A Python callable `terms(kind, order, q, dq, along)` with the rows it adds (`q`, `q̇`
+/// lists, `along` arrays). `kind` is
 /// `"lagrangian"`, `"terms"` or `"constraints"`, `order` 0, 1 or 2 (first, dynamics, full),
 /// `along` `None` or `(δq, δq̇)`; it returns `[(key, values, derivatives or None), …]` with
 /// `key` one of `L`, `dL_dq`, `F`, `d2L_dqdq`, `dF_dq`, `dF_ddq`, `h`, `Dh`, `dh_dot`, `D2h`
@@ -132,7 +134,13 @@ impl AddedTerms for PythonTerms {
         let (n, rows) = (q.len(), self.names.len());
         let result: Option<Entries> = Python::attach(|py| {
             let along = along.map(|(a, b)| (vector(py, a), vector(py, b)));
-            let args = (kind, order, vector(py, q), vector(py, dq), along);
+            // The state as lists: the script's methods read it entry by entry, which a list
+            // serves several times faster than an array.
+            let (q, dq) = (PyList::new(py, q), PyList::new(py, dq));
+            let (Ok(q), Ok(dq)) = (q, dq) else {
+                return None;
+            };
+            let args = (kind, order, q, dq, along);
             self.callback
                 .call1(py, args)
                 .and_then(|r| {

@@ -21,6 +21,9 @@ from .. import _native
 from . import _products as products
 from ._python_terms import PythonTerms, defined_in_python
 
+#: No values (a step without inputs or kinematic configs), shared: never written.
+_NO_VALUES = np.zeros(0)
+
 WORLD = "world"
 TX, TY, TZ, RX, RY, RZ = "tx", "ty", "tz", "rx", "ry", "rz"
 CONST_SE3 = "const_se3"
@@ -669,7 +672,7 @@ class System:
         self._in_callback = False
         # The script's own elements, called back by the native model (_add_python_terms).
         self._terms: Optional[PythonTerms] = None
-        self._python_parts: Optional[tuple] = None
+        self._python_plan: Any = None
         self._cache: Dict[str, Any] = {}
         self._world = _World(self)
 
@@ -1008,6 +1011,10 @@ class System:
             self._perm = np.array([index[c.name] for c in self._configs], dtype=int)
             self._dperm = np.array([dynamic[c.name] for c in self.dyn_configs], dtype=int)
             self._kperm = np.array([kinematic[c.name] for c in self.kin_configs], dtype=int)
+            #: Whether trep's config order is the model's (every vector handed over as is).
+            self._model_order_is_trep = all(
+                np.array_equal(p, np.arange(len(p))) for p in (self._perm, self._dperm,
+                                                               self._kperm))
             self._add_python_terms()
         return self._model
 
@@ -1022,7 +1029,7 @@ class System:
     def _add_python_terms(self) -> None:
         """The script's own potentials, forces and constraints (written in Python), added to
         the native model's terms: the runtime calls them back on every evaluation."""
-        self._python_parts = None  # found again for this model
+        self._python_plan = None  # found again for this model
         terms = PythonTerms(self)
         potentials, forces, constraints = terms.parts()
         self._terms = terms if potentials or forces or constraints else None
@@ -1568,6 +1575,8 @@ class MidpointVI:
     nc = property(lambda self: self._system.nc, doc="The number of constraints.")
 
     def _vec(self, value: Any, n: int, what: str) -> np.ndarray:
+        if n == 0 and isinstance(value, tuple) and not value:
+            return _NO_VALUES  # `step(t2)` on a system without inputs: every step
         v = np.asarray(value, dtype=float).reshape(-1)
         if len(v) != n:
             raise ValueError(f"{what} needs {n} entries, got {len(v)}")
@@ -1632,8 +1641,15 @@ class MidpointVI:
         dt = self.t2 - self.t1
         if dt == 0.0:
             return
-        self._system.set_state(q=0.5 * (self._q1 + self._q2), dq=(self._q2 - self._q1) / dt,
-                               u=self._u1, t=0.5 * (self.t1 + self.t2))
+        # Written in place (the shapes are the integrator's own): this runs every step.
+        s = self._system
+        np.add(self._q1, self._q2, out=s._q)
+        s._q *= 0.5
+        np.subtract(self._q2, self._q1, out=s._dq)
+        s._dq /= dt
+        s._u[:] = self._u1
+        s.t = 0.5 * (self.t1 + self.t2)
+        s._state_changed()
 
     def step(self, t2: float, u1: Any = (), k2: Any = (), max_iterations: int = 200,
              q2_hint: Any = None, lambda1_hint: Any = None) -> int:
@@ -1664,21 +1680,29 @@ class MidpointVI:
 
     def _solve(self, order: int) -> None:
         s = self._system
-        kin_model = np.zeros(self.nk)
-        kin_model[s._kperm] = self._k2
-        p1 = np.zeros(self.nd)
-        p1[s._dperm] = self._p1
+        same = s._model_order_is_trep  # nothing to move (the usual case): no copies
+        if same:
+            q1, p1, kin_model = self._q1, self._p1, self._k2
+        else:
+            kin_model = np.zeros(self.nk)
+            kin_model[s._kperm] = self._k2
+            p1 = np.zeros(self.nd)
+            p1[s._dperm] = self._p1
+            q1 = s._to_model(self._q1)
         q2, p2, lam, iterations, derivs = s._native_call(
-            lambda: self._stepper.step(self.t1, s._to_model(self._q1), p1, self.t2, self._u1,
-                                       kin_model, self._lam, order),
+            lambda: self._stepper.step(self.t1, q1, p1, self.t2, self._u1, kin_model,
+                                       self._lam, order),
             ConvergenceError, f"the step to t = {self.t2}: ")
-        self._q2 = np.asarray(q2)[s._perm]
-        self._p2 = np.asarray(p2)[s._dperm]
+        if same:
+            self._q2, self._p2 = np.asarray(q2), np.asarray(p2)
+        else:
+            self._q2, self._p2 = np.asarray(q2)[s._perm], np.asarray(p2)[s._dperm]
         self._lam = np.asarray(lam)
         self._iterations = iterations
         # trep's λ₁ multiplies its rows (System._signs) with the opposite sign and Δt folded
         # in: λ₁ = −Δt·sign·λ (the native derivatives already carry the −Δt).
-        self._lambda1 = -(self.t2 - self.t1) * s._signs() * self._lam
+        self._lambda1 = (-(self.t2 - self.t1) * s._signs() * self._lam if len(self._lam)
+                         else self._lam)
         if order:
             self._derivs = {k: np.asarray(v) for k, v in derivs.items()}
             self._order = order

@@ -18,7 +18,7 @@ What each ask needs, as trep needs it (a derivative a script does not write rais
 from __future__ import annotations
 
 import weakref
-from typing import Any, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -43,6 +43,30 @@ def _grid(configs: Any, rank: int, entry) -> List[float]:
     return [entry(a, b, c) for a in configs for b in configs for c in configs]
 
 
+def _symmetric_grid(configs: Any, rank: int, entry) -> List[float]:
+    """:func:`_grid` of a derivative symmetric in its arguments (``V_dqdq``, ``h_dqdqdq``
+    …): ``entry`` is called once per set of configs, arguments in config order (as trep
+    calls a Hessian: once per pair), and the value copied to every permutation."""
+    n = len(configs)
+    if rank == 1:
+        return [entry(a) for a in configs]
+    out = [0.0] * n ** rank
+    if rank == 2:
+        for i, a in enumerate(configs):
+            for j in range(i, n):
+                out[i * n + j] = out[j * n + i] = entry(a, configs[j])
+        return out
+    for i, a in enumerate(configs):
+        for j in range(i, n):
+            b = configs[j]
+            for k in range(j, n):
+                v = entry(a, b, configs[k])
+                for x, y, z in ((i, j, k), (i, k, j), (j, i, k), (j, k, i), (k, i, j),
+                                (k, j, i)):
+                    out[(x * n + y) * n + z] = v
+    return out
+
+
 def _total(parts: List[Any], name: str):
     """The parts' method ``name`` summed, as one callable (the method itself for one part:
     this runs several times a step)."""
@@ -55,6 +79,33 @@ def _total(parts: List[Any], name: str):
 def _array(values: List[float], n: int, rank: int) -> np.ndarray:
     """Flat values as an n × … × n array (for the derivatives along a direction)."""
     return np.asarray(values, dtype=float).reshape((n,) * rank)
+
+
+class _Plan:
+    """What every call back reads, found once per model: the configs (trep's order), the
+    script's own parts, and their methods summed by name (:func:`_total`)."""
+
+    def __init__(self, system: Any) -> None:
+        self.configs = list(system._configs)
+        self.n, self.nd = len(self.configs), system.nQd
+        self.parts = ([p for p in system._potentials if defined_in_python(p)],
+                      [f for f in system._forces if defined_in_python(f)],
+                      [c for c in system._constraints if defined_in_python(c)])
+        self._summed: Dict[Tuple[int, str], Any] = {}
+
+    def _method(self, kind: int, name: str):
+        method = self._summed.get((kind, name))
+        if method is None:
+            method = self._summed[(kind, name)] = _total(self.parts[kind], name)
+        return method
+
+    def potentials(self, name: str):
+        """The potentials' method ``name``, summed."""
+        return self._method(0, name)
+
+    def forces(self, name: str):
+        """The forces' method ``name``, summed."""
+        return self._method(1, name)
 
 
 class PythonTerms:
@@ -76,19 +127,21 @@ class PythonTerms:
         """The system whose elements these are."""
         return self._system()
 
-    def parts(self) -> Tuple[List[Any], List[Any], List[Any]]:
-        """The script's own potentials, forces and constraints (kept on the system, which a
-        structure change rebuilds with its model)."""
+    def plan(self) -> "_Plan":
+        """What the calls back read every time, found once per model and kept on the
+        system (which a structure change rebuilds with its model): on the native model's
+        side, the parts' methods would hold the system through a cycle Python cannot see."""
         s = self.system
-        parts = getattr(s, "_python_parts", None)
-        if parts is None:
-            parts = ([p for p in s._potentials if defined_in_python(p)],
-                     [f for f in s._forces if defined_in_python(f)],
-                     [c for c in s._constraints if defined_in_python(c)])
-            s._python_parts = parts
-        return parts
+        plan = s._python_plan
+        if plan is None:
+            plan = s._python_plan = _Plan(s)
+        return plan
 
-    def __call__(self, kind: str, order: int, q: np.ndarray, dq: np.ndarray,
+    def parts(self) -> Tuple[List[Any], List[Any], List[Any]]:
+        """The script's own potentials, forces and constraints."""
+        return self.plan().parts
+
+    def __call__(self, kind: str, order: int, q: List[float], dq: List[float],
                  along: Optional[Tuple[np.ndarray, np.ndarray]]) -> Optional[list]:
         try:
             return self._at(kind, order, q, dq, along)
@@ -106,19 +159,20 @@ class PythonTerms:
         # several times faster than an array); a frame read now is evaluated at this state,
         # on the model without these elements.
         if self.identity:
-            s._q, s._dq = q.tolist(), dq.tolist()
+            s._q, s._dq = q, dq
         else:
-            s._q, s._dq = np.asarray(q)[perm].tolist(), np.asarray(dq)[perm].tolist()
+            s._q, s._dq = [q[i] for i in perm], [dq[i] for i in perm]
         s._cache, s._in_callback = {}, True
         try:
             if along is not None:
                 along = (np.asarray(along[0])[perm], np.asarray(along[1])[perm])
+            plan = s._python_plan or self.plan()
             if kind == "constraints":
-                entries = self._constraints(order, along)
+                entries = _constraints(plan, s._dq, order, along)
             else:
-                entries = self._potentials(kind == "lagrangian", order, along)
+                entries = _potentials(plan, kind == "lagrangian", order, along)
                 if kind == "terms":
-                    entries += self._forces(order, along)
+                    entries += _forces(plan, order, along)
         finally:
             s._q, s._dq, s._cache = kept
             s._in_callback = False
@@ -143,97 +197,93 @@ class PythonTerms:
         out[(slice(None),) + np.ix_(*[perm] * axes)] = x
         return out.ravel().tolist()
 
-    def _potentials(self, energy_only: bool, order: int, along) -> list:
-        """``L = −ΣV`` and its derivatives (trep's ``V``, ``V_dq``, ``V_dqdq``, ``V_dqdqdq``)."""
-        ps = self.parts()[0]
-        configs = self.system._configs
-        n = len(configs)
-        lagrangian = -_total(ps, "V")()
-        if energy_only and along is None:
-            return [("L", [lagrangian], None)]
-        v_dq = _total(ps, "V_dq")
-        dl = [-v_dq(a) for a in configs]
-        if along is None and order != ORDER_FULL:
-            return [("L", [lagrangian], None), ("dL_dq", dl, None)]
-        dq_along = along[0] if along is not None else None
-        if energy_only:
-            return [("L", [lagrangian], [float(np.dot(dl, dq_along))])]
-        v_dqdq = _total(ps, "V_dqdq")
-        d2l = [-v_dqdq(a, b) for a in configs for b in configs]
-        if along is None:
-            return [("L", [lagrangian], None), ("dL_dq", dl, None), ("d2L_dqdq", d2l, None)]
-        out = [("L", [lagrangian], [float(np.dot(dl, dq_along))]),
-               ("dL_dq", dl, _array(d2l, n, 2) @ dq_along)]
-        if order == ORDER_FULL:
-            v_dqdqdq = _total(ps, "V_dqdqdq")
-            d3l = _grid(configs, 3, lambda a, b, c: -v_dqdqdq(a, b, c))
-            out.append(("d2L_dqdq", d2l, _array(d3l, n, 3) @ dq_along))
-        return out
 
-    def _forces(self, order: int, along) -> list:
-        """``F`` on the dynamic configs and its derivatives (trep's ``f``, ``f_dq``,
-        ``f_ddq``, and for a direction ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``); zero on the
-        kinematic ones."""
-        fs = self.parts()[1]
-        if not fs:
-            return []
-        s = self.system
-        configs, n, nd = s._configs, len(s._configs), s.nQd
+def _potentials(plan: "_Plan", energy_only: bool, order: int, along) -> list:
+    """``L = −ΣV`` and its derivatives (trep's ``V``, ``V_dq``, ``V_dqdq``, ``V_dqdqdq``)."""
+    configs, n, method = plan.configs, plan.n, plan.potentials
+    lagrangian = -method("V")()
+    if energy_only and along is None:
+        return [("L", [lagrangian], None)]
+    v_dq = method("V_dq")
+    dl = [-v_dq(a) for a in configs]
+    if along is None and order != ORDER_FULL:
+        return [("L", [lagrangian], None), ("dL_dq", dl, None)]
+    dq_along = along[0] if along is not None else None
+    if energy_only:
+        return [("L", [lagrangian], [float(np.dot(dl, dq_along))])]
+    v_dqdq = method("V_dqdq")
+    d2l = _symmetric_grid(configs, 2, lambda a, b: -v_dqdq(a, b))
+    if along is None:
+        return [("L", [lagrangian], None), ("dL_dq", dl, None), ("d2L_dqdq", d2l, None)]
+    out = [("L", [lagrangian], [float(np.dot(dl, dq_along))]),
+           ("dL_dq", dl, _array(d2l, n, 2) @ dq_along)]
+    if order == ORDER_FULL:
+        v_dqdqdq = method("V_dqdqdq")
+        d3l = _symmetric_grid(configs, 3, lambda a, b, c: -v_dqdqdq(a, b, c))
+        out.append(("d2L_dqdq", d2l, _array(d3l, n, 3) @ dq_along))
+    return out
 
-        def each(name: str, rank: int) -> List[float]:
-            """The forces' ``name`` method summed, rows on the dynamic configs only."""
-            zeros = [0.0] * ((n - nd) * n ** (rank - 1))
-            method = _total(fs, name)
-            if rank == 1:
-                return [method(a) for a in configs[:nd]] + zeros
-            if rank == 2:
-                return [method(a, b) for a in configs[:nd] for b in configs] + zeros
-            rest = _grid(configs, rank - 1, lambda *b: b)
-            return [method(a, *b) for a in configs[:nd] for b in rest] + zeros
+def _forces(plan: "_Plan", order: int, along) -> list:
+    """``F`` on the dynamic configs and its derivatives (trep's ``f``, ``f_dq``,
+    ``f_ddq``, and for a direction ``f_dqdq``, ``f_ddqdq``, ``f_ddqddq``); zero on the
+    kinematic ones."""
+    if not plan.parts[1]:
+        return []
+    configs, n, nd = plan.configs, plan.n, plan.nd
 
-        f = each("f", 1)
-        full = order == ORDER_FULL
-        if along is None and not full:
-            return [("F", f, None)]
-        f_dq, f_ddq = each("f_dq", 2), each("f_ddq", 2)
-        if along is None:
-            return [("F", f, None), ("dF_dq", f_dq, None), ("dF_ddq", f_ddq, None)]
-        dq_along, ddq_along = along
-        m_dq, m_ddq = _array(f_dq, n, 2), _array(f_ddq, n, 2)
-        out = [("F", f, m_dq @ dq_along + m_ddq @ ddq_along)]
-        if full:
-            qq = _array(each("f_dqdq", 3), n, 3)
-            vq = _array(each("f_ddqdq", 3), n, 3)  # vq[i, j, k] = ∂²F_i/∂q̇_j∂q_k
-            vv = _array(each("f_ddqddq", 3), n, 3)
-            out += [("dF_dq", f_dq, qq @ dq_along + np.einsum("ikj,k->ij", vq, ddq_along)),
-                    ("dF_ddq", f_ddq, vq @ dq_along + vv @ ddq_along)]
-        return out
+    def each(name: str, rank: int) -> List[float]:
+        """The forces' ``name`` method summed, rows on the dynamic configs only."""
+        zeros = [0.0] * ((n - nd) * n ** (rank - 1))
+        method = plan.forces(name)
+        if rank == 1:
+            return [method(a) for a in configs[:nd]] + zeros
+        if rank == 2:
+            return [method(a, b) for a in configs[:nd] for b in configs] + zeros
+        rest = _grid(configs, rank - 1, lambda *b: b)
+        return [method(a, *b) for a in configs[:nd] for b in rest] + zeros
 
-    def _constraints(self, order: int, along) -> list:
-        """The script's constraint rows (trep's ``h``, ``h_dq``, ``h_dqdq``, ``h_dqdqdq``)."""
-        rows = self.parts()[2]
-        s = self.system
-        configs, n, m = s._configs, len(s._configs), len(rows)
+    f = each("f", 1)
+    full = order == ORDER_FULL
+    if along is None and not full:
+        return [("F", f, None)]
+    f_dq, f_ddq = each("f_dq", 2), each("f_ddq", 2)
+    if along is None:
+        return [("F", f, None), ("dF_dq", f_dq, None), ("dF_ddq", f_ddq, None)]
+    dq_along, ddq_along = along
+    m_dq, m_ddq = _array(f_dq, n, 2), _array(f_ddq, n, 2)
+    out = [("F", f, m_dq @ dq_along + m_ddq @ ddq_along)]
+    if full:
+        qq = _array(each("f_dqdq", 3), n, 3)
+        vq = _array(each("f_ddqdq", 3), n, 3)  # vq[i, j, k] = ∂²F_i/∂q̇_j∂q_k
+        vv = _array(each("f_ddqddq", 3), n, 3)
+        out += [("dF_dq", f_dq, qq @ dq_along + np.einsum("ikj,k->ij", vq, ddq_along)),
+                ("dF_ddq", f_ddq, vq @ dq_along + vv @ ddq_along)]
+    return out
 
-        def each(name: str, rank: int) -> List[float]:
-            return [x for c in rows for x in _grid(configs, rank, getattr(c, name))]
+def _constraints(plan: "_Plan", dq_now: List[float], order: int, along) -> list:
+    """The script's constraint rows (trep's ``h``, ``h_dq``, ``h_dqdq``, ``h_dqdqdq``)."""
+    rows = plan.parts[2]
+    configs, n, m = plan.configs, plan.n, len(rows)
 
-        h, dh = [c.h() for c in rows], each("h_dq", 1)
-        if along is None and order < ORDER_DYNAMICS:
-            return [("h", h, None), ("Dh", dh, None)]
-        d2h = np.asarray(each("h_dqdq", 2), dtype=float).reshape(m, n, n)
-        dq = np.array(s._dq)
-        out = [("h", h, None if along is None else np.asarray(dh).reshape(m, n) @ along[0]),
-               ("Dh", dh, None if along is None else d2h @ along[0])]
-        d3h = None
-        if along is not None and order >= ORDER_DYNAMICS:
-            d3h = np.asarray(each("h_dqdqdq", 3), dtype=float).reshape(m, n, n, n)
-        if order >= ORDER_DYNAMICS:
-            tangent = None
-            if along is not None:
-                tangent = (np.einsum("rijk,i,j,k->r", d3h, dq, dq, along[0])
-                           + 2.0 * np.einsum("rij,i,j->r", d2h, dq, along[1]))
-            out.append(("dh_dot", np.einsum("rij,i,j->r", d2h, dq, dq), tangent))
-        if order == ORDER_FULL:
-            out.append(("D2h", d2h, None if along is None else d3h @ along[0]))
-        return out
+    def each(name: str, rank: int) -> List[float]:
+        return [x for c in rows for x in _symmetric_grid(configs, rank, getattr(c, name))]
+
+    h, dh = [c.h() for c in rows], each("h_dq", 1)
+    if along is None and order < ORDER_DYNAMICS:
+        return [("h", h, None), ("Dh", dh, None)]
+    d2h = np.asarray(each("h_dqdq", 2), dtype=float).reshape(m, n, n)
+    dq = np.array(dq_now)
+    out = [("h", h, None if along is None else np.asarray(dh).reshape(m, n) @ along[0]),
+           ("Dh", dh, None if along is None else d2h @ along[0])]
+    d3h = None
+    if along is not None and order >= ORDER_DYNAMICS:
+        d3h = np.asarray(each("h_dqdqdq", 3), dtype=float).reshape(m, n, n, n)
+    if order >= ORDER_DYNAMICS:
+        tangent = None
+        if along is not None:
+            tangent = (np.einsum("rijk,i,j,k->r", d3h, dq, dq, along[0])
+                       + 2.0 * np.einsum("rij,i,j->r", d2h, dq, along[1]))
+        out.append(("dh_dot", np.einsum("rij,i,j->r", d2h, dq, dq), tangent))
+    if order == ORDER_FULL:
+        out.append(("D2h", d2h, None if along is None else d3h @ along[0]))
+    return out
