@@ -61,11 +61,12 @@ def test_lagrangian_and_constraints_match_trep(recorded, key):
 
 
 @pytest.mark.parametrize("key", ["f", "f_dq", "f_ddq", "f_du", "f_dddk", "lambda",
-                                 "lambda_dq", "lambda_ddq", "lambda_dddk"])
+                                 "lambda_dq", "lambda_ddq", "lambda_du", "lambda_dddk"])
 def test_dynamics_and_their_derivatives_match_trep(recorded, key):
     name, ours, theirs = recorded
     if key not in theirs:
-        pytest.skip(f"{name} has no {'inputs' if key == 'f_du' else 'kinematic configs'}")
+        missing = "inputs" if key in ("f_du", "lambda_du") else "kinematic configs"
+        pytest.skip(f"{name} has no {missing}")
     close(ours[key], theirs[key], 1e-12, f"{name} {key}")
 
 
@@ -601,8 +602,21 @@ def test_treps_puppet_module_builds_treps_marionette():
         names = sorted(theirs[what])
         close([ours[what][k] for k in names], [theirs[what][k] for k in names], 1e-10,
               f"puppet {what}")
-    with pytest.raises(NotImplementedError, match="HybridWrench"):
-        trep.puppets.Puppet(string_forces=True)
+
+
+def test_treps_puppet_pulled_by_its_strings_as_forces_moves_as_treps():
+    # Puppet(string_forces=True): a HybridWrench per string whose force entries are inputs.
+    # 20 steps pulling each string by its own amount, and the last step's derivatives by
+    # every input, against trep's (all by name).
+    theirs = FIXTURE["puppet_string_forces"]
+    ours = trep_scripts.puppet_string_forces(trep)
+    assert ours["inputs"] == theirs["inputs"]
+    names = sorted(theirs["q"])
+    close([ours["q"][k] for k in names], [theirs["q"][k] for k in names], 1e-10, "puppet q")
+    for block in ("q2_du1", "p2_du1"):
+        rows = sorted(theirs[block])
+        flat = lambda d: [d[r][u] for r in rows for u in theirs["inputs"]]  # noqa: E731
+        close(flat(ours[block]), flat(theirs[block]), 1e-9, f"puppet {block}")
 
 
 def test_a_constant_se3_frame_is_its_matrix():
@@ -749,16 +763,49 @@ def test_a_tape_measure_checks_itself_and_refuses_a_zero_segment():
         trep.TapeMeasure(s, ["A"])
 
 
-def test_a_wrench_of_inputs_is_refused_by_name():
+def test_a_wrench_names_its_inputs_and_bad_entries_are_refused():
     s = trep_scripts.wrenches_and_curves(trep)
-    with pytest.raises(NotImplementedError, match="entry 1 of the wrench names an input"):
-        trep.forces.BodyWrench(s, "tip", (0.0, "push", 0.0))
+    w = trep.forces.BodyWrench(s, "tip", (0.0, "push", 0.0))
+    assert [i.name for i in s.inputs] == ["push"] and s.inputs[0].force is w
+    assert w.wrench[1] is s.inputs[0] and w.wrench_val == [0.0] * 6
+    s.u = [2.5]
+    assert w.wrench_val == [0.0, 2.5, 0.0, 0.0, 0.0, 0.0]
     with pytest.raises(ValueError, match="six entries"):
         trep.forces.HybridWrench(s, "tip", (0.0,) * 7)
-    with pytest.raises(ValueError, match="entry 2 of the wrench is nan"):
+    with pytest.raises(ValueError, match="entry 2 of the wrench is nan; each entry is a "
+                                         "finite number or an input's name"):
         trep.forces.SpatialWrench(s, "B", (0.0, 1.0, float("nan")))
     with pytest.raises(ValueError, match="entry 0 of the wrench is None"):
         trep.forces.SpatialWrench(s, "B", (None,))
+
+
+def test_a_python_force_with_an_input_but_no_f_du_says_so_when_a_derivative_needs_it():
+    # It steps (f alone is needed); the derivative by its input raises trep's error.
+    class Push(trep.Force):
+        def __init__(self, system):
+            trep.Force.__init__(self, system, name="push")
+            self.u1 = self._create_input("push")
+
+        def f(self, q):
+            return self.u1.u
+
+        def f_dq(self, q, q1):
+            return 0.0
+
+        def f_ddq(self, q, dq1):
+            return 0.0
+
+    s = trep.System()
+    s.import_frames([trep.tx("x", name="cart", mass=2.0)])
+    Push(s)
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, [0.0], 0.1, [0.0])
+    mvi.step(0.2, [4.0])
+    assert abs(mvi.p2[0] - 0.4) < 1e-12  # the impulse Δt·u
+    with pytest.raises(NotImplementedError, match="f_du"):
+        mvi.q2_du1()
+    with pytest.raises(NotImplementedError, match="f_du"):
+        s.f_du()
 
 
 def test_a_python_element_reads_the_systems_arrays_inside_a_callback():

@@ -294,10 +294,145 @@ def wrenches_and_curves(trep):
     return s
 
 
+def input_wrenches(trep):
+    """A two-joint arm (a about x, b about y) beside a slider x, pushed by wrenches whose
+    entries name inputs — on the tip in world axes at its origin, on the tip in its own axes,
+    on the elbow joint's frame in world axes — between a ConfigForce on the slider and one
+    after them; gravity."""
+    s = trep.System()
+    s.import_frames([
+        trep.rx("a", name="A"), [
+            trep.tz(-1.0, name="elbow"), [
+                trep.ry("b", name="B"), [
+                    trep.tz(-0.5, mass=(1.0, 0.1, 0.2, 0.3), name="tip")]]],
+        trep.tx("x", name="X", mass=2.0)])
+    trep.potentials.Gravity(s)
+    trep.forces.ConfigForce(s, "x", "push")
+    trep.forces.HybridWrench(s, "tip", ("fx", 0.0, "fz", 0.1, 0.0, 0.0))
+    trep.forces.BodyWrench(s, "tip", (0.2, "by", 0.0, 0.0, 0.0, "bt"))
+    trep.forces.SpatialWrench(s, "B", (0.0, 0.0, "sz", "st", 0.0, 0.0))
+    trep.forces.ConfigForce(s, "b", "elbow_torque")
+    s.q = [0.3, -0.4, 0.2]
+    return s
+
+
+def python_force_inputs(trep):
+    """``python_elements`` (a potential, a force and a constraint written in Python) pushed
+    as well by a force written in Python that creates two inputs — nonlinear in them and
+    depending on the state: ``F_θ = a u₁ cos θ + b u₁ u₂``, ``F_x = u₂ (1 + c x θ̇)`` — then a
+    ConfigForce on z after it."""
+
+    class Thruster(trep.Force):
+        def __init__(self, system, a, b, c):
+            trep.Force.__init__(self, system, name="thruster")
+            self.th, self.x = system.get_config("theta"), system.get_config("x")
+            self.a, self.b, self.c = a, b, c
+            self.u1 = self._create_input("thrust")
+            self.u2 = self._create_input("gimbal")
+
+        def f(self, q):
+            u1, u2 = self.u1.u, self.u2.u
+            if q == self.th:
+                return self.a * u1 * math.cos(self.th.q) + self.b * u1 * u2
+            if q == self.x:
+                return u2 * (1.0 + self.c * self.x.q * self.th.dq)
+            return 0.0
+
+        def f_dq(self, q, q1):
+            u1, u2 = self.u1.u, self.u2.u
+            if q == self.th and q1 == self.th:
+                return -self.a * u1 * math.sin(self.th.q)
+            if q == self.x and q1 == self.x:
+                return u2 * self.c * self.th.dq
+            return 0.0
+
+        def f_ddq(self, q, dq1):
+            if q == self.x and dq1 == self.th:
+                return self.u2.u * self.c * self.x.q
+            return 0.0
+
+        def f_du(self, q, u):
+            u1, u2 = self.u1.u, self.u2.u
+            if q == self.th:
+                if u == self.u1:
+                    return self.a * math.cos(self.th.q) + self.b * u2
+                if u == self.u2:
+                    return self.b * u1
+            if q == self.x and u == self.u2:
+                return 1.0 + self.c * self.x.q * self.th.dq
+            return 0.0
+
+        def f_dqdq(self, q, q1, q2):
+            if q == self.th and q1 == self.th and q2 == self.th:
+                return -self.a * self.u1.u * math.cos(self.th.q)
+            return 0.0
+
+        def f_ddqdq(self, q, dq1, q2):
+            if q == self.x and dq1 == self.th and q2 == self.x:
+                return self.u2.u * self.c
+            return 0.0
+
+        def f_ddqddq(self, q, dq1, dq2):
+            return 0.0
+
+        def f_dudq(self, q, u, q1):
+            if q == self.th and u == self.u1 and q1 == self.th:
+                return -self.a * math.sin(self.th.q)
+            if q == self.x and u == self.u2 and q1 == self.x:
+                return self.c * self.th.dq
+            return 0.0
+
+        def f_duddq(self, q, u, dq1):
+            if q == self.x and u == self.u2 and dq1 == self.th:
+                return self.c * self.x.q
+            return 0.0
+
+        def f_dudu(self, q, u1, u2):
+            if q == self.th and set([u1.name, u2.name]) == set(["thrust", "gimbal"]):
+                return self.b
+            return 0.0
+
+    s = python_elements(trep)
+    Thruster(s, 0.8, 0.5, 0.7)
+    trep.forces.ConfigForce(s, "z", "lift")
+    return s
+
+
+def puppet_string_forces(trep, steps=20, dt=0.01):
+    """trep's marionette pulled by its strings as forces (``Puppet(string_forces=True)``: a
+    HybridWrench per string, its three components inputs): the inputs, then ``steps`` VI
+    steps with each string pulling up by its own amount, and the last step's derivatives by
+    the strings' inputs — all by name (trep lists the strings in its dict's order)."""
+    import importlib
+    puppets = importlib.import_module(trep.__name__ + ".puppets")
+    p = puppets.Puppet(joint_forces=False, string_forces=True)
+    pose = {"torso_tz": 1.1, "torso_rz": 0.2, "lhip_rx": -0.4, "rhip_rx": 0.3,
+            "lknee_rx": 0.5, "rknee_rx": 0.2, "lshoulder_rx": 0.6, "relbow_rx": 0.4}
+    for name, value in pose.items():
+        p.get_config(name).q = value
+    names = [i.name for i in p.inputs]
+    pull = dict((n, (0.5 + 0.05 * len(n) if n.endswith("-z") else 0.1 * (-1) ** len(n)))
+                for n in names)
+    u = [pull[n] for n in names]
+    mvi = trep.MidpointVI(p, tolerance=1e-10)  # trep's Newton stalls on the Puppet at 1e-13
+    mvi.initialize_from_configs(0.0, p.q, dt, p.q)
+    for _ in range(steps):
+        mvi.step(mvi.t2 + dt, u)
+    dyn = [c.name for c in p.dyn_configs]
+    q2_du1, p2_du1 = mvi.q2_du1(), mvi.p2_du1()
+    return {"inputs": sorted(names),
+            "q": dict((c.name, float(mvi.q2[i])) for i, c in enumerate(p.configs)),
+            "q2_du1": dict((d, dict((n, float(q2_du1[r, k])) for k, n in enumerate(names)))
+                           for r, d in enumerate(dyn)),
+            "p2_du1": dict((d, dict((n, float(p2_du1[r, k])) for k, n in enumerate(names)))
+                           for r, d in enumerate(dyn))}
+
+
 SYSTEMS = [("cart_pendulum_string", cart_pendulum_string), ("ball_on_incline", ball_on_incline),
            ("imported_tree", imported_tree), ("coupled_pendulums", coupled_pendulums),
            ("pinned_masses", pinned_masses), ("python_elements", python_elements),
-           ("wrenches_and_curves", wrenches_and_curves)]
+           ("wrenches_and_curves", wrenches_and_curves), ("input_wrenches", input_wrenches),
+           ("python_force_inputs", python_force_inputs)]
 
 #: The systems whose frames' third derivatives are recorded too.
 THIRD_ORDER = (wrenches_and_curves,)
@@ -409,6 +544,7 @@ def record(trep, build):
     out["f_dq"], out["f_ddq"] = _list(s.f_dq()), _list(s.f_ddq())
     if s.nu:
         out["f_du"] = _list(s.f_du())
+        out["lambda_du"] = _list(s.lambda_du())
     if s.nQk:
         out["f_dddk"] = _list(s.f_dddk())
         out["lambda_dddk"] = _list(s.lambda_dddk())

@@ -54,6 +54,7 @@ out['puppet'] = {'configs': [c.name for c in s.configs],
                  'q100': [float(x) for x in trep_scripts.step_puppet(trep, s, 100, 0.01)]}
 out['energy_pump'] = trep_scripts.energy_pump(trep)
 out['puppet_module'] = trep_scripts.puppet_module(trep)
+out['puppet_string_forces'] = trep_scripts.puppet_string_forces(trep)
 out['splines'] = trep_scripts.splines(trep)
 out['tape_measure'] = trep_scripts.tape_measure(trep)
 path = os.path.join(root, 'python', 'tests', 'fixtures', 'trep-api.json')

@@ -18,6 +18,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .. import _native
+from . import _force_inputs as force_inputs
 from . import _products as products
 from ._python_terms import PythonTerms, defined_in_python
 
@@ -49,6 +50,12 @@ def _vector3(v: Any, what: str) -> List[float]:
     if len(out) != 3 or not all(np.isfinite(out)):
         raise ValueError(f"{what} must be three finite numbers, got {list(v)!r}")
     return out
+
+
+def _hidden_input(config: "Config") -> str:
+    """The model's name of the hidden force on a dynamic config (``_force_inputs``): never a
+    trep input's, which the model would refuse twice."""
+    return f"{config.name} (tree_mech.trep: force through inputs)"
 
 
 def _toml_string(s: str) -> str:
@@ -610,12 +617,21 @@ class Input:
         self._system = system
         self.name = name if name is not None else f"input{len(system._inputs) + 1}"
         self.index = len(system._inputs)
+        #: The force that reads it; whether the model carries it (a ConfigForce's, on one
+        #: config) or a force written in Python reads it (``Force._create_input``).
+        self._force: Any = None
+        self._in_model = True
         system._inputs.append(self)
 
     @property
     def system(self) -> "System":
         """The system the input belongs to."""
         return self._system
+
+    @property
+    def force(self) -> Any:
+        """The force that reads the input."""
+        return self._force
 
     @property
     def u(self) -> float:
@@ -963,6 +979,15 @@ class System:
         for part in [*parts, *self._constraints]:
             if not defined_in_python(part):  # a script's own element is called back instead
                 out += part._toml()
+        if any(not i._in_model for i in self._inputs):
+            # Inputs a Python force reads: a hidden force on each dynamic config without a
+            # ConfigForce (whose input is one already), held at zero, whose derivatives give
+            # theirs (_force_inputs).
+            pushed = self._config_inputs()
+            for c in self.dyn_configs:
+                if c.name not in pushed:
+                    out += ["[[input]]", f"name = {_toml_string(_hidden_input(c))}",
+                            f"variable = {_toml_string(c.name)}", ""]
         return "\n".join(out)
 
     def _frame_toml(self, f: Frame) -> List[str]:
@@ -1015,8 +1040,48 @@ class System:
             self._model_order_is_trep = all(
                 np.array_equal(p, np.arange(len(p))) for p in (self._perm, self._dperm,
                                                                self._kperm))
+            self._place_inputs()
             self._add_python_terms()
         return self._model
+
+    def _place_inputs(self) -> None:
+        """Where trep's inputs are among the model's (after a build): ``_uin`` the model's
+        column of each ConfigForce input (trep's order), ``_through`` the inputs a force
+        written in Python reads, ``_hidden`` the model's column of the hidden force on each
+        dynamic config (their derivatives: ``_force_inputs``), ``_ucols`` each trep input's
+        column among ``(ConfigForce inputs…, through…)``."""
+        col = {name: k for k, name in enumerate(self._model.inputs)}
+        own = [i for i in self._inputs if i._in_model]
+        self._through = [i for i in self._inputs if not i._in_model]
+        self._uin = np.array([col[i.name] for i in own], dtype=int)
+        pushed = self._config_inputs()
+        self._hidden = np.array([col[pushed.get(c.name, _hidden_input(c))]
+                                 for c in self.dyn_configs] if self._through else [], dtype=int)
+        self._own_index = np.array([i.index for i in own], dtype=int)
+        place = {i.index: k for k, i in enumerate(own + self._through)}
+        self._ucols = np.array([place[i.index] for i in self._inputs], dtype=int)
+        self._n_model_u = len(col)
+
+    def _config_inputs(self) -> Dict[str, str]:
+        """Each config a ConfigForce pushes on, with its input's name."""
+        return {f.config.name: f.finput.name for f in self._forces
+                if isinstance(getattr(f, "finput", None), Input) and hasattr(f, "config")}
+
+    def _model_u(self, u: np.ndarray) -> np.ndarray:
+        """The model's inputs for trep's ``u``: the ConfigForce inputs' values, the hidden
+        forces zero (an input a Python force reads acts through its call back)."""
+        out = np.zeros(self._n_model_u)
+        out[self._uin] = np.asarray(u)[self._own_index]
+        return out
+
+    def _input_columns(self, block: np.ndarray) -> np.ndarray:
+        """``∂y/∂u`` in trep's input order from ``block`` over the model's inputs, at the
+        current state (an input through a Python force: the hidden forces' columns times
+        its ``∂F/∂u``, ``_force_inputs``)."""
+        if not self._through:
+            return block[:, self._uin]
+        b = self._terms.input_map(self._q.tolist(), self._dq.tolist(), self._u, False)[0]
+        return force_inputs.dynamics_columns(block, self._uin, self._hidden, b)[:, self._ucols]
 
     def _twin(self) -> _native.Model:
         """The native model without the Python elements (their frames' poses and velocities,
@@ -1076,7 +1141,7 @@ class System:
             m = self._twin() if self._in_callback else self._native_model()
             self._cache["state"] = self._native_call(lambda: m.evaluate(
                 self._to_model(self._q), self._to_model(self._dq), self.t,
-                self._u if self.nu else None, ddq=self._to_model(self._ddq)))
+                self._model_u(self._u) if self._n_model_u else None, ddq=self._to_model(self._ddq)))
         return self._cache["state"]
 
     def _linear(self) -> Dict[str, Any]:
@@ -1084,7 +1149,7 @@ class System:
             m = self._native_model()
             self._cache["linear"] = self._native_call(lambda: m.linearize(
                 self._to_model(self._q), self._to_model(self._dq),
-                self._u if self.nu else None, self.t, ddq=self._to_model(self._ddq)))
+                self._model_u(self._u) if self._n_model_u else None, self.t, ddq=self._to_model(self._ddq)))
         return self._cache["linear"]
 
     # The Lagrangian ------------------------------------------------------------------
@@ -1175,7 +1240,9 @@ class System:
 
     def f_du(self, q: Optional[Config] = None, u1: Optional[Input] = None) -> Any:
         """``∂q̈_d/∂u`` (an entry, given a config and an input; a row or column, given one)."""
-        m = self._block("qdd_du", self._rows_d(), np.arange(self.nu))
+        self._dynamics()
+        block = np.asarray(self._linear()["qdd_du"])[self._rows_d()]
+        m = self._input_columns(block)
         return m[self._index("d", q), self._index("u", u1)]
 
     def _kinematic_acceleration_derivatives(self) -> np.ndarray:
@@ -1237,7 +1304,9 @@ class System:
     def lambda_du(self, constraint: Any = None, u1: Optional[Input] = None) -> Any:
         """``∂λ/∂u`` (trep's rows and signs)."""
         self._native_model()
-        m = self._lambda_derivative("lambda_du", np.arange(self.nu))
+        self._dynamics()
+        block = np.asarray(self._linear()["lambda_du"]) * self._signs()[:, None]
+        m = self._input_columns(block)
         return m[self._index("c", constraint), self._index("u", u1)]
 
     # Constraints ----------------------------------------------------------------------
@@ -1488,12 +1557,19 @@ class Force(_Part):
     f_dqdq = _undefined("f_dqdq", "force", "∂²f_q/∂q1∂q2")
     f_ddqdq = _undefined("f_ddqdq", "force", "∂²f_q/∂q̇1∂q2")
     f_ddqddq = _undefined("f_ddqddq", "force", "∂²f_q/∂q̇1∂q̇2")
+    f_du = _undefined("f_du", "force", "∂f_q/∂u1")
+    f_dudq = _undefined("f_dudq", "force", "∂²f_q/∂u1∂q2")
+    f_duddq = _undefined("f_duddq", "force", "∂²f_q/∂u1∂q̇2")
+    f_dudu = _undefined("f_dudu", "force", "∂²f_q/∂u1∂u2")
 
-    def _create_input(self, name: Optional[str] = None) -> Any:
-        raise NotImplementedError(
-            f"{type(self).__name__}: a force written in Python that reads inputs is not "
-            f"supported by tree_mech.trep (an input enters its integrator linearly, as "
-            f"forces.ConfigForce's does); give the input to a ConfigForce")
+    def _create_input(self, name: Optional[str] = None) -> "Input":
+        """A new input the force reads (trep's): ``Input.u`` its value; the force's ``f``
+        depends on it, ``f_du`` (and for second derivatives ``f_dudq``, ``f_duddq``,
+        ``f_dudu``) give the derivatives the runtime needs."""
+        created = Input(self._system, name)
+        created._force, created._in_model = self, False
+        self._system._structure_changed()
+        return created
 
 
 class Constraint:
@@ -1689,10 +1765,17 @@ class MidpointVI:
             p1 = np.zeros(self.nd)
             p1[s._dperm] = self._p1
             q1 = s._to_model(self._q1)
-        q2, p2, lam, iterations, derivs = s._native_call(
-            lambda: self._stepper.step(self.t1, q1, p1, self.t2, self._u1, kin_model,
-                                       self._lam, order),
-            ConvergenceError, f"the step to t = {self.t2}: ")
+        # A force written in Python reads its inputs from the System while called back.
+        kept_u = s._u.copy()
+        s._u[:] = self._u1
+        try:
+            q2, p2, lam, iterations, derivs = s._native_call(
+                lambda: self._stepper.step(self.t1, q1, p1, self.t2, s._model_u(self._u1),
+                                           kin_model, self._lam, order),
+                ConvergenceError, f"the step to t = {self.t2}: ")
+        except BaseException:
+            s._u[:] = kept_u
+            raise
         if same:
             self._q2, self._p2 = np.asarray(q2), np.asarray(p2)
         else:
@@ -1706,7 +1789,26 @@ class MidpointVI:
         if order:
             self._derivs = {k: np.asarray(v) for k, v in derivs.items()}
             self._order = order
+            if s._through:
+                self._derivs = self._through_forces(self._derivs, order == 2)
         self._leave_system_at_midpoint()
+
+    def _through_forces(self, derivs: Dict[str, np.ndarray], second: bool
+                        ) -> Dict[str, np.ndarray]:
+        """The step's derivatives with the inputs a Python force reads (``_force_inputs``),
+        from that force's ``∂F/∂u`` and its derivatives at the step's quadrature point."""
+        s = self._system
+        dt = self.t2 - self.t1
+        mid, vel = 0.5 * (self._q1 + self._q2), (self._q2 - self._q1) / dt
+        kept_t, s.t = s.t, 0.5 * (self.t1 + self.t2)
+        try:
+            b, b_dq, b_dv, b_du = s._terms.input_map(mid.tolist(), vel.tolist(), self._u1,
+                                                     second)
+        finally:
+            s.t = kept_t
+        point = force_inputs.StepPoint(s._perm, s._dperm, s._kperm, dt)
+        return force_inputs.complete(derivs, second, s._uin, s._hidden, point, b, b_dq, b_dv,
+                                     b_du)
 
     def calc_f(self) -> np.ndarray:
         """The discrete Euler–Lagrange equations at the integrator's current values (``t1``,
@@ -1720,8 +1822,15 @@ class MidpointVI:
         p1[s._dperm] = self._p1
         # trep's λ₁ over ours: λ₁ = −Δt·sign·λ (see _solve).
         lam = -self._lambda1 / (dt * s._signs()) if self.nc else np.zeros(0)
-        r = np.asarray(s._native_call(lambda: self._stepper.residual(
-            self.t1, s._to_model(self._q1), p1, self.t2, s._to_model(self._q2), self._u1, lam)))
+        kept_u = s._u.copy()
+        s._u[:] = self._u1  # what a force written in Python reads while called back
+        try:
+            r = np.asarray(s._native_call(lambda: self._stepper.residual(
+                self.t1, s._to_model(self._q1), p1, self.t2, s._to_model(self._q2),
+                s._model_u(self._u1), lam)))
+        finally:
+            s._u[:] = kept_u
+            s._state_changed()
         return np.concatenate([r[: self.nd][s._dperm], s._signs() * r[self.nd:]])
 
     def calc_p2(self) -> None:
@@ -1744,8 +1853,10 @@ class MidpointVI:
 
     def _cols(self, by: str) -> np.ndarray:
         s = self._system
-        return {"q1": s._perm, "p1": s._dperm, "u1": np.arange(self.nu),
-                "k2": s._kperm}[by]
+        # The u1 block: the model's inputs, or (ConfigForce inputs…, through…) when a
+        # Python force reads some (_through_forces).
+        u1 = s._ucols if s._through else s._uin
+        return {"q1": s._perm, "p1": s._dperm, "u1": u1, "k2": s._kperm}[by]
 
     def _first(self, of: str, by: str) -> np.ndarray:
         s = self._system

@@ -141,6 +141,38 @@ class PythonTerms:
         """The script's own potentials, forces and constraints."""
         return self.plan().parts
 
+    def input_map(self, q: List[float], dq: List[float], u: np.ndarray, second: bool
+                  ) -> Tuple[np.ndarray, Any, Any, Any]:
+        """``B = ∂F/∂u`` for the inputs forces written in Python read (trep's dynamic configs
+        × those inputs) at ``(q, q̇, u)`` (trep's order), and with ``second`` its derivatives
+        ``∂B/∂q``, ``∂B/∂q̇`` (× every config) and ``∂²F/∂u∂u`` (× those inputs): each
+        input's own force's ``f_du``, ``f_dudq``, ``f_duddq`` and ``f_dudu`` (another force's
+        input is not its)."""
+        s = self.system
+        kept = (s._q, s._dq, s._u, s._cache)
+        s._q, s._dq, s._u, s._cache = list(q), list(dq), np.asarray(u, dtype=float), {}
+        s._in_callback = True
+        try:
+            dyn, configs, through = s.dyn_configs, s._configs, s._through
+            shape = (len(dyn), len(through))
+            b = np.array([[i.force.f_du(c, i) for i in through] for c in dyn]).reshape(shape)
+            if not second:
+                return b, None, None, None
+            b_dq = np.array([[[i.force.f_dudq(c, i, a) for a in configs] for i in through]
+                             for c in dyn]).reshape(shape + (len(configs),))
+            b_dv = np.array([[[i.force.f_duddq(c, i, a) for a in configs] for i in through]
+                             for c in dyn]).reshape(shape + (len(configs),))
+            b_du = np.zeros(shape + (len(through),))
+            for r, c in enumerate(dyn):
+                for k, i in enumerate(through):
+                    for m, j in enumerate(through):
+                        if i.force is j.force:
+                            b_du[r, k, m] = i.force.f_dudu(c, i, j)
+            return b, b_dq, b_dv, b_du
+        finally:
+            s._q, s._dq, s._u, s._cache = kept
+            s._in_callback = False
+
     def __call__(self, kind: str, order: int, q: List[float], dq: List[float],
                  along: Optional[Tuple[np.ndarray, np.ndarray]]) -> Optional[list]:
         try:

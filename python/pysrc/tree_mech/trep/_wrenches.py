@@ -1,5 +1,6 @@
 """trep's wrenches on a frame — ``BodyWrench``, ``SpatialWrench``, ``HybridWrench`` — as
-forces the runtime calls back, with exact derivatives.
+forces the runtime calls back, with exact derivatives; an entry may name an input
+(``_force_inputs`` gives the step's derivatives with respect to it).
 
 A wrench ``w = (f, τ)`` held in some axes does the generalized force ``F_i = w · (X_i)^∨`` on
 config ``q_i``, where ``X_i`` is the frame's velocity generator for ``q̇_i`` in those axes
@@ -32,7 +33,8 @@ def _vee(x: np.ndarray) -> np.ndarray:
 
 
 class _Wrench(Force):
-    """A constant wrench ``(fx, fy, fz, τx, τy, τz)`` on ``frame`` in the class's axes."""
+    """A wrench ``(fx, fy, fz, τx, τy, τz)`` on ``frame`` in the class's axes: each entry a
+    number or the name of an input the wrench creates (trep's), whose value is the entry."""
 
     #: Called back by the runtime (its force depends on the frame's pose).
     _called_back = True
@@ -44,22 +46,29 @@ class _Wrench(Force):
         if len(values) != 6:
             raise ValueError(f"{type(self).__name__}: a wrench has six entries (fx, fy, fz, "
                              f"τx, τy, τz), got {len(wrench)}")
+        constants = []
         for k, x in enumerate(values):
             if isinstance(x, str):
-                raise NotImplementedError(
-                    f"{type(self).__name__}: entry {k} of the wrench names an input ({x!r}); "
-                    "tree_mech.trep takes a wrench of numbers only — its integrators take "
-                    "each input on one config (forces.ConfigForce), and a wrench's input "
-                    "acts through the frame's Jacobian, which they do not take yet")
+                constants.append(0.0)
+                continue
             try:
                 finite = np.isfinite(float(x))
             except (TypeError, ValueError):
                 finite = False
             if not finite:
                 raise ValueError(f"{type(self).__name__}: entry {k} of the wrench is {x!r}; "
-                                 "each entry is a finite number")
-        self._wrench = np.array(values, dtype=float)
+                                 "each entry is a finite number or an input's name")
+            constants.append(float(x))
+        self._wrench = np.array(constants, dtype=float)
+        #: (entry, input) for each entry that names an input.
+        self._entries: List[Tuple[int, Any]] = []
         super().__init__(system, name)
+        system._hold()
+        try:
+            self._entries = [(k, self._create_input(x)) for k, x in enumerate(values)
+                             if isinstance(x, str)]
+        finally:
+            system._release()
 
     #: ``X_i`` as a product of factors, with ``("g", (q_i,))`` for ``∂g/∂q_i``.
     _generator: Tuple[Factor, ...] = ()
@@ -70,22 +79,42 @@ class _Wrench(Force):
         return self._frame
 
     @property
-    def wrench(self) -> Tuple[float, ...]:
-        """The wrench's six entries."""
-        return tuple(self._wrench)
+    def wrench(self) -> Tuple[Any, ...]:
+        """The wrench's six entries: numbers, and the inputs named."""
+        out: List[Any] = list(self._wrench)
+        for k, created in self._entries:
+            out[k] = created
+        return tuple(out)
 
     @property
     def wrench_val(self) -> List[float]:
-        """The wrench's values (trep's name)."""
-        return self._wrench.tolist()
+        """The wrench's values now (an input's entry its value; trep's name)."""
+        return self._values().tolist()
 
-    def _force(self, q: Config, *by: Config) -> float:
+    def _values(self) -> np.ndarray:
+        if not self._entries:
+            return self._wrench
+        w = self._wrench.copy()
+        for k, created in self._entries:
+            w[k] = created.u
+        return w
+
+    def _generator_vee(self, q: Config, *by: Config) -> Optional[np.ndarray]:
+        """``(X_q)^∨`` differentiated by ``by``; None where config ``q`` does not move the
+        frame (or is kinematic: no force on it)."""
         if q.kinematic or not self._frame.uses_config(q):
-            return 0.0
+            return None
         terms: List[Term] = [(1.0, tuple(("g", (q,)) if f == ("g", ()) else f
                                          for f in self._generator))]
-        total = value(self._frame, derivatives(terms, *by))
-        return float(self._wrench @ _vee(total))
+        return _vee(value(self._frame, derivatives(terms, *by)))
+
+    def _force(self, q: Config, *by: Config) -> float:
+        x = self._generator_vee(q, *by)
+        return 0.0 if x is None else float(self._values() @ x)
+
+    def _entry(self, u1: Any) -> Optional[int]:
+        """The entry input ``u1`` is, if it is one of this wrench's."""
+        return next((k for k, created in self._entries if created is u1), None)
 
     def f(self, q: Config) -> float:
         """The generalized force on config ``q``."""
@@ -99,6 +128,16 @@ class _Wrench(Force):
         """``∂²f_q/∂q1∂q2``."""
         return self._force(q, q1, q2)
 
+    def f_du(self, q: Config, u1: Any) -> float:
+        """``∂f_q/∂u1``: the generator's entry the input fills."""
+        k, x = self._entry(u1), self._generator_vee(q)
+        return 0.0 if k is None or x is None else float(x[k])
+
+    def f_dudq(self, q: Config, u1: Any, q2: Config) -> float:
+        """``∂²f_q/∂u1∂q2``."""
+        k, x = self._entry(u1), self._generator_vee(q, q2)
+        return 0.0 if k is None or x is None else float(x[k])
+
     def f_ddq(self, q: Config, dq1: Config) -> float:
         """Zero: a wrench does not depend on the velocity."""
         return 0.0
@@ -109,6 +148,14 @@ class _Wrench(Force):
 
     def f_ddqddq(self, q: Config, dq1: Config, dq2: Config) -> float:
         """Zero."""
+        return 0.0
+
+    def f_duddq(self, q: Config, u1: Any, dq2: Config) -> float:
+        """Zero."""
+        return 0.0
+
+    def f_dudu(self, q: Config, u1: Any, u2: Any) -> float:
+        """Zero: the force is linear in its inputs."""
         return 0.0
 
 

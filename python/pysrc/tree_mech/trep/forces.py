@@ -55,6 +55,7 @@ class ConfigForce(Force):
         system._hold()
         try:
             self.finput = Input(system, finput)
+            self.finput._force = self
             super().__init__(system, name)
         finally:
             system._release()

@@ -3,10 +3,11 @@
 a free torso with a neck and head, two arms (3-axis shoulders, elbows, hands) and two legs
 (3-axis hips, knees, feet), gravity and joint damping; strings as distance constraints to
 control points in a plane above it (``string_constraints=True``), or joint forces
-(``joint_forces=True``). Written from trep's documented interface: the dimension and joint
-names and their default values (Pygmalion's motion-capture figure) are trep's, so a script
-gets trep's Puppet. The strings as forces (``string_forces=True``, trep's ``HybridWrench``)
-are not supported.
+(``joint_forces=True``), or forces pulling on the hooks (``string_forces=True``: a
+``HybridWrench`` per string whose three force entries are inputs ``NAME-x``, ``NAME-y``,
+``NAME-z``). Written from trep's documented interface: the dimension and joint names and
+their default values (Pygmalion's motion-capture figure) are trep's, so a script gets trep's
+Puppet.
 """
 from __future__ import annotations
 
@@ -124,10 +125,6 @@ class Puppet(System):
                  joints: Optional[Dict[str, Any]] = None, joint_forces: bool = False,
                  string_forces: bool = False, string_constraints: bool = False) -> None:
         super().__init__()
-        if string_forces:
-            raise NotImplementedError(
-                "Puppet(string_forces=True) pulls the strings with trep's HybridWrench, which "
-                "tree_mech.trep does not support; use string_constraints=True")
         self.string_plane: Any = None
         self.string_hooks: Dict[str, str] = {}
         self.joint_forces: Dict[str, Any] = {}
@@ -140,6 +137,8 @@ class Puppet(System):
         self.make_string_frames()
         if joint_forces:
             self.make_joint_forces()
+        if string_forces:
+            self.make_string_forces()
         if string_constraints:
             self.make_string_constraints()
         potentials.Gravity(self, (0, 0, -9.8))
@@ -160,6 +159,16 @@ class Puppet(System):
         for config in self.dyn_configs:
             self.joint_forces[config.name] = forces.ConfigForce(
                 self, config, config.name, config.name)
+
+    def make_string_forces(self) -> None:
+        """Each string a force on its hook in world axes (a ``HybridWrench``), its three
+        components the inputs ``NAME-x``, ``NAME-y``, ``NAME-z``."""
+        for name, hook in self.string_hooks.items():
+            info = {"name": name, "x": f"{name}-x", "y": f"{name}-y", "z": f"{name}-z",
+                    "hook": hook}
+            forces.HybridWrench(self, hook, (info["x"], info["y"], info["z"], 0, 0, 0),
+                                name=name)
+            self.string_forces[name] = info
 
     def make_string_constraints(self) -> None:
         """Each string a ``Distance`` constraint from its hook to a control point in the
