@@ -41,7 +41,8 @@ if '--time-discopt' in sys.argv:
     sys.exit(0)
 
 if '--time-python' in sys.argv:
-    print('trep_seconds %.4f' % trep_scripts.time_python_elements(trep))
+    print('trep_seconds %.4f %.4f' % (trep_scripts.time_python_elements(trep),
+                                      trep_scripts.time_python_elements(trep, parts=('potential',))))
     sys.exit(0)
 
 if '--time' in sys.argv:
