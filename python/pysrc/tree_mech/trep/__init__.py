@@ -37,7 +37,7 @@ from ._spline import Spline
 from ._tape import TapeMeasure
 from ._trajectory import load_trajectory, save_trajectory
 from . import discopt  # noqa: E402 (needs the core above)
-from . import puppets, system  # noqa: E402 (need the core above)
+from . import puppets, system, visual  # noqa: E402 (need the core above)
 
 #: The trep release whose API this matches.
 __version__ = "v1.0.2"
@@ -48,4 +48,5 @@ __all__ = [
     "TapeMeasure",
     "constraints", "discopt", "forces", "potentials", "__version__", "tx", "ty", "tz", "rx", "ry", "rz",
     "const_se3", "const_txyz", "load_trajectory", "puppets", "save_trajectory", "system",
+    "visual",
 ]

@@ -15,6 +15,7 @@ from typing import Any, Dict, List, Optional
 
 from . import constraints, forces, potentials
 from ._core import System, const_txyz, rx, ry, rz, tx, ty, tz
+from .visual import VisualItem3D
 
 #: The figure's dimensions (m), masses ``[m, Ixx, Iyy, Izz]``, joint damping, the height of
 #: the string plane and where each string is hooked (frame, offset): trep's defaults.
@@ -202,3 +203,14 @@ class Puppet(System):
         for info in self._strings(strings):
             length = self.get_constraint(info["name"]).get_actual_distance()
             self.get_config(info["length"]).q = length
+
+
+class PuppetVisual(VisualItem3D):
+    """trep's view of a Puppet's trajectory (``visualize_3d([PuppetVisual(puppet, t, q)])``):
+    seen from the front (its forward the world's −y, up +z), drawn as its frames (trep draws
+    shaped limbs with OpenGL)."""
+
+    def __init__(self, *args: Any, **kwds: Any):
+        super().__init__(*args, **kwds)
+        self.setOrientation(forward=[0, -1, 0], up=[0, 0, 1])
+        self.puppet = self.system
