@@ -127,19 +127,22 @@ impl Model {
 
     /// The constraints alone at `q` (default the model's q0): a dict with `h` (one entry per
     /// constraint equation), `dh_dq` (equations × variables), as `evaluate()` has them, and
-    /// `d2h_dqdq` (equations × variables × variables), without the dynamics (so also where
-    /// those have no solution).
-    #[pyo3(signature = (q=None))]
+    /// with `second` (the default) `d2h_dqdq` (equations × variables × variables), without
+    /// the dynamics (so also where those have no solution). `second=False` evaluates no
+    /// second derivatives (a constraint written in Python is not asked for them).
+    #[pyo3(signature = (q=None, second=true))]
     fn constraints_at<'py>(
         &self,
         py: Python<'py>,
         q: Option<PerVariable<'_>>,
+        second: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let q = self.vector("q", q, |i| self.model.variables[i].q0)?;
         let mut sys = self.sys.lock().expect("no panic holds the lock");
         let mut c = ConstraintTerms::zeros(sys.constraint_count(), self.n());
-        sys.constraints(&q, &Vector::<Dyn>::zeros(self.n()), Order::Full, &mut c);
-        let curvature = c.d2h.iter().flat_map(|m| m.iter());
+        let order = if second { Order::Full } else { Order::First };
+        sys.constraints(&q, &Vector::<Dyn>::zeros(self.n()), order, &mut c);
+        let curvature = c.d2h.iter().flat_map(|m| m.iter()).filter(|_| second);
         if c.h
             .iter()
             .chain(c.dh.iter())
@@ -153,9 +156,11 @@ impl Model {
         let out = PyDict::new(py);
         out.set_item("h", vector(py, c.h.as_slice()))?;
         out.set_item("dh_dq", matrix(py, &c.dh))?;
-        let n = self.n();
-        let d2h = Array3::from_shape_fn((c.d2h.len(), n, n), |(r, i, j)| c.d2h[r][(i, j)]);
-        out.set_item("d2h_dqdq", d2h.into_pyarray(py))?;
+        if second {
+            let n = self.n();
+            let d2h = Array3::from_shape_fn((c.d2h.len(), n, n), |(r, i, j)| c.d2h[r][(i, j)]);
+            out.set_item("d2h_dqdq", d2h.into_pyarray(py))?;
+        }
         Ok(out)
     }
 

@@ -35,14 +35,30 @@ pub(crate) struct VariationalStepper {
 #[pymethods]
 impl VariationalStepper {
     #[new]
-    #[pyo3(signature = (model, forcing="left", tolerance=None))]
-    fn new(model: &Model, forcing: &str, tolerance: Option<f64>) -> PyResult<Self> {
+    /// `max_turn`: the largest turn of an angle a step may take (rad; a quarter turn by
+    /// default, `inf` to take any step as trep does — the trep layer then warns).
+    #[pyo3(signature = (model, forcing="left", tolerance=None, max_turn=None))]
+    fn new(
+        model: &Model,
+        forcing: &str,
+        tolerance: Option<f64>,
+        max_turn: Option<f64>,
+    ) -> PyResult<Self> {
         let forcing = crate::simulate::forcing(forcing)?;
         let mut settings = ViSettings {
             forcing,
             max_subdivisions: 0,
             ..ViSettings::default()
         };
+        if let Some(turn) = max_turn {
+            if turn.is_nan() || turn <= 0.0 {
+                return Err(bad(format!(
+                    "max_turn must be a positive number of radians (or inf), got {}",
+                    tree_mech::model::Given(turn)
+                )));
+            }
+            settings.max_turn = turn;
+        }
         if let Some(tol) = tolerance {
             if !(tol > 0.0 && tol.is_finite()) {
                 return Err(bad(format!(

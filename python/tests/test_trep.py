@@ -551,6 +551,40 @@ def test_an_error_in_a_python_element_is_raised_not_swallowed():
         mvi.q2_dq1dq1()  # …its second derivatives do
 
 
+def test_a_python_constraint_is_asked_only_for_the_derivatives_a_call_needs():
+    # As trep: satisfy_constraints and a step read h and h_dq alone, so a broken h_dqdq
+    # (trep's own pypccd example has one) matters only where it is needed — and there its
+    # own error is raised, not a NaN's.
+    class OnLine(trep.Constraint):
+        def __init__(self, system):
+            trep.Constraint.__init__(self, system)
+            self.x, self.y = system.get_config("x"), system.get_config("y")
+
+        def h(self):
+            return self.x.q - 2.0 * self.y.q
+
+        def h_dq(self, q1):
+            return {"x": 1.0, "y": -2.0}[q1.name]
+
+        def h_dqdq(self, q1, q2):
+            raise TypeError("h_dqdq is broken")
+
+    s = trep.System()
+    s.import_frames([trep.tx("x", name="X", mass=1.0), [trep.ty("y", name="Y", mass=1.0)]])
+    trep.potentials.Gravity(s, (0.0, -9.8, 0.0))
+    OnLine(s)
+    s.q = [0.3, 0.0]
+    q = s.satisfy_constraints()
+    assert abs(q[0] - 2.0 * q[1]) < 1e-12
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, q, 0.01, q)
+    for _ in range(10):
+        mvi.step(mvi.t2 + 0.01)
+    assert abs(mvi.q2[0] - 2.0 * mvi.q2[1]) < 1e-12 and mvi.q2[1] < q[1]
+    with pytest.raises(TypeError, match="h_dqdq is broken"):
+        s.f()  # the dynamics need the constraint's curvature
+
+
 def test_a_built_in_constraint_after_one_written_in_python_is_refused():
     s = trep.System()
     s.import_frames([trep.tx("x", name="slider", mass=1.0), trep.ty("y", name="other", mass=1.0)])

@@ -379,3 +379,13 @@ def test_the_default_monitor_gives_the_costs_in_step_order(capsys):
     assert opt.calc_cost(result.X, result.U) <= costs[-1]
     assert trep.system.save_trajectory is trep.save_trajectory
     assert trep.system.System is trep.System
+
+
+def test_dsystem_keeps_treps_private_time_name():
+    # trep's own puppet-optimization example reads dsys._time.
+    s = trep.System()
+    s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0)]])
+    trep.potentials.Gravity(s)
+    trep.forces.ConfigForce(s, "theta", "torque")
+    dsys = discopt.DSystem(trep.MidpointVI(s), np.arange(0.0, 0.1, 0.01))
+    assert dsys._time is not None and np.array_equal(dsys._time, dsys.time)

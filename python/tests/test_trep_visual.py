@@ -82,3 +82,37 @@ def test_without_matplotlib_the_viewer_says_what_to_install(monkeypatch):
     s = pendulum()
     with pytest.raises(ImportError, match="pip install matplotlib"):
         visual.visualize_3d([visual.VisualItem3D(s, [0.0], [[0.0]])])
+
+
+def test_without_a_window_the_viewer_says_to_save(monkeypatch):
+    matplotlib = pytest.importorskip("matplotlib")
+    monkeypatch.setattr(matplotlib, "get_backend", lambda: "agg")
+    s = pendulum()
+    with pytest.warns(RuntimeWarning, match="pass save='run.gif'"):
+        assert visual.visualize_3d([visual.VisualItem3D(s, [0.0], [[0.0]])]) == 0
+
+
+def test_an_stl_drawing_is_kept_and_a_missing_file_refused(tmp_path):
+    mesh = tmp_path / "torso.stl"
+    mesh.write_text("solid torso\nendsolid torso\n")
+    s = pendulum()
+    item = visual.VisualItem3D(s, [0.0], [[0.0]])
+    item.attachDrawing("bob", visual.stlmodel(str(mesh)).draw)
+    assert len(item.drawings) == 1 and item.drawings[0][0].name == "bob"
+    assert item.drawings[0][1]() is None
+    with pytest.raises(FileNotFoundError, match="no STL file"):
+        visual.stlmodel(str(tmp_path / "missing.stl"))
+
+
+def test_plot_spline_draws_the_spline_and_its_derivatives():
+    pytest.importorskip("matplotlib")
+    import warnings
+    from tree_mech.trep.visual.splineplotter import plot_spline
+    spline = trep.Spline([[0.0, 0.0], [1.0, 2.0], [2.0, 1.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Agg cannot show
+        fig = plot_spline(spline, points=50)
+    axes = fig.get_axes()
+    assert len(axes) == 3
+    x, y = axes[0].lines[0].get_data()
+    assert len(x) == 50 and y[-1] == pytest.approx(spline.y(2.0))

@@ -89,7 +89,9 @@ class Model:
         dq: Optional[_PerVariable] = None,
         ddq: Optional[_PerVariable] = None,
     ) -> npt.NDArray[np.float64]: ...
-    def constraints_at(self, q: Optional[_PerVariable] = None) -> dict: ...
+    def constraints_at(
+        self, q: Optional[_PerVariable] = None, second: bool = True
+    ) -> dict: ...
     def add_python_terms(self, terms: Any, constraints: Sequence[str] = ...) -> None: ...
     def mass_matrix(self, q: Optional[_PerVariable] = None) -> npt.NDArray[np.float64]: ...
     def frame_pose(self, frame: str, q: Optional[_PerVariable] = None) -> npt.NDArray[np.float64]: ...
@@ -221,7 +223,11 @@ class Stepper:
 class VariationalStepper:
     """The midpoint VI one step at a time with everything given (tree_mech.trep's engine)."""
     def __new__(
-        cls, model: Model, forcing: str = "left", tolerance: Optional[float] = None
+        cls,
+        model: Model,
+        forcing: str = "left",
+        tolerance: Optional[float] = None,
+        max_turn: Optional[float] = None,
     ) -> "VariationalStepper": ...
     def step(
         self,

@@ -149,6 +149,12 @@ pub struct ViSettings {
     /// (`φ γ = κ`, in metres times newton-seconds; smooth contact, whose step derivatives are
     /// those of a smooth system).
     pub kappa: f64,
+    /// The largest turn of an angle a step may take before it is refused (and subdivided,
+    /// where subdivisions are allowed), in radians: a quarter turn by default — beyond it
+    /// the step does not resolve the motion and Newton can land on a spurious root of the
+    /// discrete equations. `f64::INFINITY` takes any step, as trep's integrator does (the
+    /// trep layer, which warns instead).
+    pub max_turn: f64,
     /// Each step is followed by its derivatives ([`MidpointVi::derivatives_into`]): a Newton
     /// check expected to converge is of second order, so the derivatives find the terms at
     /// the solution already evaluated instead of evaluating them again (one expected to fail
@@ -170,6 +176,7 @@ impl Default for ViSettings {
             forcing: Forcing::Split,
             max_subdivisions: 4,
             kappa: 0.0,
+            max_turn: MAX_TURN,
             derivatives: false,
         }
     }
@@ -997,7 +1004,7 @@ where
         if let Some(&i) = self
             .angles
             .iter()
-            .find(|&&i| (q_next[i] - q[i]).abs() > MAX_TURN)
+            .find(|&&i| (q_next[i] - q[i]).abs() > self.settings.max_turn)
         {
             return Err(SimError::StepTooCoarse {
                 step,

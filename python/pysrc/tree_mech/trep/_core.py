@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import warnings
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -1125,6 +1126,9 @@ class System:
         except _native.SimulationError as e:
             self._raise_python_error()
             raise error(f"{context}{e}") from None
+        except ValueError:
+            self._raise_python_error()  # a script's element failed: its own error, not NaN's
+            raise
         self._raise_python_error()
         return result
 
@@ -1343,7 +1347,8 @@ class System:
         worst = math.inf
         for k in range(100):
             model = self._native_model()
-            c = self._native_call(lambda: model.constraints_at(self._to_model(self._q)))
+            c = self._native_call(lambda: model.constraints_at(self._to_model(self._q),
+                                                               second=False))
             h = np.asarray(c["h"], dtype=float)
             jac = np.asarray(c["dh_dq"], dtype=float)[:, self._perm][:, free]
             worst = float(np.max(np.abs(h)))
@@ -1390,7 +1395,8 @@ class System:
             """``q`` moved onto the constraints by minimum-norm corrections, or None."""
             q = q.copy()
             for _ in range(50):
-                c = self._native_call(lambda: model.constraints_at(self._to_model(q)))
+                c = self._native_call(lambda: model.constraints_at(self._to_model(q),
+                                                                   second=False))
                 h = np.asarray(c["h"], dtype=float)
                 if not h.size or float(np.max(np.abs(h))) < tolerance:
                     return q
@@ -1625,7 +1631,13 @@ class MidpointVI:
         self._system = system
         self.tolerance = tolerance
         model = system._native_model()
-        self._stepper = _native.VariationalStepper(model, forcing="left")
+        # Any step, as trep's integrator takes it (a warning past a quarter turn: _turned).
+        self._stepper = _native.VariationalStepper(model, forcing="left", max_turn=math.inf)
+        #: The configs that turn a frame (trep's order), and whether a step past a quarter
+        #: turn has been warned of.
+        self._angles = np.array([c.index for c in system._configs if c.frame is not None
+                                 and c.frame.transform_type in (RX, RY, RZ)], dtype=int)
+        self._warned_turn = False
         nq, nd, nk, nc = system.nQ, system.nQd, system.nQk, system.nc
         self.t1 = self.t2 = 0.0
         self._q1, self._q2 = np.zeros(nq), np.zeros(nq)
@@ -1782,6 +1794,7 @@ class MidpointVI:
             self._q2, self._p2 = np.asarray(q2)[s._perm], np.asarray(p2)[s._dperm]
         self._lam = np.asarray(lam)
         self._iterations = iterations
+        self._turned()
         # trep's λ₁ multiplies its rows (System._signs) with the opposite sign and Δt folded
         # in: λ₁ = −Δt·sign·λ (the native derivatives already carry the −Δt).
         self._lambda1 = (-(self.t2 - self.t1) * s._signs() * self._lam if len(self._lam)
@@ -1792,6 +1805,22 @@ class MidpointVI:
             if s._through:
                 self._derivs = self._through_forces(self._derivs, order == 2)
         self._leave_system_at_midpoint()
+
+    def _turned(self) -> None:
+        """Warns (once per integrator) of a step that turned a joint by more than a quarter
+        turn: trep takes it and so does this layer, but such a step does not resolve the
+        motion and may have found a spurious root (tree-mech's own integrators refuse it)."""
+        if self._warned_turn or not len(self._angles):
+            return
+        turn = np.abs(self._q2[self._angles] - self._q1[self._angles])
+        k = int(np.argmax(turn))
+        if turn[k] > 0.5 * math.pi:
+            self._warned_turn = True
+            name = self._system._configs[self._angles[k]].name
+            warnings.warn(f"the step to t = {self.t2} turned `{name}` by {turn[k]:.3g} rad, "
+                          "more than a quarter turn: trep takes such a step, but it may not "
+                          "resolve the motion (a smaller dt would); warned once",
+                          RuntimeWarning, stacklevel=5)
 
     def _through_forces(self, derivs: Dict[str, np.ndarray], second: bool
                         ) -> Dict[str, np.ndarray]:

@@ -57,6 +57,8 @@ class DSystem:
     xk = property(lambda self: self._xk.copy(), doc="The current state.")
     uk = property(lambda self: self._uk.copy(), doc="The current input.")
     k = property(lambda self: self._k, doc="The current discrete time.")
+    #: trep's private name of the time base, which its own examples read.
+    _time = property(lambda self: self.time, doc="The time base (trep's ``_time``).")
 
     def kf(self) -> int:
         """The last discrete time a state can be set to (``len(time) − 1``)."""

@@ -12,11 +12,14 @@ kept but not drawn (the frames are). matplotlib is needed only here:
 """
 from __future__ import annotations
 
+import os
+import warnings
 from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["VisualItem", "VisualItem2D", "VisualItem3D", "visualize_2d", "visualize_3d"]
+__all__ = ["VisualItem", "VisualItem2D", "VisualItem3D", "stlmodel", "visualize_2d",
+           "visualize_3d"]
 
 #: Pictures a second of the trajectory's time.
 FPS = 25.0
@@ -83,6 +86,21 @@ class VisualItem:
             if frame.mass:
                 masses.append((p, float(frame.mass)))
         return lines, masses
+
+
+class stlmodel:  # noqa: N801 (trep's name)
+    """An STL mesh a script draws on a frame (``attachDrawing(frame, stlmodel(path).draw)``):
+    the file must exist, as trep loads it, but the mesh is not drawn (the frames are)."""
+
+    def __init__(self, filename: str, wireframe: bool = False, normals: bool = False,
+                 color: Any = None, scale: Sequence[float] = (1.0, 1.0, 1.0)):
+        if not os.path.isfile(filename):
+            raise FileNotFoundError(f"stlmodel: no STL file {filename!r}")
+        self.filename, self.wireframe, self.normals = filename, wireframe, normals
+        self.color, self.scale = color, tuple(scale)
+
+    def draw(self) -> None:
+        """Nothing: the viewer draws frames, not meshes."""
 
 
 def _interpolate(times: np.ndarray, rows: np.ndarray, t: float) -> np.ndarray:
@@ -160,9 +178,21 @@ def _pyplot() -> Any:
     return plt
 
 
+#: matplotlib's backends that draw no window.
+_HEADLESS = ("agg", "pdf", "ps", "svg", "cairo", "template", "pgf")
+
+
 def _animate(items: Sequence[VisualItem], three_d: bool, limits: Callable,
              save: Optional[str]) -> int:
     plt = _pyplot()
+    if save is None:
+        import matplotlib
+        backend = matplotlib.get_backend()
+        if backend.lower() in _HEADLESS:
+            warnings.warn(f"trep.visual: matplotlib has no window here (its backend is "
+                          f"{backend}); pass save='run.gif' to write the animation to a file",
+                          RuntimeWarning, stacklevel=3)
+            return 0
     from matplotlib.animation import FuncAnimation, PillowWriter
     times = _times(items)
     fig = plt.figure(figsize=(6, 6))
