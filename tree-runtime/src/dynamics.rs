@@ -192,6 +192,12 @@ impl ReducedKkt {
         }
     }
 
+    /// The Cholesky factor `L` of `M_dd = L Lᵀ` (column-major, dynamic × dynamic) the last
+    /// [`Self::solve`] formed.
+    pub(crate) fn factor(&self) -> &[f64] {
+        self.mdd.as_slice()
+    }
+
     /// Solves for the dynamic entries of `x` (its kinematic entries given)
     /// `M_dd x_d − Dh_dᵀλ = b_d − M_dk x_k` and `Dh_d x_d = γ − Dh_k x_k`, by the Cholesky
     /// factor of `M_dd` and the Schur complement `Dh_d M_dd⁻¹ Dh_dᵀ` (docs/derivations.md §6).

@@ -126,6 +126,23 @@ pub fn cholesky_forward(a: &[f64], n: usize, b: &mut [f64]) {
     }
 }
 
+/// [`cholesky_forward`] for `k` right sides at once, each `n` long and stored one after the
+/// other in `b[..k·n]`: one division a column, and the sides' substitutions interleaved (a
+/// single side's is a chain of dependent divisions and updates).
+pub fn cholesky_forward_many(a: &[f64], n: usize, b: &mut [f64], k: usize) {
+    for j in 0..n {
+        let col = &a[j * n..(j + 1) * n];
+        let inverse = 1.0 / col[j];
+        for side in b[..k * n].chunks_exact_mut(n) {
+            side[j] *= inverse;
+            let bj = side[j];
+            for i in j + 1..n {
+                side[i] -= col[i] * bj;
+            }
+        }
+    }
+}
+
 /// Solves `Lᵀ x = y` for the factor `L` of [`cholesky_factor`]; `b` (holding `y`) becomes
 /// `x`.
 pub fn cholesky_backward(a: &[f64], n: usize, b: &mut [f64]) {
@@ -776,6 +793,39 @@ mod tests {
                 "row {i}: {sy} against {}",
                 b0[i]
             );
+        }
+    }
+
+    /// Forward substitution for several sides at once solves `L y = b` for each (to the
+    /// rounding of one multiplication by the pivot's inverse in place of a division).
+    #[test]
+    fn forward_substitution_of_many_sides_solves_each() {
+        let n = 7;
+        let mut a: Vec<f64> = (0..n * n)
+            .map(|x| ((x * x) as f64 * 0.37).cos() * 0.3)
+            .collect();
+        for i in 0..n {
+            a[i * n + i] += 3.0 + i as f64;
+        }
+        let spd: Vec<f64> = (0..n * n)
+            .map(|x| {
+                (0..n)
+                    .map(|k| a[(x / n) * n + k] * a[(x % n) * n + k])
+                    .sum()
+            })
+            .collect();
+        let mut l = spd.clone();
+        cholesky_factor_packed(&mut l, n).expect("positive definite");
+        let k = 5;
+        let b: Vec<f64> = (0..k * n).map(|x| (x as f64 * 1.3).sin()).collect();
+        let mut many = b.clone();
+        cholesky_forward_many(&l, n, &mut many, k);
+        for side in 0..k {
+            let mut one = b[side * n..(side + 1) * n].to_vec();
+            cholesky_forward(&l, n, &mut one);
+            for (x, y) in one.iter().zip(&many[side * n..(side + 1) * n]) {
+                assert!((x - y).abs() <= 1e-14 * x.abs().max(1.0), "{x} against {y}");
+            }
         }
     }
 

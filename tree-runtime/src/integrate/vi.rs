@@ -1189,7 +1189,7 @@ where
             let closed = 1e3 * self.settings.constraint_tolerance * q.amax().max(1.0);
             let n = q.len();
             c.project_velocity(
-                self.terms.mass.as_slice(),
+                self.reduced.factor(),
                 n,
                 &self.split.dynamic,
                 dq.as_mut_slice(),

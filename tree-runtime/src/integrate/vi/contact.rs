@@ -31,8 +31,8 @@ use crate::context::StepContext;
 use crate::dynamics::{GeneralizedForce, Prescription};
 use crate::error::SimError;
 use crate::linalg::{
-    cholesky_backward, cholesky_factor_packed, cholesky_forward, lu_factor_packed,
-    lu_factor_packed_unguarded, lu_solve_packed, semidefinite_solve,
+    cholesky_backward, cholesky_forward_many, lu_factor_packed, lu_factor_packed_unguarded,
+    lu_solve_packed, semidefinite_solve,
 };
 
 mod mode;
@@ -144,10 +144,9 @@ pub(crate) struct ContactStep {
     /// The predicted `q₂` and the `λ` a free attempt started from, to start again from.
     predicted: Vec<f64>,
     saved_lambda: Vec<f64>,
-    /// The velocity projection's workspace: the rows held, `M_dd`'s Cholesky factor `L`,
-    /// `L⁻¹Aᵀ` by rows, the small system, the velocity change.
+    /// The velocity projection's workspace: the rows held, `L⁻¹Aᵀ` by rows, the small
+    /// system, the velocity change.
     held: Vec<usize>,
-    mass: Vec<f64>,
     velocity: Vec<f64>,
     solved: Vec<f64>,
     small: Vec<f64>,
@@ -213,7 +212,6 @@ impl ContactStep {
             predicted: vec![0.0; sys.dim().value()],
             saved_lambda: vec![0.0; m],
             held: Vec::with_capacity(rows),
-            mass: vec![0.0; nd * nd],
             velocity: vec![0.0; nd],
             solved: vec![0.0; nd * rows],
             small: vec![0.0; rows * rows],
@@ -440,10 +438,11 @@ impl ContactStep {
     /// tangent rows of those that stick (`‖b‖ < μγ`), are held at zero velocity by the
     /// projection in `M_dd`'s metric, `q̇_d ← q̇_d − M⁻¹Aᵀ(AM⁻¹Aᵀ)⁻¹A q̇` — as the bilateral
     /// rows are. Without it a ball at rest on the ground reports the `−gΔt/2` of its step's
-    /// momentum. `mass` is the full `M(q₂)`; nothing is allocated.
+    /// momentum. `factor` is `M_dd(q₂)`'s Cholesky factor `L` (column-major, the velocity
+    /// solve's); nothing is allocated.
     pub(crate) fn project_velocity(
         &mut self,
-        mass: &[f64],
+        factor: &[f64],
         n: usize,
         dynamic: &[usize],
         dq: &mut [f64],
@@ -470,23 +469,15 @@ impl ContactStep {
         if r == 0 {
             return;
         }
-        for (cj, &j) in dynamic.iter().enumerate() {
-            for (ci, &i) in dynamic.iter().enumerate() {
-                self.mass[cj * nd + ci] = mass[j * n + i];
-            }
-        }
-        if cholesky_factor_packed(&mut self.mass, nd).is_err() {
-            return;
-        }
         // With M_dd = L Lᵀ: Y = L⁻¹Aᵀ, S = A M⁻¹ Aᵀ = YᵀY, y = S⁻¹ A q̇, q̇_d −= L⁻ᵀ (Y y).
         for (k, &row) in self.held.iter().enumerate() {
             let x = &mut self.solved[k * nd..(k + 1) * nd];
             for (ci, &i) in dynamic.iter().enumerate() {
                 x[ci] = g.dh[(row, i)];
             }
-            cholesky_forward(&self.mass, nd, x);
             self.rhs[k] = row_speed(row, dq);
         }
+        cholesky_forward_many(factor, nd, &mut self.solved, r);
         for a in 0..r {
             for k in 0..=a {
                 let (ya, yk) = (
@@ -514,7 +505,7 @@ impl ContactStep {
                 *vi += xi * y;
             }
         }
-        cholesky_backward(&self.mass, nd, v);
+        cholesky_backward(factor, nd, v);
         for (ci, &i) in dynamic.iter().enumerate() {
             dq[i] -= v[ci];
         }
