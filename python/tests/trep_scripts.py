@@ -275,11 +275,9 @@ def python_elements(trep, parts=("potential", "force", "constraint")):
     return s
 
 
-def wrenches_and_curves(trep):
-    """A two-joint arm (a about x, b about y) beside a slider x on a nonlinear spring: a
-    spline force curve through four points (m = 1.5, b = 0.2), a constant wrench on the tip
-    in its own axes, one on the elbow in world axes and one on the tip in world axes at its
-    origin; gravity."""
+def _arm_beside_slider(trep):
+    """A two-joint arm (a about x, b about y, its tip a body with inertia) beside a slider x,
+    under gravity."""
     s = trep.System()
     s.import_frames([
         trep.rx("a", name="A"), [
@@ -288,6 +286,15 @@ def wrenches_and_curves(trep):
                     trep.tz(-0.5, mass=(1.0, 0.1, 0.2, 0.3), name="tip")]]],
         trep.tx("x", name="X", mass=2.0)])
     trep.potentials.Gravity(s)
+    return s
+
+
+def wrenches_and_curves(trep):
+    """A two-joint arm (a about x, b about y) beside a slider x on a nonlinear spring: a
+    spline force curve through four points (m = 1.5, b = 0.2), a constant wrench on the tip
+    in its own axes, one on the elbow in world axes and one on the tip in world axes at its
+    origin; gravity."""
+    s = _arm_beside_slider(trep)
     curve = trep.Spline([[-1.0, -2.0], [0.0, 0.0], [0.5, 1.5], [2.0, 2.0]])
     trep.potentials.NonlinearConfigSpring(s, "x", curve, m=1.5, b=0.2)
     trep.forces.BodyWrench(s, "tip", (1.0, -0.5, 0.3, 0.2, 0.1, -0.4))
@@ -302,14 +309,7 @@ def input_wrenches(trep):
     entries name inputs — on the tip in world axes at its origin, on the tip in its own axes,
     on the elbow joint's frame in world axes — between a ConfigForce on the slider and one
     after them; gravity."""
-    s = trep.System()
-    s.import_frames([
-        trep.rx("a", name="A"), [
-            trep.tz(-1.0, name="elbow"), [
-                trep.ry("b", name="B"), [
-                    trep.tz(-0.5, mass=(1.0, 0.1, 0.2, 0.3), name="tip")]]],
-        trep.tx("x", name="X", mass=2.0)])
-    trep.potentials.Gravity(s)
+    s = _arm_beside_slider(trep)
     trep.forces.ConfigForce(s, "x", "push")
     trep.forces.HybridWrench(s, "tip", ("fx", 0.0, "fz", 0.1, 0.0, 0.0))
     trep.forces.BodyWrench(s, "tip", (0.2, "by", 0.0, 0.0, 0.0, "bt"))
@@ -401,18 +401,24 @@ def python_force_inputs(trep):
     return s
 
 
+def _posed_puppet(trep, **strings):
+    """trep's marionette (`trep.puppets.Puppet`, its strings as `strings` says) in a pose."""
+    import importlib
+    puppets = importlib.import_module(trep.__name__ + ".puppets")
+    p = puppets.Puppet(joint_forces=False, **strings)
+    pose = {"torso_tz": 1.1, "torso_rz": 0.2, "lhip_rx": -0.4, "rhip_rx": 0.3,
+            "lknee_rx": 0.5, "rknee_rx": 0.2, "lshoulder_rx": 0.6, "relbow_rx": 0.4}
+    for name, value in pose.items():
+        p.get_config(name).q = value
+    return p
+
+
 def puppet_string_forces(trep, steps=20, dt=0.01):
     """trep's marionette pulled by its strings as forces (``Puppet(string_forces=True)``: a
     HybridWrench per string, its three components inputs): the inputs, then ``steps`` VI
     steps with each string pulling up by its own amount, and the last step's derivatives by
     the strings' inputs — all by name (trep lists the strings in its dict's order)."""
-    import importlib
-    puppets = importlib.import_module(trep.__name__ + ".puppets")
-    p = puppets.Puppet(joint_forces=False, string_forces=True)
-    pose = {"torso_tz": 1.1, "torso_rz": 0.2, "lhip_rx": -0.4, "rhip_rx": 0.3,
-            "lknee_rx": 0.5, "rknee_rx": 0.2, "lshoulder_rx": 0.6, "relbow_rx": 0.4}
-    for name, value in pose.items():
-        p.get_config(name).q = value
+    p = _posed_puppet(trep, string_forces=True)
     names = [i.name for i in p.inputs]
     pull = dict((n, (0.5 + 0.05 * len(n) if n.endswith("-z") else 0.1 * (-1) ** len(n)))
                 for n in names)
@@ -695,13 +701,7 @@ def puppet_module(trep, steps=30, dt=0.01):
     frames' positions in a pose, the control points projected above their hooks, then
     `steps` VI steps with the string controls held — all by name (trep lists the strings in
     its dict's order)."""
-    import importlib
-    puppets = importlib.import_module(trep.__name__ + ".puppets")
-    p = puppets.Puppet(joint_forces=False, string_constraints=True)
-    pose = {"torso_tz": 1.1, "torso_rz": 0.2, "lhip_rx": -0.4, "rhip_rx": 0.3,
-            "lknee_rx": 0.5, "rknee_rx": 0.2, "lshoulder_rx": 0.6, "relbow_rx": 0.4}
-    for name, value in pose.items():
-        p.get_config(name).q = value
+    p = _posed_puppet(trep, string_constraints=True)
     p.project_string_controls()
     out = {"configs": sorted(c.name for c in p.configs),
            "dyn": sorted(c.name for c in p.dyn_configs),
