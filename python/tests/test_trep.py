@@ -638,6 +638,27 @@ def test_treps_puppet_module_builds_treps_marionette():
               f"puppet {what}")
 
 
+def test_the_puppets_joint_forces_are_one_input_per_dynamic_config():
+    # trep 1.0.2: Puppet(joint_forces=True) has 22 inputs, one ConfigForce per dynamic config
+    # named after it; with string_forces too, 40. (They were silently missing here, the
+    # constructor's hold hiding the configs.)
+    p = trep.puppets.Puppet(joint_forces=True)
+    assert p.nu == 22 and [i.name for i in p.inputs] == [c.name for c in p.dyn_configs]
+    assert trep.puppets.Puppet(joint_forces=True, string_forces=True).nu == 40
+    # A torque on a knee moves that knee.
+    p.get_config("torso_tz").q = 1.1
+    mvi = trep.MidpointVI(p)
+    mvi.initialize_from_configs(0.0, p.q, 0.01, p.q)
+    u = np.zeros(p.nu)
+    u[p.get_input("lknee_rx").index] = 5.0
+    mvi.step(0.02, u)
+    free = trep.MidpointVI(p)
+    free.initialize_from_configs(0.0, mvi.q1, 0.01, mvi.q1)
+    free.step(0.02, np.zeros(p.nu))
+    knee = p.get_config("lknee_rx").index
+    assert mvi.q2[knee] - free.q2[knee] > 1e-5
+
+
 def test_treps_puppet_pulled_by_its_strings_as_forces_moves_as_treps():
     # Puppet(string_forces=True): a HybridWrench per string whose force entries are inputs.
     # 20 steps pulling each string by its own amount, and the last step's derivatives by

@@ -157,7 +157,9 @@ class Puppet(System):
 
     def make_joint_forces(self) -> None:
         """A ``ConfigForce`` on each dynamic config, its input named after it."""
-        for config in self.dyn_configs:
+        # The configs as created: while the structure is on hold (the constructor holds it),
+        # `dyn_configs` still lists the configs before the skeleton was imported.
+        for config in [c for c in self._configs_created if not c.kinematic]:
             self.joint_forces[config.name] = forces.ConfigForce(
                 self, config, config.name, config.name)
 
