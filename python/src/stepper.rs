@@ -30,6 +30,10 @@ pub(crate) struct VariationalStepper {
     pub(crate) kinematic: Vec<usize>,
     /// The last step's `q₂`: a step from it keeps the VI's predictor history.
     pub(crate) last: Vec<f64>,
+    /// The largest turn of an angle over the last step (rad): what the trep layer warns of
+    /// past a quarter turn when `max_turn` lets such a step through.
+    #[pyo3(get)]
+    pub(crate) largest_turn: f64,
 }
 
 #[pymethods]
@@ -80,6 +84,7 @@ impl VariationalStepper {
             sys,
             vi,
             last: Vec::new(),
+            largest_turn: 0.0,
         })
     }
 
@@ -114,6 +119,10 @@ impl VariationalStepper {
             py.detach(|| step.solve(sys, vi))
         };
         let (q2, p2, lambda, iterations, derivatives) = solved.map_err(|e| sim_error(py, &e))?;
+        self.largest_turn = (0..q2.len())
+            .filter(|&i| sys.is_angle(i))
+            .map(|i| (q2[i] - step.q1[i]).abs())
+            .fold(0.0, f64::max);
         self.last = q2.as_slice().to_vec();
         let p2: Vec<f64> = self.dynamic.iter().map(|&i| p2[i]).collect();
         let out = step_derivatives(py, derivatives, dt)?;

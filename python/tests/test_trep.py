@@ -585,6 +585,24 @@ def test_a_python_constraint_is_asked_only_for_the_derivatives_a_call_needs():
         s.f()  # the dynamics need the constraint's curvature
 
 
+def test_a_step_past_a_quarter_turn_is_taken_with_one_warning():
+    # As trep takes it (its screw example's drive jumps 3.7 rad in a step); warned once.
+    s = trep.System()
+    s.import_frames([trep.rx("theta", name="pivot"), [trep.tz(-1.0, mass=1.0, name="bob")]])
+    mvi = trep.MidpointVI(s)
+    mvi.initialize_from_configs(0.0, [0.0], 0.01, [2.0])  # 200 rad/s, no forces
+    with pytest.warns(RuntimeWarning, match=r"turned `theta` by 2 rad, more than a quarter"):
+        mvi.step(0.02)
+    assert mvi.q2[0] == pytest.approx(4.0, abs=1e-9)  # free rotation: 2 rad a step
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mvi.step(0.03)  # no second warning
+    assert mvi.q2[0] == pytest.approx(6.0, abs=1e-9)
+    with pytest.raises(ValueError, match="max_turn must be a positive number of radians"):
+        tm._native.VariationalStepper(s._native_model(), max_turn=-1.0)
+
+
 def test_a_built_in_constraint_after_one_written_in_python_is_refused():
     s = trep.System()
     s.import_frames([trep.tx("x", name="slider", mass=1.0), trep.ty("y", name="other", mass=1.0)])

@@ -39,6 +39,8 @@ def test_an_item_puts_the_system_on_its_trajectory_and_draws_its_frames():
     assert np.allclose(flat.skeleton()[1][0][0], bob[1:], atol=1e-14)
     with pytest.raises(ValueError, match="plane 'XX'"):
         visual.VisualItem2D(s, plane="XX")
+    with pytest.raises(ValueError, match="forward and up must be nonzero and not parallel"):
+        item.setOrientation(forward=[0, 0, 2], up=[0, 0, 1])
     with pytest.raises(ValueError, match="one configuration per time"):
         visual.VisualItem3D(s, [0.0, 1.0], [[0.0]])
 

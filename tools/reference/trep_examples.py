@@ -168,7 +168,16 @@ def difference(a, b):
 
 
 def main():
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    try:
+        import lib2to3  # noqa: F401 (the conversion runs it as a module)
+    except ImportError:
+        sys.exit("trep_examples.py converts trep's scripts with lib2to3, which Python 3.13 "
+                 "removed: run it with Python 3.12 or older")
     checkout, trep_python = sys.argv[1], sys.argv[2]
+    if not os.path.isdir(os.path.join(checkout, "examples")):
+        sys.exit("%s is no trep checkout (it has no examples/ folder)" % checkout)
     ours = sys.argv[3] if len(sys.argv) > 3 else sys.executable
     chosen = sys.argv[4:] or scripts(checkout)
     work = tempfile.mkdtemp()

@@ -222,6 +222,7 @@ class Stepper:
 @final
 class VariationalStepper:
     """The midpoint VI one step at a time with everything given (tree_mech.trep's engine)."""
+    largest_turn: float
     def __new__(
         cls,
         model: Model,

@@ -1064,9 +1064,10 @@ class System:
         self._n_model_u = len(col)
 
     def _config_inputs(self) -> Dict[str, str]:
-        """Each config a ConfigForce pushes on, with its input's name."""
-        return {f.config.name: f.finput.name for f in self._forces
-                if isinstance(getattr(f, "finput", None), Input) and hasattr(f, "config")}
+        """Each config a ConfigForce pushes on, with its input's name (the model's inputs are
+        ConfigForces' alone)."""
+        return {i.force.config.name: i.name for i in self._inputs
+                if i._in_model and i.force is not None}
 
     def _model_u(self, u: np.ndarray) -> np.ndarray:
         """The model's inputs for trep's ``u``: the ConfigForce inputs' values, the hidden
@@ -1809,18 +1810,18 @@ class MidpointVI:
     def _turned(self) -> None:
         """Warns (once per integrator) of a step that turned a joint by more than a quarter
         turn: trep takes it and so does this layer, but such a step does not resolve the
-        motion and may have found a spurious root (tree-mech's own integrators refuse it)."""
-        if self._warned_turn or not len(self._angles):
+        motion and may have found a spurious root (tree-mech's own integrators refuse it).
+        The native step measures the turn; the joint is found only to name it."""
+        if self._warned_turn or self._stepper.largest_turn <= 0.5 * math.pi:
             return
+        self._warned_turn = True
         turn = np.abs(self._q2[self._angles] - self._q1[self._angles])
         k = int(np.argmax(turn))
-        if turn[k] > 0.5 * math.pi:
-            self._warned_turn = True
-            name = self._system._configs[self._angles[k]].name
-            warnings.warn(f"the step to t = {self.t2} turned `{name}` by {turn[k]:.3g} rad, "
-                          "more than a quarter turn: trep takes such a step, but it may not "
-                          "resolve the motion (a smaller dt would); warned once",
-                          RuntimeWarning, stacklevel=5)
+        name = self._system._configs[self._angles[k]].name
+        warnings.warn(f"the step to t = {self.t2} turned `{name}` by {turn[k]:.3g} rad, more "
+                      "than a quarter turn: trep takes such a step, but it may not resolve "
+                      "the motion (a smaller dt would); warned once", RuntimeWarning,
+                      stacklevel=5)
 
     def _through_forces(self, derivs: Dict[str, np.ndarray], second: bool
                         ) -> Dict[str, np.ndarray]:
