@@ -17,9 +17,11 @@ use tree_mech::{model, tree_model, NoForce, System};
 
 tree_model!(struct Marionette from "models/marionette.toml");
 tree_model!(struct Humanoid from "models/humanoid.toml");
-tree_model!(struct Ur5 from "models/ur5.urdf");
-tree_model!(struct Panda from "models/panda.urdf");
-tree_model!(struct Solo12 from "models/solo12.urdf", floating_base);
+// The robots' limits unenforced: these figures time the smooth dynamics, as Pinocchio's and
+// MuJoCo's compared here (and the tasks, which leave them off).
+tree_model!(struct Ur5 from "models/ur5.urdf", enforce_limits = false);
+tree_model!(struct Panda from "models/panda.urdf", enforce_limits = false);
+tree_model!(struct Solo12 from "models/solo12.urdf", floating_base, enforce_limits = false);
 tree_model!(struct Cartpole from "models/cartpole.toml");
 
 /// A hash of a value's debug text: Rust prints each `f64` as its shortest round trip, so equal

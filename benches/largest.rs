@@ -19,8 +19,10 @@ use tree_mech::{tree_model, NoForce, System, Terms, TreeSystem};
 mod timing;
 use timing::{time_ns, timed_state};
 
-tree_model!(struct Talos from "tests/robots/example-robot-data/talos_data/robots/talos_reduced.urdf", floating_base);
-tree_model!(struct G1 from "tests/robots/example-robot-data/g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf", floating_base);
+// The robots' limits unenforced: these figures time the smooth dynamics, as Pinocchio's and
+// MuJoCo's compared here (and the tasks, which leave them off).
+tree_model!(struct Talos from "tests/robots/example-robot-data/talos_data/robots/talos_reduced.urdf", floating_base, enforce_limits = false);
+tree_model!(struct G1 from "tests/robots/example-robot-data/g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf", floating_base, enforce_limits = false);
 
 /// `[M, q̈, VI step, VI step + first derivatives]` in ns, at the state Pinocchio is timed at.
 fn measure<S: System>(mut sys: S) -> [f64; 4]
@@ -83,7 +85,9 @@ fn interpreted(file: &str) -> TreeSystem {
         floating_base: true,
         ..Default::default()
     };
-    TreeSystem::new(&model::from_file(path, options).unwrap()).unwrap()
+    let mut robot = model::from_file(path, options).unwrap();
+    robot.contacts.enforce_limits = false; // as the compiled ones
+    TreeSystem::new(&robot).unwrap()
 }
 
 /// Pinocchio's `[crba, aba, aba_derivatives]` for `label`, if measured.

@@ -14,8 +14,10 @@ use tree_mech::control::{solve_task, TaskOptions, TaskResult};
 use tree_mech::nalgebra::{allocator::Allocator, DefaultAllocator};
 use tree_mech::{model, tree_model, System, TreeSystem};
 
-tree_model!(struct Ur5 from "models/ur5.urdf");
-tree_model!(struct Ur10 from "models/ur10.urdf");
+// The robots' limits unenforced: these figures time the smooth dynamics, as Pinocchio's and
+// MuJoCo's compared here (and the tasks, which leave them off).
+tree_model!(struct Ur5 from "models/ur5.urdf", enforce_limits = false);
+tree_model!(struct Ur10 from "models/ur10.urdf", enforce_limits = false);
 
 const ROUNDS: usize = 3;
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");

@@ -24,9 +24,11 @@ use tree_mech::{tree_model, NoForce, Order, System, Terms, TreeSystem};
 mod timing;
 use timing::{time_ns, timed_state};
 
-tree_model!(struct Ur5 from "models/ur5.urdf");
-tree_model!(struct Panda from "models/panda.urdf");
-tree_model!(struct Solo12 from "models/solo12.urdf", floating_base);
+// The robots' limits unenforced: these figures time the smooth dynamics, as Pinocchio's and
+// MuJoCo's compared here (and the tasks, which leave them off).
+tree_model!(struct Ur5 from "models/ur5.urdf", enforce_limits = false);
+tree_model!(struct Panda from "models/panda.urdf", enforce_limits = false);
+tree_model!(struct Solo12 from "models/solo12.urdf", floating_base, enforce_limits = false);
 
 /// `[M, q̈, full evaluation, VI step, RK4 step, continuous derivatives, VI step + first
 /// derivatives, contracted second derivatives]` in ns, at the state Pinocchio is timed at.
@@ -132,17 +134,13 @@ where
 
 fn interpreted(file: &str, floating_base: bool) -> TreeSystem {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
-    TreeSystem::new(
-        &model::from_file(
-            path,
-            UrdfOptions {
-                floating_base,
-                ..Default::default()
-            },
-        )
-        .unwrap(),
-    )
-    .unwrap()
+    let options = UrdfOptions {
+        floating_base,
+        ..Default::default()
+    };
+    let mut robot = model::from_file(path, options).unwrap();
+    robot.contacts.enforce_limits = false; // as the compiled ones
+    TreeSystem::new(&robot).unwrap()
 }
 
 /// Pinocchio's `[crba, nle, aba, aba_derivatives]` for `label`, if measured.

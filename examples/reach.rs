@@ -10,7 +10,7 @@ use tree_mech::model;
 use tree_mech::nalgebra::DVector;
 use tree_mech::{tree_model, System};
 
-tree_model!(pub struct Ur5 from "models/ur5.urdf");
+tree_model!(pub struct Ur5 from "models/ur5.urdf", enforce_limits = false);
 
 fn main() -> std::process::ExitCode {
     tree_mech::run_main(example)

@@ -82,10 +82,12 @@ pub struct Cli {
         value_delimiter = ','
     )]
     contact: Vec<String>,
-    /// Enforce the variables' limits (as `enforce_limits = true` in the model).
+    /// Enforce the variables' limits even where the model says `enforce_limits = false` (they
+    /// are enforced by default).
     #[arg(long, global = true, conflicts_with = "no_limits")]
     limits: bool,
-    /// Do not enforce the variables' limits, whatever the model says.
+    /// Do not enforce the variables' limits, whatever the model says (they stay numbers that
+    /// `check` shows; rk4 and rk45 then run through them).
     #[arg(long, global = true)]
     no_limits: bool,
 }

@@ -384,7 +384,7 @@ fn urdf_models_are_read_wherever_toml_is() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("limits [-3.14159265359, 3.14159265359] (not enforced)"),
+        stdout.contains("limits [-3.14159265359, 3.14159265359] (enforced)"),
         "{stdout}"
     );
     let (ok, stdout, stderr) = tree_mech(&["check", "models/solo12.urdf", "--floating-base"]);

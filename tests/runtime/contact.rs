@@ -152,10 +152,41 @@ fn a_box_on_a_slope_sticks_or_slides_as_coulomb_says() {
     }
 }
 
-/// A pendulum thrown at its limit never passes it and never gains energy.
+/// The Panda (its URDF's limits enforced, by default) collapses from its home pose under
+/// gravity onto its limits — wrist, elbow and fingers pressing at once, the fingers' impulses
+/// 10⁴ times the arm's smaller — and the limits hold to rounding; its steps stay in their
+/// modes: at most three Newton updates a step on average over 3 s (ten before a mode step
+/// at its rounding floor counted as converged, as the interior point's does).
+#[test]
+fn the_panda_collapses_onto_its_limits_in_its_modes() {
+    let model = model::from_urdf_file("models/panda.urdf", Default::default()).unwrap();
+    assert!(model.contacts.enforce_limits);
+    let traj = run(&model, 1e-3, 3.0);
+    let deepest = (0..traj.len())
+        .flat_map(|k| traj.gap(k).to_vec())
+        .fold(0.0, f64::min);
+    assert!(deepest > -1e-12, "a limit passed by {deepest:e}");
+    let pressing: Vec<&str> = (0..traj.unilateral.len())
+        .filter(|&r| (0..traj.len()).any(|k| traj.impulse(k)[r] > 0.0))
+        .map(|r| traj.unilateral[r].as_str())
+        .collect();
+    assert!(
+        pressing.len() >= 8 && pressing.iter().any(|r| r.contains("finger")),
+        "{pressing:?}"
+    );
+    let per_step = traj.newton_iterations as f64 / (traj.len() - 1) as f64;
+    assert!(per_step <= 3.0, "{per_step} Newton updates a step");
+}
+
+/// A pendulum thrown at its limit never passes it and never gains energy — enforced by
+/// default (the file does not say); with `enforce_limits = false` it swings through.
 #[test]
 fn a_pendulum_thrown_at_its_limit_never_passes_it() {
     let model = load("tests/models/limited-pendulum.toml");
+    let mut free = model.clone();
+    free.contacts.enforce_limits = false;
+    let through = run(&free, 1e-3, 2.0);
+    assert!((0..through.len()).any(|k| through.q(k)[0] > 0.6));
     let traj = run(&model, 1e-3, 2.0);
     let theta: Vec<f64> = (0..traj.len()).map(|k| traj.q(k)[0]).collect();
     let (lowest, highest) = theta
@@ -656,12 +687,17 @@ fn a_urdf_robot_s_collision_spheres_become_contacts() {
     let (mut q0, dq0) = sys.initial_state();
     q0[2] = 0.45; // root_z: the feet some 0.1 m above the ground
     let traj = run_from(&mut sys, &q0, &dq0, 1e-3, 0.25);
-    // The ground is frictionless: every row is a foot's gap (no tangent rows).
-    assert_eq!(traj.unilateral.len(), 4);
+    // The ground is frictionless: a foot's row is its gap (no tangent rows), after the 12
+    // joints' enforced limits, two rows each.
+    assert_eq!(traj.unilateral.len(), 24 + 4);
+    let feet: Vec<usize> = (0..traj.unilateral.len())
+        .filter(|&r| traj.unilateral[r].ends_with("_foot"))
+        .collect();
+    assert_eq!(feet.len(), 4, "{:?}", traj.unilateral);
     let deepest = (0..traj.len())
         .flat_map(|k| traj.gap(k).to_vec())
         .fold(f64::INFINITY, f64::min);
-    let landed = (0..traj.len()).any(|k| traj.impulse(k).iter().any(|&g| g > 0.0));
+    let landed = (0..traj.len()).any(|k| feet.iter().any(|&r| traj.impulse(k)[r] > 0.0));
     assert!(
         deepest > -1e-9 && landed,
         "deepest gap {deepest:e}, landed {landed}"

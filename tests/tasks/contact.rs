@@ -373,3 +373,37 @@ fn a_task_says_where_contact_is_and_its_relaxations() {
         );
     }
 }
+
+/// A URDF robot's limits are enforced by default, so a task on it names its relaxations or
+/// says `enforce_limits = false` — and the message offers both; a system whose unilateral
+/// rows are not the task's model's (compiled without the task's setting) is refused.
+#[test]
+fn a_task_on_a_limited_robot_says_how_to_go_on_and_its_system_must_match() {
+    let base = Path::new(ROOT).join("tasks");
+    let reach = std::fs::read_to_string(base.join("ur5-reach.toml")).unwrap();
+    let enforced = reach.replace("enforce_limits = false", "enforce_limits = true");
+    assert_ne!(enforced, reach);
+    let err = task_from_str(&enforced, Some("t.toml"), &base)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("the model has 12 unilateral rows")
+            && err.contains(
+                "or plan without enforcing its 12 joint limits (`enforce_limits = false`)"
+            ),
+        "{err}"
+    );
+    let (task, m) = task_from_str(&reach, Some("t.toml"), &base).unwrap();
+    assert!(m.gaps().is_empty());
+    let mut limited = m.clone();
+    limited.contacts.enforce_limits = true;
+    let sys = TreeSystem::new(&limited).unwrap();
+    let err = solve_task(sys, &task, &m, &TaskOptions::default(), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("the system has 12 unilateral elements")
+            && err.contains("but the task's model has 0"),
+        "{err}"
+    );
+}

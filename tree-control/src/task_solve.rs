@@ -149,6 +149,12 @@ where
             model.variables.len()
         )));
     }
+    let (held, written) = (sys.unilateral().len(), model.gaps().len());
+    if held != written {
+        return Err(SimError::InvalidInput(format!(
+            "the system has {held} unilateral elements (enforced limits, contacts, slack strings) but the task's model has {written}: compile it with the task's (`contacts from \"task.toml\"`, `enforce_limits = false` as the task says)"
+        )));
+    }
     check_task_memory(task, sys.dof())?;
     let mut dynamics = task_system(sys, task)?;
     let (x0, guess) = initial_guess(&mut dynamics, task, model)?;

@@ -38,6 +38,9 @@ pub struct Input {
     /// `contacts from "file.toml"` after a file's path: the ground, contacts and enforced
     /// limits that TOML file writes (a task file's, say), added to the model.
     pub contacts: Option<LitStr>,
+    /// `enforce_limits = false` (or `true`) after a file's path: whether the variables'
+    /// limits are enforced, as the TOML key says (applied after `contacts from`).
+    pub enforce_limits: Option<bool>,
 }
 
 pub enum Source {
@@ -223,6 +226,7 @@ impl Parse for Input {
             input.parse::<kw::from>()?;
             let path: LitStr = input.parse()?;
             let (mut floating_base, mut lean, mut contacts) = (false, None, None);
+            let mut enforce_limits = None;
             while input.peek(Token![,]) {
                 input.parse::<Token![,]>()?;
                 let lookahead = input.lookahead1();
@@ -241,6 +245,14 @@ impl Parse for Input {
                     input.parse::<kw::contacts>()?;
                     input.parse::<kw::from>()?;
                     contacts = Some(input.parse::<LitStr>()?);
+                } else if lookahead.peek(kw::enforce_limits) {
+                    let kw: kw::enforce_limits = input.parse()?;
+                    if !input.peek(Token![=]) {
+                        let message = "`enforce_limits` takes a value: `enforce_limits = false` leaves the variables' limits unenforced, `= true` enforces them (the default)";
+                        return Err(syn::Error::new(kw.span, message));
+                    }
+                    input.parse::<Token![=]>()?;
+                    enforce_limits = Some(input.parse::<syn::LitBool>()?.value);
                 } else {
                     return Err(lookahead.error());
                 }
@@ -256,6 +268,7 @@ impl Parse for Input {
                 source: Source::File(path, floating_base),
                 lean,
                 contacts,
+                enforce_limits,
             });
         }
         input.parse::<Token![;]>()?;
@@ -307,6 +320,7 @@ impl Parse for Input {
             source: Source::Inline(model),
             lean: None,
             contacts: None,
+            enforce_limits: None,
         })
     }
 }

@@ -559,6 +559,8 @@ pub(crate) struct Loaded {
     floating_base: bool,
     /// The contacts file's (`contacts from "…"`) full path and the path as written.
     contacts: Option<(String, String)>,
+    /// `enforce_limits = …` after the path.
+    enforce_limits: Option<bool>,
 }
 
 /// Reads the model from its file or lowers the inline syntax (a compile error at the token
@@ -573,12 +575,16 @@ fn load(input: &Input) -> syn::Result<Loaded> {
                 model = with;
                 contacts = Some((full.to_string_lossy().into_owned(), file.value()));
             }
+            if let Some(enforce) = input.enforce_limits {
+                model = lower::with_enforced_limits(model, enforce);
+            }
             Loaded {
                 model,
                 spec: None,
                 file: Some((full.to_string_lossy().into_owned(), path.value())),
                 floating_base: *floating_base,
                 contacts,
+                enforce_limits: input.enforce_limits,
             }
         }
         Source::Inline(inline) => {
@@ -589,6 +595,7 @@ fn load(input: &Input) -> syn::Result<Loaded> {
                 file: None,
                 floating_base: false,
                 contacts: None,
+                enforce_limits: None,
             }
         }
     })
@@ -802,6 +809,16 @@ fn inherent_impl(
             #constructor
                 .with_contacts_from_toml_str(include_str!(#path), Some(#shown))
                 .expect("the contacts were validated when the model was compiled")
+        };
+    }
+    if let Some(enforce) = loaded.enforce_limits {
+        constructor = quote! {
+            #constructor
+                .with_contacts(&::tree_mech::__private::model::ContactsSpec {
+                    enforce_limits: Some(#enforce),
+                    ..::core::default::Default::default()
+                })
+                .expect("the limits were validated when the model was compiled")
         };
     }
     let functions = programs.functions();

@@ -52,7 +52,7 @@ use syn::parse_macro_input;
 /// The path is relative to the calling crate's `Cargo.toml`; TOML or URDF by extension
 /// (`floating_base` adds `root_x root_y root_z root_yaw root_pitch root_roll` under a URDF
 /// robot's root link; `contacts from` adds the ground, contacts and enforced limits a TOML
-/// file — a task's, say — writes). The same reader and validator as the runtime; editing the file
+/// file — a task's, say — writes; `enforce_limits = false` leaves the limits unenforced). The same reader and validator as the runtime; editing the file
 /// rebuilds. A file's errors are compile errors naming `file:line`.
 ///
 /// # Inline

@@ -54,6 +54,12 @@ fn from_crate_root(written: &str) -> PathBuf {
     base.join(written)
 }
 
+/// `model` with its limits enforced or not (`enforce_limits = …` after a file's path).
+pub fn with_enforced_limits(mut model: Model, enforce: bool) -> Model {
+    model.contacts.enforce_limits = enforce;
+    model
+}
+
 /// `model` with the contact tables of the TOML file at `path` (`contacts from "…"`), and
 /// that file's full path; a mistake in it is a compile error at the path, with its line.
 pub fn with_contacts_from(model: Model, path: &LitStr) -> syn::Result<(Model, PathBuf)> {

@@ -13,7 +13,7 @@ use crate::model::{Constraint, ConstraintKind, Joint, Model, Parameter, Variable
 /// variables' limits are enforced.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ContactsSpec {
-    /// Whether declared joint limits are enforced (default: not yet; see docs/model-format.md).
+    /// Whether declared joint limits are enforced (default: they are; docs/model-format.md).
     pub enforce_limits: Option<bool>,
     /// The ground, if any.
     pub ground: Option<GroundSpec>,

@@ -170,7 +170,8 @@ pub struct Variable {
     /// A prescribed variable's motion (`None`: a dynamic variable, simulated).
     pub motion: Option<Motion>,
     /// `[lower, upper]` joint limits (from URDF or `limits = [..]`): a dynamic variable's are
-    /// enforced by the variational integrator when [`crate::Contacts::enforce_limits`].
+    /// enforced by the variational integrator when [`crate::Contacts::enforce_limits`] (the
+    /// default).
     pub limits: Option<[f64; 2]>,
 }
 

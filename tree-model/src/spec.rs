@@ -39,8 +39,8 @@ pub struct VariableSpec {
     pub motion: Option<SineSpec>,
     /// Samples `(t, q)` of a spline prescription (kinematic variables only).
     pub samples: Option<Vec<[f64; 2]>>,
-    /// `[lower, upper]` joint limits (a dynamic variable's enforced by the VI when the model says
-    /// `enforce_limits = true`).
+    /// `[lower, upper]` joint limits (a dynamic variable's enforced by the VI unless the model
+    /// says `enforce_limits = false`).
     pub limits: Option<[f64; 2]>,
 }
 

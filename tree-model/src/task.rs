@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::{Spanned, Value};
 
+use crate::contact::GapKind;
 use crate::error::{ModelError, Problem, Site};
 use crate::model::Model;
 use crate::source::LineIndex;
@@ -425,6 +426,22 @@ fn with_task_contacts(
     with_written_contacts(model, written, lines, src)
 }
 
+/// The message for a model with unilateral rows and no `kappa`: name the relaxations, or —
+/// when its only rows are its enforced limits — plan without them.
+fn unrelaxed_rows(model: &Model, rows: usize) -> String {
+    let limits = (model.gaps().iter())
+        .filter(|g| matches!(g.kind, GapKind::Lower { .. } | GapKind::Upper { .. }))
+        .count();
+    let relax = format!(
+        "the model has {rows} unilateral rows (limits, contacts, slack strings): name the relaxations the optimiser goes through, largest first, e.g. `kappa = [1e-3, 1e-4, 1e-5]` (φγ in m·N·s)"
+    );
+    if limits == rows {
+        format!("{relax}, or plan without enforcing its {limits} joint limits (`enforce_limits = false`)")
+    } else {
+        relax
+    }
+}
+
 /// `kappa`: one relaxation or a list, each positive and finite, each smaller than the one
 /// before; required when the model has unilateral rows (their units, m·N·s, are the
 /// model's), refused otherwise.
@@ -434,9 +451,7 @@ fn kappa_of(p: &mut Problems, raw: &RawTask, model: &Model) -> Vec<f64> {
         if rows > 0 {
             p.found.push(Problem {
                 site: Site::Model,
-                message: format!(
-                    "the model has {rows} unilateral rows (limits, contacts, slack strings): name the relaxations the optimiser goes through, largest first, e.g. `kappa = [1e-3, 1e-4, 1e-5]` (φγ in m·N·s)"
-                ),
+                message: unrelaxed_rows(model, rows),
                 line: None,
             });
         }

@@ -100,7 +100,7 @@ pub fn validate(spec: &ModelSpec) -> Result<Model, Vec<Problem>> {
         dampers,
         inputs,
         contacts: crate::contact::Contacts {
-            enforce_limits: spec.contacts.enforce_limits.unwrap_or(false),
+            enforce_limits: spec.contacts.enforce_limits.unwrap_or(true),
             ground,
             spheres,
             strings: strings.into_iter().map(|(c, _)| c).collect(),
