@@ -745,3 +745,81 @@ fn a_report_that_asks_to_stop_ends_the_solve_with_its_best_trajectory() {
     let full = unlimited(dynamics, common::cart_to_half_metre(dt), &x0, knots);
     assert!(full.history.len() > 2 && full.cost < sol.cost);
 }
+
+/// MPC on the cart's plan (towards x = 0.5 within ±2 N): started with a push the plan never
+/// saw (0.2 N·s on the cart), re-planned over 10 knots every knot with one iteration a tick,
+/// the cart stays within 3 cm of the plan's (2.4 cm, at the end, where the reference stops
+/// dead beyond the plan) within the limits; the plan's controls played open loop from the
+/// same push end 20 cm off. Wrong sizes, a zero horizon or tick and a plant of another step
+/// are refused in sentences.
+#[test]
+fn mpc_tracks_a_plan_through_a_push_the_plan_never_saw() {
+    use tree_mech::control::{Mpc, MpcSettings};
+    let plan = cart_problem(Cart, Solver::Ilqr);
+    let limits = (DVector::from_vec(vec![-2.0]), DVector::from_vec(vec![2.0]));
+    let settings = |horizon: usize| MpcSettings {
+        horizon,
+        ilqr: IlqrSettings {
+            max_iterations: 1,
+            limits: Some(limits.clone()),
+            ..IlqrSettings::default()
+        },
+        x_weight: DVector::from_vec(vec![100.0, 100.0, 1.0, 1.0, 0.0]),
+        u_weight: DVector::from_vec(vec![1e-3]),
+        terminal_weight: DVector::from_vec(vec![1e3, 1e3, 10.0, 10.0, 0.0]),
+    };
+    let (dynamics, x0) = at_start(Cart, ViSettings::default(), 0.02);
+    assert_eq!((&plan.x[0] - &x0).amax(), 0.0);
+    let mut mpc = Mpc::new(dynamics, plan.x.clone(), plan.u.clone(), settings(10)).unwrap();
+    let (mut plant, _) = at_start(Cart, ViSettings::default(), 0.02);
+    let mut pushed = x0.clone();
+    pushed[2] += 0.2;
+    let knots = plan.u.len();
+    let run = mpc
+        .closed_loop(&mut plant, &pushed, knots, 1, &mut |_, _| {})
+        .unwrap();
+    assert_eq!((run.x.len(), run.tick_seconds.len()), (knots + 1, knots));
+    // The largest distance of the cart from the plan's over the run, and at the end.
+    let off = |x: &[DVector<f64>]| {
+        let d: Vec<f64> = (0..=knots)
+            .map(|k| (x[k][0] - plan.x[k][0]).abs())
+            .collect();
+        (d.iter().copied().fold(0.0, f64::max), d[knots])
+    };
+    let (worst, last) = off(&run.x);
+    assert!(run.u.iter().all(|u| u[0].abs() <= 2.0));
+    // Open loop from the same push.
+    let mut open = vec![pushed.clone()];
+    for k in 0..knots {
+        let mut next = pushed.clone();
+        let x = open[k].as_slice();
+        plant
+            .step(k, x, plan.u[k].as_slice(), next.as_mut_slice(), None)
+            .unwrap();
+        open.push(next);
+    }
+    let (open_worst, open_last) = off(&open);
+    assert!(
+        worst < 3e-2 && open_last > 5.0 * worst && open_worst >= open_last,
+        "MPC off the plan by {worst} m at worst ({last} at the end); open loop by {open_last} at the end"
+    );
+    let refused = |x_ref: Vec<DVector<f64>>, s: MpcSettings| {
+        let (dynamics, _) = at_start(Cart, ViSettings::default(), 0.02);
+        match Mpc::new(dynamics, x_ref, plan.u.clone(), s) {
+            Ok(_) => panic!("accepted"),
+            Err(e) => e.to_string(),
+        }
+    };
+    let short = plan.x[..knots].to_vec();
+    assert!(refused(short, settings(10)).contains("one more state than controls"));
+    assert!(refused(plan.x.clone(), settings(0)).contains("horizon and its iterations"));
+    let mut wide = settings(10);
+    wide.u_weight = DVector::zeros(2);
+    assert!(refused(plan.x.clone(), wide).contains("u_weight has 2 entries; the problem has 1"));
+    let (mut other, _) = at_start(Cart, ViSettings::default(), 0.01);
+    let err = mpc
+        .closed_loop(&mut other, &pushed, 5, 1, &mut |_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("must be the planner's"), "{err}");
+}

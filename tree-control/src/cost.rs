@@ -78,7 +78,7 @@ pub struct QuadraticCost {
 }
 
 /// `½ Σ w_i (a_i − b_i)²` and, with `grad`, `grad_i = s·w_i (a_i − b_i)` and `hess = s·diag(w)`.
-fn quadratic(
+pub(crate) fn quadratic(
     a: &DVector<f64>,
     b: &DVector<f64>,
     w: &DVector<f64>,

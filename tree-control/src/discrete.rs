@@ -936,6 +936,20 @@ where
         matches!(&self.method, Stepper::Vi(vi) if vi.has_contacts())
     }
 
+    /// Lets a VI step that Newton cannot take be retried in up to `2^max` shorter steps, as a
+    /// simulation does — for a plant that is stepped, not differentiated (a subdivided step's
+    /// derivatives are not one step's, so a planner's steps are never subdivided).
+    pub fn with_subdivisions(mut self, max: usize) -> Self {
+        if let Stepper::Vi(vi) = &mut self.method {
+            let settings = ViSettings {
+                max_subdivisions: max,
+                ..vi.settings
+            };
+            **vi = MidpointVi::new(&self.sys, settings);
+        }
+        self
+    }
+
     /// Sets the contacts' relaxation `κ` of the VI's steps (`φγ = κ`, m·N·s; 0: hard).
     pub fn set_kappa(&mut self, kappa: f64) -> Result<(), SimError> {
         if !(kappa.is_finite() && kappa >= 0.0) {

@@ -5,7 +5,8 @@
 //! ([`solve`]) on a [`DiscreteSystem`] — the VI (or RK4) as `x_{k+1} = f(x_k, u_k)`
 //! whose controls are inputs and kinematic variables. Costs are [`Cost`]s: a
 //! [`QuadraticCost`] on the state and controls, or the [`TaskCost`] of a task file (state,
-//! control, control-rate, frame and orientation terms).
+//! control, control-rate, frame and orientation terms). [`Mpc`] re-plans a receding horizon
+//! from each measured state, tracking a reference (an offline plan).
 #![warn(missing_docs)]
 
 mod cost;
@@ -14,6 +15,7 @@ mod frames;
 mod ilqr;
 mod knot;
 mod lqr;
+mod mpc;
 mod qp;
 mod task_cost;
 mod task_solve;
@@ -26,8 +28,9 @@ pub use ilqr::{
 };
 pub use knot::{Knot, Needs};
 pub use lqr::{dare, tvlqr, Lqr};
+pub use mpc::{ClosedLoop, Mpc, MpcSettings, Tick};
 pub use task_cost::TaskCost;
 pub use task_solve::{
-    solve_task, solve_task_until, task_system, HardReplay, TaskOptions, TaskResult,
+    solve_task, solve_task_until, task_settings, task_system, HardReplay, TaskOptions, TaskResult,
 };
 pub use tree_model::{About, Control, CostTerm, Target, Task, TaskIntegrator, TaskSolver};

@@ -158,7 +158,7 @@ where
     check_task_memory(task, sys.dof())?;
     let mut dynamics = task_system(sys, task)?;
     let (x0, guess) = initial_guess(&mut dynamics, task, model)?;
-    let settings = ilqr_settings(task, options);
+    let settings = task_settings(task, options);
     let mut cost = TaskCost::new(task, model)?;
     let start = Instant::now();
     let (solution, continuation) = solve_stages(
@@ -235,9 +235,10 @@ where
     Ok((x0, guess))
 }
 
-/// The optimiser's settings: the solver and iteration limit (the options', else the
-/// task's), the controls' box limits.
-fn ilqr_settings(task: &Task, options: &TaskOptions) -> IlqrSettings {
+/// The solver's settings for `task` with `options`: the solver and iteration limit (the
+/// options', else the task's), the controls' box limits (an [`crate::Mpc`] on a task's plan
+/// takes these).
+pub fn task_settings(task: &Task, options: &TaskOptions) -> IlqrSettings {
     let nu = task.controls.len();
     let bounded = task.limits.iter().any(Option::is_some);
     let limits = bounded.then(|| {
