@@ -4,10 +4,11 @@
 //! iteration a tick, the plant stepping at hard contact.
 
 use tree_mech::control::{
-    task_settings, task_system, ClosedLoop, Mpc, MpcSettings, Solution, TaskOptions,
+    run_closed_loop, task_settings, task_system, ClosedLoop, DiscreteSystem, Mpc, MpcSettings,
+    Solution, TaskOptions,
 };
 use tree_mech::model::{Model, Task};
-use tree_mech::nalgebra::DVector;
+use tree_mech::nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 use tree_mech::{SimError, System};
 
 /// Knots planned at each tick: 0.1 s at the task's 5 ms.
@@ -43,6 +44,26 @@ pub fn settings(task: &Task) -> MpcSettings {
     }
 }
 
+/// The Solo at hard contact stepped as a simulation steps (a step Newton cannot take
+/// retried in halves): the plant.
+fn hard_plant<P: System>(plant: P, task: &Task) -> Result<DiscreteSystem<P>, SimError>
+where
+    DefaultAllocator: Allocator<P::N> + Allocator<P::N, P::N>,
+{
+    let mut hard = task_system(plant, task)?.with_subdivisions(4);
+    hard.set_kappa(0.0)?;
+    Ok(hard)
+}
+
+/// The push: `push` N·s on root_x's momentum at `PUSH_KNOT`.
+fn pushed(push: f64) -> impl FnMut(usize, &mut DVector<f64>) {
+    move |k, x| {
+        if k == PUSH_KNOT {
+            x[18] += push;
+        }
+    }
+}
+
 /// The closed loop of `task`'s plan `plan` with `push` N·s along x at `PUSH_KNOT`: planned on
 /// `planner` at the task's last `κ`, stepped on `plant` at hard contact.
 pub fn stand_mpc<S: System, P: System>(
@@ -53,24 +74,16 @@ pub fn stand_mpc<S: System, P: System>(
     push: f64,
 ) -> Result<ClosedLoop, SimError>
 where
-    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<S::N>
-        + tree_mech::nalgebra::allocator::Allocator<S::N, S::N>
-        + tree_mech::nalgebra::allocator::Allocator<P::N>
-        + tree_mech::nalgebra::allocator::Allocator<P::N, P::N>,
+    DefaultAllocator:
+        Allocator<S::N> + Allocator<S::N, S::N> + Allocator<P::N> + Allocator<P::N, P::N>,
 {
     let dynamics = task_system(planner, task)?;
     let mut mpc = Mpc::new(dynamics, plan.x.clone(), plan.u.clone(), settings(task))?;
-    let mut hard = task_system(plant, task)?.with_subdivisions(4);
-    hard.set_kappa(0.0)?;
-    let mut disturb = |k: usize, x: &mut DVector<f64>| {
-        if k == PUSH_KNOT {
-            x[18] += push; // root_x's momentum
-        }
-    };
-    mpc.closed_loop(&mut hard, &plan.x[0], task.knots, EVERY, &mut disturb)
+    let mut hard = hard_plant(plant, task)?;
+    mpc.closed_loop(&mut hard, &plan.x[0], task.knots, EVERY, &mut pushed(push))
 }
 
-/// The offline plan's own policy `u_k + K_k (x − x_k)` (clamped to the task's limits) at hard
+/// The offline plan's own policy `u_k + K_k (x − x_k)` (within the task's limits) at hard
 /// contact through the same push: never re-planned.
 pub fn policy_only<P: System>(
     plant: P,
@@ -79,34 +92,18 @@ pub fn policy_only<P: System>(
     push: f64,
 ) -> Result<ClosedLoop, SimError>
 where
-    tree_mech::nalgebra::DefaultAllocator: tree_mech::nalgebra::allocator::Allocator<P::N>
-        + tree_mech::nalgebra::allocator::Allocator<P::N, P::N>,
+    DefaultAllocator: Allocator<P::N> + Allocator<P::N, P::N>,
 {
-    let mut hard = task_system(plant, task)?.with_subdivisions(4);
-    hard.set_kappa(0.0)?;
+    let mut hard = hard_plant(plant, task)?;
     let limits = task_settings(task, &TaskOptions::default()).limits;
-    let mut run = ClosedLoop {
-        x: vec![plan.x[0].clone()],
-        u: Vec::new(),
-        tick_seconds: Vec::new(),
-        penetration: 0.0,
-    };
-    let (mut x, mut next) = (plan.x[0].clone(), plan.x[0].clone());
-    for k in 0..task.knots {
-        if k == PUSH_KNOT {
-            x[18] += push;
-        }
-        let mut u = &plan.u[k] + &plan.gains[k] * (&x - &plan.x[k]);
-        if let Some((lo, hi)) = &limits {
-            u = u.zip_zip_map(lo, hi, |u, lo, hi| u.clamp(lo, hi));
-        }
-        hard.step(k, x.as_slice(), u.as_slice(), next.as_mut_slice(), None)?;
-        std::mem::swap(&mut x, &mut next);
-        run.x.push(x.clone());
-        run.u.push(u);
-    }
-    run.penetration = hard.penetration();
-    Ok(run)
+    let mut policy = |k: usize, x: &DVector<f64>| Ok(plan.policy(k, x, limits.as_ref()));
+    run_closed_loop(
+        &mut hard,
+        &plan.x[0],
+        task.knots,
+        &mut pushed(push),
+        &mut policy,
+    )
 }
 
 /// Where a closed loop ends and how its feet did: the base's final `(x, z)`, how far any foot

@@ -99,6 +99,49 @@ pub(crate) fn quadratic(
     value
 }
 
+/// The running term `Δt (½‖x − x_r‖²_{W_x} + ½‖u − u_r‖²_{W_u})` with, in `d`, its
+/// derivatives (`ℓ_ux = 0`): [`QuadraticCost`]'s and a tracking MPC's.
+pub(crate) fn running_quadratic(
+    dt: f64,
+    (x, x_ref, x_weight): (&DVector<f64>, &DVector<f64>, &DVector<f64>),
+    (u, u_ref, u_weight): (&DVector<f64>, &DVector<f64>, &DVector<f64>),
+    d: Option<&mut Derivatives>,
+) -> f64 {
+    let (lx, lu) = match d {
+        Some(d) => {
+            d.lux.as_mut_slice().fill(0.0);
+            let Derivatives {
+                lx, lu, lxx, luu, ..
+            } = d;
+            (Some((lx, lxx)), Some((lu, luu)))
+        }
+        None => (None, None),
+    };
+    dt * (quadratic(x, x_ref, x_weight, dt, lx) + quadratic(u, u_ref, u_weight, dt, lu))
+}
+
+/// `Ok` when each `(name, entries, wanted)` fits and every weight is finite and not
+/// negative; else the sentence saying which does not (`whose`: "the cost's", say).
+pub(crate) fn check_sizes_and_weights<'a>(
+    whose: &str,
+    sizes: &[(&str, usize, usize)],
+    weights: impl Iterator<Item = &'a f64>,
+) -> Result<(), String> {
+    for &(name, got, want) in sizes {
+        if got != want {
+            return Err(format!(
+                "{whose} {name} has {got} entries; the problem has {want}"
+            ));
+        }
+    }
+    match weights.copied().find(|w| !(w.is_finite() && *w >= 0.0)) {
+        Some(w) => Err(format!(
+            "{whose} weights must be finite and non-negative; one is {w}"
+        )),
+        None => Ok(()),
+    }
+}
+
 impl Cost for QuadraticCost {
     fn running(
         &mut self,
@@ -107,19 +150,8 @@ impl Cost for QuadraticCost {
         u: &DVector<f64>,
         d: Option<&mut Derivatives>,
     ) -> f64 {
-        let dt = self.dt;
-        let (lx, lu) = match d {
-            Some(d) => {
-                d.lux.as_mut_slice().fill(0.0);
-                let Derivatives {
-                    lx, lu, lxx, luu, ..
-                } = d;
-                (Some((lx, lxx)), Some((lu, luu)))
-            }
-            None => (None, None),
-        };
-        dt * (quadratic(&x.x, &self.x_ref, &self.x_weight, dt, lx)
-            + quadratic(u, &self.u_ref, &self.u_weight, dt, lu))
+        let xs = (&x.x, &self.x_ref, &self.x_weight);
+        running_quadratic(self.dt, xs, (u, &self.u_ref, &self.u_weight), d)
     }
 
     fn check(&self, nx: usize, nu: usize) -> Result<(), String> {
@@ -131,23 +163,10 @@ impl Cost for QuadraticCost {
             ("terminal_ref", self.terminal_ref.len(), nx),
             ("terminal_weight", self.terminal_weight.len(), nx),
         ];
-        for (name, got, want) in sizes {
-            if got != want {
-                return Err(format!(
-                    "the cost's {name} has {got} entries; the problem has {want}"
-                ));
-            }
-        }
-        let weights = self
-            .x_weight
-            .iter()
+        let weights = (self.x_weight.iter())
             .chain(self.u_weight.iter())
             .chain(self.terminal_weight.iter());
-        if let Some(w) = weights.copied().find(|w| !(w.is_finite() && *w >= 0.0)) {
-            return Err(format!(
-                "the cost's weights must be finite and non-negative; one is {w}"
-            ));
-        }
+        check_sizes_and_weights("the cost's", &sizes, weights)?;
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(format!(
                 "the cost's dt must be positive, got {}",

@@ -168,6 +168,25 @@ pub struct Solution {
     pub history: Vec<Iteration>,
 }
 
+impl Solution {
+    /// The plan's policy at knot `k` for the state `x`: `u_k + K_k (x − x_k)`, clamped to
+    /// `limits` (a solve's box limits) when given.
+    pub fn policy(
+        &self,
+        k: usize,
+        x: &DVector<f64>,
+        limits: Option<&(DVector<f64>, DVector<f64>)>,
+    ) -> DVector<f64> {
+        let mut u = &self.u[k] + &self.gains[k] * (x - &self.x[k]);
+        if let Some((lo, hi)) = limits {
+            for c in 0..u.len() {
+                u[c] = u[c].clamp(lo[c], hi[c]);
+            }
+        }
+        u
+    }
+}
+
 /// Optimises the controls of `dynamics` over `u.len()` steps from `x0`, starting from `u`.
 /// Returns the best trajectory found with its gains, converged or not; fails only when the
 /// first rollout does (the start cannot be simulated) or the problem does not fit.

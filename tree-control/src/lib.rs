@@ -28,7 +28,7 @@ pub use ilqr::{
 };
 pub use knot::{Knot, Needs};
 pub use lqr::{dare, tvlqr, Lqr};
-pub use mpc::{ClosedLoop, Mpc, MpcSettings, Tick};
+pub use mpc::{run_closed_loop, ClosedLoop, Mpc, MpcSettings, Policy, Tick};
 pub use task_cost::TaskCost;
 pub use task_solve::{
     solve_task, solve_task_until, task_settings, task_system, HardReplay, TaskOptions, TaskResult,

@@ -11,7 +11,7 @@ use std::time::Instant;
 use nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
 use tree_runtime::{SimError, System};
 
-use crate::cost::{quadratic, Cost, Derivatives};
+use crate::cost::{check_sizes_and_weights, quadratic, running_quadratic, Cost, Derivatives};
 use crate::discrete::DiscreteSystem;
 use crate::ilqr::{solve, IlqrSettings, Solution};
 use crate::knot::Knot;
@@ -64,17 +64,9 @@ impl Cost for Tracking {
         u: &DVector<f64>,
         d: Option<&mut Derivatives>,
     ) -> f64 {
-        let dt = self.dt;
-        let (lx, lu) = match d {
-            Some(d) => {
-                d.lux.as_mut_slice().fill(0.0);
-                (Some((&mut d.lx, &mut d.lxx)), Some((&mut d.lu, &mut d.luu)))
-            }
-            None => (None, None),
-        };
         let (xr, ur) = (self.state(self.from + k), self.control(self.from + k));
-        dt * (quadratic(&x.x, xr, &self.x_weight, dt, lx)
-            + quadratic(u, ur, &self.u_weight, dt, lu))
+        let (xs, us) = ((&x.x, xr, &self.x_weight), (u, ur, &self.u_weight));
+        running_quadratic(self.dt, xs, us, d)
     }
 
     fn terminal(&mut self, x: &Knot, d: Option<&mut Derivatives>) -> f64 {
@@ -91,22 +83,10 @@ impl Cost for Tracking {
             ("u_weight", self.u_weight.len(), nu),
             ("terminal_weight", self.terminal_weight.len(), nx),
         ];
-        for (name, got, want) in sizes {
-            if got != want {
-                return Err(format!(
-                    "the MPC's {name} has {got} entries; the problem has {want}"
-                ));
-            }
-        }
         let weights = (self.x_weight.iter())
             .chain(self.u_weight.iter())
             .chain(self.terminal_weight.iter());
-        match weights.copied().find(|w| !(w.is_finite() && *w >= 0.0)) {
-            Some(w) => Err(format!(
-                "the MPC's weights must be finite and non-negative; one is {w}"
-            )),
-            None => Ok(()),
-        }
+        check_sizes_and_weights("the MPC's", &sizes, weights)
     }
 }
 
@@ -208,22 +188,16 @@ where
     }
 
     /// The control at reference knot `knot` for the measured state `x`: the last plan's
-    /// control there with its feedback, `u_k + K_k (x − x_k)`, within the solver's limits
-    /// (the reference's control before any plan or beyond the last one's horizon).
+    /// policy there (its control with its feedback, within the solver's limits), the
+    /// reference's control before any plan or beyond the last one's horizon.
     pub fn control(&self, knot: usize, x: &DVector<f64>) -> DVector<f64> {
         let Some((from, plan)) = &self.plan else {
             return self.cost.control(knot).clone();
         };
-        let Some(i) = knot.checked_sub(*from).filter(|&i| i < plan.u.len()) else {
-            return self.cost.control(knot).clone();
-        };
-        let mut u = &plan.u[i] + &plan.gains[i] * (x - &plan.x[i]);
-        if let Some((lo, hi)) = &self.ilqr.limits {
-            for c in 0..u.len() {
-                u[c] = u[c].clamp(lo[c], hi[c]);
-            }
+        match knot.checked_sub(*from).filter(|&i| i < plan.u.len()) {
+            Some(i) => plan.policy(i, x, self.ilqr.limits.as_ref()),
+            None => self.cost.control(knot).clone(),
         }
-        u
     }
 
     /// The planner's discrete system (its `κ`, its state layout).
@@ -252,29 +226,52 @@ where
                 plant.dt, self.dynamics.dt
             )));
         }
-        let mut run = ClosedLoop {
-            x: vec![x0.clone()],
-            u: Vec::with_capacity(knots),
-            tick_seconds: Vec::new(),
-            penetration: 0.0,
-        };
-        let mut x = x0.clone();
-        let mut next = x0.clone();
-        for k in 0..knots {
-            disturb(k, &mut x);
-            if k % every == 0 {
-                let tick = self.tick(k, &x)?;
-                run.tick_seconds.push(tick.seconds);
+        let mut seconds = Vec::with_capacity(knots.div_ceil(every));
+        let mut policy = |k: usize, x: &DVector<f64>| {
+            if k.is_multiple_of(every) {
+                seconds.push(self.tick(k, x)?.seconds);
             }
-            let u = self.control(k, &x);
-            plant.step(k, x.as_slice(), u.as_slice(), next.as_mut_slice(), None)?;
-            std::mem::swap(&mut x, &mut next);
-            run.x.push(x.clone());
-            run.u.push(u);
-        }
-        run.penetration = plant.penetration();
+            Ok(self.control(k, x))
+        };
+        let mut run = run_closed_loop(plant, x0, knots, disturb, &mut policy)?;
+        run.tick_seconds = seconds;
         Ok(run)
     }
+}
+
+/// A closed loop's policy: the control at knot `k` for the state `x` there.
+pub type Policy<'a> = dyn FnMut(usize, &DVector<f64>) -> Result<DVector<f64>, SimError> + 'a;
+
+/// `plant` run for `knots` steps from `x0` under `policy(k, x)`, the control at knot `k` for
+/// the state there; `disturb(k, x)` may change the state first (a push). An MPC's loop
+/// ([`Mpc::closed_loop`]), or a fixed plan's feedback law ([`Solution::policy`]).
+pub fn run_closed_loop<P: System>(
+    plant: &mut DiscreteSystem<P>,
+    x0: &DVector<f64>,
+    knots: usize,
+    disturb: &mut dyn FnMut(usize, &mut DVector<f64>),
+    policy: &mut Policy<'_>,
+) -> Result<ClosedLoop, SimError>
+where
+    DefaultAllocator: Allocator<P::N> + Allocator<P::N, P::N>,
+{
+    let mut run = ClosedLoop {
+        x: vec![x0.clone()],
+        u: Vec::with_capacity(knots),
+        tick_seconds: Vec::new(),
+        penetration: 0.0,
+    };
+    let (mut x, mut next) = (x0.clone(), x0.clone());
+    for k in 0..knots {
+        disturb(k, &mut x);
+        let u = policy(k, &x)?;
+        plant.step(k, x.as_slice(), u.as_slice(), next.as_mut_slice(), None)?;
+        run.penetration = run.penetration.max(plant.penetration());
+        std::mem::swap(&mut x, &mut next);
+        run.x.push(x.clone());
+        run.u.push(u);
+    }
+    Ok(run)
 }
 
 /// A closed loop's record.
@@ -285,8 +282,9 @@ pub struct ClosedLoop {
     pub x: Vec<DVector<f64>>,
     /// The controls applied at knots `0 … N−1`.
     pub u: Vec<DVector<f64>>,
-    /// Each tick's re-plan, wall-clock seconds.
+    /// Each tick's re-plan, wall-clock seconds (empty for a fixed policy).
     pub tick_seconds: Vec<f64>,
-    /// The plant's deepest penetration of a unilateral row (m or rad; 0 without contact).
+    /// The plant's deepest penetration of a unilateral row over the run (m or rad; 0
+    /// without contact).
     pub penetration: f64,
 }
