@@ -463,8 +463,16 @@ fn mismatched_problems_are_refused_with_a_sentence() {
         cost_tolerance: f64::NAN,
         ..IlqrSettings::default()
     };
-    let e = err(&good, &x0, u, &loose);
+    let e = err(&good, &x0, u.clone(), &loose);
     assert!(e.contains("must be finite and non-negative"), "{e}");
+    for min_step in [0.0, 1.5, f64::NAN] {
+        let search = IlqrSettings {
+            min_step,
+            ..IlqrSettings::default()
+        };
+        let e = err(&good, &x0, u.clone(), &search);
+        assert!(e.contains("smallest step (min_step = "), "{e}");
+    }
 }
 
 /// A knot's velocity and gravity compensation by the state (`dq_x`, `gravity_x`) against

@@ -4,8 +4,8 @@
 //! iteration a tick, the plant stepping at hard contact.
 
 use tree_mech::control::{
-    run_closed_loop, task_settings, task_system, ClosedLoop, DiscreteSystem, Mpc, MpcSettings,
-    Solution, TaskOptions,
+    run_closed_loop, task_settings, task_system, ClosedLoop, DiscreteSystem, IlqrSettings, Mpc,
+    MpcSettings, Solution, TaskOptions,
 };
 use tree_mech::model::{Model, Task};
 use tree_mech::nalgebra::{allocator::Allocator, DVector, DefaultAllocator};
@@ -37,7 +37,11 @@ pub fn settings(task: &Task) -> MpcSettings {
     };
     MpcSettings {
         horizon: HORIZON,
-        ilqr: task_settings(task, &options),
+        // At most four rollouts in the line search (1, ½, ¼, ⅛): a tick's time bounded.
+        ilqr: IlqrSettings {
+            min_step: 0.125,
+            ..task_settings(task, &options)
+        },
         terminal_weight: &x_weight * 10.0,
         x_weight,
         u_weight: DVector::from_element(task.controls.len(), 1e-2),

@@ -57,6 +57,9 @@ pub struct IlqrSettings {
     /// The first regularisation, relative: each knot's `Q_uu` gains `μ s I` with `s` its
     /// largest diagonal entry, so a cost in other units takes the same steps.
     pub mu: f64,
+    /// The line search tries step lengths 1, ½, ¼, … down to this one (10⁻⁴, fourteen
+    /// rollouts at most); an MPC bounds its time a tick with a larger one.
+    pub min_step: f64,
 }
 
 impl Default for IlqrSettings {
@@ -68,6 +71,7 @@ impl Default for IlqrSettings {
             decrease_tolerance: 1e-12,
             limits: None,
             mu: 1e-6,
+            min_step: 1e-4,
         }
     }
 }
@@ -369,6 +373,12 @@ where
             "the optimiser needs at least one iteration (max_iterations ≥ 1)".into(),
         ));
     }
+    if !(settings.min_step > 0.0 && settings.min_step <= 1.0) {
+        return Err(SimError::InvalidInput(format!(
+            "the line search's smallest step (min_step = {}) must be in (0, 1]",
+            tree_model::Given(settings.min_step)
+        )));
+    }
     if settings.solver == Solver::Ddp && !dynamics.is_vi() {
         return Err(SimError::InvalidInput(
             "DDP needs the VI's second derivatives: use iLQR with RK4".into(),
@@ -467,8 +477,8 @@ where
     }))
 }
 
-/// The forward pass: the first step length (1, ½, ¼, … above 10⁻⁴) whose rollout lowers the
-/// true cost, into the trial iterate; `(0, total)` when none does.
+/// The forward pass: the first step length (1, ½, ¼, … down to the settings' `min_step`)
+/// whose rollout lowers the true cost, into the trial iterate; `(0, total)` when none does.
 fn try_step<S: System>(
     dynamics: &mut DiscreteSystem<S>,
     cost: &mut dyn Cost,
@@ -481,7 +491,7 @@ where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,
 {
     let mut alpha = 1.0;
-    while alpha > 1e-4 {
+    while alpha >= settings.min_step {
         for k in 0..it.u.len() {
             it.u_new[k].copy_from(&it.u[k]);
             it.u_new[k].axpy(alpha, &work.k[k], 1.0);
