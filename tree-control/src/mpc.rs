@@ -76,9 +76,16 @@ impl Cost for Tracking {
     }
 
     fn check(&self, nx: usize, nu: usize) -> Result<(), String> {
+        // The reference's odd one out, if any (else its first), and the weights.
+        let odd = |v: &[DVector<f64>], want: usize| {
+            v.iter()
+                .map(|e| e.len())
+                .find(|&n| n != want)
+                .unwrap_or(v[0].len())
+        };
         let sizes = [
-            ("reference state", self.x[0].len(), nx),
-            ("reference control", self.u[0].len(), nu),
+            ("reference state", odd(&self.x, nx), nx),
+            ("reference control", odd(&self.u, nu), nu),
             ("x_weight", self.x_weight.len(), nx),
             ("u_weight", self.u_weight.len(), nu),
             ("terminal_weight", self.terminal_weight.len(), nx),
@@ -220,9 +227,14 @@ where
     where
         DefaultAllocator: Allocator<P::N> + Allocator<P::N, P::N>,
     {
-        if every == 0 || (plant.dt - self.dynamics.dt).abs() > 1e-12 * plant.dt {
+        if every == 0 {
+            return Err(SimError::InvalidInput(
+                "the closed loop must tick at least every knot (every ≥ 1), not every 0".into(),
+            ));
+        }
+        if (plant.dt - self.dynamics.dt).abs() > 1e-12 * plant.dt {
             return Err(SimError::InvalidInput(format!(
-                "the closed loop ticks every {every} knots of the plant's Δt = {}, which must be the planner's, {}, and ticks at least every knot",
+                "the plant steps Δt = {} s and the planner {} s: the closed loop needs them equal",
                 plant.dt, self.dynamics.dt
             )));
         }

@@ -963,7 +963,7 @@ where
         if self.split.rows > 0 {
             self.lambda += &self.dlambda;
         }
-        if largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0) {
+        if below_rounding(largest, q_next) {
             self.evaluate_residual(cx, q, p, q_next, self.settings.derivatives);
             return Ok(true);
         }
@@ -1210,6 +1210,16 @@ const NEARLY_SINGULAR: f64 = 1e-4;
 /// The variable of the weakest pivot of the dynamic variables' mass matrix at `q`, and
 /// `d/M_ii` there, when it is below [`NEARLY_SINGULAR`]: why a step failed, asked only
 /// after it did (allocates).
+/// Whether a Newton update whose largest entry is `largest` was lost in the rounding of `q`
+/// (a few ulps of its largest entry, of 1 near zero): the residual is then at its floor, and
+/// the smooth step, the contact mode and the interior point all stop there.
+fn below_rounding<N: Dim>(largest: f64, q: &Vector<N>) -> bool
+where
+    DefaultAllocator: Allocator<N>,
+{
+    largest <= 4.0 * f64::EPSILON * q.amax().max(1.0)
+}
+
 fn nearly_singular<S: System>(sys: &mut S, q: &Vector<S::N>) -> Option<(String, f64)>
 where
     DefaultAllocator: Allocator<S::N> + Allocator<S::N, S::N>,

@@ -25,7 +25,7 @@
 
 use nalgebra::{allocator::Allocator, DMatrix, DefaultAllocator, Dim};
 
-use super::MidpointVi;
+use super::{below_rounding, MidpointVi};
 use crate::cone::{self, Point};
 use crate::context::StepContext;
 use crate::dynamics::{GeneralizedForce, Prescription};
@@ -1062,7 +1062,7 @@ where
         for k in nd + self.split.rows..c.nz {
             c.z[k] += alpha * c.direction[k];
         }
-        largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0)
+        below_rounding(largest, q_next)
     }
 
     /// The error for a zero pivot at unknown `k`.

@@ -295,6 +295,6 @@ where
                 c.weights[e.row + t] += c.direction[e.base + t];
             }
         }
-        largest <= 4.0 * f64::EPSILON * q_next.amax().max(1.0)
+        below_rounding(largest, q_next)
     }
 }
